@@ -1,0 +1,14 @@
+# carvemap_add_test(name SOURCES a_test.cc ... LIBS lib ...)
+# One gtest binary per test file (STYLE.md habit 13); tests are discovered into ctest.
+function(carvemap_add_test name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS" ${ARGN})
+  if(NOT ARG_SOURCES)
+    set(ARG_SOURCES ${name}.cc)
+  endif()
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest_main GTest::gmock)
+  target_compile_definitions(${name} PRIVATE
+      CARVEMAP_SHARED_DIR="${CARVEMAP_SHARED_DIR}"
+      CARVEMAP_BINARY_DIR="${PROJECT_BINARY_DIR}")
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES TIMEOUT 600)
+endfunction()

@@ -1,0 +1,68 @@
+// Reads scan.h5 (carvemap-scan v1, DESIGN §3). Open() checks the structure (format, version,
+// datasets, attributes, dtypes); Validate() also checks every row. Frames stream in time
+// order across sensors with bounded memory: /points is read in blocks, never whole.
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "services/geometry/pose.h"
+#include "storage/scan_types.h"
+
+namespace carvemap {
+
+class ScanReader {
+ public:
+  // Errors name the file and the dataset, e.g.
+  // "scan.h5: /sensors/h0/frames: missing field 'count'".
+  static absl::StatusOr<std::unique_ptr<ScanReader>> Open(const std::string& path);
+  ~ScanReader();
+  ScanReader(const ScanReader&) = delete;
+  ScanReader& operator=(const ScanReader&) = delete;
+
+  // Every check of DESIGN §3 on every row: finite poses, ascending time, unit quaternions,
+  // covariances, frame ranges inside /points, grid frame sizes, frames within the path's time
+  // span, point rows finite or all-NaN. The first error names file, dataset and row.
+  absl::Status Validate();
+
+  [[nodiscard]] const std::string& file() const;
+  // The path is small (poses, not rays) and held whole.
+  [[nodiscard]] const std::vector<PathRecord>& path() const;
+  [[nodiscard]] const std::vector<TimedPose>& timed_path() const;
+  [[nodiscard]] const std::optional<std::vector<PathCovariance>>& path_covariance() const;
+  [[nodiscard]] const std::optional<std::vector<MagnetometerRecord>>& magnetometer() const;
+  [[nodiscard]] const std::vector<SensorInfo>& sensors() const;
+  [[nodiscard]] uint64_t frame_count(int sensor) const;
+  [[nodiscard]] uint64_t point_count(int sensor) const;
+
+  // Pose of the system at time t (linear position, SLERP orientation, §2.4); clamped to the
+  // ends of the path.
+  [[nodiscard]] Pose PoseAt(double t) const;
+
+  // Streams frames of all sensors merged by time (ties by sensor index, then row). Memory is
+  // bounded by a per-sensor block of frame rows and points, whatever the file's size.
+  class FrameStream {
+   public:
+    virtual ~FrameStream() = default;
+    // Fills `frame` with the next frame; returns false at the end. Errors (e.g. a read failure
+    // in a truncated file) name file, dataset and row.
+    virtual absl::StatusOr<bool> Next(ScanFrame& frame) = 0;
+  };
+  // Bytes: the block budget per sensor for frame rows and points.
+  [[nodiscard]] std::unique_ptr<FrameStream> StreamFrames(size_t block_bytes = 4 << 20);
+
+  // Reads one frame's rows of a sensor directly (random access).
+  absl::StatusOr<ScanFrame> ReadFrame(int sensor, uint64_t row);
+
+ private:
+  struct Impl;
+  explicit ScanReader(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace carvemap
