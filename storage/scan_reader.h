@@ -1,6 +1,9 @@
 // Reads scan.h5 (carvemap-scan v1, DESIGN §3). Open() checks the structure (format, version,
 // datasets, attributes, dtypes); Validate() also checks every row. Frames stream in time
 // order across sensors with bounded memory: /points is read in blocks, never whole.
+//
+// Thread safety: Debian's libhdf5 is built without thread-safety, so even one reader per thread
+// is unsafe: serialize every HDF5 call in the process (all ScanReader/ScanWriter use included).
 #pragma once
 
 #include <memory>
@@ -53,7 +56,8 @@ class ScanReader {
     // in a truncated file) name file, dataset and row.
     virtual absl::StatusOr<bool> Next(ScanFrame& frame) = 0;
   };
-  // Bytes: the block budget per sensor for frame rows and points.
+  // Bytes: the block budget per sensor for frame rows and points (a frame larger than the
+  // budget is still read whole). REQUIRES: the reader outlives the stream.
   [[nodiscard]] std::unique_ptr<FrameStream> StreamFrames(size_t block_bytes = 4 << 20);
 
   // Reads one frame's rows of a sensor directly (random access).

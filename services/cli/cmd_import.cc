@@ -1,0 +1,133 @@
+// `carvemap import graph|tum|ply INPUT -o scan.h5`: turns other inputs into scan.h5 (DESIGN §3)
+// through the importers in storage/import/, then re-opens and validates what it wrote.
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "services/cli/commands.h"
+#include "storage/import/import_writer.h"
+#include "storage/import/octomap_graph_import.h"
+#include "storage/import/ply_import.h"
+#include "storage/import/tum_import.h"
+#include "storage/scan_reader.h"
+
+namespace carvemap {
+namespace {
+
+// Re-opens the written file so the summary reports what is on disk, and so a writer bug
+// cannot go unnoticed.
+absl::Status ValidateAndSummarize(const std::string& out_path) {
+  auto reader = ScanReader::Open(out_path);
+  if (!reader.ok()) return reader.status();
+  if (absl::Status s = (*reader)->Validate(); !s.ok()) return s;
+  const ScanReader& r = **reader;
+  uint64_t frames = 0, points = 0;
+  for (size_t i = 0; i < r.sensors().size(); ++i) {
+    frames += r.frame_count(static_cast<int>(i));
+    points += r.point_count(static_cast<int>(i));
+  }
+  const double duration_s = r.path().back().t - r.path().front().t;
+  std::cout << std::fixed << std::setprecision(3) << out_path << ": " << frames << " frames, "
+            << points << " points, " << r.path().size() << " poses, " << duration_s << " s\n";
+  return absl::OkStatus();
+}
+
+absl::Status Run(const std::string& out_path, const SensorInfo& sensor,
+                 absl::FunctionRef<absl::StatusOr<ImportedScan>(const FrameSink&)> import) {
+  if (auto summary = WriteImport(out_path, sensor, import); !summary.ok()) {
+    return summary.status();
+  }
+  return ValidateAndSummarize(out_path);
+}
+
+struct ImportFlags {
+  std::string input, output;
+  OctomapGraphOptions graph;
+  TumOptions tum;
+  PlyImportOptions ply;
+};
+
+void RegisterImport(CLI::App& app, int& exit_code) {
+  CLI::App* cmd = app.add_subcommand(
+      "import", "Turn an OctoMap scan graph, TUM depth images or a PLY with sensor origins "
+                "into scan.h5 (validated after writing)");
+  cmd->require_subcommand(1);
+  auto flags = std::make_shared<ImportFlags>();
+
+  CLI::App* graph = cmd->add_subcommand(
+      "graph",
+      "OctoMap scan graph (.graph) ➜ scan.h5.\n"
+      "Assumes: one `points` sensor \"graph\" with identity extrinsics (node pose = sensor "
+      "pose);\none frame and one path pose per node; SYNTHETIC times: node k at t = k s "
+      "(graphs have none);\npoints kept in the sensor frame; edges are checked, not stored.");
+  graph->add_option("input", flags->input, "The .graph file")->required();
+  graph->add_option("-o,--output", flags->output, "The scan.h5 to write")->required();
+  graph->callback([flags, &exit_code] {
+    exit_code = ReportStatus(
+        "import graph",
+        Run(flags->output, OctomapGraphSensor(flags->graph), [&](const FrameSink& sink) {
+          return ImportOctomapGraph(flags->input, flags->graph, sink);
+        }));
+  });
+
+  TumOptions& tum = flags->tum;
+  CLI::App* tum_cmd = cmd->add_subcommand(
+      "tum",
+      "TUM RGB-D style directory (depth/<t>.png + association file) ➜ scan.h5.\n"
+      "Assumes: depth PNGs are 16-bit, metres = value/5000, 0 = no return, registered to the "
+      "colour camera;\nassociation lines 'rgb/<t>.png depth/<t>.png tx ty tz qx qy qz qw' give "
+      "the colour camera pose\n(mocap world) at the rgb time; path = all those poses sorted "
+      "(verbatim duplicates dropped);\none frame per existing depth image at its depth time; "
+      "one `grid` sensor \"depth\" with identity\nextrinsics (system frame = camera optical "
+      "frame: x right, y down, z forward);\nrange noise 2 mm + 0.008·range, sigma_t 0.01 s, "
+      "pixels beyond --max-range become no-return.");
+  tum_cmd->add_option("input", flags->input, "The directory holding depth/")->required();
+  tum_cmd->add_option("-o,--output", flags->output, "The scan.h5 to write")->required();
+  tum_cmd->add_option("--association", tum.association_file,
+                      "Association file (default: DIR/my_association.txt)");
+  tum_cmd->add_option("--stride", tum.stride, "Keep every N-th pixel in both directions")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  tum_cmd->add_option("--fx", tum.fx, "Focal length x, px")->capture_default_str();
+  tum_cmd->add_option("--fy", tum.fy, "Focal length y, px")->capture_default_str();
+  tum_cmd->add_option("--cx", tum.cx, "Principal point x, px")->capture_default_str();
+  tum_cmd->add_option("--cy", tum.cy, "Principal point y, px")->capture_default_str();
+  tum_cmd->add_option("--depth-scale", tum.depth_scale, "Stored depth units per metre")
+      ->capture_default_str();
+  tum_cmd->add_option("--max-range", tum.max_range_m, "Max range, m; farther = no return")
+      ->capture_default_str();
+  tum_cmd->callback([flags, &exit_code] {
+    exit_code = ReportStatus("import tum",
+                             Run(flags->output, TumSensor(flags->tum), [&](const FrameSink& sink) {
+                               return ImportTum(flags->input, flags->tum, sink);
+                             }));
+  });
+
+  CLI::App* ply = cmd->add_subcommand(
+      "ply",
+      "PLY point cloud with per-vertex sensor origin ➜ scan.h5 (ascii or binary).\n"
+      "Needs vertex x y z and an origin named sensor_x/y/z, sx/sy/sz, origin_x/y/z or "
+      "vp_x/y/z;\noptional time t, time or timestamp (s). Assumes: each run of consecutive "
+      "vertices with one origin\n(and time) is one frame of a `points` sensor \"ply\" with "
+      "identity extrinsics; its path pose has\nidentity rotation at the origin; frame time = "
+      "the vertex time, else the frame index (synthetic,\n1 s apart); times must increase.");
+  ply->add_option("input", flags->input, "The .ply file")->required();
+  ply->add_option("-o,--output", flags->output, "The scan.h5 to write")->required();
+  ply->callback([flags, &exit_code] {
+    exit_code = ReportStatus("import ply",
+                             Run(flags->output, PlySensor(flags->ply), [&](const FrameSink& sink) {
+                               return ImportPly(flags->input, flags->ply, sink);
+                             }));
+  });
+}
+
+}  // namespace
+
+CARVEMAP_REGISTER_COMMAND(30, RegisterImport);
+
+}  // namespace carvemap

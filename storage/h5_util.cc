@@ -1,0 +1,384 @@
+#include "storage/h5_util.h"
+
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <mutex>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "absl/strings/str_split.h"
+#include "storage/scan_types.h"
+
+namespace carvemap::h5 {
+
+void Init() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    H5open();
+    // Errors are reported through Status; HDF5's own printing would only add noise to stderr.
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+  });
+}
+
+void Hid::Reset() {
+  if (id_ >= 0) H5Idec_ref(id_);
+  id_ = H5I_INVALID_HID;
+}
+
+namespace {
+
+herr_t CollectMessage(unsigned /*n*/, const H5E_error2_t* err, void* data) {
+  auto* messages = static_cast<std::vector<std::string>*>(data);
+  if (err->desc != nullptr && err->desc[0] != '\0') messages->emplace_back(err->desc);
+  return 0;
+}
+
+}  // namespace
+
+std::string TakeErrorStack() {
+  std::vector<std::string> messages;
+  H5Ewalk2(H5E_DEFAULT, H5E_WALK_DOWNWARD, CollectMessage, &messages);
+  H5Eclear2(H5E_DEFAULT);
+  // The innermost messages say what went wrong ("truncated file: eof = ..."); the outer ones
+  // only name the API calls that failed on the way up.
+  std::vector<std::string> useful;
+  for (auto it = messages.rbegin(); it != messages.rend() && useful.size() < 2; ++it) {
+    if (useful.empty() || useful.back() != *it) useful.push_back(*it);
+  }
+  return absl::StrJoin(useful, "; ");
+}
+
+absl::Status Error(absl::StatusCode code, absl::string_view what) {
+  const std::string stack = TakeErrorStack();
+  if (stack.empty()) return absl::Status(code, what);
+  return absl::Status(code, absl::StrCat(what, " (HDF5: ", stack, ")"));
+}
+
+absl::StatusOr<Hid> CheckId(hid_t id, absl::string_view what) {
+  if (id < 0) return Error(absl::StatusCode::kDataLoss, what);
+  return Hid(id);
+}
+
+absl::Status CheckRc(herr_t rc, absl::string_view what) {
+  if (rc < 0) return Error(absl::StatusCode::kDataLoss, what);
+  return absl::OkStatus();
+}
+
+absl::Status Prefixed(absl::string_view prefix, const absl::Status& status) {
+  if (status.ok()) return status;
+  return absl::Status(status.code(), absl::StrCat(prefix, ": ", status.message()));
+}
+
+bool Exists(hid_t loc, const std::string& path) {
+  std::string prefix;
+  for (absl::string_view part : absl::StrSplit(path, '/', absl::SkipEmpty())) {
+    absl::StrAppend(&prefix, "/", part);
+    if (H5Lexists(loc, prefix.c_str(), H5P_DEFAULT) <= 0) {
+      H5Eclear2(H5E_DEFAULT);
+      return false;
+    }
+  }
+  return true;
+}
+
+Hid GroupCreatePlist(bool track_link_order) {
+  Hid gcpl(H5Pcreate(H5P_GROUP_CREATE));
+  H5Pset_obj_track_times(gcpl.get(), 0);
+  if (track_link_order) {
+    // Readers list sensors in the order they were added, so sensor indices agree.
+    H5Pset_link_creation_order(gcpl.get(), H5P_CRT_ORDER_TRACKED | H5P_CRT_ORDER_INDEXED);
+  }
+  return gcpl;
+}
+
+// --- Attributes ---------------------------------------------------------------------------
+
+namespace {
+
+absl::Status WriteAttr(hid_t obj, const char* name, hid_t file_type, hid_t space, hid_t mem_type,
+                       const void* data) {
+  auto attr = CheckId(H5Acreate2(obj, name, file_type, space, H5P_DEFAULT, H5P_DEFAULT),
+                      absl::StrCat("cannot create attribute '", name, "'"));
+  if (!attr.ok()) return attr.status();
+  return CheckRc(H5Awrite(attr->get(), mem_type, data),
+                 absl::StrCat("cannot write attribute '", name, "'"));
+}
+
+absl::StatusOr<Hid> OpenAttr(hid_t obj, const char* name) {
+  if (!HasAttr(obj, name)) {
+    return absl::InvalidArgumentError(absl::StrCat("missing attribute '", name, "'"));
+  }
+  return CheckId(H5Aopen(obj, name, H5P_DEFAULT),
+                 absl::StrCat("cannot open attribute '", name, "'"));
+}
+
+hssize_t AttrPoints(hid_t attr) {
+  Hid space(H5Aget_space(attr));
+  return H5Sget_simple_extent_npoints(space.get());
+}
+
+}  // namespace
+
+absl::Status WriteStringAttr(hid_t obj, const char* name, absl::string_view value) {
+  // Variable-length UTF-8, as h5py writes them, so Python reads a str and not bytes.
+  Hid type(H5Tcopy(H5T_C_S1));
+  H5Tset_size(type.get(), H5T_VARIABLE);
+  H5Tset_cset(type.get(), H5T_CSET_UTF8);
+  Hid space(H5Screate(H5S_SCALAR));
+  const std::string copy(value);
+  const char* ptr = copy.c_str();
+  return WriteAttr(obj, name, type.get(), space.get(), type.get(), &ptr);
+}
+
+absl::Status WriteIntAttr(hid_t obj, const char* name, int64_t value) {
+  Hid space(H5Screate(H5S_SCALAR));
+  return WriteAttr(obj, name, H5T_STD_I64LE, space.get(), H5T_NATIVE_INT64, &value);
+}
+
+absl::Status WriteDoubleAttr(hid_t obj, const char* name, double value) {
+  Hid space(H5Screate(H5S_SCALAR));
+  return WriteAttr(obj, name, H5T_IEEE_F64LE, space.get(), H5T_NATIVE_DOUBLE, &value);
+}
+
+absl::Status WriteDoublesAttr(hid_t obj, const char* name, std::span<const double> values) {
+  const hsize_t dims[1] = {values.size()};
+  Hid space(H5Screate_simple(1, dims, nullptr));
+  return WriteAttr(obj, name, H5T_IEEE_F64LE, space.get(), H5T_NATIVE_DOUBLE, values.data());
+}
+
+bool HasAttr(hid_t obj, const char* name) {
+  const htri_t exists = H5Aexists(obj, name);
+  if (exists < 0) H5Eclear2(H5E_DEFAULT);
+  return exists > 0;
+}
+
+absl::StatusOr<std::string> ReadStringAttr(hid_t obj, const char* name) {
+  auto attr = OpenAttr(obj, name);
+  if (!attr.ok()) return attr.status();
+  Hid type(H5Aget_type(attr->get()));
+  if (H5Tget_class(type.get()) != H5T_STRING || AttrPoints(attr->get()) != 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("attribute '", name, "' is not a single string"));
+  }
+  if (H5Tis_variable_str(type.get()) > 0) {
+    Hid mem(H5Tcopy(H5T_C_S1));
+    H5Tset_size(mem.get(), H5T_VARIABLE);
+    H5Tset_cset(mem.get(), H5Tget_cset(type.get()));  // HDF5 does not convert charsets
+    char* str = nullptr;
+    if (H5Aread(attr->get(), mem.get(), &str) < 0) {
+      return Error(absl::StatusCode::kDataLoss, absl::StrCat("cannot read attribute '", name, "'"));
+    }
+    std::string value = str != nullptr ? str : "";
+    H5free_memory(str);
+    return value;
+  }
+  std::string buffer(H5Tget_size(type.get()), '\0');
+  if (H5Aread(attr->get(), type.get(), buffer.data()) < 0) {
+    return Error(absl::StatusCode::kDataLoss, absl::StrCat("cannot read attribute '", name, "'"));
+  }
+  buffer.resize(std::min(buffer.size(), buffer.find('\0')));
+  if (H5Tget_strpad(type.get()) == H5T_STR_SPACEPAD) {
+    buffer.erase(buffer.find_last_not_of(' ') + 1);
+  }
+  return buffer;
+}
+
+absl::StatusOr<int64_t> ReadIntAttr(hid_t obj, const char* name) {
+  auto attr = OpenAttr(obj, name);
+  if (!attr.ok()) return attr.status();
+  Hid type(H5Aget_type(attr->get()));
+  if (H5Tget_class(type.get()) != H5T_INTEGER || AttrPoints(attr->get()) != 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("attribute '", name, "' is not a single integer"));
+  }
+  int64_t value = 0;
+  if (H5Aread(attr->get(), H5T_NATIVE_INT64, &value) < 0) {
+    return Error(absl::StatusCode::kDataLoss, absl::StrCat("cannot read attribute '", name, "'"));
+  }
+  return value;
+}
+
+absl::StatusOr<std::vector<double>> ReadDoublesAttr(hid_t obj, const char* name, size_t n) {
+  auto attr = OpenAttr(obj, name);
+  if (!attr.ok()) return attr.status();
+  Hid type(H5Aget_type(attr->get()));
+  const H5T_class_t cls = H5Tget_class(type.get());
+  const hssize_t points = AttrPoints(attr->get());
+  if ((cls != H5T_INTEGER && cls != H5T_FLOAT) || points != static_cast<hssize_t>(n)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("attribute '", name, "' must hold ", n, " number", n == 1 ? "" : "s"));
+  }
+  std::vector<double> values(n);
+  if (H5Aread(attr->get(), H5T_NATIVE_DOUBLE, values.data()) < 0) {
+    return Error(absl::StatusCode::kDataLoss, absl::StrCat("cannot read attribute '", name, "'"));
+  }
+  return values;
+}
+
+// --- Compound types ----------------------------------------------------------------------
+
+Hid MakeCompound(size_t size, std::span<const Field> fields) {
+  Hid type(H5Tcreate(H5T_COMPOUND, size));
+  for (const Field& f : fields) H5Tinsert(type.get(), f.name, f.offset, f.mem_type);
+  return type;
+}
+
+Hid MakePackedCompound(std::span<const Field> fields, std::span<const hid_t> file_types) {
+  size_t size = 0;
+  for (hid_t t : file_types) size += H5Tget_size(t);
+  Hid type(H5Tcreate(H5T_COMPOUND, size));
+  size_t offset = 0;
+  for (size_t i = 0; i < fields.size(); ++i) {
+    H5Tinsert(type.get(), fields[i].name, offset, file_types[i]);
+    offset += H5Tget_size(file_types[i]);
+  }
+  return type;
+}
+
+absl::Status CheckCompoundFields(hid_t file_type, std::span<const Field> fields) {
+  if (H5Tget_class(file_type) != H5T_COMPOUND) {
+    return absl::InvalidArgumentError("not a compound dataset");
+  }
+  for (const Field& f : fields) {
+    const int index = H5Tget_member_index(file_type, f.name);
+    if (index < 0) {
+      H5Eclear2(H5E_DEFAULT);
+      return absl::InvalidArgumentError(absl::StrCat("missing field '", f.name, "'"));
+    }
+    const H5T_class_t cls = H5Tget_member_class(file_type, static_cast<unsigned>(index));
+    if (cls != H5T_INTEGER && cls != H5T_FLOAT) {
+      return absl::InvalidArgumentError(absl::StrCat("field '", f.name, "' is not numeric"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+std::span<const Field> PathFields() {
+  static const std::array<Field, 8> fields = {{
+      {"t", offsetof(PathRecord, t), H5T_NATIVE_DOUBLE},
+      {"x", offsetof(PathRecord, x), H5T_NATIVE_DOUBLE},
+      {"y", offsetof(PathRecord, y), H5T_NATIVE_DOUBLE},
+      {"z", offsetof(PathRecord, z), H5T_NATIVE_DOUBLE},
+      {"qw", offsetof(PathRecord, qw), H5T_NATIVE_DOUBLE},
+      {"qx", offsetof(PathRecord, qx), H5T_NATIVE_DOUBLE},
+      {"qy", offsetof(PathRecord, qy), H5T_NATIVE_DOUBLE},
+      {"qz", offsetof(PathRecord, qz), H5T_NATIVE_DOUBLE},
+  }};
+  return fields;
+}
+
+std::span<const Field> FrameFields() {
+  static const std::array<Field, 3> fields = {{
+      {"t", offsetof(FrameRecord, t), H5T_NATIVE_DOUBLE},
+      {"first", offsetof(FrameRecord, first), H5T_NATIVE_UINT64},
+      {"count", offsetof(FrameRecord, count), H5T_NATIVE_UINT32},
+  }};
+  return fields;
+}
+
+std::span<const Field> MagnetometerFields() {
+  static const std::array<Field, 4> fields = {{
+      {"t", offsetof(MagnetometerRecord, t), H5T_NATIVE_DOUBLE},
+      {"mx", offsetof(MagnetometerRecord, mx), H5T_NATIVE_DOUBLE},
+      {"my", offsetof(MagnetometerRecord, my), H5T_NATIVE_DOUBLE},
+      {"mz", offsetof(MagnetometerRecord, mz), H5T_NATIVE_DOUBLE},
+  }};
+  return fields;
+}
+
+Hid PathMemType() { return MakeCompound(sizeof(PathRecord), PathFields()); }
+Hid FrameMemType() { return MakeCompound(sizeof(FrameRecord), FrameFields()); }
+Hid MagnetometerMemType() { return MakeCompound(sizeof(MagnetometerRecord), MagnetometerFields()); }
+
+Hid PathFileType() {
+  const std::vector<hid_t> types(PathFields().size(), H5T_IEEE_F64LE);
+  return MakePackedCompound(PathFields(), types);
+}
+Hid FrameFileType() {
+  const std::array<hid_t, 3> types = {H5T_IEEE_F64LE, H5T_STD_U64LE, H5T_STD_U32LE};
+  return MakePackedCompound(FrameFields(), types);
+}
+Hid MagnetometerFileType() {
+  const std::vector<hid_t> types(MagnetometerFields().size(), H5T_IEEE_F64LE);
+  return MakePackedCompound(MagnetometerFields(), types);
+}
+
+// --- Row datasets ------------------------------------------------------------------------
+
+absl::StatusOr<std::vector<hsize_t>> Dims(hid_t dataset) {
+  Hid space(H5Dget_space(dataset));
+  const int rank = H5Sget_simple_extent_ndims(space.get());
+  if (rank < 0) return Error(absl::StatusCode::kDataLoss, "cannot read the dataspace");
+  std::vector<hsize_t> dims(static_cast<size_t>(rank));
+  H5Sget_simple_extent_dims(space.get(), dims.data(), nullptr);
+  return dims;
+}
+
+absl::StatusOr<Hid> CreateRows(hid_t loc, const char* name, hid_t file_type, hsize_t cols,
+                               hsize_t chunk_rows) {
+  const int rank = cols > 0 ? 2 : 1;
+  const hsize_t dims[2] = {0, cols};
+  const hsize_t max_dims[2] = {H5S_UNLIMITED, cols};
+  const hsize_t chunk[2] = {chunk_rows, cols};
+  Hid space(H5Screate_simple(rank, dims, max_dims));
+  Hid dcpl(H5Pcreate(H5P_DATASET_CREATE));
+  H5Pset_chunk(dcpl.get(), rank, chunk);
+  H5Pset_obj_track_times(dcpl.get(), 0);
+  // A defined (zero) fill written at allocation: the unused tail of the last chunk holds
+  // zeros, not leftover memory, so equal content gives equal bytes.
+  const std::vector<unsigned char> zero(H5Tget_size(file_type), 0);
+  H5Pset_fill_value(dcpl.get(), file_type, zero.data());
+  H5Pset_fill_time(dcpl.get(), H5D_FILL_TIME_ALLOC);
+  return CheckId(
+      H5Dcreate2(loc, name, file_type, space.get(), H5P_DEFAULT, dcpl.get(), H5P_DEFAULT),
+      absl::StrCat("cannot create dataset '", name, "'"));
+}
+
+namespace {
+
+// Selects rows [first, first+n) of `dataset`'s file space; returns it and a matching memory
+// space.
+std::pair<Hid, Hid> RowSpaces(hid_t dataset, hsize_t cols, uint64_t first, uint64_t n) {
+  const int rank = cols > 0 ? 2 : 1;
+  const hsize_t start[2] = {first, 0};
+  const hsize_t count[2] = {n, cols};
+  Hid file_space(H5Dget_space(dataset));
+  H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start, nullptr, count, nullptr);
+  Hid mem_space(H5Screate_simple(rank, count, nullptr));
+  return {std::move(file_space), std::move(mem_space)};
+}
+
+}  // namespace
+
+absl::Status ReadRows(hid_t dataset, hid_t mem_type, hsize_t cols, uint64_t first, uint64_t n,
+                      void* out) {
+  if (n == 0) return absl::OkStatus();
+  auto dims = Dims(dataset);
+  if (!dims.ok()) return dims.status();
+  if (dims->empty() || first + n > (*dims)[0]) {
+    return absl::OutOfRangeError(absl::StrCat("rows [", first, ", ", first + n, ") past the end (",
+                                              dims->empty() ? 0 : (*dims)[0], " rows)"));
+  }
+  auto [file_space, mem_space] = RowSpaces(dataset, cols, first, n);
+  return CheckRc(H5Dread(dataset, mem_type, mem_space.get(), file_space.get(), H5P_DEFAULT, out),
+                 absl::StrCat("cannot read rows [", first, ", ", first + n, ")"));
+}
+
+absl::Status WriteRows(hid_t dataset, hid_t mem_type, hsize_t cols, uint64_t first, uint64_t n,
+                       const void* data) {
+  if (n == 0) return absl::OkStatus();
+  auto dims = Dims(dataset);
+  if (!dims.ok()) return dims.status();
+  if (first + n > (*dims)[0]) {
+    std::vector<hsize_t> grown = *dims;
+    grown[0] = first + n;
+    absl::Status extended = CheckRc(H5Dset_extent(dataset, grown.data()), "cannot extend");
+    if (!extended.ok()) return extended;
+  }
+  auto [file_space, mem_space] = RowSpaces(dataset, cols, first, n);
+  return CheckRc(H5Dwrite(dataset, mem_type, mem_space.get(), file_space.get(), H5P_DEFAULT, data),
+                 absl::StrCat("cannot write rows [", first, ", ", first + n, ")"));
+}
+
+}  // namespace carvemap::h5

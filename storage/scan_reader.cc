@@ -1,0 +1,631 @@
+#include "storage/scan_reader.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "storage/h5_util.h"
+
+namespace carvemap {
+namespace {
+
+using h5::Hid;
+
+constexpr double kQuaternionNormTolerance = 1e-3;
+
+// One sensor's group and its open frames and points datasets, with block reads that name the
+// file, dataset and row on error.
+struct SensorData {
+  std::string file;
+  SensorInfo info;
+  std::string group_path;  // "/sensors/<name>"
+  Hid frames;
+  Hid points;
+  Hid frame_mem = h5::FrameMemType();
+  uint64_t frame_count = 0;
+  uint64_t point_count = 0;
+
+  [[nodiscard]] std::string frames_path() const { return group_path + "/frames"; }
+  [[nodiscard]] std::string points_path() const { return group_path + "/points"; }
+  absl::Status ReadFrameRows(uint64_t first, uint64_t n, std::vector<FrameRecord>& out) const;
+  absl::Status ReadPoints(uint64_t first, uint64_t n, std::vector<Eigen::Vector3f>& out) const;
+  // OK when the frame's rays lie inside /points.
+  absl::Status CheckFrameRange(uint64_t row, const FrameRecord& f) const;
+};
+
+absl::Status Invalid(absl::string_view file, absl::string_view dataset, absl::string_view what) {
+  return absl::InvalidArgumentError(absl::StrCat(file, ": ", dataset, ": ", what));
+}
+
+absl::Status RowError(absl::string_view file, absl::string_view dataset, uint64_t row,
+                      absl::string_view what) {
+  return absl::InvalidArgumentError(absl::StrCat(file, ": ", dataset, " row ", row, ": ", what));
+}
+
+bool AllFinite(std::span<const double> values) {
+  return std::all_of(values.begin(), values.end(), [](double v) { return std::isfinite(v); });
+}
+
+// Rows of a checked dataset: its rank is `cols` ? 2 : 1, and rank-2 datasets have `cols` columns.
+absl::StatusOr<uint64_t> CheckShape(hid_t dataset, hsize_t cols) {
+  auto dims = h5::Dims(dataset);
+  if (!dims.ok()) return dims.status();
+  const size_t rank = cols > 0 ? 2 : 1;
+  if (dims->size() != rank || (cols > 0 && (*dims)[1] != cols)) {
+    std::string shape = "[";
+    for (size_t i = 0; i < dims->size(); ++i) absl::StrAppend(&shape, i ? "][" : "", (*dims)[i]);
+    absl::StrAppend(&shape, "]");
+    return absl::InvalidArgumentError(
+        cols > 0 ? absl::StrCat("shape ", shape, ", expected [N][", cols, "]")
+                 : absl::StrCat("shape ", shape, ", expected a 1-D table"));
+  }
+  return (*dims)[0];
+}
+
+// A numeric (integer or float) rank-2 dataset with `cols` columns.
+absl::StatusOr<uint64_t> CheckNumericMatrix(hid_t dataset, hsize_t cols) {
+  Hid type(H5Dget_type(dataset));
+  const H5T_class_t cls = H5Tget_class(type.get());
+  if (cls != H5T_FLOAT && cls != H5T_INTEGER) {
+    return absl::InvalidArgumentError("not a numeric dataset");
+  }
+  return CheckShape(dataset, cols);
+}
+
+absl::StatusOr<uint64_t> CheckCompoundTable(hid_t dataset, std::span<const h5::Field> fields) {
+  Hid type(H5Dget_type(dataset));
+  if (absl::Status s = h5::CheckCompoundFields(type.get(), fields); !s.ok()) return s;
+  return CheckShape(dataset, 0);
+}
+
+std::string Interval(uint64_t first, uint64_t end) {
+  return absl::StrCat("[", first, ", ", end, ")");
+}
+
+absl::Status SensorData::ReadFrameRows(uint64_t first, uint64_t n,
+                                       std::vector<FrameRecord>& out) const {
+  out.resize(n);
+  absl::Status status = h5::ReadRows(frames.get(), frame_mem.get(), 0, first, n, out.data());
+  if (status.ok()) return status;
+  return absl::DataLossError(
+      absl::StrCat(file, ": ", frames_path(), " row ", first, ": ", status.message()));
+}
+
+absl::Status SensorData::ReadPoints(uint64_t first, uint64_t n,
+                                    std::vector<Eigen::Vector3f>& out) const {
+  out.resize(n);
+  absl::Status status = h5::ReadRows(points.get(), H5T_NATIVE_FLOAT, 3, first, n, out.data());
+  if (status.ok()) return status;
+  return absl::DataLossError(
+      absl::StrCat(file, ": ", points_path(), " row ", first, ": ", status.message()));
+}
+
+absl::Status SensorData::CheckFrameRange(uint64_t row, const FrameRecord& f) const {
+  if (f.first > point_count || f.count > point_count - f.first) {
+    return RowError(file, frames_path(), row,
+                    absl::StrCat("rays ", Interval(f.first, f.first + f.count), " outside ",
+                                 points_path(), " (", point_count, " rows)"));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+struct ScanReader::Impl {
+  std::string file;
+  Hid fid;
+  std::vector<PathRecord> path;
+  std::vector<TimedPose> timed_path;
+  std::optional<std::vector<PathCovariance>> path_cov;
+  std::optional<std::vector<MagnetometerRecord>> magnetometer;
+  std::vector<SensorData> sensor_data;
+  std::vector<SensorInfo> sensors;
+
+  absl::StatusOr<Hid> OpenDataset(const std::string& name) const;
+  absl::Status CheckRoot() const;
+  absl::Status LoadPath();
+  absl::Status LoadPathCov();
+  absl::Status LoadMagnetometer();
+  absl::Status LoadSensors();
+  absl::Status LoadSensor(hid_t sensors_group, const std::string& name);
+
+  absl::Status ValidatePath() const;
+  absl::Status ValidatePathCov() const;
+  absl::Status ValidateMagnetometer() const;
+  absl::Status ValidateFrames(const SensorData& s, size_t block_rows) const;
+  absl::Status ValidatePoints(const SensorData& s, size_t block_rows) const;
+};
+
+absl::StatusOr<Hid> ScanReader::Impl::OpenDataset(const std::string& name) const {
+  if (!h5::Exists(fid.get(), name)) return Invalid(file, name, "missing");
+  H5O_info_t info;
+  if (H5Oget_info_by_name(fid.get(), name.c_str(), &info, H5P_DEFAULT) < 0 ||
+      info.type != H5O_TYPE_DATASET) {
+    h5::TakeErrorStack();
+    return Invalid(file, name, "not a dataset");
+  }
+  auto dataset = h5::CheckId(H5Dopen2(fid.get(), name.c_str(), H5P_DEFAULT), "cannot open");
+  if (!dataset.ok()) return h5::Prefixed(absl::StrCat(file, ": ", name), dataset.status());
+  return dataset;
+}
+
+absl::Status ScanReader::Impl::CheckRoot() const {
+  const hid_t root = fid.get();
+  auto format = h5::ReadStringAttr(root, "format");
+  if (!format.ok()) return Invalid(file, "/", format.status().message());
+  if (*format != std::string(kScanFormatName)) {
+    return Invalid(
+        file, "/",
+        absl::StrCat("format is '", *format, "', expected '", std::string(kScanFormatName), "'"));
+  }
+  auto version = h5::ReadIntAttr(root, "version");
+  if (!version.ok()) return Invalid(file, "/", version.status().message());
+  if (*version != kScanFormatVersion) {
+    return absl::InvalidArgumentError(absl::StrCat(file, ": unknown format version ", *version,
+                                                   " (this reader knows ", kScanFormatVersion,
+                                                   ")"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ScanReader::Impl::LoadPath() {
+  auto dataset = OpenDataset("/path");
+  if (!dataset.ok()) return dataset.status();
+  auto rows = CheckCompoundTable(dataset->get(), h5::PathFields());
+  if (!rows.ok()) return Invalid(file, "/path", rows.status().message());
+  path.resize(*rows);
+  Hid mem = h5::PathMemType();
+  if (absl::Status s = h5::ReadRows(dataset->get(), mem.get(), 0, 0, *rows, path.data()); !s.ok()) {
+    return h5::Prefixed(absl::StrCat(file, ": /path"), s);
+  }
+  timed_path.reserve(path.size());
+  for (const PathRecord& p : path) {
+    Eigen::Quaterniond q(p.qw, p.qx, p.qy, p.qz);
+    // Interpolation wants unit quaternions; Validate() reports norms far from 1.
+    if (q.norm() > 0 && std::isfinite(q.norm())) q.normalize();
+    timed_path.push_back(TimedPose{p.t, Pose{q, Eigen::Vector3d(p.x, p.y, p.z)}});
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ScanReader::Impl::LoadPathCov() {
+  if (!h5::Exists(fid.get(), "/path_cov")) return absl::OkStatus();
+  auto dataset = OpenDataset("/path_cov");
+  if (!dataset.ok()) return dataset.status();
+  auto rows = CheckNumericMatrix(dataset->get(), 12);
+  if (!rows.ok()) return Invalid(file, "/path_cov", rows.status().message());
+  if (*rows != path.size()) {
+    return Invalid(file, "/path_cov", absl::StrCat(*rows, " rows, but /path has ", path.size()));
+  }
+  path_cov.emplace(*rows);
+  return h5::Prefixed(
+      absl::StrCat(file, ": /path_cov"),
+      h5::ReadRows(dataset->get(), H5T_NATIVE_FLOAT, 12, 0, *rows, path_cov->data()));
+}
+
+absl::Status ScanReader::Impl::LoadMagnetometer() {
+  if (!h5::Exists(fid.get(), "/magnetometer")) return absl::OkStatus();
+  auto dataset = OpenDataset("/magnetometer");
+  if (!dataset.ok()) return dataset.status();
+  auto rows = CheckCompoundTable(dataset->get(), h5::MagnetometerFields());
+  if (!rows.ok()) return Invalid(file, "/magnetometer", rows.status().message());
+  magnetometer.emplace(*rows);
+  Hid mem = h5::MagnetometerMemType();
+  return h5::Prefixed(absl::StrCat(file, ": /magnetometer"),
+                      h5::ReadRows(dataset->get(), mem.get(), 0, 0, *rows, magnetometer->data()));
+}
+
+namespace {
+
+herr_t CollectName(hid_t /*group*/, const char* name, const H5L_info_t* /*info*/, void* data) {
+  static_cast<std::vector<std::string>*>(data)->emplace_back(name);
+  return 0;
+}
+
+absl::StatusOr<SensorKind> ParseKind(absl::string_view kind) {
+  if (kind == "line") return SensorKind::kLine;
+  if (kind == "grid") return SensorKind::kGrid;
+  if (kind == "points") return SensorKind::kPoints;
+  return absl::InvalidArgumentError(
+      absl::StrCat("kind is '", kind, "', expected 'line', 'grid' or 'points'"));
+}
+
+absl::StatusOr<uint32_t> ReadDimAttr(hid_t group, const char* name) {
+  auto value = h5::ReadIntAttr(group, name);
+  if (!value.ok()) return value.status();
+  if (*value <= 0 || *value > std::numeric_limits<uint32_t>::max()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("attribute '", name, "' is ", *value, ", expected a positive integer"));
+  }
+  return static_cast<uint32_t>(*value);
+}
+
+// The attributes of a sensor group into `info` (name already set).
+absl::Status ReadSensorAttrs(hid_t group, SensorInfo& info) {
+  auto kind_name = h5::ReadStringAttr(group, "kind");
+  if (!kind_name.ok()) return kind_name.status();
+  auto kind = ParseKind(*kind_name);
+  if (!kind.ok()) return kind.status();
+  info.kind = *kind;
+  if (info.kind == SensorKind::kGrid) {
+    auto rows = ReadDimAttr(group, "rows");
+    if (!rows.ok()) return rows.status();
+    auto cols = ReadDimAttr(group, "cols");
+    if (!cols.ok()) return cols.status();
+    info.rows = *rows;
+    info.cols = *cols;
+  }
+  auto r = h5::ReadDoublesAttr(group, "R_s2c", 9);
+  if (!r.ok()) return r.status();
+  auto t = h5::ReadDoublesAttr(group, "T_s2c", 3);
+  if (!t.ok()) return t.status();
+  auto sigma_t = h5::ReadDoublesAttr(group, "sigma_t", 1);
+  if (!sigma_t.ok()) return sigma_t.status();
+  auto range_sigma = h5::ReadDoublesAttr(group, "range_sigma", 2);
+  if (!range_sigma.ok()) return range_sigma.status();
+  auto max_range = h5::ReadDoublesAttr(group, "max_range", 1);
+  if (!max_range.ok()) return max_range.status();
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) info.R_s2c(i, j) = (*r)[3 * i + j];
+  }
+  info.T_s2c = Eigen::Vector3d((*t)[0], (*t)[1], (*t)[2]);
+  info.sigma_t_s = (*sigma_t)[0];
+  info.range_sigma = {(*range_sigma)[0], (*range_sigma)[1]};
+  info.max_range_m = (*max_range)[0];
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status ScanReader::Impl::LoadSensors() {
+  if (!h5::Exists(fid.get(), "/sensors")) return absl::OkStatus();  // a path-only scan
+  auto group = h5::CheckId(H5Gopen2(fid.get(), "/sensors", H5P_DEFAULT), "not a group");
+  if (!group.ok()) return h5::Prefixed(absl::StrCat(file, ": /sensors"), group.status());
+  // Creation order when the writer tracked it (ours does), so indices match the writer's;
+  // otherwise (h5py's default) names in ascending order.
+  Hid gcpl(H5Gget_create_plist(group->get()));
+  unsigned order_flags = 0;
+  H5Pget_link_creation_order(gcpl.get(), &order_flags);
+  const H5_index_t index =
+      (order_flags & H5P_CRT_ORDER_INDEXED) ? H5_INDEX_CRT_ORDER : H5_INDEX_NAME;
+  std::vector<std::string> names;
+  if (H5Literate(group->get(), index, H5_ITER_INC, nullptr, CollectName, &names) < 0) {
+    return h5::Error(absl::StatusCode::kDataLoss,
+                     absl::StrCat(file, ": /sensors: cannot list the sensors"));
+  }
+  for (const std::string& name : names) {
+    if (absl::Status s = LoadSensor(group->get(), name); !s.ok()) return s;
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ScanReader::Impl::LoadSensor(hid_t sensors_group, const std::string& name) {
+  SensorData data;
+  data.file = file;
+  data.info.name = name;
+  data.group_path = "/sensors/" + name;
+  H5O_info_t object;
+  if (H5Oget_info_by_name(sensors_group, name.c_str(), &object, H5P_DEFAULT) < 0 ||
+      object.type != H5O_TYPE_GROUP) {
+    h5::TakeErrorStack();
+    return Invalid(file, data.group_path, "not a group");
+  }
+  Hid group(H5Gopen2(sensors_group, name.c_str(), H5P_DEFAULT));
+  if (absl::Status s = ReadSensorAttrs(group.get(), data.info); !s.ok()) {
+    return Invalid(file, data.group_path, s.message());
+  }
+  auto frames = OpenDataset(data.frames_path());
+  if (!frames.ok()) return frames.status();
+  auto frame_rows = CheckCompoundTable(frames->get(), h5::FrameFields());
+  if (!frame_rows.ok()) return Invalid(file, data.frames_path(), frame_rows.status().message());
+  auto points = OpenDataset(data.points_path());
+  if (!points.ok()) return points.status();
+  auto point_rows = CheckNumericMatrix(points->get(), 3);
+  if (!point_rows.ok()) return Invalid(file, data.points_path(), point_rows.status().message());
+  data.frames = *std::move(frames);
+  data.points = *std::move(points);
+  data.frame_count = *frame_rows;
+  data.point_count = *point_rows;
+  sensors.push_back(data.info);
+  sensor_data.push_back(std::move(data));
+  return absl::OkStatus();
+}
+
+// --- Open and accessors ------------------------------------------------------------------
+
+ScanReader::ScanReader(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+ScanReader::~ScanReader() = default;
+
+absl::StatusOr<std::unique_ptr<ScanReader>> ScanReader::Open(const std::string& path) {
+  h5::Init();
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(path, error)) {
+    return absl::NotFoundError(absl::StrCat(path, ": no such file"));
+  }
+  if (H5Fis_hdf5(path.c_str()) <= 0) {
+    const std::string hdf5 = h5::TakeErrorStack();
+    return absl::DataLossError(absl::StrCat(path, ": not an HDF5 file (truncated or corrupt)",
+                                            hdf5.empty() ? "" : " (HDF5: " + hdf5 + ")"));
+  }
+  auto impl = std::make_unique<Impl>();
+  impl->file = path;
+  const hid_t fid = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  if (fid < 0) {
+    // HDF5 1.10 compares the superblock's end-of-file address with the file's size.
+    return h5::Error(absl::StatusCode::kDataLoss,
+                     absl::StrCat(path, ": truncated or corrupt HDF5 file"));
+  }
+  impl->fid = Hid(fid);
+  absl::Status s = impl->CheckRoot();
+  if (s.ok()) s = impl->LoadPath();
+  if (s.ok()) s = impl->LoadPathCov();
+  if (s.ok()) s = impl->LoadMagnetometer();
+  if (s.ok()) s = impl->LoadSensors();
+  if (!s.ok()) return s;
+  return std::unique_ptr<ScanReader>(new ScanReader(std::move(impl)));
+}
+
+const std::string& ScanReader::file() const { return impl_->file; }
+const std::vector<PathRecord>& ScanReader::path() const { return impl_->path; }
+const std::vector<TimedPose>& ScanReader::timed_path() const { return impl_->timed_path; }
+const std::optional<std::vector<PathCovariance>>& ScanReader::path_covariance() const {
+  return impl_->path_cov;
+}
+const std::optional<std::vector<MagnetometerRecord>>& ScanReader::magnetometer() const {
+  return impl_->magnetometer;
+}
+const std::vector<SensorInfo>& ScanReader::sensors() const { return impl_->sensors; }
+uint64_t ScanReader::frame_count(int sensor) const {
+  return impl_->sensor_data.at(sensor).frame_count;
+}
+uint64_t ScanReader::point_count(int sensor) const {
+  return impl_->sensor_data.at(sensor).point_count;
+}
+
+Pose ScanReader::PoseAt(double t) const {
+  if (impl_->timed_path.empty()) return Pose{};
+  return PoseAtTime(impl_->timed_path, t);
+}
+
+absl::StatusOr<ScanFrame> ScanReader::ReadFrame(int sensor, uint64_t row) {
+  if (sensor < 0 || sensor >= static_cast<int>(impl_->sensor_data.size())) {
+    return absl::InvalidArgumentError(absl::StrCat(impl_->file, ": unknown sensor index ", sensor));
+  }
+  const SensorData& s = impl_->sensor_data[sensor];
+  if (row >= s.frame_count) {
+    return absl::OutOfRangeError(absl::StrCat(impl_->file, ": ", s.frames_path(), " row ", row,
+                                              ": past the end (", s.frame_count, " rows)"));
+  }
+  std::vector<FrameRecord> record;
+  if (absl::Status st = s.ReadFrameRows(row, 1, record); !st.ok()) return st;
+  if (absl::Status st = s.CheckFrameRange(row, record[0]); !st.ok()) return st;
+  ScanFrame frame;
+  frame.sensor = sensor;
+  frame.row = row;
+  frame.t = record[0].t;
+  if (absl::Status st = s.ReadPoints(record[0].first, record[0].count, frame.points_sensor);
+      !st.ok()) {
+    return st;
+  }
+  return frame;
+}
+
+// --- Streaming ---------------------------------------------------------------------------
+
+namespace {
+
+// One sensor's read position: a block of frame rows and a block of points, refilled by
+// hyperslab reads so memory stays within the budget (plus one frame when a frame is larger).
+class SensorCursor {
+ public:
+  SensorCursor(const SensorData& data, int index, size_t block_bytes)
+      : data_(data),
+        index_(index),
+        frame_block_rows_(std::max<size_t>(1, block_bytes / 2 / sizeof(FrameRecord))),
+        point_block_rows_(std::max<size_t>(1, block_bytes / 2 / sizeof(Eigen::Vector3f))) {}
+
+  [[nodiscard]] bool done() const { return next_row_ >= data_.frame_count; }
+  [[nodiscard]] int index() const { return index_; }
+  [[nodiscard]] uint64_t row() const { return next_row_; }
+  // REQUIRES: !done() and Load() succeeded.
+  [[nodiscard]] double time() const { return frames_[next_row_ - frames_first_].t; }
+
+  // Makes the frame row at the cursor available.
+  absl::Status Load() {
+    if (done() || (next_row_ >= frames_first_ && next_row_ < frames_first_ + frames_.size())) {
+      return absl::OkStatus();
+    }
+    frames_first_ = next_row_;
+    const uint64_t n = std::min<uint64_t>(frame_block_rows_, data_.frame_count - next_row_);
+    return data_.ReadFrameRows(frames_first_, n, frames_);
+  }
+
+  // Fills `frame` with the frame at the cursor and advances. REQUIRES: !done(), Load() ok.
+  absl::Status Take(ScanFrame& frame) {
+    const FrameRecord record = frames_[next_row_ - frames_first_];
+    if (absl::Status s = data_.CheckFrameRange(next_row_, record); !s.ok()) return s;
+    if (absl::Status s = LoadPoints(record.first, record.count); !s.ok()) return s;
+    frame.sensor = index_;
+    frame.row = next_row_;
+    frame.t = record.t;
+    const auto begin = points_.begin() + static_cast<ptrdiff_t>(record.first - points_first_);
+    frame.points_sensor.assign(begin, begin + record.count);
+    ++next_row_;
+    return absl::OkStatus();
+  }
+
+ private:
+  // Makes points [first, first+count) resident, reading a block that starts at `first`.
+  absl::Status LoadPoints(uint64_t first, uint64_t count) {
+    if (first >= points_first_ && first + count <= points_first_ + points_.size()) {
+      return absl::OkStatus();
+    }
+    points_first_ = first;
+    const uint64_t n =
+        std::min<uint64_t>(std::max<uint64_t>(count, point_block_rows_), data_.point_count - first);
+    return data_.ReadPoints(first, n, points_);
+  }
+
+  const SensorData& data_;
+  int index_;
+  size_t frame_block_rows_;
+  size_t point_block_rows_;
+  uint64_t next_row_ = 0;
+  uint64_t frames_first_ = 0;
+  std::vector<FrameRecord> frames_;
+  uint64_t points_first_ = 0;
+  std::vector<Eigen::Vector3f> points_;
+};
+
+class MergedFrameStream : public ScanReader::FrameStream {
+ public:
+  MergedFrameStream(const std::vector<SensorData>& sensors, size_t block_bytes) {
+    for (size_t i = 0; i < sensors.size(); ++i) {
+      cursors_.emplace_back(sensors[i], static_cast<int>(i), block_bytes);
+    }
+  }
+
+  absl::StatusOr<bool> Next(ScanFrame& frame) override {
+    if (!error_.ok()) return error_;
+    SensorCursor* best = nullptr;
+    // Few sensors: a linear scan beats a heap. Ties go to the lower sensor index because the
+    // comparison is strict; rows of one sensor come in order by construction.
+    for (SensorCursor& cursor : cursors_) {
+      if (absl::Status s = cursor.Load(); !s.ok()) return error_ = s;
+      if (cursor.done()) continue;
+      if (best == nullptr || cursor.time() < best->time()) best = &cursor;
+    }
+    if (best == nullptr) return false;
+    if (absl::Status s = best->Take(frame); !s.ok()) return error_ = s;
+    return true;
+  }
+
+ private:
+  std::vector<SensorCursor> cursors_;
+  absl::Status error_;
+};
+
+}  // namespace
+
+std::unique_ptr<ScanReader::FrameStream> ScanReader::StreamFrames(size_t block_bytes) {
+  return std::make_unique<MergedFrameStream>(impl_->sensor_data, block_bytes);
+}
+
+// --- Validation --------------------------------------------------------------------------
+
+absl::Status ScanReader::Impl::ValidatePath() const {
+  if (path.empty()) return Invalid(file, "/path", "no poses");
+  for (size_t i = 0; i < path.size(); ++i) {
+    const PathRecord& p = path[i];
+    const std::array<double, 8> values = {p.t, p.x, p.y, p.z, p.qw, p.qx, p.qy, p.qz};
+    if (!AllFinite(values)) return RowError(file, "/path", i, "non-finite value");
+    if (i > 0 && !(p.t > path[i - 1].t)) {
+      return RowError(
+          file, "/path", i,
+          absl::StrCat("time ", p.t, " is not after row ", i - 1, "'s ", path[i - 1].t));
+    }
+    const double norm = std::sqrt(p.qw * p.qw + p.qx * p.qx + p.qy * p.qy + p.qz * p.qz);
+    if (std::abs(norm - 1.0) > kQuaternionNormTolerance) {
+      return RowError(file, "/path", i, absl::StrCat("non-unit quaternion (norm ", norm, ")"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ScanReader::Impl::ValidatePathCov() const {
+  if (!path_cov.has_value()) return absl::OkStatus();
+  constexpr std::array<int, 6> kDiagonal = {0, 3, 5, 6, 9, 11};  // xx yy zz of both blocks
+  for (size_t i = 0; i < path_cov->size(); ++i) {
+    const PathCovariance& c = (*path_cov)[i];
+    if (!std::all_of(c.begin(), c.end(), [](float v) { return std::isfinite(v); })) {
+      return RowError(file, "/path_cov", i, "non-finite value");
+    }
+    for (int d : kDiagonal) {
+      if (c[d] < 0) {
+        return RowError(file, "/path_cov", i,
+                        absl::StrCat("negative variance ", c[d], " in column ", d));
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ScanReader::Impl::ValidateMagnetometer() const {
+  if (!magnetometer.has_value()) return absl::OkStatus();
+  for (size_t i = 0; i < magnetometer->size(); ++i) {
+    const MagnetometerRecord& m = (*magnetometer)[i];
+    const std::array<double, 4> values = {m.t, m.mx, m.my, m.mz};
+    if (!AllFinite(values)) return RowError(file, "/magnetometer", i, "non-finite value");
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ScanReader::Impl::ValidateFrames(const SensorData& s, size_t block_rows) const {
+  const double t_begin = path.front().t;
+  const double t_end = path.back().t;
+  const std::string dataset = s.frames_path();
+  std::vector<FrameRecord> block;
+  double previous_t = 0;
+  for (uint64_t first = 0; first < s.frame_count; first += block.size()) {
+    const uint64_t n = std::min<uint64_t>(block_rows, s.frame_count - first);
+    if (absl::Status st = s.ReadFrameRows(first, n, block); !st.ok()) return st;
+    for (uint64_t k = 0; k < n; ++k) {
+      const uint64_t row = first + k;
+      const FrameRecord& f = block[k];
+      if (!std::isfinite(f.t)) return RowError(file, dataset, row, "non-finite time");
+      if (row > 0 && !(f.t > previous_t)) {
+        return RowError(
+            file, dataset, row,
+            absl::StrCat("time ", f.t, " is not after row ", row - 1, "'s ", previous_t));
+      }
+      previous_t = f.t;
+      if (absl::Status st = s.CheckFrameRange(row, f); !st.ok()) return st;
+      if (s.info.kind == SensorKind::kGrid &&
+          f.count != static_cast<uint64_t>(s.info.rows) * s.info.cols) {
+        return RowError(file, dataset, row,
+                        absl::StrCat("grid frame has ", f.count, " rays, expected ", s.info.rows,
+                                     "x", s.info.cols));
+      }
+      if (f.t < t_begin || f.t > t_end) {
+        return RowError(file, dataset, row,
+                        absl::StrCat("time ", f.t, " is outside the path's time span [", t_begin,
+                                     ", ", t_end, "]: no pose to interpolate"));
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ScanReader::Impl::ValidatePoints(const SensorData& s, size_t block_rows) const {
+  std::vector<Eigen::Vector3f> block;
+  for (uint64_t first = 0; first < s.point_count; first += block.size()) {
+    const uint64_t n = std::min<uint64_t>(block_rows, s.point_count - first);
+    if (absl::Status st = s.ReadPoints(first, n, block); !st.ok()) return st;
+    for (uint64_t k = 0; k < n; ++k) {
+      const Eigen::Vector3f& p = block[k];
+      if (p.allFinite() || p.array().isNaN().all()) continue;  // all-NaN: no return
+      return RowError(file, s.points_path(), first + k,
+                      absl::StrCat("point (", p.x(), ", ", p.y(), ", ", p.z(),
+                                   ") is partly non-finite (a no-return row is all NaN)"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ScanReader::Validate() {
+  constexpr size_t kBlockBytes = 4 << 20;
+  const Impl& r = *impl_;
+  absl::Status s = r.ValidatePath();
+  if (s.ok()) s = r.ValidatePathCov();
+  if (s.ok()) s = r.ValidateMagnetometer();
+  for (const SensorData& sensor : r.sensor_data) {
+    if (s.ok()) s = r.ValidateFrames(sensor, kBlockBytes / sizeof(FrameRecord));
+    if (s.ok()) s = r.ValidatePoints(sensor, kBlockBytes / sizeof(Eigen::Vector3f));
+  }
+  return s;
+}
+
+}  // namespace carvemap
