@@ -60,6 +60,9 @@ struct NavGrid {
   [[nodiscard]] bool IsFree(int ix, int iy) const {
     return ix >= 0 && iy >= 0 && ix < width && iy < height && free[size_t(iy) * width + ix];
   }
+  // Added: the cell holding world point `p` (may be outside the grid) and a cell's centre.
+  [[nodiscard]] Eigen::Vector2i CellOf(const Eigen::Vector2d& p) const;
+  [[nodiscard]] Eigen::Vector2d CellCenter(int ix, int iy) const;
 };
 
 // Stairs between two levels: the centre line a walker follows, bottom landing to top landing.
@@ -87,5 +90,25 @@ struct Building {
 // All objects; `object_of_triangle` (optional) receives the object id of each triangle.
 [[nodiscard]] TriangleMesh ObjectsMesh(const Building& building,
                                        std::vector<int>* object_of_triangle = nullptr);
+
+// ---- Added helpers (polygons and nav-grid rasterization), shared by the generators and tests.
+
+// Shoelace area of a ring: > 0 for counter-clockwise.
+[[nodiscard]] double SignedArea(const std::vector<Eigen::Vector2d>& ring);
+// Even-odd point-in-ring test (points exactly on the boundary may go either way).
+[[nodiscard]] bool RingContains(const std::vector<Eigen::Vector2d>& ring, const Eigen::Vector2d& p);
+// Inside the room's outer ring and outside all its holes.
+[[nodiscard]] bool RoomContains(const RoomTruth& room, const Eigen::Vector2d& p);
+// Free-space area of the room: outer ring minus holes, m².
+[[nodiscard]] double RoomArea(const RoomTruth& room);
+
+// Cells (same layout as `frame`) touched by the footprint of any solid (structure or object
+// part) that overlaps the height band [z_lo, z_hi] (m): what a walker's body would hit.
+[[nodiscard]] std::vector<uint8_t> BlockedCells(const NavGrid& frame, const Building& building,
+                                                double z_lo, double z_hi);
+// Euclidean distance (in cells, between cell centres) from every cell to the nearest cell with
+// blocked != 0 (Felzenszwalb–Huttenlocher); +inf-like (1e9) when nothing is blocked.
+[[nodiscard]] std::vector<float> DistanceToBlocked(const std::vector<uint8_t>& blocked, int width,
+                                                   int height);
 
 }  // namespace carvemap
