@@ -5,14 +5,25 @@
 #include <iostream>
 #include <memory>
 #include <string>
+#include <thread>
 
 #include <CLI/CLI.hpp>
 
 #include "absl/status/status.h"
 #include "services/cli/commands.h"
+#include "services/cli/progress.h"
 #include "services/sim/simulator.h"
 
 namespace carvemap {
+
+ProgressCallback SimulationProgressPrinter(ProgressLine& line) {
+  return [&line](const SimulationProgress& p) {
+    line.Update("simulate: %5.1f%% of %.0f s walk, %.2f M rays/s",
+                100.0 * p.sim_time_s / std::max(p.duration_s, 1e-9), p.duration_s,
+                p.elapsed_s > 0 ? p.rays / p.elapsed_s * 1e-6 : 0.0);
+  };
+}
+
 namespace {
 
 struct SimulateFlags {
@@ -35,20 +46,9 @@ absl::Status RunSimulate(SimulateFlags& flags) {
   }
   if (flags.range_sigma_m >= 0) o.noise.range_a_m = flags.range_sigma_m;
   const bool from_map = !o.floormap_png.empty();
-  auto last = std::chrono::steady_clock::now() - std::chrono::seconds(2);
-  ProgressCallback progress;
-  if (!flags.quiet) {
-    progress = [&last](const SimulationProgress& p) {
-      const auto now = std::chrono::steady_clock::now();
-      if (now - last < std::chrono::seconds(1)) return;
-      last = now;
-      std::fprintf(stderr, "\rsimulate: %5.1f%% of %.0f s walk, %.2f M rays/s   ",
-                   100.0 * p.sim_time_s / std::max(p.duration_s, 1e-9), p.duration_s,
-                   p.elapsed_s > 0 ? p.rays / p.elapsed_s * 1e-6 : 0.0);
-    };
-  }
-  absl::StatusOr<SimulationSummary> summary = Simulate(o, progress);
-  if (!flags.quiet) std::fprintf(stderr, "\n");
+  ProgressLine line(!flags.quiet);
+  absl::StatusOr<SimulationSummary> summary = Simulate(o, SimulationProgressPrinter(line));
+  line.Finish();
   if (!summary.ok()) return summary.status();
   const SimulationSummary& s = *summary;
   std::printf("building %s (%s), seed %llu, noise %s\n", s.building.c_str(),
@@ -107,6 +107,7 @@ void RegisterSimulate(CLI::App& app, int& exit_code) {
   cmd->add_option("--max-duration", o.max_duration_s,
                   "Stop the walk after this many seconds (0 = the whole walk)")
       ->capture_default_str();
+  o.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   cmd->add_option("--threads", o.threads, "Ray-casting threads (output is the same for any)")
       ->capture_default_str();
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress on stderr");

@@ -40,7 +40,7 @@ TEST(PoseTest, SlerpTakesTheShortArc) {
 }
 
 TEST(PoseTest, ExpLogRoundTrip) {
-  for (const Eigen::Vector3d e : {Eigen::Vector3d(0.1, -0.2, 0.3), Eigen::Vector3d(1e-9, 0, 0),
+  for (const Eigen::Vector3d& e : {Eigen::Vector3d(0.1, -0.2, 0.3), Eigen::Vector3d(1e-9, 0, 0),
                                   Eigen::Vector3d(0, 3.0, 0)}) {
     EXPECT_NEAR((RotationLog(RotationExp(e)) - e).norm(), 0, 1e-9) << e.transpose();
   }

@@ -64,6 +64,9 @@ def slerp(q0, q1, u):
 def pose_at(path, t):
     """Interpolated (R (N,3,3), p (N,3)) at times t (N,), clamped to the path's ends (§2.4)."""
     pt = path["t"]
+    if len(pt) == 1:
+        path = np.concatenate([path, path])
+        pt = np.array([pt[0], pt[0] + 1.0])
     t = np.clip(t, pt[0], pt[-1])
     i = np.clip(np.searchsorted(pt, t, side="right") - 1, 0, len(pt) - 2)
     dt = pt[i + 1] - pt[i]
@@ -89,8 +92,8 @@ def check_scan(fname, want_world_points):
         elif path.dtype[name] != np.float64:
             fail(f"/path field {name} is {path.dtype[name]}, want f64")
     n = len(path)
-    if n < 2:
-        fail("/path has fewer than 2 poses")
+    if n < 1:
+        fail("/path is empty")
     if not np.all(np.diff(path["t"]) > 0):
         fail("/path t not strictly ascending")
     qn = np.sqrt(path["qw"] ** 2 + path["qx"] ** 2 + path["qy"] ** 2 + path["qz"] ** 2)
