@@ -1,6 +1,7 @@
 // carvemap: indoor laser scans ➜ building models (Turner 2015). Thin entry point; every
 // subcommand lives in its own cmd_<name>.cc.
 #include <algorithm>
+#include <cstdio>
 #include <iostream>
 #include <utility>
 #include <vector>
@@ -45,6 +46,8 @@ int main(int argc, char** argv) {
       "carvemap turns indoor laser scans of buildings into building models: occupancy octree,\n"
       "floor plans with rooms, 2.5D and 3D meshes (E. Turner, Berkeley 2015).\n"
       "Run `carvemap <command> --help` for a command's options."};
+  // Line-buffered stdout keeps results and stderr progress in order when piped to a log.
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);
   app.require_subcommand(1);
   app.set_version_flag("--version", "carvemap 0.1.0");
   int exit_code = 0;
