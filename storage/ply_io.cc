@@ -1,10 +1,10 @@
 #include "storage/ply_io.h"
 
-#include <cstdio>
-#include <filesystem>
-#include <fstream>
+#include <bit>
+#include <ostream>
 
 #include "absl/strings/str_cat.h"
+#include "storage/atomic_file.h"
 
 namespace carvemap {
 
@@ -23,10 +23,7 @@ absl::Status WritePly(const std::string& path, const TriangleMesh& mesh,
                                                    " face values for ", mesh.triangles.size(),
                                                    " triangles"));
   }
-  const std::string tmp = path + ".partial";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return absl::PermissionDeniedError(absl::StrCat(path, ": cannot open for writing"));
+  return WriteFileAtomically(path, [&](std::ostream& out) {
     out << "ply\nformat binary_little_endian 1.0\ncomment carvemap\n"
         << "element vertex " << mesh.vertices.size() << "\n"
         << "property float x\nproperty float y\nproperty float z\n"
@@ -43,13 +40,7 @@ absl::Status WritePly(const std::string& path, const TriangleMesh& mesh,
       out.write(reinterpret_cast<const char*>(mesh.triangles[i].data()), 3 * sizeof(int));
       if (face_values) out.write(reinterpret_cast<const char*>(&(*face_values)[i]), sizeof(int));
     }
-    out.flush();
-    if (!out) return absl::DataLossError(absl::StrCat(path, ": write failed (disk full?)"));
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) return absl::InternalError(absl::StrCat(path, ": rename failed: ", ec.message()));
-  return absl::OkStatus();
+  });
 }
 
 }  // namespace carvemap

@@ -4,10 +4,10 @@
 
 #include <cstdio>
 #include <cstring>
-#include <filesystem>
 #include <memory>
 
 #include "absl/strings/str_cat.h"
+#include "storage/atomic_file.h"
 
 namespace carvemap {
 namespace {
@@ -94,15 +94,12 @@ absl::Status WritePngGray8(const std::string& path, const Image<uint8_t>& img) {
   image.width = img.width;
   image.height = img.height;
   image.format = PNG_FORMAT_GRAY;
-  const std::string tmp = path + ".partial";
+  const std::string tmp = PartialPath(path);
   if (!png_image_write_to_file(&image, tmp.c_str(), 0, img.pixels.data(), 0, nullptr)) {
     std::remove(tmp.c_str());
     return absl::InternalError(absl::StrCat(path, ": PNG write failed: ", image.message));
   }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) return absl::InternalError(absl::StrCat(path, ": rename failed: ", ec.message()));
-  return absl::OkStatus();
+  return CommitPartial(path);
 }
 
 }  // namespace carvemap

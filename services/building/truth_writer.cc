@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "storage/atomic_file.h"
 
 namespace carvemap {
 namespace {
@@ -66,18 +67,7 @@ json Document(const Building& b) {
 }
 
 absl::Status WriteTextAtomically(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".partial";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return absl::PermissionDeniedError(absl::StrCat(path, ": cannot open for writing"));
-    out << text;
-    out.flush();
-    if (!out) return absl::DataLossError(absl::StrCat(path, ": write failed (disk full?)"));
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) return absl::InternalError(absl::StrCat(path, ": rename failed: ", ec.message()));
-  return absl::OkStatus();
+  return WriteFileAtomically(path, [&](std::ostream& out) { out << text; });
 }
 
 }  // namespace
