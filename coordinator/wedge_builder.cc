@@ -1,0 +1,256 @@
+#include "coordinator/wedge_builder.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+
+namespace carvemap {
+namespace {
+
+constexpr float kNoReturn = std::numeric_limits<float>::quiet_NaN();
+
+SensorNoiseParams NoiseParamsOf(const SensorInfo& info) {
+  SensorNoiseParams p;
+  p.R_s2c = info.R_s2c;
+  p.T_s2c = info.T_s2c;
+  p.sigma_t_s = info.sigma_t_s;
+  p.range_sigma_a_m = info.range_sigma[0];
+  p.range_sigma_b = info.range_sigma[1];
+  return p;
+}
+
+absl::Status Invalid(const SensorInfo& info, uint64_t row, const std::string& what) {
+  return absl::InvalidArgumentError(
+      absl::StrCat("wedge_builder sensor ", info.name, " frame ", row, ": ", what));
+}
+
+}  // namespace
+
+absl::Status WedgeBuilderOptions::Validate() const {
+  if (auto s = noise.Validate(); !s.ok()) return s;
+  if (!std::isfinite(max_range_ratio) || max_range_ratio < 1.0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("wedge_builder options: max_range_ratio must be >= 1, got ", max_range_ratio));
+  }
+  for (auto [name, v] : {std::pair{"min_jump_m", min_jump_m}, std::pair{"min_range_m", min_range_m},
+                         std::pair{"max_frame_gap_s", max_frame_gap_s}}) {
+    if (!std::isfinite(v) || v < 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("wedge_builder options: ", name, " must be finite and >= 0, got ", v));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<FrameContext> FrameContextAt(std::span<const TimedPose> path,
+                                            std::span<const PathCovariance> path_cov, double t,
+                                            const NoiseModelOptions& options) {
+  if (path.empty()) return absl::InvalidArgumentError("wedge_builder: empty path");
+  absl::StatusOr<PoseCovariance> cov = PoseCovarianceAtTime(path, path_cov, t, options);
+  if (!cov.ok()) return cov.status();
+  return FrameContext{PoseAtTime(path, t), *cov, AngularVelocityAt(path, t)};
+}
+
+absl::StatusOr<WedgeBuilder> WedgeBuilder::Create(std::vector<SensorInfo> sensors,
+                                                  const WedgeBuilderOptions& options,
+                                                  WedgeSink sink) {
+  if (auto s = options.Validate(); !s.ok()) return s;
+  if (!sink) return absl::InvalidArgumentError("wedge_builder: no sink");
+  std::vector<SensorState> states;
+  states.reserve(sensors.size());
+  for (SensorInfo& info : sensors) {
+    if (info.kind == SensorKind::kGrid && (info.rows == 0 || info.cols == 0)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("wedge_builder sensor ", info.name, ": grid sensor without rows/cols"));
+    }
+    SensorState st;
+    st.noise = NoiseParamsOf(info);
+    st.info = std::move(info);
+    states.push_back(std::move(st));
+  }
+  return WedgeBuilder(std::move(states), options, std::move(sink));
+}
+
+WedgeBuilder::WedgeBuilder(std::vector<SensorState> sensors, const WedgeBuilderOptions& options,
+                           WedgeSink sink)
+    : sensors_(std::move(sensors)), options_(options), sink_(std::move(sink)) {}
+
+void WedgeBuilder::ComputeRays(const SensorState& s, const ScanFrame& frame,
+                               const FrameContext& context) {
+  const size_t n = frame.points_sensor.size();
+  cur_rays_.resize(n);
+  cur_range_.resize(n);
+  cur_covered_.assign(n, 0);
+  // Eq 4.5 and the pose-only parts of eq 4.6 once per frame: its rays share one timestamp.
+  const FrameNoiseModel model(context.pose_world_sys, context.covariance, context.omega_world,
+                              s.noise, options_.noise);
+  ++stats_.frames;
+  stats_.rays += n;
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3f& p = frame.points_sensor[i];
+    const float range = p.norm();
+    // NaN rows have no return (DESIGN §3); a return at the sensor has no direction.
+    if (!p.allFinite() || !(range >= options_.min_range_m)) {
+      cur_range_[i] = kNoReturn;
+      ++stats_.rays_without_return;
+      continue;
+    }
+    cur_range_[i] = range;
+    cur_rays_[i] = model.Ray(p.cast<double>());
+  }
+}
+
+bool WedgeBuilder::Continuous(float a, float b, float c, float d) const {
+  const double lo = std::min(std::min(a, b), std::min(c, d));
+  const double hi = std::max(std::max(a, b), std::max(c, d));
+  return hi - lo <= std::max(options_.min_jump_m, (options_.max_range_ratio - 1.0) * lo);
+}
+
+absl::Status WedgeBuilder::EmitWedge(const RayModel& a, const RayModel& b, const RayModel& c,
+                                     const RayModel& d) {
+  wedge_.rays = {a, b, c, d};
+  wedge_.num_rays = 4;
+  ++stats_.wedges;
+  return sink_(wedge_);
+}
+
+absl::Status WedgeBuilder::EmitSingles(std::span<const RayModel> rays, std::span<const float> range,
+                                       std::span<const uint8_t> covered) {
+  wedge_.num_rays = 1;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    if (std::isnan(range[i]) || covered[i]) continue;
+    wedge_.rays.fill(rays[i]);
+    ++stats_.single_ray_wedges;
+    if (auto st = sink_(wedge_); !st.ok()) return st;
+  }
+  return absl::OkStatus();
+}
+
+absl::Status WedgeBuilder::AddLineFrame(SensorState& s, const ScanFrame& frame) {
+  if (s.has_prev && frame.t - s.prev_t <= options_.max_frame_gap_s) {
+    const size_t n = std::min(s.prev_rays.size(), cur_rays_.size());
+    const auto& pr = s.prev_range;
+    const auto& cr = cur_range_;
+    for (size_t j = 0; j + 1 < n; ++j) {
+      if (std::isnan(pr[j]) || std::isnan(pr[j + 1]) || std::isnan(cr[j]) || std::isnan(cr[j + 1])) {
+        continue;
+      }
+      if (!Continuous(pr[j], pr[j + 1], cr[j], cr[j + 1])) {
+        ++stats_.discontinuities;
+        continue;
+      }
+      if (auto st = EmitWedge(s.prev_rays[j], s.prev_rays[j + 1], cur_rays_[j], cur_rays_[j + 1]);
+          !st.ok()) {
+        return st;
+      }
+      s.prev_covered[j] = s.prev_covered[j + 1] = 1;
+      cur_covered_[j] = cur_covered_[j + 1] = 1;
+    }
+  }
+  // The previous frame has met both its neighbours now: whatever it has left carves alone.
+  if (s.has_prev) {
+    if (auto st = EmitSingles(s.prev_rays, s.prev_range, s.prev_covered); !st.ok()) return st;
+  }
+  std::swap(s.prev_rays, cur_rays_);
+  std::swap(s.prev_range, cur_range_);
+  std::swap(s.prev_covered, cur_covered_);
+  s.prev_t = frame.t;
+  s.has_prev = true;
+  return absl::OkStatus();
+}
+
+absl::Status WedgeBuilder::AddGridFrame(SensorState& s, const ScanFrame& frame) {
+  const size_t rows = s.info.rows, cols = s.info.cols;
+  const auto& r = cur_range_;
+  for (size_t y = 0; y + 1 < rows; ++y) {
+    for (size_t x = 0; x + 1 < cols; ++x) {
+      const size_t i00 = y * cols + x, i01 = i00 + 1, i10 = i00 + cols, i11 = i10 + 1;
+      if (std::isnan(r[i00]) || std::isnan(r[i01]) || std::isnan(r[i10]) || std::isnan(r[i11])) {
+        continue;
+      }
+      if (!Continuous(r[i00], r[i01], r[i10], r[i11])) {
+        ++stats_.discontinuities;
+        continue;
+      }
+      if (auto st = EmitWedge(cur_rays_[i00], cur_rays_[i01], cur_rays_[i10], cur_rays_[i11]);
+          !st.ok()) {
+        return st;
+      }
+      cur_covered_[i00] = cur_covered_[i01] = cur_covered_[i10] = cur_covered_[i11] = 1;
+    }
+  }
+  return EmitSingles(cur_rays_, cur_range_, cur_covered_);
+}
+
+absl::Status WedgeBuilder::AddFrame(const ScanFrame& frame, const FrameContext& context) {
+  if (frame.sensor < 0 || static_cast<size_t>(frame.sensor) >= sensors_.size()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("wedge_builder: frame ", frame.row, " of unknown sensor ", frame.sensor));
+  }
+  SensorState& s = sensors_[frame.sensor];
+  if (!std::isfinite(frame.t) || (s.has_prev && frame.t < s.prev_t)) {
+    return Invalid(s.info, frame.row, absl::StrCat("time ", frame.t, " goes backwards"));
+  }
+  if (s.info.kind == SensorKind::kGrid &&
+      frame.points_sensor.size() != size_t{s.info.rows} * s.info.cols) {
+    return Invalid(s.info, frame.row,
+                   absl::StrCat(frame.points_sensor.size(), " rays, expected rows·cols = ",
+                                size_t{s.info.rows} * s.info.cols));
+  }
+  ComputeRays(s, frame, context);
+  switch (s.info.kind) {
+    case SensorKind::kLine:
+      return AddLineFrame(s, frame);
+    case SensorKind::kGrid:
+      return AddGridFrame(s, frame);
+    case SensorKind::kPoints:
+      return EmitSingles(cur_rays_, cur_range_, cur_covered_);
+  }
+  return absl::InternalError("wedge_builder: unknown sensor kind");
+}
+
+absl::Status WedgeBuilder::Finish() {
+  for (SensorState& s : sensors_) {
+    if (!s.has_prev) continue;
+    if (auto st = EmitSingles(s.prev_rays, s.prev_range, s.prev_covered); !st.ok()) return st;
+    s.has_prev = false;
+    s.prev_rays.clear();
+    s.prev_range.clear();
+    s.prev_covered.clear();
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<WedgeBuilderStats> BuildWedges(ScanReader& reader,
+                                              const WedgeBuilderOptions& options,
+                                              WedgeSink sink) {
+  absl::StatusOr<WedgeBuilder> builder =
+      WedgeBuilder::Create(reader.sensors(), options, std::move(sink));
+  if (!builder.ok()) return builder.status();
+  const std::vector<TimedPose>& path = reader.timed_path();
+  std::span<const PathCovariance> cov;
+  if (reader.path_covariance().has_value()) cov = *reader.path_covariance();
+  std::unique_ptr<ScanReader::FrameStream> stream = reader.StreamFrames();
+  ScanFrame frame;
+  while (true) {
+    absl::StatusOr<bool> more = stream->Next(frame);
+    if (!more.ok()) return more.status();
+    if (!*more) break;
+    absl::StatusOr<FrameContext> ctx = FrameContextAt(path, cov, frame.t, options.noise);
+    if (!ctx.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(reader.file(), ": frame at t=", frame.t, ": ", ctx.status().message()));
+    }
+    if (auto st = builder->AddFrame(frame, *ctx); !st.ok()) return st;
+  }
+  if (auto st = builder->Finish(); !st.ok()) return st;
+  WedgeBuilderStats stats = builder->stats();
+  stats.default_covariance = cov.empty();
+  return stats;
+}
+
+}  // namespace carvemap

@@ -1,0 +1,142 @@
+// Turns the frames of a scan into wedges (seed §4.2.1, §4.3.1; DESIGN §3, §5): every ray gets its
+// noise model (§4.1.1, eqs 4.1–4.6) once, and neighbouring rays are joined into wedges:
+//   line   — rays j, j+1 of frames i and i+1 of one sensor:
+//            rays = {(i, j), (i, j+1), (i+1, j), (i+1, j+1)}
+//   grid   — pixels of one frame: rays = {(r, c), (r, c+1), (r+1, c), (r+1, c+1)}
+//   points — one single-ray wedge per ray (num_rays = 1).
+// A wedge needs all its rays to have returns (a NaN row carves nothing) and no depth
+// discontinuity between them. Every return that ends up in no wedge is still carved, as a
+// single-ray wedge (num_rays = 1, the ray copied into all four slots so the bytes are defined).
+//
+// Streaming: memory holds only the previous frame of each line sensor, whatever the scan size.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "services/geometry/carving_types.h"
+#include "services/geometry/noise_model.h"
+#include "services/geometry/pose.h"
+#include "storage/scan_reader.h"
+#include "storage/scan_types.h"
+
+namespace carvemap {
+
+struct WedgeBuilderOptions {
+  NoiseModelOptions noise;
+  // Depth discontinuity: rays are not joined when max − min of their ranges exceeds
+  // max(min_jump_m, (max_range_ratio − 1)·min). A wedge across a near object's edge would carve
+  // the space between the edge and the surface behind it. The ratio term follows the ray
+  // spacing: on a plane seen at incidence θ, neighbouring rays Δφ apart differ by ≈ r·Δφ·tanθ,
+  // which for a 0.25° scanner stays below 25 % up to θ ≈ 89°, so floors seen at grazing angles
+  // stay joined while a chair edge 2 m in front of a wall 3 m away (ratio 1.5) is split. The
+  // absolute term keeps range noise (1–3 cm std-dev) from splitting smooth surfaces at short
+  // range, where 25 % is only a few centimetres; 10 cm is below the 3σ extension of wedges.
+  double max_range_ratio = 1.25;
+  double min_jump_m = 0.10;
+  // Returns closer than this to the sensor have no usable direction: treated as no return.
+  double min_range_m = 0.01;
+  // Line sensors: frames further apart than this are not joined (a pause in the recording or
+  // many dropped frames; 0.5 s is 20 frames of a 40 Hz scanner).
+  double max_frame_gap_s = 0.5;
+
+  [[nodiscard]] absl::Status Validate() const;
+};
+
+struct WedgeBuilderStats {
+  uint64_t frames = 0;
+  uint64_t rays = 0;
+  uint64_t rays_without_return = 0;   // NaN rows and returns closer than min_range_m
+  uint64_t wedges = 0;                // four-ray wedges emitted
+  uint64_t single_ray_wedges = 0;     // one-ray wedges emitted
+  uint64_t discontinuities = 0;       // four valid rays not joined because of their ranges
+  bool default_covariance = false;    // BuildWedges: the scan had no /path_cov
+};
+
+// Everything about the system at a frame's time that the noise model needs.
+struct FrameContext {
+  Pose pose_world_sys;
+  PoseCovariance covariance;
+  Eigen::Vector3d omega_world = Eigen::Vector3d::Zero();  // rad/s, world frame
+};
+
+// The context at time t: pose interpolated along `path` (§2.4), /path_cov rows interpolated
+// linearly (option defaults when `path_cov` is empty), angular velocity from the neighbouring
+// poses. REQUIRES: path non-empty and sorted.
+[[nodiscard]] absl::StatusOr<FrameContext> FrameContextAt(
+    std::span<const TimedPose> path, std::span<const PathCovariance> path_cov, double t,
+    const NoiseModelOptions& options);
+
+// Receives each wedge; a non-OK status stops the builder and is returned by the caller's
+// AddFrame/Finish. The wedge reference is valid only during the call.
+using WedgeSink = std::function<absl::Status(const Wedge&)>;
+
+// Not thread-safe; one builder per scan.
+class WedgeBuilder {
+ public:
+  // `sensors` are indexed by ScanFrame::sensor. Errors: InvalidArgument for bad options or a
+  // grid sensor without rows/cols.
+  static absl::StatusOr<WedgeBuilder> Create(std::vector<SensorInfo> sensors,
+                                             const WedgeBuilderOptions& options, WedgeSink sink);
+
+  // Feeds one frame (frames of one sensor in ascending time; sensors may interleave). Emits
+  // the wedges it completes. Errors: InvalidArgument for an unknown sensor, time going
+  // backwards or a grid frame of the wrong size; or the sink's error.
+  absl::Status AddFrame(const ScanFrame& frame, const FrameContext& context);
+  // Emits what is still pending (single-ray wedges of each line sensor's last frame). Call once
+  // at the end; AddFrame after Finish starts fresh sequences.
+  absl::Status Finish();
+
+  [[nodiscard]] const WedgeBuilderStats& stats() const { return stats_; }
+
+ private:
+  struct SensorState {
+    SensorInfo info;
+    SensorNoiseParams noise;
+    bool has_prev = false;
+    double prev_t = 0;
+    // The previous frame (line sensors): its rays, ranges (NaN = no return) and whether a
+    // wedge used each ray.
+    std::vector<RayModel> prev_rays;
+    std::vector<float> prev_range;
+    std::vector<uint8_t> prev_covered;
+  };
+
+  WedgeBuilder(std::vector<SensorState> sensors, const WedgeBuilderOptions& options,
+               WedgeSink sink);
+
+  // Fills cur_rays_/cur_range_/cur_covered_ for `frame`.
+  void ComputeRays(const SensorState& s, const ScanFrame& frame, const FrameContext& context);
+  [[nodiscard]] bool Continuous(float a, float b, float c, float d) const;
+  absl::Status EmitWedge(const RayModel& a, const RayModel& b, const RayModel& c,
+                         const RayModel& d);
+  absl::Status EmitSingles(std::span<const RayModel> rays, std::span<const float> range,
+                           std::span<const uint8_t> covered);
+  absl::Status AddLineFrame(SensorState& s, const ScanFrame& frame);
+  absl::Status AddGridFrame(SensorState& s, const ScanFrame& frame);
+
+  std::vector<SensorState> sensors_;
+  WedgeBuilderOptions options_;
+  WedgeSink sink_;
+  WedgeBuilderStats stats_;
+  // Scratch for the current frame, reused to avoid allocations per frame.
+  std::vector<RayModel> cur_rays_;
+  std::vector<float> cur_range_;
+  std::vector<uint8_t> cur_covered_;
+  Wedge wedge_;
+};
+
+// Streams every frame of `reader` (in time order) through a WedgeBuilder, computing each
+// frame's context from the reader's path and /path_cov (stats.default_covariance says when the
+// option defaults were used instead). REQUIRES: HDF5 calls serialized (see scan_reader.h).
+absl::StatusOr<WedgeBuilderStats> BuildWedges(ScanReader& reader,
+                                              const WedgeBuilderOptions& options,
+                                              WedgeSink sink);
+
+}  // namespace carvemap

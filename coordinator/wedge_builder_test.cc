@@ -1,0 +1,376 @@
+#include "coordinator/wedge_builder.h"
+
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+#include "storage/scan_reader.h"
+#include "storage/scan_writer.h"
+
+namespace carvemap {
+namespace {
+
+using Eigen::Vector3d;
+using Eigen::Vector3f;
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+constexpr double kWallX = 5.0;
+
+// A 2D scanner whose scan plane is the system's x–z plane (its own x–y plane rolled 90° about
+// x), rays from −30° to +30° in elevation.
+SensorInfo VerticalLineSensor() {
+  SensorInfo s;
+  s.name = "v0";
+  s.kind = SensorKind::kLine;
+  s.R_s2c = Eigen::AngleAxisd(M_PI / 2, Vector3d::UnitX()).toRotationMatrix();
+  s.range_sigma = {0.01, 0.0};
+  return s;
+}
+
+double RayAngle(int j, int num_rays) { return (-30.0 + 60.0 * j / (num_rays - 1)) * M_PI / 180; }
+
+// Frame i of a sweep along +y past the wall x = kWallX: ray j ends on the wall at height
+// kWallX·tan(angle) (or on a surface at `range_x` in front of the sensor if given).
+ScanFrame WallFrame(int i, int num_rays, const std::vector<double>& range_x = {}) {
+  ScanFrame f;
+  f.sensor = 0;
+  f.row = i;
+  f.t = 0.025 * i;
+  for (int j = 0; j < num_rays; ++j) {
+    const double x = range_x.empty() ? kWallX : range_x[j];
+    f.points_sensor.emplace_back(float(x), float(x * std::tan(RayAngle(j, num_rays))), 0.f);
+  }
+  return f;
+}
+
+FrameContext WalkContext(int i) {
+  FrameContext c;
+  c.pose_world_sys.translation = Vector3d(0, 0.1 * i, 0);
+  c.covariance = DefaultPoseCovariance(NoiseModelOptions{});
+  return c;
+}
+
+struct Collected {
+  std::vector<Wedge> wedges;
+  WedgeSink Sink() {
+    return [this](const Wedge& w) {
+      wedges.push_back(w);
+      return absl::OkStatus();
+    };
+  }
+  int Count(int num_rays) const {
+    int n = 0;
+    for (const Wedge& w : wedges) n += w.num_rays == num_rays;
+    return n;
+  }
+};
+
+TEST(WedgeBuilderTest, OptionsValidate) {
+  EXPECT_TRUE(WedgeBuilderOptions{}.Validate().ok());
+  WedgeBuilderOptions o;
+  o.max_range_ratio = 0.9;
+  EXPECT_EQ(o.Validate().code(), absl::StatusCode::kInvalidArgument);
+  o = {};
+  o.min_jump_m = -1;
+  EXPECT_FALSE(o.Validate().ok());
+  o = {};
+  o.noise.covariance_floor_m = NAN;
+  EXPECT_FALSE(o.Validate().ok());
+}
+
+TEST(WedgeBuilderTest, LineSensorSweepingAWall) {
+  constexpr int kRays = 9, kFrames = 6;
+  Collected out;
+  absl::StatusOr<WedgeBuilder> b =
+      WedgeBuilder::Create({VerticalLineSensor()}, WedgeBuilderOptions{}, out.Sink());
+  ASSERT_TRUE(b.ok()) << b.status();
+  for (int i = 0; i < kFrames; ++i) ASSERT_TRUE(b->AddFrame(WallFrame(i, kRays), WalkContext(i)).ok());
+  ASSERT_TRUE(b->Finish().ok());
+  ASSERT_EQ(out.wedges.size(), size_t{(kRays - 1) * (kFrames - 1)});
+  EXPECT_EQ(out.Count(1), 0);
+  EXPECT_EQ(b->stats().wedges, uint64_t{(kRays - 1) * (kFrames - 1)});
+  EXPECT_EQ(b->stats().rays, uint64_t{kRays * kFrames});
+  EXPECT_EQ(b->stats().frames, uint64_t{kFrames});
+
+  // Wedges come per frame pair, ray pairs ascending; corners {(i,j), (i,j+1), (i+1,j), (i+1,j+1)}.
+  for (int i = 0; i + 1 < kFrames; ++i) {
+    for (int j = 0; j + 1 < kRays; ++j) {
+      const Wedge& w = out.wedges[i * (kRays - 1) + j];
+      ASSERT_EQ(w.num_rays, 4);
+      const int fi[4] = {i, i, i + 1, i + 1};
+      const int rj[4] = {j, j + 1, j, j + 1};
+      for (int k = 0; k < 4; ++k) {
+        const Vector3d expect(kWallX, 0.1 * fi[k], kWallX * std::tan(RayAngle(rj[k], kRays)));
+        EXPECT_NEAR((w.rays[k].point_mean.cast<double>() - expect).norm(), 0, 1e-5)
+            << "frame pair " << i << " ray " << j << " corner " << k;
+        EXPECT_NEAR((w.rays[k].sensor_mean.cast<double>() - Vector3d(0, 0.1 * fi[k], 0)).norm(), 0,
+                    1e-6);
+        // Eq 4.6 includes range noise along the ray: the point is more uncertain than the sensor.
+        EXPECT_GT(w.rays[k].point_cov[0], w.rays[k].sensor_cov[0]);
+      }
+    }
+  }
+}
+
+TEST(WedgeBuilderTest, MissingReturnsLeaveIsolatedRaysAsSingles) {
+  constexpr int kRays = 7, kFrames = 5;
+  Collected out;
+  absl::StatusOr<WedgeBuilder> b =
+      WedgeBuilder::Create({VerticalLineSensor()}, WedgeBuilderOptions{}, out.Sink());
+  ASSERT_TRUE(b.ok());
+  for (int i = 0; i < kFrames; ++i) {
+    ScanFrame f = WallFrame(i, kRays);
+    if (i == 2) {  // a frame that only returned ray 3
+      for (int j = 0; j < kRays; ++j) {
+        if (j != 3) f.points_sensor[j] = Vector3f(kNaN, kNaN, kNaN);
+      }
+    }
+    ASSERT_TRUE(b->AddFrame(f, WalkContext(i)).ok());
+  }
+  ASSERT_TRUE(b->Finish().ok());
+  // Pairs (1,2) and (2,3) form nothing; every other ray is still in some wedge.
+  EXPECT_EQ(out.Count(4), (kRays - 1) * (kFrames - 1 - 2));
+  ASSERT_EQ(out.Count(1), 1);
+  EXPECT_EQ(b->stats().rays_without_return, uint64_t{kRays - 1});
+  for (const Wedge& w : out.wedges) {
+    if (w.num_rays != 1) continue;
+    const Vector3d expect(kWallX, 0.2, kWallX * std::tan(RayAngle(3, kRays)));
+    for (const RayModel& r : w.rays) {  // the ray fills all four slots
+      EXPECT_NEAR((r.point_mean.cast<double>() - expect).norm(), 0, 1e-5);
+    }
+  }
+}
+
+TEST(WedgeBuilderTest, DepthDiscontinuityIsNotBridged) {
+  constexpr int kRays = 8, kFrames = 5;
+  Collected out;
+  absl::StatusOr<WedgeBuilder> b =
+      WedgeBuilder::Create({VerticalLineSensor()}, WedgeBuilderOptions{}, out.Sink());
+  ASSERT_TRUE(b.ok());
+  for (int i = 0; i < kFrames; ++i) {
+    std::vector<double> range_x(kRays, kWallX);
+    if (i == 2) range_x[3] = range_x[4] = 2.0;  // a thin pole 3 m in front of the wall
+    ASSERT_TRUE(b->AddFrame(WallFrame(i, kRays, range_x), WalkContext(i)).ok());
+  }
+  ASSERT_TRUE(b->Finish().ok());
+  // Ray pairs j = 2, 3, 4 of frame pairs (1,2) and (2,3) touch the pole's rays.
+  EXPECT_EQ(b->stats().discontinuities, 6u);
+  EXPECT_EQ(out.Count(4), (kRays - 1) * (kFrames - 1) - 6);
+  // The pole's two returns are carved alone; nothing is lost.
+  ASSERT_EQ(out.Count(1), 2);
+  for (const Wedge& w : out.wedges) {
+    if (w.num_rays == 1) {
+      EXPECT_NEAR(w.rays[0].point_mean.x(), 2.0, 1e-5);
+    }
+  }
+}
+
+TEST(WedgeBuilderTest, SmallRangeChangesAndNoiseAreJoined) {
+  WedgeBuilderOptions o;
+  Collected out;
+  absl::StatusOr<WedgeBuilder> b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
+  ASSERT_TRUE(b.ok());
+  // 0.3 m vs 0.38 m: a 27 % ratio but under min_jump_m; 5 m vs 6 m: 20 %, under the ratio.
+  ASSERT_TRUE(b->AddFrame(WallFrame(0, 2, {0.3, 5.0}), WalkContext(0)).ok());
+  ASSERT_TRUE(b->AddFrame(WallFrame(1, 2, {0.38, 6.0}), WalkContext(1)).ok());
+  ASSERT_TRUE(b->Finish().ok());
+  EXPECT_EQ(out.Count(4), 0);  // 0.3 vs 6 m is a jump
+  EXPECT_EQ(b->stats().discontinuities, 1u);
+  EXPECT_EQ(out.Count(1), 4);
+
+  out.wedges.clear();
+  b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
+  ASSERT_TRUE(b->AddFrame(WallFrame(0, 2, {0.30, 0.32}), WalkContext(0)).ok());
+  ASSERT_TRUE(b->AddFrame(WallFrame(1, 2, {0.38, 0.35}), WalkContext(1)).ok());
+  ASSERT_TRUE(b->Finish().ok());
+  EXPECT_EQ(out.Count(4), 1);
+  out.wedges.clear();
+  b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
+  ASSERT_TRUE(b->AddFrame(WallFrame(0, 2, {5.0, 5.5}), WalkContext(0)).ok());
+  ASSERT_TRUE(b->AddFrame(WallFrame(1, 2, {6.0, 5.2}), WalkContext(1)).ok());
+  ASSERT_TRUE(b->Finish().ok());
+  EXPECT_EQ(out.Count(4), 1);
+}
+
+TEST(WedgeBuilderTest, FramesFarApartAreNotJoined) {
+  Collected out;
+  absl::StatusOr<WedgeBuilder> b =
+      WedgeBuilder::Create({VerticalLineSensor()}, WedgeBuilderOptions{}, out.Sink());
+  ASSERT_TRUE(b.ok());
+  ScanFrame f0 = WallFrame(0, 4), f1 = WallFrame(1, 4);
+  f1.t = f0.t + 2.0;
+  ASSERT_TRUE(b->AddFrame(f0, WalkContext(0)).ok());
+  ASSERT_TRUE(b->AddFrame(f1, WalkContext(1)).ok());
+  ASSERT_TRUE(b->Finish().ok());
+  EXPECT_EQ(out.Count(4), 0);
+  EXPECT_EQ(out.Count(1), 8);
+  // Time going backwards is an error.
+  EXPECT_EQ(b->AddFrame(f1, WalkContext(1)).code(), absl::StatusCode::kOk);
+  EXPECT_EQ(b->AddFrame(f0, WalkContext(0)).code(), absl::StatusCode::kInvalidArgument);
+}
+
+SensorInfo Grid(uint32_t rows, uint32_t cols) {
+  SensorInfo s;
+  s.name = "depth";
+  s.kind = SensorKind::kGrid;
+  s.rows = rows;
+  s.cols = cols;
+  return s;
+}
+
+// A depth image of the wall x = kWallX seen by a camera at the origin looking along +x.
+ScanFrame GridFrame(uint32_t rows, uint32_t cols) {
+  ScanFrame f;
+  f.sensor = 0;
+  for (uint32_t r = 0; r < rows; ++r) {
+    for (uint32_t c = 0; c < cols; ++c) {
+      f.points_sensor.emplace_back(float(kWallX), 0.1f * c, -0.1f * r);
+    }
+  }
+  return f;
+}
+
+TEST(WedgeBuilderTest, GridNeighbours) {
+  Collected out;
+  absl::StatusOr<WedgeBuilder> b =
+      WedgeBuilder::Create({Grid(3, 4)}, WedgeBuilderOptions{}, out.Sink());
+  ASSERT_TRUE(b.ok());
+  ASSERT_TRUE(b->AddFrame(GridFrame(3, 4), FrameContext{}).ok());
+  ASSERT_EQ(out.Count(4), 2 * 3);
+  EXPECT_EQ(out.Count(1), 0);
+  // Wedge (r=1, c=2): pixels (1,2), (1,3), (2,2), (2,3).
+  const Wedge& w = out.wedges[1 * 3 + 2];
+  const float expect[4][2] = {{0.2f, -0.1f}, {0.3f, -0.1f}, {0.2f, -0.2f}, {0.3f, -0.2f}};
+  for (int k = 0; k < 4; ++k) {
+    EXPECT_NEAR((w.rays[k].point_mean - Vector3f(kWallX, expect[k][0], expect[k][1])).norm(), 0,
+                1e-6);
+  }
+
+  // Pixels (0,1) and (1,0) without returns: wedges (0,0), (0,1), (1,0) go, and pixels (0,0)
+  // and (2,0), which only those wedges held, are carved alone.
+  out.wedges.clear();
+  ScanFrame f = GridFrame(3, 4);
+  f.points_sensor[1] = f.points_sensor[4] = Vector3f(kNaN, kNaN, kNaN);
+  ASSERT_TRUE(b->AddFrame(f, FrameContext{}).ok());
+  EXPECT_EQ(out.Count(4), 3);
+  ASSERT_EQ(out.Count(1), 2);
+  EXPECT_NEAR((out.wedges[3].rays[0].point_mean - Vector3f(kWallX, 0, 0)).norm(), 0, 1e-6);
+  EXPECT_NEAR((out.wedges[4].rays[0].point_mean - Vector3f(kWallX, 0, -0.2f)).norm(), 0, 1e-6);
+
+  // A frame of the wrong size.
+  f.points_sensor.pop_back();
+  EXPECT_EQ(b->AddFrame(f, FrameContext{}).code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST(WedgeBuilderTest, PointsAreCarvedOneByOne) {
+  SensorInfo s;
+  s.name = "cloud";
+  s.kind = SensorKind::kPoints;
+  Collected out;
+  absl::StatusOr<WedgeBuilder> b = WedgeBuilder::Create({s}, WedgeBuilderOptions{}, out.Sink());
+  ASSERT_TRUE(b.ok());
+  ScanFrame f;
+  f.sensor = 0;
+  f.points_sensor = {Vector3f(1, 0, 0), Vector3f(kNaN, kNaN, kNaN), Vector3f(0, 2, 0),
+                     Vector3f(0, 0, 0.001f), Vector3f(0, 0, 3)};
+  ASSERT_TRUE(b->AddFrame(f, FrameContext{}).ok());
+  ASSERT_EQ(out.wedges.size(), 3u);  // the NaN row and the return at the sensor carve nothing
+  for (const Wedge& w : out.wedges) {
+    EXPECT_EQ(w.num_rays, 1);
+    EXPECT_EQ(w.rays[3].point_mean, w.rays[0].point_mean);
+  }
+  EXPECT_EQ(b->stats().rays_without_return, 2u);
+}
+
+TEST(WedgeBuilderTest, SinkErrorsStopTheBuilder) {
+  absl::StatusOr<WedgeBuilder> b =
+      WedgeBuilder::Create({VerticalLineSensor()}, WedgeBuilderOptions{},
+                           [](const Wedge&) { return absl::ResourceExhaustedError("disk full"); });
+  ASSERT_TRUE(b.ok());
+  ASSERT_TRUE(b->AddFrame(WallFrame(0, 3), WalkContext(0)).ok());  // nothing emitted yet
+  EXPECT_EQ(b->AddFrame(WallFrame(1, 3), WalkContext(1)).code(),
+            absl::StatusCode::kResourceExhausted);
+  EXPECT_EQ(WedgeBuilder::Create({}, WedgeBuilderOptions{}, nullptr).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+TEST(WedgeBuilderTest, FrameContextFromPath) {
+  std::vector<TimedPose> path = {
+      {0.0, Pose{Eigen::Quaterniond::Identity(), Vector3d(0, 0, 0)}},
+      {1.0, Pose{Eigen::Quaterniond(Eigen::AngleAxisd(0.5, Vector3d::UnitZ())), Vector3d(2, 0, 0)}}};
+  absl::StatusOr<FrameContext> c = FrameContextAt(path, {}, 0.5, NoiseModelOptions{});
+  ASSERT_TRUE(c.ok());
+  EXPECT_NEAR((c->pose_world_sys.translation - Vector3d(1, 0, 0)).norm(), 0, 1e-12);
+  EXPECT_NEAR((c->omega_world - Vector3d(0, 0, 0.5)).norm(), 0, 1e-12);
+  EXPECT_NEAR(c->covariance.position(0, 0), 0.05 * 0.05, 1e-15);
+  EXPECT_FALSE(FrameContextAt({}, {}, 0.5, NoiseModelOptions{}).ok());
+}
+
+// A tiny scan.h5 through ScanWriter and ScanReader: a line sensor with 4 frames of 5 rays (one
+// NaN in the middle of frame 1) and a points sensor with 3 rays (one NaN).
+std::string WriteTinyScan(bool with_cov) {
+  const std::string path =
+      ::testing::TempDir() + (with_cov ? "/wedge_builder_cov.h5" : "/wedge_builder_nocov.h5");
+  absl::StatusOr<std::unique_ptr<ScanWriter>> w = ScanWriter::Create(path);
+  EXPECT_TRUE(w.ok()) << w.status();
+  std::vector<PathRecord> poses;
+  std::vector<PathCovariance> cov;
+  for (int i = 0; i <= 10; ++i) {
+    poses.push_back(PathRecord{0.01 * i, 0, 0.02 * i, 1.0, 1, 0, 0, 0});
+    PathCovariance c{};
+    c[0] = c[3] = c[5] = 1e-4f;
+    c[6] = c[9] = c[11] = 1e-6f;
+    cov.push_back(c);
+  }
+  EXPECT_TRUE((*w)->AppendPath(poses, with_cov ? std::span<const PathCovariance>(cov)
+                                               : std::span<const PathCovariance>())
+                  .ok());
+  absl::StatusOr<int> line = (*w)->AddSensor(VerticalLineSensor());
+  SensorInfo pts;
+  pts.name = "cloud";
+  pts.kind = SensorKind::kPoints;
+  absl::StatusOr<int> cloud = (*w)->AddSensor(pts);
+  EXPECT_TRUE(line.ok() && cloud.ok());
+  for (int i = 0; i < 4; ++i) {
+    ScanFrame f = WallFrame(i, 5);
+    if (i == 1) f.points_sensor[2] = Vector3f(kNaN, kNaN, kNaN);
+    EXPECT_TRUE((*w)->AppendFrame(*line, 0.02 * i + 0.005, f.points_sensor).ok());
+  }
+  const std::vector<Vector3f> cloud_points = {Vector3f(1, 1, 0), Vector3f(kNaN, kNaN, kNaN),
+                                              Vector3f(2, 0, 1)};
+  EXPECT_TRUE((*w)->AppendFrame(*cloud, 0.03, cloud_points).ok());
+  EXPECT_TRUE((*w)->Close().ok());
+  return path;
+}
+
+TEST(WedgeBuilderTest, TinyScanFileThroughTheReader) {
+  for (bool with_cov : {true, false}) {
+    const std::string file = WriteTinyScan(with_cov);
+    absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(file);
+    ASSERT_TRUE(reader.ok()) << reader.status();
+    ASSERT_TRUE((*reader)->Validate().ok());
+    Collected out;
+    absl::StatusOr<WedgeBuilderStats> stats =
+        BuildWedges(**reader, WedgeBuilderOptions{}, out.Sink());
+    ASSERT_TRUE(stats.ok()) << stats.status();
+    // Line: 4·3 ray-pair × frame-pair wedges minus the 2·2 touching the NaN; ray 2 of the
+    // first frame was only in those, so it is carved alone. Points: two returns.
+    EXPECT_EQ(stats->wedges, 4u * 3 - 4);
+    EXPECT_EQ(stats->single_ray_wedges, 1u + 2);
+    EXPECT_EQ(out.wedges.size(), 4u * 3 - 4 + 3);
+    EXPECT_EQ(stats->rays, 4u * 5 + 3);
+    EXPECT_EQ(stats->rays_without_return, 2u);
+    EXPECT_EQ(stats->default_covariance, !with_cov);
+    // The system stands 1 m up: sensors at z = 1 and wall points at their heights + 1.
+    for (const Wedge& w : out.wedges) {
+      EXPECT_NEAR(w.rays[0].sensor_mean.z(), 1.0, 1e-5);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace carvemap

@@ -1,0 +1,103 @@
+// The carve map of one scan ray (seed §4.1.2, eq 4.7) and its weight w = f_⊥ (§4.3.2, eq 4.8).
+//
+// For a query x, split x − μ_s into x_∥ (signed distance along d = (μ_p − μ_s)/L, L = |μ_p − μ_s|)
+// and x_⊥ (the rest). Then
+//   p(x) = F_s(x_∥) f_⊥(x_⊥) (1 − F_p(x_∥)) + 0.5 (1 − f_⊥(x_⊥))          (eq 4.7)
+// with F_s the CDF of the sensor Gaussian's marginal along d (mean 0, σ² = dᵀC_s d), F_p that of
+// the point Gaussian (mean L, σ² = dᵀC_p d), and
+//   f_⊥(x_⊥) = exp(−|x_⊥|² / (2 σ_⊥²)),  σ_⊥² = uᵀC*u,  u = x_⊥/|x_⊥|,
+//   C* = (1 − f) C_s + f C_p,  f = clamp(x_∥ / L, 0, 1).
+// The dissertation calls f_⊥ the "PMF" of the lateral marginal. We take it unnormalised (peak 1
+// on the ray): a density normalised by 1/(σ_⊥√(2π)) would exceed 1 for σ_⊥ < 0.4 m, making
+// 0.5(1 − f_⊥) negative and p leave [0, 1], which contradicts p: ℝ³ → [0, 1]. Unnormalised,
+// f_⊥ ∈ [0, 1] is the fraction of "this ray speaks about x", p is a blend of the ray's
+// along-ray vote F_s(1 − F_p) ∈ [0, 1] with "unknown" 0.5, and w = f_⊥ → 0 far from the ray.
+//
+// Hot path (billions of evaluations): prepare each ray once (PreparedRay), then Evaluate().
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Core>
+
+#include "absl/status/statusor.h"
+#include "services/geometry/carving_types.h"
+
+namespace carvemap {
+
+// One ray's vote about one location: p (eq 4.7) and its weight w = f_⊥ (eq 4.8).
+struct CarveSample {
+  double p = 0.5;  // in [0, 1]; > 0.5 interior
+  double w = 0.0;  // in [0, 1]
+};
+
+// The per-ray constants of eq 4.7. Thread-compatible: Evaluate() is const and pure.
+class PreparedRay {
+ public:
+  // Errors: InvalidArgument when a mean or covariance is not finite or the ray is shorter than
+  // 1 µm (no direction: such a ray carves nothing).
+  static absl::StatusOr<PreparedRay> Make(const RayModel& ray);
+
+  [[nodiscard]] CarveSample Evaluate(const Eigen::Vector3d& x) const;
+
+  [[nodiscard]] const Eigen::Vector3d& origin() const { return origin_; }    // μ_s
+  [[nodiscard]] const Eigen::Vector3d& direction() const { return dir_; }    // d, unit
+  [[nodiscard]] double length() const { return length_; }                    // L, m
+  [[nodiscard]] double sensor_sigma_along() const { return sigma_s_par_; }   // m
+  [[nodiscard]] double point_sigma_along() const { return sigma_p_par_; }    // m
+
+ private:
+  PreparedRay() = default;
+
+  Eigen::Vector3d origin_;
+  Eigen::Vector3d dir_;
+  // An orthonormal basis (e1, e2) of the plane orthogonal to d: the lateral covariances are
+  // kept as 2×2 blocks in it, so f_⊥ needs two dot products and a 2×2 quadratic form.
+  Eigen::Vector3d e1_, e2_;
+  double length_ = 0;
+  double inv_length_ = 0;
+  double sigma_s_par_ = 0, sigma_p_par_ = 0;
+  double inv_sqrt2_sigma_s_ = 0, inv_sqrt2_sigma_p_ = 0;  // 1/(σ√2), for erfc
+  // Lateral covariance blocks (e1e1, e1e2, e2e2) of C_s and of C_p − C_s (C* = C_s + f(C_p − C_s)).
+  double ls11_ = 0, ls12_ = 0, ls22_ = 0;
+  double ld11_ = 0, ld12_ = 0, ld22_ = 0;
+};
+
+// Eq 4.7 for a single query (prepares the ray each call: for tests and one-offs). A degenerate
+// ray (see PreparedRay::Make) gives {0.5, 0}: no information.
+[[nodiscard]] CarveSample EvaluateCarveMap(const RayModel& ray, const Eigen::Vector3d& x);
+
+// Eq 4.8 accumulation of one ray's vote into a leaf.
+inline void FuseInto(LeafStats& leaf, const CarveSample& s) { leaf.Add(s.p, s.w); }
+
+// ---- implementation of the hot path (inline so callers' loops can keep it in registers) ----
+
+inline CarveSample PreparedRay::Evaluate(const Eigen::Vector3d& x) const {
+  constexpr double kNoWeightExponent = 39.0;
+  const Eigen::Vector3d r = x - origin_;
+  const double x_par = r.dot(dir_);
+  const double a = r.dot(e1_);
+  const double b = r.dot(e2_);
+  const double perp2 = a * a + b * b;  // |x_⊥|²
+
+  double f_perp = 1.0;
+  // |x_⊥| ≈ 0 means x is on the ray: f_⊥ = 1 (the limit of the formula below).
+  if (perp2 > 1e-24) {
+    const double f = std::clamp(x_par * inv_length_, 0.0, 1.0);
+    // x_⊥ᵀ C* x_⊥ = |x_⊥|² σ_⊥², so |x_⊥|²/(2σ_⊥²) = |x_⊥|⁴ / (2 x_⊥ᵀC*x_⊥): no sqrt, no divide
+    // by |x_⊥|.
+    const double q = (ls11_ + f * ld11_) * a * a + 2.0 * (ls12_ + f * ld12_) * a * b +
+                     (ls22_ + f * ld22_) * b * b;
+    const double exponent = q > 0 ? 0.5 * perp2 * perp2 / q : kNoWeightExponent + 1;
+    // Past this f_⊥ < 1e-17 and p = 0.5 to double precision: skip the two erfc calls.
+    if (exponent > kNoWeightExponent) return CarveSample{0.5, 0.0};
+    f_perp = std::exp(-exponent);
+  }
+  // Φ(z) = 0.5 erfc(−z/√2): F_s(x_∥) = Φ(x_∥/σ_s), 1 − F_p(x_∥) = Φ((L − x_∥)/σ_p).
+  const double F_s = 0.5 * std::erfc(-x_par * inv_sqrt2_sigma_s_);
+  const double one_minus_F_p = 0.5 * std::erfc((x_par - length_) * inv_sqrt2_sigma_p_);
+  return CarveSample{F_s * f_perp * one_minus_F_p + 0.5 * (1.0 - f_perp), f_perp};
+}
+
+}  // namespace carvemap

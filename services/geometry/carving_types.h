@@ -1,0 +1,80 @@
+// Plain data shared by the coordinator (which builds wedges and bins them into chunks) and the
+// workers (which carve them into chunk octrees): seed §4.1–§4.3, DESIGN §5.
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include <Eigen/Core>
+
+namespace carvemap {
+
+// A symmetric 3×3 covariance stored as xx xy xz yy yz zz (m²), as /path_cov stores it.
+using SymCov3f = std::array<float, 6>;
+
+[[nodiscard]] inline Eigen::Matrix3d ToMatrix(const SymCov3f& c) {
+  Eigen::Matrix3d m;
+  m << c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5];
+  return m;
+}
+[[nodiscard]] inline SymCov3f ToSymCov(const Eigen::Matrix3d& m) {
+  return {float(m(0, 0)), float(m(0, 1)), float(m(0, 2)),
+          float(m(1, 1)), float(m(1, 2)), float(m(2, 2))};
+}
+
+// One scan ray in the world frame as two Gaussians (§4.1.1): the sensor position
+// N(sensor_mean, sensor_cov) = eq 4.5 and the scan point N(point_mean, point_cov) = eq 4.6.
+// Floats: world coordinates within ±10 km keep sub-millimetre precision, and a ray is sent to
+// workers and spilled to disk millions of times.
+struct RayModel {
+  Eigen::Vector3f sensor_mean;  // m, world
+  Eigen::Vector3f point_mean;   // m, world
+  SymCov3f sensor_cov;          // m²
+  SymCov3f point_cov;           // m²
+};
+
+// A wedge (§4.2.1, §4.3.1): the volume between up to four neighbouring rays — rays j, j+1 of
+// frames i, i+1 of a line sensor, or four neighbouring pixels of a grid sensor — or a single
+// ray of a points sensor. Its volume is the convex hull of the sensor means and the point means
+// extended 3σ along each ray (for a single ray: that segment dilated by 3σ laterally).
+struct Wedge {
+  std::array<RayModel, 4> rays;
+  uint8_t num_rays = 4;  // 4, or 1 for `points` sensors
+};
+
+// The fused statistics of one octree leaf (eq 4.8), kept as sums so that fusion is a plain
+// accumulation and sibling leaves merge exactly when simplified (§4.3.2). Unobserved space
+// (count 0) reads as p = 0.5.
+struct LeafStats {
+  double sum_w = 0;     // Σ w_i(x_L)
+  double sum_wp = 0;    // Σ w_i p_i(x_L)
+  double sum_wp2 = 0;   // Σ w_i p_i(x_L)²
+  uint32_t count = 0;   // number of rays that contributed
+
+  void Add(double p, double w) {
+    sum_w += w;
+    sum_wp += w * p;
+    sum_wp2 += w * p * p;
+    ++count;
+  }
+  void Merge(const LeafStats& o) {
+    sum_w += o.sum_w;
+    sum_wp += o.sum_wp;
+    sum_wp2 += o.sum_wp2;
+    count += o.count;
+  }
+  [[nodiscard]] bool observed() const { return count > 0 && sum_w > 0; }
+  // eq 4.8: the weighted mean of the rays' carve-map values.
+  [[nodiscard]] double p() const { return observed() ? sum_wp / sum_w : 0.5; }
+  // Weighted variance of those values (0 when unobserved).
+  [[nodiscard]] double variance() const {
+    if (!observed()) return 0.0;
+    const double m = p();
+    const double v = sum_wp2 / sum_w - m * m;
+    return v > 0 ? v : 0.0;
+  }
+  // §4.3.2: interior iff p > 0.5 strictly; unobserved space is exterior.
+  [[nodiscard]] bool interior() const { return p() > 0.5; }
+};
+
+}  // namespace carvemap
