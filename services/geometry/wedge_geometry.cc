@@ -1,0 +1,267 @@
+#include "services/geometry/wedge_geometry.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Eigenvalues>
+
+namespace carvemap {
+namespace {
+
+using Eigen::Vector3d;
+using Eigen::Vector4d;
+
+// A flat wedge (e.g. two identical frames while the operator stands still) or a collinear one
+// has zero volume; it is given this half-thickness. Not more: §4.3.1's wedge is the hull itself,
+// without lateral dilation, and thicker flat wedges would be discontinuous with nearly flat ones
+// (which the hull handles exactly). Not less: float32 world coordinates (~1 mm steps at 10 km)
+// only place the plane to about a millimetre, and a zero-thickness slab would make "touches the
+// box" hinge on rounding. 1 mm is well below the finest leaf (7.8 mm).
+constexpr double kMinHalfThicknessM = 1e-3;
+// Every plane offset and the bounding box are widened by this, so that rounding in the dot
+// products of HullIntersectsBox can never turn a touching box into a separated one.
+constexpr double kSlackM = 1e-7;
+// A triple of points whose cross product is below this (relative to the squared extent) has no
+// reliable normal; the brute-force hull skips it (a skipped facet only enlarges the hull).
+constexpr double kMinRelativeCross = 1e-10;
+
+struct PointSet {
+  std::array<Vector3d, 16> p;  // relative to `origin`, for precision far from the world origin
+  int n = 0;
+  Vector3d origin = Vector3d::Zero();
+  void Add(const Vector3d& x) { p[n++] = x - origin; }
+};
+
+Vector3d RayDirection(const RayModel& ray) {
+  const Vector3d d = (ray.point_mean - ray.sensor_mean).cast<double>();
+  const double len = d.norm();
+  return len > 1e-9 ? Vector3d(d / len) : Vector3d::Zero();
+}
+
+// σ along the ray of the point Gaussian (σ_∥² = dᵀ C_p d); for a zero-length ray, the largest σ.
+double SigmaAlong(const RayModel& ray, const Vector3d& d) {
+  const Eigen::Matrix3d c = ToMatrix(ray.point_cov);
+  if (d.isZero()) {
+    return std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(
+                                       c, Eigen::EigenvaluesOnly)
+                                       .eigenvalues()
+                                       .maxCoeff()));
+  }
+  return std::sqrt(std::max(0.0, d.dot(c * d)));
+}
+
+// Largest σ across the ray (of the point and the sensor Gaussians): sqrt of the largest
+// eigenvalue of P C P with P = I − ddᵀ.
+double SigmaLateral(const RayModel& ray, const Vector3d& d) {
+  const Eigen::Matrix3d p = Eigen::Matrix3d::Identity() - d * d.transpose();
+  double var = 0;
+  for (const SymCov3f& cov : {ray.point_cov, ray.sensor_cov}) {
+    const Eigen::Matrix3d m = p * ToMatrix(cov) * p;
+    var = std::max(var, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(m, Eigen::EigenvaluesOnly)
+                            .eigenvalues()
+                            .maxCoeff());
+  }
+  return std::sqrt(std::max(0.0, var));
+}
+
+// Adds the plane n·x <= max over the points, if n is new. Offsets are the exact support of the
+// points, so every plane added contains all of them: the result is always conservative.
+void AddSupportPlane(const PointSet& s, const Vector3d& n, double extra, WedgeHull& hull) {
+  double support = -std::numeric_limits<double>::infinity();
+  for (int i = 0; i < s.n; ++i) support = std::max(support, n.dot(s.p[i]));
+  for (const Vector4d& q : hull.planes) {
+    if (q.head<3>().dot(n) > 1 - 1e-12) return;  // duplicate (the coplanar faces of a quad)
+  }
+  hull.planes.emplace_back(n.x(), n.y(), n.z(), support + extra + n.dot(s.origin) + kSlackM);
+}
+
+void SetBox(const PointSet& s, const Vector3d& widen, WedgeHull& hull) {
+  Eigen::AlignedBox3d box;
+  for (int i = 0; i < s.n; ++i) box.extend(s.p[i]);
+  const Vector3d w = widen + Vector3d::Constant(kSlackM);
+  hull.box = Eigen::AlignedBox3d(box.min() + s.origin - w, box.max() + s.origin + w);
+}
+
+// Oriented box along the orthonormal axes, dilated by half_widths along each axis.
+void OrientedBoxHull(const PointSet& s, const Eigen::Matrix3d& axes, const Vector3d& half_widths,
+                     WedgeHull& hull) {
+  Vector3d widen = Vector3d::Zero();
+  for (int a = 0; a < 3; ++a) {
+    const Vector3d e = axes.col(a);
+    AddSupportPlane(s, e, half_widths[a], hull);
+    AddSupportPlane(s, -e, half_widths[a], hull);
+    widen += half_widths[a] * e.cwiseAbs();
+  }
+  SetBox(s, widen, hull);
+}
+
+// Convex hull of points spanning 3D: a plane through every non-degenerate triple that has all
+// points on one side is a facet plane (n ≤ 8, so 56 triples; simpler and sturdier than an
+// incremental hull for this size).
+void BruteForceHull(const PointSet& s, double extent, WedgeHull& hull) {
+  const double tol = 1e-9 * extent;
+  for (int i = 0; i < s.n; ++i) {
+    for (int j = i + 1; j < s.n; ++j) {
+      for (int k = j + 1; k < s.n; ++k) {
+        Vector3d n = (s.p[j] - s.p[i]).cross(s.p[k] - s.p[i]);
+        const double len = n.norm();
+        if (len <= kMinRelativeCross * extent * extent) continue;
+        n /= len;
+        const double o = n.dot(s.p[i]);
+        bool above = false, below = false;
+        for (int m = 0; m < s.n; ++m) {
+          const double dist = n.dot(s.p[m]) - o;
+          above |= dist > tol;
+          below |= dist < -tol;
+        }
+        if (above && below) continue;
+        AddSupportPlane(s, below ? n : Vector3d(-n), 0.0, hull);
+      }
+    }
+  }
+  SetBox(s, Vector3d::Zero(), hull);
+}
+
+// A flat point set (normal e3): the prism over its 2D hull in the (e1, e2) plane, half-thickness
+// t along e3.
+void PrismHull(const PointSet& s, const Eigen::Matrix3d& axes, double t, WedgeHull& hull) {
+  const Vector3d e1 = axes.col(0), e2 = axes.col(1), e3 = axes.col(2);
+  std::array<Eigen::Vector2d, 16> q;
+  for (int i = 0; i < s.n; ++i) q[i] = Eigen::Vector2d(e1.dot(s.p[i]), e2.dot(s.p[i]));
+  std::sort(q.begin(), q.begin() + s.n, [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
+  // Andrew's monotone chain; collinear points are dropped.
+  std::array<Eigen::Vector2d, 34> h;
+  int m = 0;
+  auto cross = [](const Eigen::Vector2d& o, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
+  };
+  for (int i = 0; i < s.n; ++i) {
+    while (m >= 2 && cross(h[m - 2], h[m - 1], q[i]) <= 0) --m;
+    h[m++] = q[i];
+  }
+  for (int i = s.n - 2, lower = m + 1; i >= 0; --i) {
+    while (m >= lower && cross(h[m - 2], h[m - 1], q[i]) <= 0) --m;
+    h[m++] = q[i];
+  }
+  // Counter-clockwise: the outward normal of edge a→b is (dy, −dx).
+  for (int i = 0; i + 1 < m; ++i) {
+    const Eigen::Vector2d d = h[i + 1] - h[i];
+    const double len = d.norm();
+    if (len <= 0) continue;
+    AddSupportPlane(s, (d.y() * e1 - d.x() * e2) / len, 0.0, hull);
+  }
+  AddSupportPlane(s, e3, t, hull);
+  AddSupportPlane(s, -e3, t, hull);
+  SetBox(s, t * e3.cwiseAbs(), hull);
+}
+
+WedgeHull SingleRayHull(const RayModel& ray, double sigmas) {
+  const Vector3d d = RayDirection(ray);
+  const double r = std::max(kMinHalfThicknessM, sigmas * SigmaLateral(ray, d));
+  PointSet s;
+  s.origin = ray.sensor_mean.cast<double>();
+  s.Add(ray.sensor_mean.cast<double>());
+  s.Add(ExtendedPointMean(ray, sigmas));
+  WedgeHull hull;
+  hull.planes.reserve(6);
+  if (d.isZero()) {
+    // No direction: a cube of half-width sigmas·σ_max around the point.
+    const double half = std::max(r, sigmas * SigmaAlong(ray, d));
+    OrientedBoxHull(s, Eigen::Matrix3d::Identity(), Vector3d::Constant(half), hull);
+    return hull;
+  }
+  // The segment dilated by r is a capsule; the oriented box around it (r also past both ends).
+  Eigen::Matrix3d axes;
+  axes.col(0) = d;
+  axes.col(1) = d.unitOrthogonal();
+  axes.col(2) = d.cross(axes.col(1));
+  OrientedBoxHull(s, axes, Vector3d::Constant(r), hull);
+  return hull;
+}
+
+}  // namespace
+
+WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas) {
+  const int num_rays = std::clamp<int>(wedge.num_rays, 1, 4);
+  if (num_rays == 1) return SingleRayHull(wedge.rays[0], sigmas);
+
+  PointSet s;
+  s.origin = wedge.rays[0].point_mean.cast<double>();
+  for (int i = 0; i < num_rays; ++i) {
+    const RayModel& ray = wedge.rays[i];
+    s.Add(ray.sensor_mean.cast<double>());
+    s.Add(ExtendedPointMean(ray, sigmas));
+  }
+
+  // Principal axes of the points, to detect flat and collinear wedges.
+  Vector3d mean = Vector3d::Zero();
+  for (int i = 0; i < s.n; ++i) mean += s.p[i];
+  mean /= s.n;
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (int i = 0; i < s.n; ++i) scatter += (s.p[i] - mean) * (s.p[i] - mean).transpose();
+  // Closed form is enough: the axes only choose the case and the prism frame; every plane is
+  // then placed at the exact support of the points.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
+  eig.computeDirect(scatter);
+  Eigen::Matrix3d axes;  // columns by decreasing spread
+  for (int a = 0; a < 3; ++a) axes.col(a) = eig.eigenvectors().col(2 - a);
+  Vector3d extent;
+  for (int a = 0; a < 3; ++a) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (int i = 0; i < s.n; ++i) {
+      const double v = axes.col(a).dot(s.p[i]);
+      lo = std::min(lo, v);
+      hi = std::max(hi, v);
+    }
+    extent[a] = hi - lo;
+  }
+
+  WedgeHull hull;
+  hull.planes.reserve(16);
+  if (extent[1] < 2 * kMinHalfThicknessM) {
+    // Collinear (all rays along one line, or all points coincide).
+    OrientedBoxHull(s, axes, Vector3d::Constant(kMinHalfThicknessM), hull);
+  } else if (extent[2] < 2 * kMinHalfThicknessM) {
+    PrismHull(s, axes, kMinHalfThicknessM, hull);
+  } else {
+    BruteForceHull(s, extent[0], hull);
+  }
+  return hull;
+}
+
+Vector3d ExtendedPointMean(const RayModel& ray, double sigmas) {
+  const Vector3d d = RayDirection(ray);
+  if (d.isZero()) return ray.point_mean.cast<double>();
+  return ray.point_mean.cast<double>() + sigmas * SigmaAlong(ray, d) * d;
+}
+
+bool HullContainsPoint(const WedgeHull& hull, const Eigen::Vector3d& x) {
+  if (!hull.box.contains(x)) return false;
+  for (const Vector4d& q : hull.planes) {
+    if (q.head<3>().dot(x) > q[3]) return false;
+  }
+  return true;
+}
+
+bool HullIntersectsBox(const WedgeHull& hull, const Eigen::AlignedBox3d& box) {
+  // Separating axes: the box's axes (bounding boxes), then the hull's face normals.
+  if ((box.min().array() > hull.box.max().array()).any() ||
+      (box.max().array() < hull.box.min().array()).any()) {
+    return false;
+  }
+  const Vector3d c = box.center();
+  const Vector3d h = 0.5 * (box.max() - box.min());
+  for (const Vector4d& q : hull.planes) {
+    // Lowest point of the box along the normal.
+    const double lo = q[0] * c[0] + q[1] * c[1] + q[2] * c[2] -
+                      (std::abs(q[0]) * h[0] + std::abs(q[1]) * h[1] + std::abs(q[2]) * h[2]);
+    if (lo > q[3]) return false;
+  }
+  return true;
+}
+
+}  // namespace carvemap

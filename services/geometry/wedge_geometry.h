@@ -1,0 +1,38 @@
+// The volume of a wedge (§4.2.1, §4.3.1) and its intersection with axis-aligned boxes (octree
+// nodes and 2 m chunks). Shared by the coordinator, which bins wedges into the chunks they
+// touch, and the workers, which find the leaves they touch: both must agree.
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "services/geometry/carving_types.h"
+
+namespace carvemap {
+
+// A convex volume as half-spaces normal·x <= offset, plus its bounding box.
+struct WedgeHull {
+  std::vector<Eigen::Vector4d> planes;  // (nx, ny, nz, offset), unit normals pointing out
+  Eigen::AlignedBox3d box;
+};
+
+// The hull of the wedge's sensor means and its point means extended `sigmas` standard
+// deviations (of the point Gaussian, along the ray) past the point (§4.3.1: 3σ). A single-ray
+// wedge is that segment dilated laterally by `sigmas` of the ray's lateral spread.
+[[nodiscard]] WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas = 3.0);
+
+// Conservative: true whenever the hull and the box intersect (it may also say true for a box
+// that only comes near the hull, never false for one that touches it).
+[[nodiscard]] bool HullIntersectsBox(const WedgeHull& hull, const Eigen::AlignedBox3d& box);
+
+// The ray's point mean moved `sigmas`·σ_∥ further along the ray (σ_∥² = dᵀ C_p d, d the unit
+// direction from sensor to point): the far end of the wedge's volume. A zero-length ray is
+// not moved.
+[[nodiscard]] Eigen::Vector3d ExtendedPointMean(const RayModel& ray, double sigmas = 3.0);
+
+// Whether x satisfies every half-space of the hull (and lies in its box).
+[[nodiscard]] bool HullContainsPoint(const WedgeHull& hull, const Eigen::Vector3d& x);
+
+}  // namespace carvemap
