@@ -1,0 +1,71 @@
+// Tiles (DESIGN §5): one HDF5 file per carved 2 m chunk holding the leaves of its simplified
+// octree (§4.3.2) as columns. Layout: storage/TILE_FORMAT.md (format "carvemap-tile",
+// version 1). Equal TileData gives byte-identical files, so a retried carve task is harmless.
+//
+// Thread safety: Debian 12's libhdf5 is built without --enable-threadsafe. WriteTile/ReadTile
+// serialize among themselves (one mutex inside tile_store.cc), but every other HDF5 use in the
+// process (ScanReader, ScanWriter, ...) must not run concurrently with them.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "services/geometry/carving_types.h"
+#include "services/geometry/octree_keys.h"
+
+namespace carvemap {
+
+inline constexpr char kTileFormat[] = "carvemap-tile";
+inline constexpr int kTileVersion = 1;
+
+// One leaf of a chunk octree: a node of the chunk (depth ≤ chunk_depth) and its fused
+// statistics (eq 4.8). Tiles keep the sums (sum_w, sum_wp, sum_wp2, count), so leaves of
+// tiles merge exactly; p and variance are stored too, derived, for readers that want them.
+struct TileLeaf {
+  ChunkNode node;
+  LeafStats stats;
+};
+
+// How the chunk was carved; stored as attributes so a tile says what produced it.
+struct TileCarveParams {
+  std::string job_id;         // may be empty
+  uint64_t num_wedges = 0;    // wedges carved into the chunk
+  double hull_sigmas = 3.0;   // §4.3.1: rays extended this many σ past their points
+  double min_weight = 1e-6;   // ray contributions with w below this were skipped
+  bool simplified = true;     // §4.3.2 simplification applied
+};
+
+struct TileData {
+  ChunkKey chunk = ChunkKey::Zero();
+  OctreeGrid grid;
+  TileCarveParams params;
+  // Leaves in any order; WriteTile stores them in canonical order (below). They must not
+  // overlap. Space no leaf covers is unobserved (p = 0.5, count 0; §4.3.2).
+  std::vector<TileLeaf> leaves;
+};
+
+// Canonical leaf order: by the Morton code of each leaf's first finest-depth cell
+// (code << 3·(chunk_depth − depth)), then by depth. Non-overlapping leaves are thereby in
+// Z-curve order. ReadTile returns leaves in this order.
+void SortTileLeaves(const OctreeGrid& grid, std::vector<TileLeaf>& leaves);
+
+// "c_<x>_<y>_<z>.h5" with the chunk key in decimal (negative keys keep their '-').
+[[nodiscard]] std::string TileFileName(const ChunkKey& chunk);
+
+// Writes `tile` to `dir`/TileFileName(tile.chunk) via "<name>.partial" and a rename, so a
+// reader never sees a half-written tile; replaces an existing tile. Returns the final path.
+// InvalidArgument for bad content (depth > chunk_depth, code outside 8^depth, overlapping
+// leaves, non-finite sums, negative weights); the error names the file and leaf index.
+absl::StatusOr<std::string> WriteTile(const std::string& dir, const TileData& tile);
+
+// Reads and validates a tile: format/version attributes, all columns present, rank 1, equal
+// lengths, depth ≤ chunk_depth, codes inside 8^depth, finite values, p in [0, 1] and
+// consistent with the sums, leaves sorted and non-overlapping. NotFound for a missing file;
+// DataLoss (naming the file and the dataset or attribute) for a truncated/corrupt or invalid
+// tile.
+absl::StatusOr<TileData> ReadTile(const std::string& path);
+
+}  // namespace carvemap

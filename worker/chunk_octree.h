@@ -1,0 +1,85 @@
+// The probabilistic octree of one 2 m chunk (seed §4.3.1–§4.3.2, DESIGN §5): wedges are carved
+// into its finest leaves (eq 4.8), then the tree is simplified bottom-up (§4.3.2) and its
+// leaves go to a tile (storage/tile_store.h).
+//
+// Representation: only observed leaves are stored, per depth, keyed by Morton code. Every
+// region no stored leaf covers is unobserved (p = 0.5, count 0, exterior; §4.3.2). That is the
+// same tree the dissertation describes: its unobserved leaves are the maximal nodes holding no
+// observed leaf, which the stored leaves determine. Memory is ∝ observed leaves (~50 B each).
+//
+// Thread-compatible: one ChunkOctree per chunk and thread; const methods may run concurrently.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "absl/container/flat_hash_map.h"
+#include "absl/status/status.h"
+#include "services/geometry/carving_types.h"
+#include "services/geometry/octree_keys.h"
+#include "storage/tile_store.h"
+
+namespace carvemap {
+
+// §4.3.1: each ray of a wedge is extended this many σ past its point.
+inline constexpr double kWedgeHullSigmas = 3.0;
+// Ray contributions with w = f_⊥ below this are skipped (see CarveWedge).
+inline constexpr double kMinRayWeight = 1e-6;
+
+class ChunkOctree {
+ public:
+  // REQUIRES: grid.chunk_depth in [kMinChunkDepth, kMaxChunkDepth].
+  ChunkOctree(const OctreeGrid& grid, const ChunkKey& chunk);
+  ChunkOctree(const ChunkOctree&) = delete;
+  ChunkOctree& operator=(const ChunkOctree&) = delete;
+  ChunkOctree(ChunkOctree&&) = default;
+  ChunkOctree& operator=(ChunkOctree&&) = default;
+
+  // Carves one wedge (eq 4.8): every finest leaf of this chunk whose box the wedge hull
+  // (MakeWedgeHull, kWedgeHullSigmas) touches receives, from each ray of the wedge, its carve
+  // map value at the leaf centre, LeafStats::Add(p, w) — skipping w < kMinRayWeight. A wedge
+  // that misses the chunk changes nothing. Rays shorter than 1 µm carve nothing.
+  // Errors (nothing changed): InvalidArgument for num_rays outside [1, 4] or a non-finite
+  // mean/covariance; FailedPrecondition after Simplify().
+  absl::Status CarveWedge(const Wedge& wedge);
+
+  // §4.3.2, bottom-up: 8 sibling leaves merge into their parent (LeafStats::Merge, exact sums)
+  // when all 8 are observed leaves with the same label (interior iff p > 0.5). A node with an
+  // unobserved child is never merged (its children are not all observed, nor all unobserved);
+  // a node whose children are all unobserved is an unobserved leaf already (stores nothing).
+  // Repeats up to the chunk root. Labels of every point are unchanged. Idempotent.
+  void Simplify();
+
+  // The observed leaves in canonical tile order (SortTileLeaves): deterministic, whatever the
+  // hash maps' iteration order.
+  [[nodiscard]] std::vector<TileLeaf> Leaves() const;
+  // The statistics of the leaf holding `x_world` (count 0, p 0.5 when unobserved or outside
+  // the chunk), and the depth of that stored leaf (-1 when none).
+  [[nodiscard]] LeafStats StatsAt(const Eigen::Vector3d& x_world, int* depth = nullptr) const;
+  // The leaves as a tile; params.num_wedges/hull_sigmas/min_weight/simplified are filled in.
+  [[nodiscard]] TileData ToTile(const std::string& job_id) const;
+
+  [[nodiscard]] const OctreeGrid& grid() const { return grid_; }
+  [[nodiscard]] const ChunkKey& chunk() const { return chunk_; }
+  [[nodiscard]] size_t num_leaves() const;
+  [[nodiscard]] bool simplified() const { return simplified_; }
+  [[nodiscard]] uint64_t num_wedges() const { return num_wedges_; }  // carved, incl. misses
+  [[nodiscard]] uint64_t num_leaf_updates() const { return num_leaf_updates_; }  // Add() calls
+
+ private:
+  using Level = absl::flat_hash_map<uint64_t, LeafStats>;  // Morton code at that depth → stats
+
+  OctreeGrid grid_;
+  ChunkKey chunk_;
+  // levels_[d]: observed leaves at depth d. Carving fills levels_[k] only; Simplify moves
+  // merged parents up.
+  std::vector<Level> levels_;
+  bool simplified_ = false;
+  uint64_t num_wedges_ = 0;
+  uint64_t num_leaf_updates_ = 0;
+};
+
+}  // namespace carvemap
