@@ -1,0 +1,375 @@
+#include "coordinator/lease_table.h"
+
+#include <algorithm>
+#include <cassert>
+#include <chrono>
+#include <utility>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+
+namespace carvemap {
+namespace {
+
+class SystemClock final : public LeaseTable::Clock {
+ public:
+  int64_t NowUnixMs() override {
+    return std::chrono::duration_cast<std::chrono::milliseconds>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+  }
+};
+
+std::string KeyText(const ChunkCoord& k) { return absl::StrCat("(", k.x, ",", k.y, ",", k.z, ")"); }
+
+struct ParsedLease {
+  std::string job_id;
+  ChunkCoord chunk;
+  int64_t generation = 0;
+};
+
+// Inverse of MakeLeaseId. Split from the right, so a job id may itself contain '/'.
+absl::StatusOr<ParsedLease> ParseLeaseId(absl::string_view lease_id) {
+  const auto bad = [&] {
+    return absl::InvalidArgumentError(absl::StrCat("malformed lease id \"", lease_id, "\""));
+  };
+  size_t gen_slash = lease_id.rfind('/');
+  if (gen_slash == absl::string_view::npos || gen_slash == 0) return bad();
+  size_t key_slash = lease_id.rfind('/', gen_slash - 1);
+  if (key_slash == absl::string_view::npos || key_slash == 0) return bad();
+  ParsedLease p;
+  p.job_id = std::string(lease_id.substr(0, key_slash));
+  std::vector<absl::string_view> xyz =
+      absl::StrSplit(lease_id.substr(key_slash + 1, gen_slash - key_slash - 1), ',');
+  if (xyz.size() != 3 || !absl::SimpleAtoi(xyz[0], &p.chunk.x) ||
+      !absl::SimpleAtoi(xyz[1], &p.chunk.y) || !absl::SimpleAtoi(xyz[2], &p.chunk.z) ||
+      !absl::SimpleAtoi(lease_id.substr(gen_slash + 1), &p.generation) || p.generation < 1) {
+    return bad();
+  }
+  return p;
+}
+
+}  // namespace
+
+absl::Status LeaseTableOptions::Validate() const {
+  if (lease_timeout_ms <= 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("lease table: lease_timeout_ms must be > 0, got ", lease_timeout_ms));
+  }
+  if (max_attempts < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("lease table: max_attempts must be >= 1, got ", max_attempts));
+  }
+  return absl::OkStatus();
+}
+
+LeaseTable::Clock& LeaseTable::Clock::System() {
+  static SystemClock* clock = new SystemClock();  // never destroyed: usable at exit
+  return *clock;
+}
+
+LeaseTable::LeaseTable(JobStore& store, Clock& clock, LeaseTableOptions options)
+    : store_(store), clock_(clock), options_(options) {
+  assert(options_.Validate().ok());
+}
+
+std::string LeaseTable::MakeLeaseId(absl::string_view job_id, const ChunkCoord& chunk,
+                                    int64_t generation) {
+  return absl::StrCat(job_id, "/", chunk.x, ",", chunk.y, ",", chunk.z, "/", generation);
+}
+
+// ---- jobs
+
+absl::Status LeaseTable::LoadJob(absl::string_view job_id) {
+  if (jobs_.find(job_id) != jobs_.end()) {
+    return absl::AlreadyExistsError(absl::StrCat("lease table: job ", job_id, " already loaded"));
+  }
+  absl::StatusOr<JobRecord> record = store_.GetJob(job_id);
+  if (!record.ok()) return record.status();
+  if (IsTerminal(record->state)) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "lease table: job ", job_id, " is ", JobStateName(record->state), ", nothing to lease"));
+  }
+  absl::StatusOr<std::vector<ChunkRecord>> chunks = store_.ListChunks(job_id);
+  if (!chunks.ok()) return chunks.status();
+
+  // Leases of a previous coordinator: their workers do not know us (they must register again),
+  // so the chunks go back to the queue. The attempt is given back, since the lease ended
+  // without a verdict on the chunk; generation and lease id stay, so the old holder can still
+  // complete it until it is leased again.
+  const int64_t now = clock_.NowUnixMs();
+  std::vector<ChunkUpdate> requeue;
+  JobEntry job;
+  job.id = std::string(job_id);
+  for (ChunkRecord& c : *chunks) {
+    if (c.state == ChunkState::kLeased) {
+      ChunkUpdate u{c, c.generation};
+      u.chunk.state = ChunkState::kQueued;
+      u.chunk.deadline_unix_ms = 0;
+      u.chunk.attempts = std::max(0, c.attempts - 1);
+      u.chunk.last_error = "requeued: coordinator restarted while leased";
+      requeue.push_back(u);
+      c = u.chunk;
+    }
+    if (c.state == ChunkState::kQueued) job.queued.insert(c.key);
+    job.chunks.emplace(c.key, std::move(c));
+  }
+  if (!requeue.empty()) {
+    if (absl::Status s = store_.UpdateChunks(requeue, now); !s.ok()) return s;
+  }
+  job_order_.push_back(job.id);
+  jobs_.emplace(job.id, std::move(job));
+  return absl::OkStatus();
+}
+
+void LeaseTable::DropJob(absl::string_view job_id) {
+  auto it = jobs_.find(job_id);
+  if (it == jobs_.end()) return;
+  for (auto& [key, chunk] : it->second.chunks) {
+    if (chunk.state == ChunkState::kLeased) ForgetLease(chunk);
+  }
+  jobs_.erase(it);
+  std::erase(job_order_, std::string(job_id));
+}
+
+void LeaseTable::ForgetLease(const ChunkRecord& chunk) {
+  auto w = leases_by_worker_.find(chunk.worker_id);
+  if (w == leases_by_worker_.end()) return;
+  w->second.erase({chunk.job_id, chunk.key});
+  if (w->second.empty()) leases_by_worker_.erase(w);
+}
+
+// ---- leasing
+
+absl::StatusOr<std::optional<LeaseTable::Grant>> LeaseTable::Lease(absl::string_view worker_id) {
+  if (worker_id.empty()) return absl::InvalidArgumentError("lease: empty worker id");
+  const int64_t now = clock_.NowUnixMs();
+  for (const std::string& job_id : job_order_) {
+    JobEntry& job = jobs_.at(job_id);
+    if (job.failed || job.queued.empty()) continue;
+    const ChunkCoord key = *job.queued.begin();
+    const ChunkRecord& current = job.chunks.at(key);
+    ChunkRecord next = current;
+    next.state = ChunkState::kLeased;
+    next.generation = current.generation + 1;
+    next.lease_id = MakeLeaseId(job_id, key, next.generation);
+    next.worker_id = std::string(worker_id);
+    next.deadline_unix_ms = now + options_.lease_timeout_ms;
+    next.attempts = current.attempts + 1;
+    // Persist first: if the write fails the table is unchanged and the chunk stays queued.
+    const ChunkUpdate update{next, current.generation};
+    if (absl::Status s = store_.UpdateChunks({&update, 1}, now); !s.ok()) return s;
+    job.queued.erase(key);
+    leases_by_worker_[next.worker_id].insert({job_id, key});
+    Grant grant{job_id,        key,           next.lease_id, next.generation,
+                next.deadline_unix_ms, next.attempts, next.wedge_count};
+    job.chunks[key] = std::move(next);
+    return grant;
+  }
+  return std::nullopt;
+}
+
+std::optional<int64_t> LeaseTable::Heartbeat(absl::string_view worker_id) {
+  auto w = leases_by_worker_.find(worker_id);
+  if (w == leases_by_worker_.end()) return std::nullopt;
+  const int64_t deadline = clock_.NowUnixMs() + options_.lease_timeout_ms;
+  for (const LeaseRef& ref : w->second) {
+    jobs_.at(ref.first).chunks.at(ref.second).deadline_unix_ms = deadline;
+  }
+  return deadline;
+}
+
+absl::Status LeaseTable::Complete(absl::string_view lease_id, int64_t generation,
+                                  const Tile& tile) {
+  absl::StatusOr<ParsedLease> parsed = ParseLeaseId(lease_id);
+  if (!parsed.ok()) return parsed.status();
+  if (parsed->generation != generation) {
+    return absl::InvalidArgumentError(absl::StrCat("complete ", lease_id, ": generation ",
+                                                   generation, " does not match the lease id"));
+  }
+  auto it = jobs_.find(parsed->job_id);
+  if (it == jobs_.end()) {
+    return absl::NotFoundError(
+        absl::StrCat("complete ", lease_id, ": job ", parsed->job_id, " is not being carved"));
+  }
+  JobEntry& job = it->second;
+  if (job.failed) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("complete ", lease_id, ": job ", job.id, " failed: ", job.error));
+  }
+  auto c = job.chunks.find(parsed->chunk);
+  if (c == job.chunks.end()) {
+    return absl::NotFoundError(absl::StrCat("complete ", lease_id, ": job ", job.id,
+                                            " has no chunk ", KeyText(parsed->chunk)));
+  }
+  const ChunkRecord& current = c->second;
+  if (current.state == ChunkState::kDone) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("complete ", lease_id, ": chunk ", KeyText(current.key),
+                     " already committed by lease ", current.lease_id));
+  }
+  if (current.generation != generation) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("complete ", lease_id, ": stale lease, chunk ", KeyText(current.key),
+                     " was leased again (generation ", current.generation, ")"));
+  }
+  // Same generation: either still LEASED (in time or past its deadline) or QUEUED after expiry
+  // and not yet leased again. Both are accepted; see the header.
+  ChunkRecord next = current;
+  next.state = ChunkState::kDone;
+  next.deadline_unix_ms = 0;
+  next.tile_path = tile.path;
+  next.tile_size_bytes = tile.size_bytes;
+  next.tile_sha256_hex = tile.sha256_hex;
+  const ChunkUpdate update{next, current.generation};
+  if (absl::Status s = store_.UpdateChunks({&update, 1}, clock_.NowUnixMs()); !s.ok()) return s;
+  if (current.state == ChunkState::kLeased) ForgetLease(current);
+  job.queued.erase(current.key);
+  c->second = std::move(next);
+  return absl::OkStatus();
+}
+
+absl::StatusOr<bool> LeaseTable::Fail(absl::string_view lease_id, int64_t generation,
+                                      absl::string_view reason, bool retryable) {
+  absl::StatusOr<ParsedLease> parsed = ParseLeaseId(lease_id);
+  if (!parsed.ok()) return parsed.status();
+  auto it = jobs_.find(parsed->job_id);
+  if (it == jobs_.end()) {
+    return absl::NotFoundError(
+        absl::StrCat("fail ", lease_id, ": job ", parsed->job_id, " is not being carved"));
+  }
+  JobEntry& job = it->second;
+  auto c = job.chunks.find(parsed->chunk);
+  if (job.failed || c == job.chunks.end() || c->second.state != ChunkState::kLeased ||
+      c->second.generation != generation || parsed->generation != generation) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("fail ", lease_id, ": the lease is no longer held"));
+  }
+  const std::string worker = c->second.worker_id;
+  std::vector<std::pair<ChunkCoord, std::string>> what = {
+      {parsed->chunk, absl::StrCat("worker ", worker, ": ", reason)}};
+  if (absl::Status s = RequeueOrFail(job, what, /*force_fail=*/!retryable); !s.ok()) return s;
+  return !job.failed;
+}
+
+// ---- expiry and lost workers
+
+absl::StatusOr<int> LeaseTable::ExpireLeases() {
+  const int64_t now = clock_.NowUnixMs();
+  std::map<std::string, std::vector<std::pair<ChunkCoord, std::string>>> by_job;
+  int expired = 0;
+  for (const auto& [worker, refs] : leases_by_worker_) {
+    for (const LeaseRef& ref : refs) {
+      const ChunkRecord& c = jobs_.at(ref.first).chunks.at(ref.second);
+      if (c.deadline_unix_ms < now) {
+        by_job[ref.first].push_back(
+            {ref.second, absl::StrCat("lease ", c.lease_id, " of worker ", worker,
+                                      " expired (deadline passed ", now - c.deadline_unix_ms,
+                                      " ms ago)")});
+        ++expired;
+      }
+    }
+  }
+  for (const auto& [job_id, what] : by_job) {
+    if (absl::Status s = RequeueOrFail(jobs_.at(job_id), what, false); !s.ok()) return s;
+  }
+  return expired;
+}
+
+absl::StatusOr<int> LeaseTable::WorkerLost(absl::string_view worker_id) {
+  auto w = leases_by_worker_.find(worker_id);
+  if (w == leases_by_worker_.end()) return 0;
+  std::map<std::string, std::vector<std::pair<ChunkCoord, std::string>>> by_job;
+  const std::set<LeaseRef> refs = w->second;  // RequeueOrFail edits the map
+  for (const LeaseRef& ref : refs) {
+    by_job[ref.first].push_back({ref.second, absl::StrCat("worker ", worker_id, " lost")});
+  }
+  for (const auto& [job_id, what] : by_job) {
+    if (absl::Status s = RequeueOrFail(jobs_.at(job_id), what, false); !s.ok()) return s;
+  }
+  return static_cast<int>(refs.size());
+}
+
+absl::Status LeaseTable::RequeueOrFail(
+    JobEntry& job, const std::vector<std::pair<ChunkCoord, std::string>>& what,
+    bool force_fail) {
+  const int64_t now = clock_.NowUnixMs();
+  std::vector<ChunkUpdate> updates;
+  std::optional<JobTransition> fail;
+  for (const auto& [key, why] : what) {
+    const ChunkRecord& current = job.chunks.at(key);
+    assert(current.state == ChunkState::kLeased);
+    ChunkUpdate u{current, current.generation};
+    u.chunk.state = ChunkState::kQueued;
+    u.chunk.deadline_unix_ms = 0;
+    u.chunk.last_error = why;
+    updates.push_back(u);
+    if (!fail && (force_fail || current.attempts >= options_.max_attempts)) {
+      fail = JobTransition{
+          JobState::kFailed,
+          force_fail ? absl::StrCat("chunk ", KeyText(key), ": ", why, " (not retryable)")
+                     : absl::StrCat("chunk ", KeyText(key), ": attempt ", current.attempts,
+                                    " of ", options_.max_attempts, " failed: ", why),
+          now};
+    }
+  }
+  // One transaction: the requeues and the job failure land together or not at all.
+  if (absl::Status s = store_.UpdateChunks(updates, now, fail); !s.ok()) return s;
+  for (ChunkUpdate& u : updates) {
+    ForgetLease(job.chunks.at(u.chunk.key));
+    job.queued.insert(u.chunk.key);
+    job.chunks[u.chunk.key] = std::move(u.chunk);
+  }
+  if (fail) {
+    job.failed = true;
+    job.error = fail->error;
+    // The job's other leases are void: completing them is FAILED_PRECONDITION, and they no
+    // longer expire or extend. The store keeps them as they are; a FAILED job is never loaded.
+    for (auto& [key, chunk] : job.chunks) {
+      if (chunk.state == ChunkState::kLeased) ForgetLease(chunk);
+    }
+  }
+  return absl::OkStatus();
+}
+
+// ---- reporting
+
+absl::StatusOr<LeaseTable::Progress> LeaseTable::GetProgress(absl::string_view job_id) const {
+  auto it = jobs_.find(job_id);
+  if (it == jobs_.end()) {
+    return absl::NotFoundError(absl::StrCat("lease table: job ", job_id, " not loaded"));
+  }
+  Progress p;
+  p.failed = it->second.failed;
+  p.error = it->second.error;
+  for (const auto& [key, c] : it->second.chunks) {
+    ++p.chunks_total;
+    p.chunks_done += c.state == ChunkState::kDone;
+    p.chunks_leased += c.state == ChunkState::kLeased;
+    p.chunks_queued += c.state == ChunkState::kQueued;
+    p.chunk_retries += std::max(0, c.attempts - 1);
+  }
+  return p;
+}
+
+bool LeaseTable::AllDone(absl::string_view job_id) const {
+  auto it = jobs_.find(job_id);
+  if (it == jobs_.end() || it->second.failed) return false;
+  for (const auto& [key, c] : it->second.chunks) {
+    if (c.state != ChunkState::kDone) return false;
+  }
+  return true;
+}
+
+std::vector<std::string> LeaseTable::LeasesOf(absl::string_view worker_id) const {
+  std::vector<std::string> ids;
+  auto w = leases_by_worker_.find(worker_id);
+  if (w == leases_by_worker_.end()) return ids;
+  for (const LeaseRef& ref : w->second) {
+    ids.push_back(jobs_.at(ref.first).chunks.at(ref.second).lease_id);
+  }
+  return ids;
+}
+
+}  // namespace carvemap

@@ -1,0 +1,372 @@
+#include "coordinator/lease_table.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <memory>
+
+#include "absl/strings/str_cat.h"
+
+namespace carvemap {
+namespace {
+
+// Removes this process's scratch directory when the test binary ends.
+class ScratchCleanup : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    std::error_code ignored;
+    std::filesystem::remove_all(
+        std::filesystem::temp_directory_path() / absl::StrCat("lease_table_test_", getpid()), ignored);
+  }
+};
+const auto* const kScratchCleanup = ::testing::AddGlobalTestEnvironment(new ScratchCleanup);
+
+using ::testing::ElementsAre;
+using ::testing::HasSubstr;
+
+class FakeClock final : public LeaseTable::Clock {
+ public:
+  int64_t NowUnixMs() override { return now_ms; }
+  void AdvanceMs(int64_t ms) { now_ms += ms; }
+  int64_t now_ms = 1'700'000'000'000;
+};
+
+constexpr int64_t kTimeoutMs = 30'000;
+
+class LeaseTableTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    std::filesystem::path dir = std::filesystem::temp_directory_path() /
+                                absl::StrCat("lease_table_test_", getpid()) / info->name();
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directories(dir);
+    path_ = (dir / "jobs.db").string();
+    OpenStore();
+  }
+
+  void OpenStore() {
+    auto store = JobStore::Open(path_);
+    ASSERT_TRUE(store.ok()) << store.status();
+    store_ = std::move(*store);
+    table_ = std::make_unique<LeaseTable>(*store_, clock_, options_);
+  }
+
+  // Simulates a coordinator crash/restart: everything in memory is gone.
+  void Restart() {
+    table_.reset();
+    store_.reset();
+    OpenStore();
+  }
+
+  // A CARVING job with chunks (0,0,0), (0,0,1), ..., loaded into the table.
+  void AddJob(const std::string& id, int chunks) {
+    JobRecord job;
+    job.id = id;
+    job.output_name = id;
+    job.params_json = "{}";
+    job.created_unix_ms = clock_.now_ms;
+    ASSERT_TRUE(store_->CreateJob(job).ok());
+    std::vector<ChunkRecord> records(chunks);
+    // Inserted in reverse to show that the lease order is by key, not insertion.
+    for (int i = 0; i < chunks; ++i) records[i].key = {0, 0, chunks - 1 - i};
+    ASSERT_TRUE(store_->AddChunks(id, records).ok());
+    ASSERT_TRUE(store_->TransitionJob(id, {JobState::kCarving, "", clock_.now_ms}).ok());
+    ASSERT_TRUE(table_->LoadJob(id).ok());
+  }
+
+  LeaseTable::Grant MustLease(const std::string& worker) {
+    auto grant = table_->Lease(worker);
+    EXPECT_TRUE(grant.ok()) << grant.status();
+    EXPECT_TRUE(grant.ok() && grant->has_value()) << "nothing to lease";
+    return grant.ok() && grant->has_value() ? **grant : LeaseTable::Grant{};
+  }
+
+  static LeaseTable::Tile TileFor(const LeaseTable::Grant& g) {
+    return {absl::StrCat(g.job_id, "/tiles/", g.chunk.x, "_", g.chunk.y, "_", g.chunk.z, ".h5"),
+            1234, std::string(64, 'f')};
+  }
+
+  ChunkRecord StoredChunk(const std::string& job_id, ChunkCoord key) {
+    auto chunks = store_->ListChunks(job_id);
+    EXPECT_TRUE(chunks.ok());
+    for (const ChunkRecord& c : *chunks) {
+      if (c.key == key) return c;
+    }
+    ADD_FAILURE() << "no chunk";
+    return {};
+  }
+
+  std::string path_;
+  FakeClock clock_;
+  LeaseTableOptions options_{.lease_timeout_ms = kTimeoutMs, .max_attempts = 3};
+  std::unique_ptr<JobStore> store_;
+  std::unique_ptr<LeaseTable> table_;
+};
+
+TEST_F(LeaseTableTest, LeasesInKeyOrderAndCompletes) {
+  AddJob("j-1", 3);
+  LeaseTable::Grant a = MustLease("w-1");
+  LeaseTable::Grant b = MustLease("w-2");
+  LeaseTable::Grant c = MustLease("w-1");
+  EXPECT_EQ(a.chunk, (ChunkCoord{0, 0, 0}));
+  EXPECT_EQ(b.chunk, (ChunkCoord{0, 0, 1}));
+  EXPECT_EQ(c.chunk, (ChunkCoord{0, 0, 2}));
+  EXPECT_EQ(a.generation, 1);
+  EXPECT_EQ(a.attempt, 1);
+  EXPECT_EQ(a.lease_id, "j-1/0,0,0/1");
+  EXPECT_EQ(a.deadline_unix_ms, clock_.now_ms + kTimeoutMs);
+  auto none = table_->Lease("w-3");
+  ASSERT_TRUE(none.ok());
+  EXPECT_FALSE(none->has_value());
+  EXPECT_THAT(table_->LeasesOf("w-1"), ElementsAre("j-1/0,0,0/1", "j-1/0,0,2/1"));
+
+  for (const auto& g : {a, b, c}) {
+    ASSERT_TRUE(table_->Complete(g.lease_id, g.generation, TileFor(g)).ok());
+  }
+  EXPECT_TRUE(table_->AllDone("j-1"));
+  auto progress = table_->GetProgress("j-1");
+  ASSERT_TRUE(progress.ok());
+  EXPECT_EQ(progress->chunks_done, 3);
+  EXPECT_EQ(progress->chunks_leased, 0);
+  EXPECT_TRUE(table_->LeasesOf("w-1").empty());
+  // The store has the same picture, counters included.
+  auto job = store_->GetJob("j-1");
+  ASSERT_TRUE(job.ok());
+  EXPECT_EQ(job->counters.chunks_done, 3);
+  ChunkRecord stored = StoredChunk("j-1", {0, 0, 1});
+  EXPECT_EQ(stored.state, ChunkState::kDone);
+  EXPECT_EQ(stored.tile_path, "j-1/tiles/0_0_1.h5");
+  EXPECT_EQ(stored.worker_id, "w-2");
+}
+
+TEST_F(LeaseTableTest, SecondCompletionIsRejected) {
+  AddJob("j-1", 1);
+  LeaseTable::Grant g = MustLease("w-1");
+  ASSERT_TRUE(table_->Complete(g.lease_id, g.generation, TileFor(g)).ok());
+  absl::Status again = table_->Complete(g.lease_id, g.generation, TileFor(g));
+  EXPECT_EQ(again.code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(again.message(), HasSubstr("already committed"));
+  EXPECT_EQ(table_->Complete(g.lease_id, 7, TileFor(g)).code(),
+            absl::StatusCode::kInvalidArgument);  // generation does not match the id
+  EXPECT_EQ(table_->Complete("garbage", 1, TileFor(g)).code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(table_->Complete("j-9/0,0,0/1", 1, TileFor(g)).code(), absl::StatusCode::kNotFound);
+}
+
+TEST_F(LeaseTableTest, ExpiryRequeuesWithNewGeneration) {
+  AddJob("j-1", 2);
+  LeaseTable::Grant first = MustLease("w-1");
+  clock_.AdvanceMs(kTimeoutMs - 1);
+  auto expired = table_->ExpireLeases();
+  ASSERT_TRUE(expired.ok());
+  EXPECT_EQ(*expired, 0);  // not yet
+  clock_.AdvanceMs(2);
+  expired = table_->ExpireLeases();
+  ASSERT_TRUE(expired.ok());
+  EXPECT_EQ(*expired, 1);
+  EXPECT_TRUE(table_->LeasesOf("w-1").empty());
+  EXPECT_THAT(StoredChunk("j-1", first.chunk).last_error, HasSubstr("expired"));
+
+  LeaseTable::Grant second = MustLease("w-2");
+  EXPECT_EQ(second.chunk, first.chunk);  // requeued chunk comes first again (key order)
+  EXPECT_EQ(second.generation, 2);
+  EXPECT_EQ(second.attempt, 2);
+  // The first holder is late and the chunk was leased again: stale.
+  absl::Status stale = table_->Complete(first.lease_id, first.generation, TileFor(first));
+  EXPECT_EQ(stale.code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(stale.message(), HasSubstr("stale"));
+  EXPECT_TRUE(table_->Complete(second.lease_id, second.generation, TileFor(second)).ok());
+  auto progress = table_->GetProgress("j-1");
+  ASSERT_TRUE(progress.ok());
+  EXPECT_EQ(progress->chunk_retries, 1);
+}
+
+TEST_F(LeaseTableTest, ExpiredButNotReassignedCompletionIsAccepted) {
+  AddJob("j-1", 2);
+  LeaseTable::Grant a = MustLease("w-1");
+  LeaseTable::Grant b = MustLease("w-1");
+  clock_.AdvanceMs(kTimeoutMs + 1);
+  // Past its deadline, before any sweep: accepted.
+  EXPECT_TRUE(table_->Complete(a.lease_id, a.generation, TileFor(a)).ok());
+  // After the sweep requeued it, but before anyone leased it again: still accepted.
+  auto expired = table_->ExpireLeases();
+  ASSERT_TRUE(expired.ok());
+  EXPECT_EQ(*expired, 1);
+  EXPECT_TRUE(table_->Complete(b.lease_id, b.generation, TileFor(b)).ok());
+  EXPECT_TRUE(table_->AllDone("j-1"));
+  auto none = table_->Lease("w-2");
+  ASSERT_TRUE(none.ok());
+  EXPECT_FALSE(none->has_value());  // and b is no longer queued
+}
+
+TEST_F(LeaseTableTest, HeartbeatExtendsAllLeasesOfTheWorker) {
+  AddJob("j-1", 3);
+  MustLease("w-1");
+  MustLease("w-1");
+  MustLease("w-2");
+  EXPECT_FALSE(table_->Heartbeat("w-9").has_value());
+  clock_.AdvanceMs(20'000);
+  std::optional<int64_t> deadline = table_->Heartbeat("w-1");
+  ASSERT_TRUE(deadline.has_value());
+  EXPECT_EQ(*deadline, clock_.now_ms + kTimeoutMs);
+  clock_.AdvanceMs(20'000);  // 40 s after the leases: w-2's expired, w-1's were extended
+  auto expired = table_->ExpireLeases();
+  ASSERT_TRUE(expired.ok());
+  EXPECT_EQ(*expired, 1);
+  EXPECT_EQ(table_->LeasesOf("w-1").size(), 2u);
+  EXPECT_TRUE(table_->LeasesOf("w-2").empty());
+}
+
+TEST_F(LeaseTableTest, LostWorkersChunksAreRequeued) {
+  AddJob("j-1", 4);
+  LeaseTable::Grant a = MustLease("w-1");
+  MustLease("w-2");
+  LeaseTable::Grant c = MustLease("w-1");
+  auto lost = table_->WorkerLost("w-1");
+  ASSERT_TRUE(lost.ok());
+  EXPECT_EQ(*lost, 2);
+  EXPECT_TRUE(table_->LeasesOf("w-1").empty());
+  EXPECT_EQ(table_->LeasesOf("w-2").size(), 1u);
+  auto progress = table_->GetProgress("j-1");
+  ASSERT_TRUE(progress.ok());
+  EXPECT_EQ(progress->chunks_queued, 3);
+  EXPECT_EQ(progress->chunks_leased, 1);
+  EXPECT_EQ(StoredChunk("j-1", a.chunk).state, ChunkState::kQueued);
+  EXPECT_THAT(StoredChunk("j-1", c.chunk).last_error, HasSubstr("worker w-1 lost"));
+  // Requeued chunks go out again in key order.
+  EXPECT_EQ(MustLease("w-3").chunk, a.chunk);
+  auto zero = table_->WorkerLost("w-1");
+  ASSERT_TRUE(zero.ok());
+  EXPECT_EQ(*zero, 0);
+}
+
+TEST_F(LeaseTableTest, RetryableFailureRequeuesThenMaxAttemptsFailsTheJob) {
+  AddJob("j-1", 2);
+  LeaseTable::Grant other = MustLease("w-2");  // chunk (0,0,0), held throughout
+  for (int attempt = 1; attempt <= 3; ++attempt) {
+    LeaseTable::Grant g = MustLease("w-1");
+    EXPECT_EQ(g.chunk, (ChunkCoord{0, 0, 1}));
+    EXPECT_EQ(g.attempt, attempt);
+    auto requeued = table_->Fail(g.lease_id, g.generation, "out of memory", true);
+    ASSERT_TRUE(requeued.ok()) << requeued.status();
+    EXPECT_EQ(*requeued, attempt < 3) << "attempt " << attempt;
+  }
+  auto job = store_->GetJob("j-1");
+  ASSERT_TRUE(job.ok());
+  EXPECT_EQ(job->state, JobState::kFailed);
+  EXPECT_EQ(job->error, "chunk (0,0,1): attempt 3 of 3 failed: worker w-1: out of memory");
+  EXPECT_EQ(job->finished_unix_ms, clock_.now_ms);
+  auto progress = table_->GetProgress("j-1");
+  ASSERT_TRUE(progress.ok());
+  EXPECT_TRUE(progress->failed);
+  // Nothing more to lease, and the other lease of the job is void.
+  auto none = table_->Lease("w-1");
+  ASSERT_TRUE(none.ok());
+  EXPECT_FALSE(none->has_value());
+  EXPECT_EQ(table_->Complete(other.lease_id, other.generation, TileFor(other)).code(),
+            absl::StatusCode::kFailedPrecondition);
+  EXPECT_TRUE(table_->LeasesOf("w-2").empty());
+  // A failed job cannot be loaded again.
+  Restart();
+  EXPECT_EQ(table_->LoadJob("j-1").code(), absl::StatusCode::kFailedPrecondition);
+}
+
+TEST_F(LeaseTableTest, NonRetryableFailureFailsTheJobAtOnce) {
+  AddJob("j-1", 2);
+  LeaseTable::Grant g = MustLease("w-1");
+  auto requeued = table_->Fail(g.lease_id, g.generation, "corrupt wedge record 17", false);
+  ASSERT_TRUE(requeued.ok());
+  EXPECT_FALSE(*requeued);
+  auto job = store_->GetJob("j-1");
+  ASSERT_TRUE(job.ok());
+  EXPECT_EQ(job->state, JobState::kFailed);
+  EXPECT_THAT(job->error, HasSubstr("corrupt wedge record 17 (not retryable)"));
+  // Failing a lease twice: it is no longer held.
+  EXPECT_EQ(table_->Fail(g.lease_id, g.generation, "again", true).status().code(),
+            absl::StatusCode::kFailedPrecondition);
+}
+
+TEST_F(LeaseTableTest, RepeatedExpiryCountsTowardsMaxAttempts) {
+  AddJob("j-1", 1);
+  for (int attempt = 1; attempt <= 3; ++attempt) {
+    MustLease("w-1");
+    clock_.AdvanceMs(kTimeoutMs + 1);
+    ASSERT_TRUE(table_->ExpireLeases().ok());
+  }
+  auto job = store_->GetJob("j-1");
+  ASSERT_TRUE(job.ok());
+  EXPECT_EQ(job->state, JobState::kFailed);
+  EXPECT_THAT(job->error, HasSubstr("attempt 3 of 3 failed: lease j-1/0,0,0/3 of worker w-1 "
+                                    "expired"));
+}
+
+TEST_F(LeaseTableTest, RestartRebuildsTheTable) {
+  AddJob("j-1", 4);
+  LeaseTable::Grant a = MustLease("w-1");
+  LeaseTable::Grant b = MustLease("w-1");
+  LeaseTable::Grant c = MustLease("w-2");
+  ASSERT_TRUE(table_->Complete(a.lease_id, a.generation, TileFor(a)).ok());
+
+  Restart();
+  ASSERT_TRUE(table_->LoadJob("j-1").ok());
+  EXPECT_EQ(table_->LoadJob("j-1").code(), absl::StatusCode::kAlreadyExists);
+  auto progress = table_->GetProgress("j-1");
+  ASSERT_TRUE(progress.ok());
+  EXPECT_EQ(progress->chunks_total, 4);
+  EXPECT_EQ(progress->chunks_done, 1);  // DONE stays done
+  EXPECT_EQ(progress->chunks_leased, 0);  // LEASED went back to the queue
+  EXPECT_EQ(progress->chunks_queued, 3);
+  EXPECT_EQ(StoredChunk("j-1", b.chunk).state, ChunkState::kQueued);
+  // The restart does not use up an attempt.
+  EXPECT_EQ(StoredChunk("j-1", b.chunk).attempts, 0);
+
+  // The old holder of c finishes before c is leased again: accepted (same generation).
+  EXPECT_TRUE(table_->Complete(c.lease_id, c.generation, TileFor(c)).ok());
+  // b is leased again with the next generation; its old lease is now stale.
+  LeaseTable::Grant b2 = MustLease("w-3");
+  EXPECT_EQ(b2.chunk, b.chunk);
+  EXPECT_EQ(b2.generation, 2);
+  EXPECT_NE(b2.lease_id, b.lease_id);
+  EXPECT_EQ(table_->Complete(b.lease_id, b.generation, TileFor(b)).code(),
+            absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(table_->Complete(a.lease_id, a.generation, TileFor(a)).code(),
+            absl::StatusCode::kFailedPrecondition);  // committed before the restart
+  ASSERT_TRUE(table_->Complete(b2.lease_id, b2.generation, TileFor(b2)).ok());
+  LeaseTable::Grant d = MustLease("w-3");
+  ASSERT_TRUE(table_->Complete(d.lease_id, d.generation, TileFor(d)).ok());
+  EXPECT_TRUE(table_->AllDone("j-1"));
+
+  // And once more: a finished table reloads as finished.
+  Restart();
+  ASSERT_TRUE(table_->LoadJob("j-1").ok());
+  EXPECT_TRUE(table_->AllDone("j-1"));
+}
+
+TEST_F(LeaseTableTest, JobsAreServedInLoadOrderAndDropJobVoidsLeases) {
+  AddJob("j-old", 1);
+  AddJob("j-new", 1);
+  LeaseTable::Grant first = MustLease("w-1");
+  LeaseTable::Grant second = MustLease("w-1");
+  EXPECT_EQ(first.job_id, "j-old");
+  EXPECT_EQ(second.job_id, "j-new");
+  table_->DropJob("j-old");  // e.g. cancelled
+  EXPECT_EQ(table_->Complete(first.lease_id, first.generation, TileFor(first)).code(),
+            absl::StatusCode::kNotFound);
+  EXPECT_THAT(table_->LeasesOf("w-1"), ElementsAre(second.lease_id));
+}
+
+TEST(LeaseTableOptionsTest, Validate) {
+  EXPECT_TRUE(LeaseTableOptions{}.Validate().ok());
+  EXPECT_EQ((LeaseTableOptions{.lease_timeout_ms = 0}.Validate().code()),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ((LeaseTableOptions{.max_attempts = 0}.Validate().code()),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(LeaseTable::MakeLeaseId("a/b", {1, -2, 3}, 4), "a/b/1,-2,3/4");
+}
+
+}  // namespace
+}  // namespace carvemap
