@@ -1,3 +1,7 @@
+# The gtest main of every test binary: a private scratch directory per test process.
+add_library(carvemap_test_main STATIC ${PROJECT_SOURCE_DIR}/tests/test_main.cc)
+target_link_libraries(carvemap_test_main PUBLIC GTest::gtest GTest::gmock)
+
 # carvemap_add_test(name SOURCES a_test.cc ... LIBS lib ...)
 # One gtest binary per test file (STYLE.md habit 13); tests are discovered into ctest.
 function(carvemap_add_test name)
@@ -6,7 +10,7 @@ function(carvemap_add_test name)
     set(ARG_SOURCES ${name}.cc)
   endif()
   add_executable(${name} ${ARG_SOURCES})
-  target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest_main GTest::gmock)
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS} carvemap_test_main)
   target_compile_definitions(${name} PRIVATE
       CARVEMAP_SHARED_DIR="${CARVEMAP_SHARED_DIR}"
       CARVEMAP_BINARY_DIR="${PROJECT_BINARY_DIR}")
