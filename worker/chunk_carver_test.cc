@@ -1,0 +1,135 @@
+// CarveChunkToTile: a real chunk of a simulated scan carves into a valid tile, and the same
+// payload gives byte-identical tiles however often and wherever it is carved.
+#include "worker/chunk_carver.h"
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "coordinator/scan_ingest.h"
+#include "services/sim/simulator.h"
+#include "storage/tile_store.h"
+
+namespace carvemap {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string ReadBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+class ChunkCarverTest : public ::testing::Test {
+ protected:
+  // A thinned `room` scan, ingested; the busiest chunk's spill file is the payload.
+  static void SetUpTestSuite() {
+    root_ = new std::string(fs::path(::testing::TempDir()) / "chunk_carver_test");
+    fs::remove_all(*root_);
+    SimulateOptions o;
+    o.preset = "room";
+    o.seed = 4;
+    o.rig.rate_hz = 5;
+    o.rig.beam_step_deg = 2;
+    o.max_duration_s = 10;
+    o.output_dir = *root_ + "/sim";
+    absl::StatusOr<SimulationSummary> s = Simulate(o);
+    ASSERT_TRUE(s.ok()) << s.status();
+    IngestOptions io;
+    io.scan_path = s->scan_path;
+    io.spill_dir = *root_ + "/spill";
+    absl::StatusOr<IngestResult> r = IngestScan(io);
+    ASSERT_TRUE(r.ok()) << r.status();
+    auto busiest = std::max_element(
+        r->chunks.begin(), r->chunks.end(),
+        [](const SpilledChunk& a, const SpilledChunk& b) { return a.wedge_count < b.wedge_count; });
+    absl::StatusOr<ChunkSpillFile> f = ReadChunkSpillFile(busiest->path);
+    ASSERT_TRUE(f.ok()) << f.status();
+    file_ = new ChunkSpillFile(*std::move(f));
+  }
+  static void TearDownTestSuite() {
+    delete root_;
+    delete file_;
+  }
+  static CarveChunkRequest Request(const std::string& dir) {
+    CarveChunkRequest req;
+    req.job_id = "test-job";
+    req.chunk = file_->chunk;
+    req.grid.chunk_depth = 5;
+    req.wedge_payload = file_->payload;
+    req.tiles_dir = dir;
+    return req;
+  }
+  static std::string* root_;
+  static ChunkSpillFile* file_;
+};
+std::string* ChunkCarverTest::root_ = nullptr;
+ChunkSpillFile* ChunkCarverTest::file_ = nullptr;
+
+TEST_F(ChunkCarverTest, CarvesValidTile) {
+  absl::StatusOr<CarveChunkResult> r = CarveChunkToTile(Request(*root_ + "/tiles"));
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_EQ(r->wedges, file_->wedge_count);
+  EXPECT_GT(r->leaf_updates, 0u);
+  EXPECT_GT(r->leaves, 0u);
+  EXPECT_EQ(fs::path(r->tile_path).filename(), TileFileName(file_->chunk));
+  EXPECT_EQ(fs::file_size(r->tile_path), r->tile_bytes);
+  absl::StatusOr<TileData> tile = ReadTile(r->tile_path);
+  ASSERT_TRUE(tile.ok()) << tile.status();
+  EXPECT_EQ(tile->chunk, file_->chunk);
+  EXPECT_EQ(tile->leaves.size(), r->leaves);
+  EXPECT_EQ(tile->params.job_id, "test-job");
+  EXPECT_EQ(tile->params.num_wedges, file_->wedge_count);
+  EXPECT_TRUE(tile->params.simplified);
+  // Both labels occur in a chunk the scanner looked through and at.
+  int interior = 0, exterior = 0;
+  for (const TileLeaf& l : tile->leaves) (l.stats.interior() ? interior : exterior)++;
+  EXPECT_GT(interior, 0);
+  EXPECT_GT(exterior, 0);
+  // No partial file is left behind.
+  for (const auto& e : fs::directory_iterator(*root_ + "/tiles")) {
+    EXPECT_EQ(e.path().extension(), ".h5") << e.path();
+  }
+}
+
+TEST_F(ChunkCarverTest, DeterministicBytes) {
+  absl::StatusOr<CarveChunkResult> a1 = CarveChunkToTile(Request(*root_ + "/det_a"));
+  ASSERT_TRUE(a1.ok()) << a1.status();
+  const std::string bytes_a1 = ReadBytes(a1->tile_path);
+  absl::StatusOr<CarveChunkResult> a2 = CarveChunkToTile(Request(*root_ + "/det_a"));  // replaces
+  ASSERT_TRUE(a2.ok()) << a2.status();
+  absl::StatusOr<CarveChunkResult> b = CarveChunkToTile(Request(*root_ + "/det_b"));
+  ASSERT_TRUE(b.ok()) << b.status();
+  EXPECT_FALSE(bytes_a1.empty());
+  EXPECT_EQ(bytes_a1, ReadBytes(a2->tile_path));
+  EXPECT_EQ(bytes_a1, ReadBytes(b->tile_path));
+}
+
+TEST_F(ChunkCarverTest, Errors) {
+  CarveChunkRequest req = Request(*root_ + "/err");
+  std::string truncated = file_->payload.substr(0, file_->payload.size() - 5);
+  req.wedge_payload = truncated;
+  EXPECT_EQ(CarveChunkToTile(req).status().code(), absl::StatusCode::kDataLoss);
+  req = Request(*root_ + "/err");
+  req.sigmas = 2.0;
+  EXPECT_EQ(CarveChunkToTile(req).status().code(), absl::StatusCode::kInvalidArgument);
+  req = Request(*root_ + "/err");
+  req.grid.chunk_depth = 11;
+  EXPECT_EQ(CarveChunkToTile(req).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_FALSE(fs::exists(*root_ + "/err/" + TileFileName(file_->chunk)));
+  // An empty payload is a chunk with no wedges: a valid, empty tile.
+  req = Request(*root_ + "/empty");
+  req.wedge_payload = {};
+  absl::StatusOr<CarveChunkResult> r = CarveChunkToTile(req);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_EQ(r->leaves, 0u);
+}
+
+}  // namespace
+}  // namespace carvemap
