@@ -1,0 +1,76 @@
+// `carvemap merge TILES_DIR -o OUT [--resolution R]`: the first merge outputs (DESIGN §7) from
+// a tiles directory: OUT/octree.bt, OUT/level_0/topdown.png (+ topdown.json) and OUT/job.json.
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "services/cli/commands.h"
+#include "services/cli/progress.h"
+#include "services/merge/first_outputs.h"
+
+namespace carvemap {
+namespace {
+
+struct MergeFlags {
+  MergeOptions options;
+  double cache_mb = 256;
+  bool quiet = false;
+};
+
+absl::Status RunMerge(MergeFlags& flags) {
+  flags.options.cache_budget_bytes = static_cast<uint64_t>(flags.cache_mb * (1 << 20));
+  flags.options.job = {{"command", "carvemap merge"}};
+  ProgressLine line(!flags.quiet);
+  auto progress = [&line](const MergeProgress& p) {
+    line.Update("merge: %s %llu/%llu", p.stage.c_str(),
+                static_cast<unsigned long long>(p.done), static_cast<unsigned long long>(p.total));
+    return true;
+  };
+  absl::StatusOr<MergeSummary> summary = MergeFirstOutputs(flags.options, progress);
+  line.Finish();
+  if (!summary.ok()) return summary.status();
+  const MergeSummary& s = *summary;
+  std::cout << std::fixed << std::setprecision(3) << "merged " << s.num_tiles << " tiles, "
+            << s.num_leaves << " leaves at " << s.resolution_m << " m in " << s.seconds_total
+            << " s\n"
+            << "  interior " << s.interior_volume_m3 << " m3, observed exterior "
+            << s.exterior_observed_volume_m3 << " m3\n"
+            << "  " << s.octree_bt_path << ": " << s.num_bt_nodes << " nodes (OctoMap .bt)\n";
+  if (s.topdown_width > 0) {
+    std::cout << "  " << s.topdown_png_path << ": " << s.topdown_width << "x" << s.topdown_height
+              << " px, origin (" << s.topdown_origin_x_m << ", " << s.topdown_origin_y_m
+              << ") m, max open height " << s.max_open_height_m << " m\n";
+  }
+  std::cout << "  " << s.topdown_json_path << "\n  " << s.job_json_path << "\n";
+  return absl::OkStatus();
+}
+
+void RegisterMerge(CLI::App& app, int& exit_code) {
+  CLI::App* cmd = app.add_subcommand(
+      "merge", "Merge carved tiles into the first outputs: octree.bt (OctoMap), "
+               "level_0/topdown.png (open height, §5.4) and job.json");
+  auto flags = std::make_shared<MergeFlags>();
+  cmd->add_option("tiles", flags->options.tiles_dir, "Directory of c_<x>_<y>_<z>.h5 tiles")
+      ->required();
+  cmd->add_option("-o,--output", flags->options.output_dir, "Output directory")->required();
+  cmd->add_option("--resolution", flags->options.resolution_m,
+                  "Octree resolution in m (2 m / 2^k); default: the tiles'");
+  cmd->add_option("--cache-mb", flags->cache_mb, "Decoded-tile cache budget in MiB")
+      ->capture_default_str();
+  cmd->add_option("--topdown-max-m", flags->options.topdown_max_height_m,
+                  "Open height drawn as white (255) in topdown.png")
+      ->capture_default_str();
+  cmd->add_flag("-q,--quiet", flags->quiet, "No progress line");
+  cmd->callback([flags, &exit_code] { exit_code = ReportStatus("merge", RunMerge(*flags)); });
+}
+
+}  // namespace
+
+CARVEMAP_REGISTER_COMMAND(50, RegisterMerge);
+
+}  // namespace carvemap

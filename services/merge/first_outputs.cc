@@ -1,0 +1,189 @@
+#include "services/merge/first_outputs.h"
+
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <system_error>
+
+#include "absl/strings/str_cat.h"
+#include "services/geometry/octree_keys.h"
+#include "services/merge/octree_bt_writer.h"
+#include "services/merge/tile_set.h"
+#include "services/merge/topdown_map.h"
+#include "storage/atomic_file.h"
+#include "storage/tile_store.h"
+
+#ifndef CARVEMAP_VERSION
+#define CARVEMAP_VERSION "unknown"
+#endif
+
+namespace carvemap {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+absl::Status Report(const MergeProgressCallback& progress, const char* stage, uint64_t done,
+                    uint64_t total) {
+  if (progress && !progress(MergeProgress{stage, done, total})) {
+    return absl::CancelledError(absl::StrCat("merge cancelled during ", stage));
+  }
+  return absl::OkStatus();
+}
+
+// Sets job[a][b] = value, keeping whatever else the caller put under job[a].
+void Put(nlohmann::json& job, const char* a, const char* b, nlohmann::json value) {
+  if (!job.contains(a) || !job[a].is_object()) job[a] = nlohmann::json::object();
+  job[a][b] = std::move(value);
+}
+
+}  // namespace
+
+absl::Status MergeOptions::Validate() const {
+  if (tiles_dir.empty()) return absl::InvalidArgumentError("merge: tiles_dir is empty");
+  if (output_dir.empty()) return absl::InvalidArgumentError("merge: output_dir is empty");
+  if (resolution_m != 0) {
+    absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(resolution_m);
+    if (!grid.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("merge: ", grid.status().message()));
+    }
+  }
+  if (!job.is_object() && !job.is_null()) {
+    return absl::InvalidArgumentError("merge: job must be a JSON object");
+  }
+  if (!(topdown_max_height_m > 0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("merge: topdown_max_height_m must be > 0, got ", topdown_max_height_m));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
+                                               const MergeProgressCallback& progress) {
+  if (absl::Status s = options.Validate(); !s.ok()) return s;
+  const Clock::time_point t_start = Clock::now();
+  MergeSummary summary;
+  nlohmann::json timings = nlohmann::json::object();
+
+  // index
+  Clock::time_point t0 = Clock::now();
+  if (absl::Status s = Report(progress, "index", 0, 1); !s.ok()) return s;
+  absl::StatusOr<std::unique_ptr<TileSet>> opened =
+      TileSet::Open(options.tiles_dir, options.resolution_m, options.cache_budget_bytes);
+  if (!opened.ok()) return opened.status();
+  TileSet& tiles = **opened;
+  summary.chunk_depth = tiles.grid().chunk_depth;
+  summary.resolution_m = tiles.grid().resolution_m();
+  const uint64_t num_tiles = tiles.chunks().size();
+  std::error_code ec;
+  const fs::path out(options.output_dir);
+  fs::create_directories(out / "level_0", ec);
+  if (ec) {
+    return absl::UnavailableError(
+        absl::StrCat((out / "level_0").string(), ": cannot create: ", ec.message()));
+  }
+  timings["merge.index"] = SecondsSince(t0);
+
+  // octree.bt, with the per-tile counts and the topdown sums gathered on the same single
+  // read of each tile.
+  t0 = Clock::now();
+  TopdownMap topdown(tiles.grid(), tiles.chunks());
+  uint64_t visited = 0;
+  auto visit = [&](const TileData& tile) -> absl::Status {
+    if (absl::Status s = Report(progress, "octree_bt", visited, num_tiles); !s.ok()) return s;
+    ++visited;
+    for (const TileLeaf& leaf : tile.leaves) {
+      ++summary.num_leaves;
+      if (!leaf.stats.observed()) continue;
+      ++summary.num_observed_leaves;
+      const double side = kChunkSizeM / (1 << leaf.node.depth);
+      const double volume = side * side * side;
+      summary.observed_volume_m3 += volume;
+      if (leaf.stats.interior()) {
+        summary.interior_volume_m3 += volume;
+      } else {
+        summary.exterior_observed_volume_m3 += volume;
+      }
+    }
+    return topdown.AddTile(tile);
+  };
+  summary.octree_bt_path = (out / "octree.bt").string();
+  absl::StatusOr<OctreeBtStats> bt = WriteOctreeBt(tiles, summary.octree_bt_path, visit);
+  if (!bt.ok()) return bt.status();
+  summary.num_tiles = bt->num_tiles;
+  summary.num_bt_nodes = bt->num_nodes;
+  timings["merge.octree_bt"] = SecondsSince(t0);
+  if (absl::Status s = Report(progress, "octree_bt", num_tiles, num_tiles); !s.ok()) return s;
+
+  // level_0/topdown.png (§5.4)
+  t0 = Clock::now();
+  if (absl::Status s = Report(progress, "topdown_png", 0, 1); !s.ok()) return s;
+  summary.topdown_png_path = (out / "level_0" / "topdown.png").string();
+  summary.topdown_json_path = (out / "level_0" / "topdown.json").string();
+  if (absl::Status s = topdown.Write(summary.topdown_png_path, summary.topdown_json_path,
+                                     options.topdown_max_height_m, /*level=*/0);
+      !s.ok()) {
+    return s;
+  }
+  const TopdownGeometry& geo = topdown.geometry();
+  summary.topdown_origin_x_m = geo.origin_x_m;
+  summary.topdown_origin_y_m = geo.origin_y_m;
+  summary.topdown_width = geo.width;
+  summary.topdown_height = geo.height;
+  summary.max_open_height_m = topdown.max_open_height_m();
+  timings["merge.topdown_png"] = SecondsSince(t0);
+
+  // job.json
+  if (absl::Status s = Report(progress, "job_json", 0, 1); !s.ok()) return s;
+  nlohmann::json job = options.job.is_null() ? nlohmann::json::object() : options.job;
+  Put(job, "versions", "carvemap", CARVEMAP_VERSION);
+  Put(job, "versions", "tile_format", absl::StrCat(kTileFormat, "/", kTileVersion));
+  Put(job, "versions", "octree_bt", "OctoMap OcTree binary (id OcTree)");
+  Put(job, "versions", "topdown", "carvemap-topdown/1");
+  Put(job, "parameters", "merge",
+      {{"tiles_dir", options.tiles_dir},
+       {"resolution_m", summary.resolution_m},
+       {"chunk_depth", summary.chunk_depth},
+       {"cache_budget_bytes", options.cache_budget_bytes},
+       {"topdown_max_height_m", options.topdown_max_height_m},
+       {"bt_occupancy", "free = observed with p > 0.5 (interior), occupied = observed with "
+                        "p <= 0.5, unknown = unobserved"},
+       {"topdown_levels", "level_0 covers the whole height (levels not yet computed)"}});
+  const uint64_t total_leaves = summary.num_leaves;
+  Put(job, "counts", "tiles", summary.num_tiles);
+  Put(job, "counts", "leaves", total_leaves);
+  Put(job, "counts", "observed_leaves", summary.num_observed_leaves);
+  Put(job, "counts", "octree_bt_nodes", summary.num_bt_nodes);
+  Put(job, "counts", "interior_volume_m3", summary.interior_volume_m3);
+  Put(job, "counts", "exterior_observed_volume_m3", summary.exterior_observed_volume_m3);
+  Put(job, "counts", "observed_volume_m3", summary.observed_volume_m3);
+  Put(job, "counts", "topdown_max_open_height_m", summary.max_open_height_m);
+  summary.seconds_total = SecondsSince(t_start);
+  timings["merge.total"] = summary.seconds_total;
+  for (auto& [key, value] : timings.items()) Put(job, "timings_s", key.c_str(), value);
+
+  nlohmann::json outputs = job.contains("outputs") && job["outputs"].is_array()
+                               ? job["outputs"]
+                               : nlohmann::json::array();
+  std::vector<std::string> mine = {"octree.bt", "job.json", "level_0/topdown.json"};
+  if (geo.width > 0 && geo.height > 0) mine.push_back("level_0/topdown.png");
+  for (const std::string& name : mine) {
+    if (std::find(outputs.begin(), outputs.end(), name) == outputs.end()) outputs.push_back(name);
+  }
+  job["outputs"] = outputs;
+
+  summary.job_json_path = (out / "job.json").string();
+  if (absl::Status s = WriteFileAtomically(
+          summary.job_json_path, [&](std::ostream& o) { o << job.dump(2) << "\n"; });
+      !s.ok()) {
+    return s;
+  }
+  summary.job = std::move(job);
+  return summary;
+}
+
+}  // namespace carvemap

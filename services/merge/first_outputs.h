@@ -1,0 +1,94 @@
+// The first merge outputs of a job (DESIGN §6, §7): from the carved tiles, out of core,
+//   <output_dir>/octree.bt              OctoMap binary tree (occupancy from p) — opens in octovis
+//   <output_dir>/level_0/topdown.png    open-height map (seed §5.4); level_0 covers the whole
+//                                       height until levels (§5.2, DESIGN §6.3) exist
+//   <output_dir>/level_0/topdown.json   its georeference (origin, resolution) and gray scale
+//   <output_dir>/job.json               the caller's job document plus the merge's parameters,
+//                                       versions, timings and counts
+// Every file is written through "<name>.partial" and a rename, so a failed merge leaves no
+// half-written output that looks complete.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+namespace carvemap {
+
+struct MergeOptions {
+  std::string tiles_dir;   // holds c_<x>_<y>_<z>.h5 tiles (storage/TILE_FORMAT.md)
+  std::string output_dir;  // created if missing; existing outputs are replaced
+  // 2 m / 2^k; 0 = take it from the tiles. When set, every tile must have it (else
+  // InvalidArgument naming the tile).
+  double resolution_m = 0;
+  // The caller's job document (an object, or null): job id, parameters, versions, ingest and
+  // carve timings/counts. MergeFirstOutputs adds its own entries (see MergeSummary::job) and
+  // writes the result as job.json; keys it does not own are kept as given.
+  nlohmann::json job = nlohmann::json::object();
+  // Bound on the decoded tiles held in memory at once (TileSet's LRU cache). At least one
+  // chunk is always held, whatever the budget.
+  uint64_t cache_budget_bytes = uint64_t{256} << 20;
+  // Gray scale of topdown.png: 0 = no open height, 255 = ≥ this many metres (linear).
+  double topdown_max_height_m = 3.0;
+
+  // InvalidArgument for empty dirs, a resolution that is not 2 m / 2^k, a non-object job or a
+  // non-positive topdown_max_height_m.
+  [[nodiscard]] absl::Status Validate() const;
+};
+
+// Progress of a running merge: `stage` is "index", "octree_bt", "topdown_png" or "job_json";
+// `done`/`total` count tiles (or 0/1 for single-step stages).
+struct MergeProgress {
+  std::string stage;
+  uint64_t done = 0;
+  uint64_t total = 0;
+};
+// Return false to cancel: MergeFirstOutputs then stops at the next tile and returns Cancelled
+// (the outputs of the stage that was running are not written).
+using MergeProgressCallback = std::function<bool(const MergeProgress&)>;
+
+struct MergeSummary {
+  // Absolute-or-as-given paths of what was written.
+  std::string octree_bt_path;
+  std::string topdown_png_path;
+  std::string topdown_json_path;
+  std::string job_json_path;
+
+  int chunk_depth = 0;
+  double resolution_m = 0;
+  uint64_t num_tiles = 0;
+  uint64_t num_leaves = 0;           // rows over all tiles
+  uint64_t num_observed_leaves = 0;  // count > 0
+  uint64_t num_bt_nodes = 0;         // nodes of octree.bt (its "size" line)
+  double interior_volume_m3 = 0;           // observed with p > 0.5 (open space)
+  double exterior_observed_volume_m3 = 0;  // observed with p ≤ 0.5 (solid)
+  double observed_volume_m3 = 0;           // both
+  // Topdown map: pixel (row, col) of the H-row image is the column at
+  // x = origin_x + (col + 0.5)·res, y = origin_y + (H − 1 − row + 0.5)·res (lower-left origin,
+  // as DESIGN §4 floor maps).
+  double topdown_origin_x_m = 0, topdown_origin_y_m = 0;
+  int topdown_width = 0, topdown_height = 0;
+  double max_open_height_m = 0;
+
+  double seconds_total = 0;
+  nlohmann::json job;  // exactly what was written to job.json
+};
+
+// Runs the merge's first outputs over `options.tiles_dir`, reading each tile once (octree.bt,
+// counts and the topdown sums share that read). Memory: the tile cache plus the topdown image
+// (5 bytes per pixel at the octree resolution over the chunks' xy bounding box).
+// Errors name the file: NotFound for a missing tiles dir; DataLoss for a corrupt tile or one
+// whose content disagrees with its name; InvalidArgument for bad options or tiles of mixed or
+// unexpected resolution; OutOfRange for chunks beyond OctoMap's 16-level key space; Cancelled
+// when `progress` returns false; Unavailable for I/O errors on the outputs.
+// Not thread-safe with other HDF5 use in the process (storage/tile_store.h).
+absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
+                                               const MergeProgressCallback& progress = nullptr);
+
+}  // namespace carvemap

@@ -1,0 +1,112 @@
+#include "services/merge/topdown_map.h"
+
+#include <algorithm>
+#include <climits>
+#include <cmath>
+#include <filesystem>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/strings/str_cat.h"
+#include "storage/atomic_file.h"
+
+namespace carvemap {
+
+TopdownMap::TopdownMap(const OctreeGrid& grid, const std::vector<ChunkKey>& chunks)
+    : grid_(grid) {
+  geometry_.resolution_m = grid.resolution_m();
+  if (chunks.empty()) return;
+  int min_x = INT_MAX, min_y = INT_MAX, max_x = INT_MIN, max_y = INT_MIN;
+  for (const ChunkKey& c : chunks) {
+    min_x = std::min(min_x, c.x());
+    min_y = std::min(min_y, c.y());
+    max_x = std::max(max_x, c.x());
+    max_y = std::max(max_y, c.y());
+  }
+  const int64_t n = grid.leaves_per_side();
+  min_leaf_x_ = int64_t{min_x} * n;
+  min_leaf_y_ = int64_t{min_y} * n;
+  geometry_.origin_x_m = min_x * kChunkSizeM;
+  geometry_.origin_y_m = min_y * kChunkSizeM;
+  geometry_.width = static_cast<int>((int64_t{max_x} - min_x + 1) * n);
+  geometry_.height = static_cast<int>((int64_t{max_y} - min_y + 1) * n);
+  height_m_.assign(size_t(geometry_.width) * geometry_.height, 0.0f);
+}
+
+absl::Status TopdownMap::AddTile(const TileData& tile) {
+  const int k = grid_.chunk_depth;
+  const int64_t n = grid_.leaves_per_side();
+  const int64_t chunk_col = int64_t{tile.chunk.x()} * n - min_leaf_x_;
+  const int64_t chunk_row_from_bottom = int64_t{tile.chunk.y()} * n - min_leaf_y_;
+  if (chunk_col < 0 || chunk_row_from_bottom < 0 || chunk_col + n > geometry_.width ||
+      chunk_row_from_bottom + n > geometry_.height) {
+    return absl::InvalidArgumentError(absl::StrCat("topdown map: chunk (", tile.chunk.x(), ", ",
+                                                   tile.chunk.y(), ", ", tile.chunk.z(),
+                                                   ") outside the map's footprint"));
+  }
+  const double res = grid_.resolution_m();
+  for (const TileLeaf& leaf : tile.leaves) {
+    if (!leaf.stats.observed()) continue;
+    const int side = 1 << (k - leaf.node.depth);  // in finest columns
+    // §5.4: each node crossed by the column adds its probability of interior times its height.
+    const float add = static_cast<float>(leaf.stats.p() * side * res);
+    const int64_t col0 = chunk_col + int64_t{leaf.node.local.x()} * side;
+    const int64_t up0 = chunk_row_from_bottom + int64_t{leaf.node.local.y()} * side;
+    for (int dy = 0; dy < side; ++dy) {
+      const int64_t row = geometry_.height - 1 - (up0 + dy);
+      float* line = height_m_.data() + row * geometry_.width + col0;
+      for (int dx = 0; dx < side; ++dx) line[dx] += add;
+    }
+  }
+  return absl::OkStatus();
+}
+
+float TopdownMap::max_open_height_m() const {
+  return height_m_.empty() ? 0.0f : *std::max_element(height_m_.begin(), height_m_.end());
+}
+
+Image<uint8_t> TopdownMap::ToGray8(double max_height_m) const {
+  Image<uint8_t> image;
+  image.width = geometry_.width;
+  image.height = geometry_.height;
+  image.pixels.resize(height_m_.size());
+  for (size_t i = 0; i < height_m_.size(); ++i) {
+    const double h = std::clamp(double(height_m_[i]), 0.0, max_height_m);
+    image.pixels[i] = static_cast<uint8_t>(std::lround(255.0 * h / max_height_m));
+  }
+  return image;
+}
+
+absl::Status TopdownMap::Write(const std::string& png_path, const std::string& json_path,
+                               double max_height_m, int level) const {
+  if (geometry_.width == 0 || geometry_.height == 0) {
+    // libpng cannot write an empty image; an empty job has no map, and its sidecar says so.
+  } else if (absl::Status s = WritePngGray8(png_path, ToGray8(max_height_m)); !s.ok()) {
+    return s;
+  }
+  nlohmann::json j = {
+      {"format", "carvemap-topdown"},
+      {"version", 1},
+      {"level", level},
+      {"z_range", "all"},  // levels (§5.2) arrive later; level_0 spans the whole octree
+      {"quantity",
+       "expected open height (m): sum over observed octree leaves in the column of "
+       "p(interior) x leaf height (seed §5.4)"},
+      {"image", geometry_.width > 0 && geometry_.height > 0
+                    ? std::filesystem::path(png_path).filename().string()
+                    : std::string()},
+      {"width", geometry_.width},
+      {"height", geometry_.height},
+      {"resolution_m", geometry_.resolution_m},
+      {"origin_m", {geometry_.origin_x_m, geometry_.origin_y_m}},
+      {"pixel_to_world",
+       "x = origin_x + (col + 0.5) * res, y = origin_y + (height - 1 - row + 0.5) * res "
+       "(pixel centres, lower-left origin)"},
+      {"gray_scale", {{"gray_0_m", 0.0}, {"gray_255_m", max_height_m}, {"linear", true},
+                      {"clamped", true}}},
+      {"max_open_height_m", max_open_height_m()},
+  };
+  return WriteFileAtomically(json_path, [&](std::ostream& out) { out << j.dump(2) << "\n"; });
+}
+
+}  // namespace carvemap

@@ -1,0 +1,63 @@
+// The top-down open-height map (seed §5.4, DESIGN §6.9): for each xy column of leaves, the sum
+// over the octree nodes it crosses of p(interior) × the node's height, i.e. the expected height
+// of open (interior) space in metres. Only observed leaves contribute: unobserved space
+// (p = 0.5 by convention, §4.3.2) would otherwise add half the height of every unscanned chunk
+// above and below the building.
+//
+// One pixel per leaf column at the octree resolution over the xy footprint of the chunks with
+// tiles. Until levels exist (§5.2) the map covers the whole height of the octree (level_0).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "services/geometry/octree_keys.h"
+#include "storage/png_io.h"
+#include "storage/tile_store.h"
+
+namespace carvemap {
+
+// Where a topdown map sits: pixel (row, col) of the H-row image is the column with
+// x = origin_x_m + (col + 0.5)·resolution_m, y = origin_y_m + (H − 1 − row + 0.5)·resolution_m
+// at its centre (lower-left origin, as DESIGN §4 floor maps).
+struct TopdownGeometry {
+  double origin_x_m = 0, origin_y_m = 0;
+  double resolution_m = 0;
+  int width = 0, height = 0;
+};
+
+class TopdownMap {
+ public:
+  // Covers the xy footprint of `chunks` (an empty list gives a 0×0 map).
+  TopdownMap(const OctreeGrid& grid, const std::vector<ChunkKey>& chunks);
+
+  // Adds a tile's observed leaves (any order, each tile once). Tiles outside the footprint
+  // given to the constructor are an error (InvalidArgument naming the chunk).
+  absl::Status AddTile(const TileData& tile);
+
+  [[nodiscard]] const TopdownGeometry& geometry() const { return geometry_; }
+  // Expected open height (m) of pixel (row, col).
+  [[nodiscard]] float open_height_m(int row, int col) const {
+    return height_m_[size_t(row) * geometry_.width + col];
+  }
+  [[nodiscard]] float max_open_height_m() const;
+
+  // 8-bit gray: round(255 · min(h, max_height_m) / max_height_m); 0 = no open space.
+  [[nodiscard]] Image<uint8_t> ToGray8(double max_height_m) const;
+
+  // Writes the PNG (ToGray8) and a JSON sidecar with the geometry, the scale and what the map
+  // covers, both through "<name>.partial" and a rename.
+  absl::Status Write(const std::string& png_path, const std::string& json_path,
+                     double max_height_m, int level) const;
+
+ private:
+  OctreeGrid grid_;
+  int64_t min_leaf_x_ = 0, min_leaf_y_ = 0;  // leaf keys of column (col 0, bottom row)
+  TopdownGeometry geometry_;
+  std::vector<float> height_m_;  // row-major, row 0 = top (largest y)
+};
+
+}  // namespace carvemap

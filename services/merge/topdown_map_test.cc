@@ -1,0 +1,131 @@
+#include "services/merge/topdown_map.h"
+
+#include <cmath>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "services/merge/merge_test_util.h"
+#include "storage/png_io.h"
+
+namespace carvemap {
+namespace {
+
+using testing::FreshDir;
+using testing::Leaf;
+
+// k = 3: 25 cm leaves, 8 columns per chunk side.
+constexpr int kK = 3;
+constexpr double kRes = 0.25;
+
+TileData Tile(const ChunkKey& chunk) {
+  TileData t;
+  t.chunk = chunk;
+  t.grid.chunk_depth = kK;
+  return t;
+}
+
+// A box of interior space 2 m tall (one chunk high) over x ∈ [-1.5, -0.5), y ∈ [0.5, 1.25),
+// built from finest leaves with p = 1, plus a neighbouring chunk that is one coarse interior
+// leaf, another stacked on it (4 m in total, clamped to white) and an exterior slab.
+class TopdownMapTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    TileData box = Tile(ChunkKey(-1, 0, 0));  // x ∈ [-2, 0)
+    for (int i = 2; i < 6; ++i) {             // x = -2 + i·0.25 ∈ [-1.5, -0.5)
+      for (int j = 2; j < 5; ++j) {           // y ∈ [0.5, 1.25)
+        for (int l = 0; l < 8; ++l) box.leaves.push_back(Leaf(kK, {i, j, l}, 1.0));
+      }
+    }
+    TileData coarse = Tile(ChunkKey(0, 0, 0));
+    coarse.leaves = {Leaf(0, {0, 0, 0}, 1.0)};
+    TileData stacked = Tile(ChunkKey(0, 0, 1));
+    stacked.leaves = {Leaf(0, {0, 0, 0}, 1.0)};
+    TileData slab = Tile(ChunkKey(0, -1, 0));  // y ∈ [-2, 0): a 1 m cube of p = 0.2
+    slab.leaves = {Leaf(1, {0, 0, 0}, 0.2)};
+    tiles_ = {box, coarse, stacked, slab};
+  }
+  TopdownMap Build() {
+    std::vector<ChunkKey> chunks;
+    for (const TileData& t : tiles_) chunks.push_back(t.chunk);
+    TopdownMap map(OctreeGrid{kK}, chunks);
+    for (const TileData& t : tiles_) EXPECT_TRUE(map.AddTile(t).ok());
+    return map;
+  }
+  // Pixel of the column holding (x, y) (lower-left origin).
+  static std::pair<int, int> RowCol(const TopdownGeometry& g, double x, double y) {
+    const int col = int(std::floor((x - g.origin_x_m) / g.resolution_m));
+    const int up = int(std::floor((y - g.origin_y_m) / g.resolution_m));
+    return {g.height - 1 - up, col};
+  }
+  std::vector<TileData> tiles_;
+};
+
+TEST_F(TopdownMapTest, FootprintAndGeometry) {
+  TopdownMap map = Build();
+  const TopdownGeometry& g = map.geometry();
+  EXPECT_DOUBLE_EQ(g.resolution_m, kRes);
+  EXPECT_DOUBLE_EQ(g.origin_x_m, -2.0);
+  EXPECT_DOUBLE_EQ(g.origin_y_m, -2.0);
+  EXPECT_EQ(g.width, 16);   // chunks x ∈ {-1, 0}
+  EXPECT_EQ(g.height, 16);  // chunks y ∈ {-1, 0}
+}
+
+TEST_F(TopdownMapTest, BoxOfInteriorGivesItsHeightExactlyOnItsFootprint) {
+  TopdownMap map = Build();
+  const TopdownGeometry& g = map.geometry();
+  int box_pixels = 0;
+  for (int row = 0; row < g.height; ++row) {
+    for (int col = 0; col < g.width; ++col) {
+      const double x = g.origin_x_m + (col + 0.5) * kRes;
+      const double y = g.origin_y_m + (g.height - 1 - row + 0.5) * kRes;
+      double expected = 0;
+      if (x > -1.5 && x < -0.5 && y > 0.5 && y < 1.25) expected = 2.0;  // the box
+      if (x > 0 && y > 0) expected = 4.0;                               // two coarse chunks
+      if (x > 0 && x < 1 && y > -2 && y < -1) expected = 0.2 * 1.0;     // the exterior slab
+      EXPECT_NEAR(map.open_height_m(row, col), expected, 1e-6) << "row " << row << " col " << col;
+      box_pixels += expected == 2.0;
+    }
+  }
+  EXPECT_EQ(box_pixels, 4 * 3);
+  auto [row, col] = RowCol(g, -1.4, 0.6);
+  EXPECT_NEAR(map.open_height_m(row, col), 2.0, 1e-6);
+  EXPECT_FLOAT_EQ(map.max_open_height_m(), 4.0f);
+
+  const Image<uint8_t> gray = map.ToGray8(3.0);
+  EXPECT_EQ(gray.at(row, col), 170);  // round(255 · 2 / 3)
+  auto [r2, c2] = RowCol(g, 0.5, 0.5);
+  EXPECT_EQ(gray.at(r2, c2), 255);  // 4 m clamps to ≥ 3 m
+  auto [r3, c3] = RowCol(g, 0.5, -1.5);
+  EXPECT_EQ(gray.at(r3, c3), 17);  // round(255 · 0.2 / 3)
+  auto [r4, c4] = RowCol(g, -1.9, -1.9);
+  EXPECT_EQ(gray.at(r4, c4), 0);
+}
+
+TEST_F(TopdownMapTest, WritesPngAndSidecar) {
+  TopdownMap map = Build();
+  const std::string dir = FreshDir();
+  ASSERT_TRUE(map.Write(dir + "/topdown.png", dir + "/topdown.json", 3.0, 0).ok());
+  absl::StatusOr<Image<uint8_t>> png = ReadPngGray8(dir + "/topdown.png");
+  ASSERT_TRUE(png.ok()) << png.status();
+  EXPECT_EQ(png->width, 16);
+  EXPECT_EQ(png->height, 16);
+  EXPECT_EQ(png->pixels, map.ToGray8(3.0).pixels);
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir + "/topdown.json"));
+  EXPECT_EQ(j["format"], "carvemap-topdown");
+  EXPECT_EQ(j["level"], 0);
+  EXPECT_DOUBLE_EQ(j["resolution_m"].get<double>(), kRes);
+  EXPECT_DOUBLE_EQ(j["origin_m"][0].get<double>(), -2.0);
+  EXPECT_DOUBLE_EQ(j["gray_scale"]["gray_255_m"].get<double>(), 3.0);
+  EXPECT_EQ(j["image"], "topdown.png");
+}
+
+TEST(TopdownMap, TileOutsideTheFootprintIsRejected) {
+  TopdownMap map(OctreeGrid{kK}, {ChunkKey(0, 0, 0)});
+  EXPECT_EQ(map.AddTile(Tile(ChunkKey(1, 0, 0))).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_TRUE(map.AddTile(Tile(ChunkKey(0, 0, 5))).ok());  // any height is inside
+}
+
+}  // namespace
+}  // namespace carvemap
