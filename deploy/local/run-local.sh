@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# The two-worker harness (DESIGN §9) by hand: a coordinator and two workers on loopback, the
+# job submitted with `carvemap submit --watch`, everything stopped at the end. What
+# `carvemap run` does in one command, spelled out as separate servers (as in a cluster).
+# Usage: deploy/local/run-local.sh SCAN.h5 OUT [CARVEMAP]
+set -euo pipefail
+SCAN=$(realpath "$1")
+OUT=$(realpath -m "$2")
+CARVEMAP=${3:-$(dirname "$0")/../../build/carvemap}
+WORK=$OUT/.carvemap
+mkdir -p "$WORK"
+rm -f "$WORK/port" "$WORK/jobs.db"*
+
+pids=()
+cleanup() {
+  for pid in "${pids[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
+  wait "${pids[@]}" 2>/dev/null || true
+}
+trap cleanup EXIT
+
+"$CARVEMAP" coordinator --listen 127.0.0.1:0 --port-file "$WORK/port" \
+    --data-root "$(dirname "$SCAN")" --output-root "$(dirname "$OUT")" --work-dir "$WORK" \
+    --heartbeat-interval-s 1 --worker-timeout-s 5 > "$WORK/coordinator.log" 2>&1 &
+pids+=($!)
+for _ in $(seq 1 300); do [ -s "$WORK/port" ] && break; sleep 0.1; done
+ADDR=$(cat "$WORK/port")
+echo "coordinator on $ADDR (logs in $WORK)"
+
+for i in 1 2; do
+  "$CARVEMAP" worker --coordinator "$ADDR" > "$WORK/worker-$i.log" 2>&1 &
+  pids+=($!)
+done
+
+"$CARVEMAP" submit --server "$ADDR" --watch -o "$(basename "$OUT")" "$(basename "$SCAN")"

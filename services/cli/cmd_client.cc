@@ -1,0 +1,165 @@
+// `carvemap submit|watch|status|list|cancel|fetch --server HOST:PORT`: talk to a running
+// coordinator's JobService (docs/RPC.md). Thin shells over services/rpc/job_client.h.
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "services/cli/commands.h"
+#include "services/cli/progress.h"
+#include "services/rpc/job_client.h"
+#include "services/rpc/process_util.h"
+
+namespace carvemap {
+namespace {
+
+constexpr char kDefaultServer[] = "127.0.0.1:7600";
+
+struct ClientFlags {
+  std::string server = kDefaultServer;
+  std::string job_id;
+  SubmitParams submit;
+  bool watch = false;
+  bool quiet = false;
+  std::string state;
+  int limit = 50;
+  std::string reason;
+  std::string artifact;
+  std::string dest;
+};
+
+void AddServer(CLI::App* cmd, ClientFlags& flags) {
+  cmd->add_option("--server", flags.server, "host:port of the coordinator")
+      ->capture_default_str();
+}
+
+// Exit status of a finished job: its error, if any, as the command's error.
+absl::Status JobOutcome(const JobInfo& job) {
+  if (job.state == "SUCCEEDED") return absl::OkStatus();
+  if (job.state == "CANCELLED") return absl::CancelledError(absl::StrCat("job ", job.job_id, ": ", job.error));
+  return absl::AbortedError(absl::StrCat("job ", job.job_id, " ", job.state, ": ", job.error));
+}
+
+absl::Status WatchWithProgress(JobClient& client, const std::string& job_id, bool quiet) {
+  HandleTerminationSignals([&client](int) { client.CancelWatch(); });
+  ProgressLine line(!quiet);
+  std::string last_state;
+  absl::StatusOr<JobInfo> job = client.Watch(job_id, 0.5, [&](const WatchUpdate& u) {
+    if (u.state != last_state && !last_state.empty()) line.Finish();
+    last_state = u.state;
+    line.Update("%s", FormatProgress(u).c_str());
+  });
+  line.Finish();
+  if (!job.ok()) return job.status();
+  std::printf("%s\n", FormatJob(*job).c_str());
+  return JobOutcome(*job);
+}
+
+void RegisterClientCommands(CLI::App& app, int& exit_code) {
+  auto flags = std::make_shared<ClientFlags>();
+
+  CLI::App* submit = app.add_subcommand("submit", "Submit a carving job to a coordinator");
+  AddServer(submit, *flags);
+  submit->add_option("input", flags->submit.input_path,
+                     "scan.h5, relative to the coordinator's data root")
+      ->required();
+  submit->add_option("-o,--output-name", flags->submit.output_name,
+                     "Output folder name under the coordinator's output root (default: job id)");
+  submit->add_option("--resolution", flags->submit.resolution_m,
+                     "Leaf size in metres: 0.0625, 0.03125, 0.015625 or 0.0078125 (0: default)");
+  submit->add_option("--idempotency-key", flags->submit.idempotency_key,
+                     "Submitting twice with the same key returns the first job");
+  submit->add_flag("--watch", flags->watch, "Watch the job until it ends");
+  submit->add_flag("-q,--quiet", flags->quiet, "No progress line");
+  submit->callback([flags, &exit_code] {
+    JobClient client(flags->server);
+    absl::StatusOr<JobInfo> job = client.Submit(flags->submit);
+    if (!job.ok()) {
+      exit_code = ReportStatus("submit", job.status());
+      return;
+    }
+    std::printf("%s\n", job->job_id.c_str());
+    if (flags->watch) {
+      exit_code = ReportStatus("submit", WatchWithProgress(client, job->job_id, flags->quiet));
+    }
+  });
+
+  CLI::App* watch = app.add_subcommand("watch", "Follow a job's progress until it ends");
+  AddServer(watch, *flags);
+  watch->add_option("job", flags->job_id, "Job id")->required();
+  watch->add_flag("-q,--quiet", flags->quiet, "No progress line");
+  watch->callback([flags, &exit_code] {
+    JobClient client(flags->server);
+    exit_code = ReportStatus("watch", WatchWithProgress(client, flags->job_id, flags->quiet));
+  });
+
+  CLI::App* status = app.add_subcommand("status", "Show a job");
+  AddServer(status, *flags);
+  status->add_option("job", flags->job_id, "Job id")->required();
+  status->callback([flags, &exit_code] {
+    JobClient client(flags->server);
+    absl::StatusOr<JobInfo> job = client.Get(flags->job_id);
+    if (!job.ok()) {
+      exit_code = ReportStatus("status", job.status());
+      return;
+    }
+    std::printf("%s\n", FormatJob(*job).c_str());
+    std::printf("  resolution %g m, %lld chunk(s) leased, %lld retried\n", job->resolution_m,
+                static_cast<long long>(job->chunks_leased),
+                static_cast<long long>(job->chunk_retries));
+  });
+
+  CLI::App* list = app.add_subcommand("list", "List jobs, newest first");
+  AddServer(list, *flags);
+  list->add_option("--state", flags->state,
+                   "Only jobs in this state (QUEUED, INGESTING, CARVING, MERGING, SUCCEEDED, "
+                   "FAILED, CANCELLED)");
+  list->add_option("--limit", flags->limit, "At most this many jobs")->capture_default_str();
+  list->callback([flags, &exit_code] {
+    JobClient client(flags->server);
+    absl::StatusOr<std::vector<JobInfo>> jobs = client.List(flags->state, flags->limit);
+    if (!jobs.ok()) {
+      exit_code = ReportStatus("list", jobs.status());
+      return;
+    }
+    for (const JobInfo& j : *jobs) std::printf("%s\n", FormatJob(j).c_str());
+  });
+
+  CLI::App* cancel = app.add_subcommand("cancel", "Cancel a job");
+  AddServer(cancel, *flags);
+  cancel->add_option("job", flags->job_id, "Job id")->required();
+  cancel->add_option("--reason", flags->reason, "Stored with the job's error");
+  cancel->callback([flags, &exit_code] {
+    JobClient client(flags->server);
+    absl::StatusOr<JobInfo> job = client.Cancel(flags->job_id, flags->reason);
+    if (!job.ok()) {
+      exit_code = ReportStatus("cancel", job.status());
+      return;
+    }
+    std::printf("%s\n", FormatJob(*job).c_str());
+  });
+
+  CLI::App* fetch = app.add_subcommand("fetch", "Download an output file of a job");
+  AddServer(fetch, *flags);
+  fetch->add_option("job", flags->job_id, "Job id")->required();
+  fetch->add_option("name", flags->artifact, "Output path under out/<job>/, e.g. job.json")
+      ->required();
+  fetch->add_option("-o,--output", flags->dest, "Destination file (default: the name's basename)");
+  fetch->callback([flags, &exit_code] {
+    JobClient client(flags->server);
+    std::string dest = flags->dest;
+    if (dest.empty()) dest = flags->artifact.substr(flags->artifact.rfind('/') + 1);
+    absl::Status s = client.Fetch(flags->job_id, flags->artifact, dest);
+    if (s.ok()) std::printf("%s\n", dest.c_str());
+    exit_code = ReportStatus("fetch", s);
+  });
+}
+
+}  // namespace
+
+CARVEMAP_REGISTER_COMMAND(62, RegisterClientCommands);
+
+}  // namespace carvemap

@@ -1,0 +1,170 @@
+// `carvemap coordinator` and `carvemap worker`: the servers of DESIGN §8 on their own. Thin
+// shells: flags ➜ Spec ➜ Start ➜ Wait (services/rpc/).
+#include <atomic>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "services/cli/commands.h"
+#include "services/rpc/coordinator_service.h"
+#include "services/rpc/process_util.h"
+#include "services/rpc/worker_service.h"
+
+namespace carvemap {
+namespace {
+
+// Written through a temporary name and a rename: whoever polls for the file (`carvemap run`)
+// never reads half a line.
+absl::Status WritePortFile(const std::string& path, const std::string& address) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp);
+    out << address << "\n";
+    if (!out.good()) return absl::InternalError(absl::StrCat("cannot write ", tmp));
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) return absl::InternalError(absl::StrCat("rename to ", path, ": ", ec.message()));
+  return absl::OkStatus();
+}
+
+std::string HostOf(const std::string& listen) {
+  const std::string host = listen.substr(0, listen.rfind(':'));
+  return host.empty() || host == "0.0.0.0" || host == "[::]" ? "127.0.0.1" : host;
+}
+
+void SetUpLogging(bool verbose) {
+  spdlog::set_level(verbose ? spdlog::level::debug : spdlog::level::info);
+  spdlog::set_pattern("[%Y-%m-%d %H:%M:%S.%e] [%n] [%l] %v");
+}
+
+struct CoordinatorFlags {
+  CoordinatorSpec spec;
+  std::string port_file;
+  bool no_merge = false;
+  bool verbose = false;
+};
+
+absl::Status RunCoordinator(CoordinatorFlags flags) {
+  SetUpLogging(flags.verbose);
+  // Set up before any thread exists (gRPC starts threads).
+  auto stop = std::make_shared<std::atomic<CoordinatorServer*>>(nullptr);
+  auto stop_requested = std::make_shared<std::atomic<bool>>(false);
+  HandleTerminationSignals([stop, stop_requested](int signo) {
+    spdlog::info("coordinator: signal {}, shutting down", signo);
+    stop_requested->store(true);
+    if (CoordinatorServer* s = stop->load()) s->Shutdown();
+  });
+  if (!flags.no_merge) flags.spec.merge = FirstOutputsMerge();
+  absl::StatusOr<std::unique_ptr<CoordinatorServer>> server =
+      CoordinatorServer::Start(flags.spec);
+  if (!server.ok()) return server.status();
+  const std::string address =
+      absl::StrCat(HostOf(flags.spec.listen_address), ":", (*server)->port());
+  std::printf("listening on %s\n", address.c_str());
+  std::fflush(stdout);
+  if (!flags.port_file.empty()) {
+    if (absl::Status s = WritePortFile(flags.port_file, address); !s.ok()) return s;
+  }
+  stop->store(server->get());
+  if (stop_requested->load()) (*server)->Shutdown();
+  (*server)->Wait();
+  (*server)->Shutdown();  // waits for a Shutdown still running on the signal thread
+  stop->store(nullptr);
+  return absl::OkStatus();
+}
+
+void RegisterCoordinator(CLI::App& app, int& exit_code) {
+  CLI::App* cmd = app.add_subcommand(
+      "coordinator", "Run the coordinator server: job service and carve-task service (gRPC)");
+  auto flags = std::make_shared<CoordinatorFlags>();
+  flags->spec.listen_address = "127.0.0.1:7600";
+  CoordinatorSpec& s = flags->spec;
+  cmd->add_option("--listen", s.listen_address, "host:port to serve on (port 0: any free port)")
+      ->capture_default_str();
+  cmd->add_option("--port-file", flags->port_file,
+                  "Write the bound host:port to this file once serving");
+  cmd->add_option("--data-root", s.data_root, "Input scan paths are relative to this directory")
+      ->capture_default_str();
+  cmd->add_option("--output-root", s.output_root, "Outputs go to <output-root>/<output_name>/")
+      ->capture_default_str();
+  cmd->add_option("--storage-root", s.storage_root,
+                  "Tiles go to <storage-root>/<job>/tiles (default: <output>/tiles)");
+  cmd->add_option("--work-dir", s.work_dir,
+                  "Job store and spill files (default: <storage-root or output-root>/.carvemap)");
+  cmd->add_option("--heartbeat-interval-s", s.heartbeat_interval_s, "Worker heartbeat interval")
+      ->capture_default_str();
+  cmd->add_option("--worker-timeout-s", s.worker_timeout_s,
+                  "A worker without heartbeat for this long is lost; its chunks are requeued")
+      ->capture_default_str();
+  cmd->add_option("--lease-timeout-s", s.lease_timeout_s, "Lease deadline without heartbeat")
+      ->capture_default_str();
+  cmd->add_option("--max-attempts", s.max_attempts, "Leases per chunk before the job fails")
+      ->capture_default_str();
+  cmd->add_option("--max-inline-wedge-bytes", s.max_inline_wedge_bytes,
+                  "Send wedges up to this size inside the lease (0: always by spill path)")
+      ->capture_default_str();
+  cmd->add_flag("--keep-spill", s.keep_spill, "Keep the spill files after a job ends");
+  cmd->add_flag("--no-merge", flags->no_merge, "Skip the merge step (tiles only)");
+  cmd->add_flag("-v,--verbose", flags->verbose, "Debug logging");
+  cmd->callback([flags, &exit_code] {
+    exit_code = ReportStatus("coordinator", RunCoordinator(*flags));
+  });
+}
+
+struct WorkerFlags {
+  WorkerSpec spec;
+  bool verbose = false;
+};
+
+absl::Status RunWorker(const WorkerFlags& flags) {
+  SetUpLogging(flags.verbose);
+  auto stop = std::make_shared<std::atomic<WorkerServer*>>(nullptr);
+  auto stop_requested = std::make_shared<std::atomic<bool>>(false);
+  HandleTerminationSignals([stop, stop_requested](int signo) {
+    spdlog::info("worker: signal {}, shutting down", signo);
+    stop_requested->store(true);
+    if (WorkerServer* s = stop->load()) s->Shutdown();
+  });
+  absl::StatusOr<std::unique_ptr<WorkerServer>> worker = WorkerServer::Start(flags.spec);
+  if (!worker.ok()) return worker.status();
+  stop->store(worker->get());
+  if (stop_requested->load()) (*worker)->Shutdown();
+  absl::Status ended = (*worker)->Wait();
+  (*worker)->Shutdown();
+  stop->store(nullptr);
+  return ended;
+}
+
+void RegisterWorker(CLI::App& app, int& exit_code) {
+  CLI::App* cmd = app.add_subcommand(
+      "worker", "Run a carve worker: leases chunks from a coordinator and writes their tiles");
+  auto flags = std::make_shared<WorkerFlags>();
+  WorkerSpec& s = flags->spec;
+  cmd->add_option("--coordinator,--server", s.coordinator_address,
+                  "host:port of the coordinator")
+      ->required();
+  cmd->add_option("--listen", s.listen_address,
+                  "host:port for the health endpoint (port 0: any; empty: none)")
+      ->capture_default_str();
+  cmd->add_option("--threads", s.threads, "Chunks carved in parallel")->capture_default_str();
+  cmd->add_option("--coordinator-lost-s", s.coordinator_lost_s,
+                  "Exit when the coordinator has been unreachable this long")
+      ->capture_default_str();
+  cmd->add_flag("-v,--verbose", flags->verbose, "Debug logging");
+  cmd->callback([flags, &exit_code] { exit_code = ReportStatus("worker", RunWorker(*flags)); });
+}
+
+}  // namespace
+
+CARVEMAP_REGISTER_COMMAND(60, RegisterCoordinator);
+CARVEMAP_REGISTER_COMMAND(61, RegisterWorker);
+
+}  // namespace carvemap

@@ -1,0 +1,1202 @@
+#include "services/rpc/coordinator_service.h"
+
+#include <grpcpp/grpcpp.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <random>
+#include <regex>
+#include <set>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "absl/base/thread_annotations.h"
+#include "absl/strings/match.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "absl/synchronization/mutex.h"
+#include "absl/synchronization/notification.h"
+#include "coordinator/chunk_spill.h"
+#include "coordinator/lease_table.h"
+#include "coordinator/scan_ingest.h"
+#include "proto/carvemap/v1/carve.grpc.pb.h"
+#include "proto/carvemap/v1/jobs.grpc.pb.h"
+#include "services/geometry/octree_keys.h"
+#include "services/grpc_server_common.h"
+#include "services/grpc_status.h"
+#include "services/rpc/file_hash.h"
+#include "storage/job_store.h"
+
+namespace carvemap {
+namespace fs = std::filesystem;
+namespace pb = ::carvemap::v1;
+
+namespace {
+
+constexpr double kDefaultResolutionM = 0.0625;
+constexpr int kMinJobChunkDepth = 5;  // 6.25 cm
+constexpr int kMaxJobChunkDepth = 8;  // 0.78 cm
+
+int64_t NowMs() { return LeaseTable::Clock::System().NowUnixMs(); }
+
+struct ResolvedParams {
+  double resolution_m = kDefaultResolutionM;
+  int method = pb::CARVE_METHOD_PROBABILISTIC;
+  int workers_hint = 0;
+};
+
+std::string ParamsToJson(const ResolvedParams& p) {
+  nlohmann::json j = {
+      {"resolution_m", p.resolution_m}, {"method", p.method}, {"workers_hint", p.workers_hint}};
+  return j.dump();
+}
+
+ResolvedParams ParamsFromJson(const std::string& text) {
+  ResolvedParams p;
+  nlohmann::json j = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (j.is_object()) {
+    p.resolution_m = j.value("resolution_m", kDefaultResolutionM);
+    p.method = j.value("method", static_cast<int>(pb::CARVE_METHOD_PROBABILISTIC));
+    p.workers_hint = j.value("workers_hint", 0);
+  }
+  return p;
+}
+
+absl::StatusOr<ResolvedParams> ResolveParams(const pb::JobParams& in) {
+  ResolvedParams p;
+  p.resolution_m = in.resolution_m() == 0 ? kDefaultResolutionM : in.resolution_m();
+  absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(p.resolution_m);
+  if (!grid.ok() || grid->chunk_depth < kMinJobChunkDepth ||
+      grid->chunk_depth > kMaxJobChunkDepth) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "resolution_m ", in.resolution_m(),
+        ": must be one of 0.0625, 0.03125, 0.015625, 0.0078125 (2 m / 2^k, k = 5..8)"));
+  }
+  p.resolution_m = grid->resolution_m();
+  switch (in.method()) {
+    case pb::CARVE_METHOD_UNSPECIFIED:
+    case pb::CARVE_METHOD_PROBABILISTIC:
+      p.method = pb::CARVE_METHOD_PROBABILISTIC;
+      break;
+    case pb::CARVE_METHOD_VOXEL:
+      return absl::UnimplementedError("method VOXEL: not implemented by the workers yet");
+    default:
+      return absl::InvalidArgumentError(absl::StrCat("unknown method ", in.method()));
+  }
+  if (in.workers_hint() < 0) return absl::InvalidArgumentError("workers_hint must be >= 0");
+  p.workers_hint = in.workers_hint();
+  return p;
+}
+
+void ToProto(const JobRecord& r, pb::Job& out) {
+  out.set_job_id(r.id);
+  out.set_tenant(r.tenant);
+  out.set_state(static_cast<pb::JobState>(static_cast<int>(r.state)));
+  out.set_input_path(r.input_path);
+  out.set_output_name(r.output_name);
+  const ResolvedParams p = ParamsFromJson(r.params_json);
+  out.mutable_params()->set_resolution_m(p.resolution_m);
+  out.mutable_params()->set_method(static_cast<pb::CarveMethod>(p.method));
+  out.mutable_params()->set_workers_hint(p.workers_hint);
+  out.set_error(r.error);
+  out.set_created_unix_ms(r.created_unix_ms);
+  out.set_updated_unix_ms(r.updated_unix_ms);
+  out.set_finished_unix_ms(r.finished_unix_ms);
+  out.set_idempotency_key(r.idempotency_key);
+  auto* pr = out.mutable_progress();
+  pr->set_chunks_total(r.counters.chunks_total);
+  pr->set_chunks_done(r.counters.chunks_done);
+  pr->set_chunks_leased(r.counters.chunks_leased);
+  pr->set_chunk_retries(r.counters.chunk_retries);
+}
+
+// Lease ids are "<job_id>/<x>,<y>,<z>/<generation>" (LeaseTable::MakeLeaseId).
+absl::StatusOr<std::string> JobOfLease(absl::string_view lease_id) {
+  std::vector<absl::string_view> parts = absl::StrSplit(lease_id, '/');
+  if (parts.size() != 3 || parts[0].empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("malformed lease id '", lease_id, "'"));
+  }
+  return std::string(parts[0]);
+}
+
+bool ValidOutputName(const std::string& name) {
+  static const std::regex kName("[A-Za-z0-9._-]{1,128}");
+  return name != "." && name != ".." && std::regex_match(name, kName);
+}
+
+bool ValidRelativePath(const std::string& path) {
+  if (path.empty() || path.front() == '/') return false;
+  for (const auto& part : fs::path(path)) {
+    if (part == "..") return false;
+  }
+  return true;
+}
+
+std::string RandomHex(int digits) {
+  static std::mt19937_64 rng(std::random_device{}());
+  static absl::Mutex mu;
+  absl::MutexLock lock(&mu);
+  std::string s;
+  for (int i = 0; i < digits; ++i) s.push_back("0123456789abcdef"[rng() % 16]);
+  return s;
+}
+
+std::string NewJobId() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char day[16];
+  std::strftime(day, sizeof(day), "%Y%m%d", &tm);
+  return absl::StrCat("j-", day, "-", RandomHex(6));
+}
+
+// Creates `dir` and checks we can write files into it: a job whose outputs cannot be written
+// must fail at submit, not after an hour of carving.
+absl::Status CheckWritableDir(const fs::path& dir, absl::string_view what) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) {
+    return absl::FailedPreconditionError(
+        absl::StrCat(what, " ", dir.string(), ": cannot create: ", ec.message()));
+  }
+  if (::access(dir.c_str(), W_OK | X_OK) != 0) {
+    return absl::FailedPreconditionError(
+        absl::StrCat(what, " ", dir.string(), ": not writable: ", std::strerror(errno)));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status CoordinatorSpec::Validate() const {
+  if (listen_address.empty()) return absl::InvalidArgumentError("listen address is empty");
+  if (data_root.empty()) return absl::InvalidArgumentError("data root is empty");
+  if (output_root.empty()) return absl::InvalidArgumentError("output root is empty");
+  if (!(heartbeat_interval_s > 0) || !(worker_timeout_s > heartbeat_interval_s)) {
+    return absl::InvalidArgumentError(
+        "need heartbeat_interval_s > 0 and worker_timeout_s > heartbeat_interval_s");
+  }
+  if (!(lease_timeout_s > 0) || !(sweep_interval_s > 0)) {
+    return absl::InvalidArgumentError("lease_timeout_s and sweep_interval_s must be > 0");
+  }
+  if (max_attempts < 1) return absl::InvalidArgumentError("max_attempts must be >= 1");
+  if (max_inline_wedge_bytes < 0 || max_inline_wedge_bytes > (3 << 20)) {
+    return absl::InvalidArgumentError("max_inline_wedge_bytes must be in [0, 3 MiB]");
+  }
+  return absl::OkStatus();
+}
+
+// ---------------------------------------------------------------------------------------------
+
+class CoordinatorServer::Impl {
+ public:
+  explicit Impl(CoordinatorSpec spec) : spec_(std::move(spec)) {}
+  ~Impl() { Shutdown(); }
+
+  absl::Status Start();
+  void Shutdown();
+  void Wait() { shutdown_done_.WaitForNotification(); }
+  int port() const { return port_; }
+
+  // ---- JobService
+  absl::Status SubmitJob(const pb::SubmitJobRequest& req, pb::SubmitJobResponse& resp);
+  absl::Status GetJob(const pb::GetJobRequest& req, pb::Job& resp);
+  absl::Status WatchJob(grpc::ServerContext& ctx, const pb::WatchJobRequest& req,
+                        grpc::ServerWriter<pb::JobEvent>& writer);
+  // One Progress event of WatchJob; false when the client is gone.
+  bool WriteProgress(grpc::ServerWriter<pb::JobEvent>& writer, pb::JobEvent e,
+                     const JobRecord& job, JobState state,
+                     std::chrono::steady_clock::time_point now, int64_t& last_rays,
+                     std::chrono::steady_clock::time_point& last_rays_time);
+  absl::Status CancelJob(const pb::CancelJobRequest& req, pb::CancelJobResponse& resp);
+  absl::Status ListJobs(const pb::ListJobsRequest& req, pb::ListJobsResponse& resp);
+  absl::Status FetchArtifact(grpc::ServerContext& ctx, const pb::FetchArtifactRequest& req,
+                             grpc::ServerWriter<pb::ArtifactChunk>& writer);
+
+  // ---- CarveTaskService
+  absl::Status RegisterWorker(grpc::ServerContext& ctx, const pb::RegisterWorkerRequest& req,
+                              pb::RegisterWorkerResponse& resp);
+  absl::Status Heartbeat(const pb::HeartbeatRequest& req, pb::HeartbeatResponse& resp);
+  absl::Status LeaseChunk(grpc::ServerContext& ctx, const pb::LeaseChunkRequest& req,
+                          pb::LeaseChunkResponse& resp);
+  absl::Status CompleteChunk(const pb::CompleteChunkRequest& req,
+                             pb::CompleteChunkResponse& resp);
+  absl::Status FailChunk(const pb::FailChunkRequest& req, pb::FailChunkResponse& resp);
+
+ private:
+  // What the coordinator knows about a running job besides the store: its directories and the
+  // live counters that are not worth a store write (rays).
+  struct JobRuntime {
+    std::string tiles_dir;
+    std::string spill_dir;
+    std::string output_dir;
+    ResolvedParams params;
+    int64_t rays_ingested = 0;
+    int64_t rays_carved = 0;    // wedges applied by workers (CompleteChunk stats)
+    int64_t rays_to_carve = 0;  // wedge-chunk pairs of the job
+    std::map<std::string, std::pair<std::chrono::steady_clock::time_point, double>> stages;
+    std::vector<std::string> stage_order;
+    std::optional<std::chrono::steady_clock::time_point> stage_start;
+    std::string current_stage;
+  };
+
+  std::string OutputDir(const JobRecord& job) const {
+    return (fs::path(spec_.output_root) / job.output_name).string();
+  }
+  std::string TilesDir(const JobRecord& job) const {
+    if (spec_.storage_root.empty()) return (fs::path(OutputDir(job)) / "tiles").string();
+    return (fs::path(spec_.storage_root) / job.id / "tiles").string();
+  }
+  std::string SpillDir(const JobRecord& job) const {
+    return (fs::path(work_dir_) / job.id / "spill").string();
+  }
+
+  void StartJobThread(const std::string& job_id) {
+    absl::MutexLock lock(&mu_);
+    job_threads_.emplace_back([this, job_id] { RunJob(job_id); });
+  }
+  void RunJob(const std::string& job_id);
+  absl::Status IngestStage(const JobRecord& job);
+  // Waits until every chunk is committed. OK: go on to merge; CANCELLED: the job is already
+  // terminal (cancelled or failed by the lease table) or the coordinator stops.
+  absl::Status CarveStage(const std::string& job_id);
+  void FailJob(const std::string& job_id, const std::string& why);
+  void CleanUp(const std::string& job_id, bool succeeded);
+  void EnterStage(const std::string& job_id, const std::string& stage);
+  void Sweep();
+  // The job must exist and not be terminal; shared by CompleteChunk and FailChunk, which check
+  // the store before the lease table (the table has forgotten cancelled jobs).
+  absl::Status CheckLeaseJob(absl::string_view lease_id);
+  void Touch(const std::string& worker_id) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    auto it = workers_.find(worker_id);
+    if (it != workers_.end()) it->second = NowMs();
+  }
+
+  const CoordinatorSpec spec_;
+  std::string work_dir_;
+  std::unique_ptr<JobStore> store_;
+  std::unique_ptr<grpc::Server> server_;
+  std::unique_ptr<grpc::Service> job_service_;
+  std::unique_ptr<grpc::Service> carve_service_;
+  int port_ = 0;
+  std::atomic<bool> stopping_{false};
+  absl::Notification shutdown_done_;
+  std::thread sweeper_;
+  std::string instance_;  // distinguishes worker ids of this coordinator from a previous one's
+
+  absl::Mutex mu_;
+  std::unique_ptr<LeaseTable> table_ ABSL_GUARDED_BY(mu_);
+  std::map<std::string, int64_t> workers_ ABSL_GUARDED_BY(mu_);  // id → last seen (ms)
+  int64_t next_worker_ ABSL_GUARDED_BY(mu_) = 1;
+  std::map<std::string, JobRuntime> runtime_ ABSL_GUARDED_BY(mu_);
+  std::vector<std::thread> job_threads_ ABSL_GUARDED_BY(mu_);
+  absl::Mutex shutdown_mu_;
+  // HDF5 (scan reading in ingest, tile reading in the merge) is not thread-safe in the
+  // Debian build: one job at a time uses it in this process.
+  absl::Mutex hdf5_mu_;
+};
+
+// ---- gRPC adapters: one conversion each way, nothing else.
+
+namespace {
+
+class JobServiceAdapter final : public pb::JobService::Service {
+ public:
+  explicit JobServiceAdapter(CoordinatorServer::Impl& impl) : impl_(impl) {}
+  grpc::Status SubmitJob(grpc::ServerContext*, const pb::SubmitJobRequest* req,
+                         pb::SubmitJobResponse* resp) override {
+    return ToGrpcStatus(impl_.SubmitJob(*req, *resp));
+  }
+  grpc::Status GetJob(grpc::ServerContext*, const pb::GetJobRequest* req,
+                      pb::Job* resp) override {
+    return ToGrpcStatus(impl_.GetJob(*req, *resp));
+  }
+  grpc::Status WatchJob(grpc::ServerContext* ctx, const pb::WatchJobRequest* req,
+                        grpc::ServerWriter<pb::JobEvent>* writer) override {
+    return ToGrpcStatus(impl_.WatchJob(*ctx, *req, *writer));
+  }
+  grpc::Status CancelJob(grpc::ServerContext*, const pb::CancelJobRequest* req,
+                         pb::CancelJobResponse* resp) override {
+    return ToGrpcStatus(impl_.CancelJob(*req, *resp));
+  }
+  grpc::Status ListJobs(grpc::ServerContext*, const pb::ListJobsRequest* req,
+                        pb::ListJobsResponse* resp) override {
+    return ToGrpcStatus(impl_.ListJobs(*req, *resp));
+  }
+  grpc::Status FetchArtifact(grpc::ServerContext* ctx, const pb::FetchArtifactRequest* req,
+                             grpc::ServerWriter<pb::ArtifactChunk>* writer) override {
+    return ToGrpcStatus(impl_.FetchArtifact(*ctx, *req, *writer));
+  }
+
+ private:
+  CoordinatorServer::Impl& impl_;
+};
+
+class CarveServiceAdapter final : public pb::CarveTaskService::Service {
+ public:
+  explicit CarveServiceAdapter(CoordinatorServer::Impl& impl) : impl_(impl) {}
+  grpc::Status RegisterWorker(grpc::ServerContext* ctx, const pb::RegisterWorkerRequest* req,
+                              pb::RegisterWorkerResponse* resp) override {
+    return ToGrpcStatus(impl_.RegisterWorker(*ctx, *req, *resp));
+  }
+  grpc::Status Heartbeat(grpc::ServerContext*, const pb::HeartbeatRequest* req,
+                         pb::HeartbeatResponse* resp) override {
+    return ToGrpcStatus(impl_.Heartbeat(*req, *resp));
+  }
+  grpc::Status LeaseChunk(grpc::ServerContext* ctx, const pb::LeaseChunkRequest* req,
+                          pb::LeaseChunkResponse* resp) override {
+    return ToGrpcStatus(impl_.LeaseChunk(*ctx, *req, *resp));
+  }
+  grpc::Status CompleteChunk(grpc::ServerContext*, const pb::CompleteChunkRequest* req,
+                             pb::CompleteChunkResponse* resp) override {
+    return ToGrpcStatus(impl_.CompleteChunk(*req, *resp));
+  }
+  grpc::Status FailChunk(grpc::ServerContext*, const pb::FailChunkRequest* req,
+                         pb::FailChunkResponse* resp) override {
+    return ToGrpcStatus(impl_.FailChunk(*req, *resp));
+  }
+
+ private:
+  CoordinatorServer::Impl& impl_;
+};
+
+}  // namespace
+
+// ---- lifecycle
+
+absl::Status CoordinatorServer::Impl::Start() {
+  if (absl::Status s = spec_.Validate(); !s.ok()) return s;
+  work_dir_ = spec_.work_dir.empty()
+                  ? (fs::path(spec_.storage_root.empty() ? spec_.output_root : spec_.storage_root) /
+                     ".carvemap")
+                        .string()
+                  : spec_.work_dir;
+  if (absl::Status s = CheckWritableDir(work_dir_, "work dir"); !s.ok()) return s;
+  absl::StatusOr<std::unique_ptr<JobStore>> store =
+      JobStore::Open((fs::path(work_dir_) / "jobs.db").string());
+  if (!store.ok()) return store.status();
+  store_ = *std::move(store);
+  instance_ = RandomHex(4);
+  {
+    absl::MutexLock lock(&mu_);
+    LeaseTableOptions options;
+    options.lease_timeout_ms = static_cast<int64_t>(spec_.lease_timeout_s * 1000);
+    options.max_attempts = spec_.max_attempts;
+    table_ = std::make_unique<LeaseTable>(*store_, LeaseTable::Clock::System(), options);
+  }
+
+  EnableHealthAndReflection();
+  job_service_ = std::make_unique<JobServiceAdapter>(*this);
+  carve_service_ = std::make_unique<CarveServiceAdapter>(*this);
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(spec_.listen_address, grpc::InsecureServerCredentials(), &port_);
+  builder.RegisterService(job_service_.get());
+  builder.RegisterService(carve_service_.get());
+  server_ = builder.BuildAndStart();
+  if (server_ == nullptr || port_ == 0) {
+    return absl::UnavailableError(
+        absl::StrCat("coordinator: cannot listen on ", spec_.listen_address));
+  }
+  SetServing(*server_, "", true);
+  SetServing(*server_, "carvemap.v1.JobService", true);
+  SetServing(*server_, "carvemap.v1.CarveTaskService", true);
+  sweeper_ = std::thread([this] { Sweep(); });
+
+  // Resume what a previous coordinator left unfinished: the store is the truth.
+  for (JobState state : {JobState::kQueued, JobState::kIngesting, JobState::kCarving,
+                         JobState::kMerging}) {
+    ListJobsQuery q;
+    q.state = state;
+    q.limit = 1000;
+    absl::StatusOr<std::vector<JobRecord>> jobs = store_->ListJobs(q);
+    if (!jobs.ok()) return jobs.status();
+    for (const JobRecord& job : *jobs) {
+      spdlog::info("coordinator: resuming job {} ({})", job.id, std::string(JobStateName(job.state)));
+      StartJobThread(job.id);
+    }
+  }
+  spdlog::info("coordinator: listening on {}:{} (outputs {}, work dir {})",
+               spec_.listen_address.substr(0, spec_.listen_address.rfind(':')), port_,
+               spec_.output_root, work_dir_);
+  return absl::OkStatus();
+}
+
+void CoordinatorServer::Impl::Shutdown() {
+  absl::MutexLock shutdown_lock(&shutdown_mu_);
+  if (shutdown_done_.HasBeenNotified()) return;
+  stopping_ = true;
+  if (server_ != nullptr) {
+    SetServing(*server_, "", false);
+    // Streams and long polls see stopping_ within a poll interval; the deadline bounds the wait.
+    server_->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(500));
+  }
+  if (sweeper_.joinable()) sweeper_.join();
+  std::vector<std::thread> threads;
+  {
+    absl::MutexLock lock(&mu_);
+    threads.swap(job_threads_);
+  }
+  for (std::thread& t : threads) t.join();
+  spdlog::info("coordinator: stopped");
+  shutdown_done_.Notify();
+}
+
+void CoordinatorServer::Impl::Sweep() {
+  while (!stopping_) {
+    std::this_thread::sleep_for(std::chrono::duration<double>(spec_.sweep_interval_s));
+    absl::MutexLock lock(&mu_);
+    absl::StatusOr<int> expired = table_->ExpireLeases();
+    if (!expired.ok()) {
+      spdlog::error("coordinator: expiring leases: {}", expired.status().ToString());
+    } else if (*expired > 0) {
+      spdlog::warn("coordinator: {} lease(s) expired and were requeued", *expired);
+    }
+    const int64_t now = NowMs();
+    const int64_t timeout_ms = static_cast<int64_t>(spec_.worker_timeout_s * 1000);
+    for (auto it = workers_.begin(); it != workers_.end();) {
+      if (now - it->second <= timeout_ms) {
+        ++it;
+        continue;
+      }
+      absl::StatusOr<int> lost = table_->WorkerLost(it->first);
+      spdlog::warn("coordinator: worker {} lost (no heartbeat for {:.1f} s); {} lease(s) requeued",
+                   it->first, (now - it->second) / 1000.0, lost.ok() ? *lost : -1);
+      it = workers_.erase(it);
+    }
+  }
+}
+
+// ---- the job pipeline
+
+void CoordinatorServer::Impl::EnterStage(const std::string& job_id, const std::string& stage) {
+  absl::MutexLock lock(&mu_);
+  JobRuntime& rt = runtime_[job_id];
+  const auto now = std::chrono::steady_clock::now();
+  if (!rt.current_stage.empty() && rt.stage_start) {
+    rt.stages[rt.current_stage].second =
+        std::chrono::duration<double>(now - *rt.stage_start).count();
+  }
+  rt.current_stage = stage;
+  rt.stage_start = now;
+  if (!stage.empty()) {
+    rt.stages[stage] = {now, 0.0};
+    rt.stage_order.push_back(stage);
+  }
+}
+
+void CoordinatorServer::Impl::FailJob(const std::string& job_id, const std::string& why) {
+  absl::Status s = store_->TransitionJob(job_id, {JobState::kFailed, why, NowMs()});
+  if (s.ok()) {
+    spdlog::error("coordinator: job {} FAILED: {}", job_id, why);
+  } else {
+    spdlog::warn("coordinator: job {}: could not mark FAILED ({}): {}", job_id, s.ToString(), why);
+  }
+}
+
+void CoordinatorServer::Impl::CleanUp(const std::string& job_id, bool succeeded) {
+  std::string tiles, spill;
+  {
+    absl::MutexLock lock(&mu_);
+    table_->DropJob(job_id);
+    tiles = runtime_[job_id].tiles_dir;
+    spill = runtime_[job_id].spill_dir;
+  }
+  std::error_code ec;
+  if (!spec_.keep_spill && !spill.empty()) fs::remove_all(fs::path(spill).parent_path(), ec);
+  // A failed or cancelled job leaves no tiles that could pass for a complete set.
+  if (!succeeded && !tiles.empty()) fs::remove_all(tiles, ec);
+  EnterStage(job_id, "");
+}
+
+absl::Status CoordinatorServer::Impl::IngestStage(const JobRecord& job) {
+  std::string spill, tiles;
+  {
+    absl::MutexLock lock(&mu_);
+    spill = runtime_[job.id].spill_dir;
+    tiles = runtime_[job.id].tiles_dir;
+  }
+  // Ingest starts from scratch (also after a restart): half-written spill files are useless,
+  // and stale tiles of an earlier attempt must not mix with this run's.
+  std::error_code ec;
+  fs::remove_all(spill, ec);
+  fs::remove_all(tiles, ec);
+  fs::create_directories(tiles, ec);
+  if (ec) return absl::FailedPreconditionError(absl::StrCat("tiles dir ", tiles, ": ", ec.message()));
+
+  IngestOptions options;
+  options.scan_path = (fs::path(spec_.data_root) / job.input_path).string();
+  options.spill_dir = spill;
+  const std::string id = job.id;
+  absl::MutexLock hdf5_lock(&hdf5_mu_);
+  absl::StatusOr<IngestResult> result =
+      IngestScan(options, [this, id](const IngestProgress& p) {
+        absl::MutexLock lock(&mu_);
+        runtime_[id].rays_ingested = static_cast<int64_t>(p.rays);
+      });
+  if (!result.ok()) return result.status();
+  spdlog::info("coordinator: job {}: ingested {} frames, {} rays, {} wedges into {} chunks in {:.1f} s",
+               job.id, result->frames, result->rays, result->wedges, result->chunks.size(),
+               result->elapsed_s);
+  if (stopping_) return absl::CancelledError("coordinator stopping");
+  absl::StatusOr<JobRecord> now = store_->GetJob(job.id);
+  if (!now.ok()) return now.status();
+  if (IsTerminal(now->state)) return absl::CancelledError("job ended during ingest");
+
+  std::vector<ChunkRecord> chunks;
+  chunks.reserve(result->chunks.size());
+  int64_t pairs = 0;
+  for (const SpilledChunk& c : result->chunks) {
+    ChunkRecord r;
+    r.job_id = job.id;
+    r.key = {c.chunk.x(), c.chunk.y(), c.chunk.z()};
+    r.wedge_count = static_cast<int64_t>(c.wedge_count);
+    pairs += r.wedge_count;
+    chunks.push_back(std::move(r));
+  }
+  if (absl::Status s = store_->AddChunks(job.id, chunks); !s.ok()) return s;
+  {
+    absl::MutexLock lock(&mu_);
+    runtime_[job.id].rays_to_carve = pairs;
+  }
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
+  {
+    absl::MutexLock lock(&mu_);
+    if (absl::Status s = table_->LoadJob(job_id); !s.ok() && !absl::IsAlreadyExists(s)) return s;
+    int64_t pairs = 0;
+    if (absl::StatusOr<std::vector<ChunkRecord>> chunks = store_->ListChunks(job_id); chunks.ok()) {
+      for (const ChunkRecord& c : *chunks) pairs += c.wedge_count;
+    }
+    runtime_[job_id].rays_to_carve = pairs;
+  }
+  while (!stopping_) {
+    {
+      absl::MutexLock lock(&mu_);
+      absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
+      if (!p.ok() || p->failed) return absl::CancelledError("job ended while carving");
+      if (table_->AllDone(job_id)) {
+        table_->DropJob(job_id);
+        return absl::OkStatus();
+      }
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  return absl::CancelledError("coordinator stopping");
+}
+
+void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
+  absl::StatusOr<JobRecord> job = store_->GetJob(job_id);
+  if (!job.ok()) {
+    spdlog::error("coordinator: job {}: {}", job_id, job.status().ToString());
+    return;
+  }
+  {
+    absl::MutexLock lock(&mu_);
+    JobRuntime& rt = runtime_[job_id];
+    rt.tiles_dir = fs::absolute(TilesDir(*job)).lexically_normal().string();
+    rt.spill_dir = fs::absolute(SpillDir(*job)).lexically_normal().string();
+    rt.output_dir = fs::absolute(OutputDir(*job)).lexically_normal().string();
+    rt.params = ParamsFromJson(job->params_json);
+  }
+  JobState state = job->state;
+  auto move_to = [&](JobState to) {
+    absl::Status s = store_->TransitionJob(job_id, {to, "", NowMs()});
+    if (s.ok()) {
+      spdlog::info("coordinator: job {} {} -> {}", job_id, std::string(JobStateName(state)), std::string(JobStateName(to)));
+      state = to;
+    }
+    return s;
+  };
+
+  if (state == JobState::kIngesting) {
+    // A restart during ingest: the chunks may already be stored (the crash came between
+    // AddChunks and the move to CARVING); then carving can go on, otherwise ingest again.
+    absl::StatusOr<std::vector<ChunkRecord>> chunks = store_->ListChunks(job_id);
+    if (chunks.ok() && !chunks->empty()) {
+      if (!move_to(JobState::kCarving).ok()) return;
+    }
+  }
+  if (state == JobState::kQueued || state == JobState::kIngesting) {
+    if (state == JobState::kQueued && !move_to(JobState::kIngesting).ok()) return;
+    EnterStage(job_id, "ingest");
+    absl::Status s = IngestStage(*job);
+    if (absl::IsCancelled(s)) {
+      if (!stopping_) CleanUp(job_id, false);
+      return;
+    }
+    if (!s.ok()) {
+      FailJob(job_id, absl::StrCat("ingest: ", s.message()));
+      CleanUp(job_id, false);
+      return;
+    }
+    absl::StatusOr<JobRecord> now = store_->GetJob(job_id);
+    const bool empty = now.ok() && now->counters.chunks_total == 0;
+    if (!move_to(empty ? JobState::kMerging : JobState::kCarving).ok()) {
+      CleanUp(job_id, false);
+      return;
+    }
+  }
+  if (state == JobState::kCarving) {
+    EnterStage(job_id, "carve");
+    absl::Status s = CarveStage(job_id);
+    if (!s.ok()) {
+      if (stopping_) return;  // resumed by the next coordinator
+      if (!absl::IsCancelled(s)) FailJob(job_id, absl::StrCat("carve: ", s.message()));
+      CleanUp(job_id, false);
+      return;
+    }
+    if (!move_to(JobState::kMerging).ok()) {
+      CleanUp(job_id, false);
+      return;
+    }
+  }
+  if (state == JobState::kMerging) {
+    EnterStage(job_id, "merge");
+    MergeJobRequest req;
+    {
+      absl::MutexLock lock(&mu_);
+      const JobRuntime& rt = runtime_[job_id];
+      req = {job_id, rt.tiles_dir, rt.output_dir, rt.params.resolution_m, ""};
+      nlohmann::json doc = {{"job_id", job_id},
+                            {"input_path", job->input_path},
+                            {"output_name", job->output_name},
+                            {"params", nlohmann::json::parse(job->params_json, nullptr, false)},
+                            {"rays_carved", rt.rays_carved}};
+      if (absl::StatusOr<JobRecord> now = store_->GetJob(job_id); now.ok()) {
+        doc["chunks_total"] = now->counters.chunks_total;
+        doc["chunk_retries"] = now->counters.chunk_retries;
+      }
+      nlohmann::json stages = nlohmann::json::object();
+      for (const auto& [name, timing] : rt.stages) stages[name] = timing.second;
+      doc["stage_seconds"] = stages;
+      req.job_json = doc.dump();
+    }
+    if (spec_.merge) {
+      absl::Status merged;
+      {
+        absl::MutexLock lock(&hdf5_mu_);
+        merged = spec_.merge(req);
+      }
+      if (absl::Status s = merged; !s.ok()) {
+        FailJob(job_id, absl::StrCat("merge: ", s.message()));
+        CleanUp(job_id, false);
+        return;
+      }
+    } else {
+      spdlog::warn("coordinator: job {}: no merge step configured; tiles only", job_id);
+    }
+    if (!move_to(JobState::kSucceeded).ok()) {
+      CleanUp(job_id, false);
+      return;
+    }
+  }
+  CleanUp(job_id, state == JobState::kSucceeded);
+}
+
+// ---- JobService
+
+absl::Status CoordinatorServer::Impl::SubmitJob(const pb::SubmitJobRequest& req,
+                                                pb::SubmitJobResponse& resp) {
+  if (stopping_) return absl::UnavailableError("coordinator shutting down");
+  if (req.input_case() == pb::SubmitJobRequest::kUploadId) {
+    return absl::UnimplementedError("upload_id input: streamed upload is not implemented yet");
+  }
+  const std::string& input = req.input_path();
+  if (!ValidRelativePath(input)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "input_path '", input, "': must be relative to the data root, without '..'"));
+  }
+  absl::StatusOr<ResolvedParams> params = ResolveParams(req.params());
+  if (!params.ok()) return params.status();
+  if (!req.output_name().empty() && !ValidOutputName(req.output_name())) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "output_name '", req.output_name(), "': must match [A-Za-z0-9._-]{1,128}"));
+  }
+  if (req.idempotency_key().size() > 128) {
+    return absl::InvalidArgumentError("idempotency_key longer than 128 bytes");
+  }
+  if (!req.idempotency_key().empty()) {
+    absl::StatusOr<std::optional<JobRecord>> found =
+        store_->FindJobByIdempotencyKey("", req.idempotency_key());
+    if (!found.ok()) return found.status();
+    if (found->has_value()) {
+      const JobRecord& j = **found;
+      if (j.input_path != input || j.params_json != ParamsToJson(*params) ||
+          (!req.output_name().empty() && j.output_name != req.output_name())) {
+        return absl::AlreadyExistsError(absl::StrCat(
+            "idempotency_key '", req.idempotency_key(), "' was used for job ", j.id,
+            " with a different request"));
+      }
+      ToProto(j, *resp.mutable_job());
+      resp.set_deduplicated(true);
+      return absl::OkStatus();
+    }
+  }
+
+  const fs::path scan = fs::path(spec_.data_root) / input;
+  std::error_code ec;
+  if (!fs::is_regular_file(scan, ec)) {
+    return absl::NotFoundError(absl::StrCat("input scan ", scan.string(), ": no such file"));
+  }
+  if (::access(scan.c_str(), R_OK) != 0) {
+    return absl::NotFoundError(
+        absl::StrCat("input scan ", scan.string(), ": not readable: ", std::strerror(errno)));
+  }
+
+  JobRecord job;
+  // A keyed submit gets an id derived from its key (unique per tenant, like the key): tiles
+  // record their job id, so two runs submitted with the same key (`carvemap run` with 1 and
+  // with 2 workers) give byte-identical tiles.
+  job.id = req.idempotency_key().empty()
+               ? NewJobId()
+               : absl::StrCat("j-", Sha256Hex(req.idempotency_key())
+                                        .substr(0, 16));
+  job.input_path = input;
+  job.output_name = req.output_name().empty() ? job.id : req.output_name();
+  job.params_json = ParamsToJson(*params);
+  job.idempotency_key = req.idempotency_key();
+  job.created_unix_ms = job.updated_unix_ms = NowMs();
+  if (absl::Status s = CheckWritableDir(OutputDir(job), "output"); !s.ok()) return s;
+  if (absl::Status s = CheckWritableDir(TilesDir(job), "tiles dir"); !s.ok()) return s;
+  if (absl::Status s = store_->CreateJob(job); !s.ok()) return s;
+  spdlog::info("coordinator: job {} submitted: {} -> {} (resolution {} m)", job.id, scan.string(),
+               OutputDir(job), params->resolution_m);
+  absl::StatusOr<JobRecord> stored = store_->GetJob(job.id);
+  if (!stored.ok()) return stored.status();
+  ToProto(*stored, *resp.mutable_job());
+  StartJobThread(job.id);
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::GetJob(const pb::GetJobRequest& req, pb::Job& resp) {
+  absl::StatusOr<JobRecord> job = store_->GetJob(req.job_id());
+  if (!job.ok()) return job.status();
+  ToProto(*job, resp);
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::CancelJob(const pb::CancelJobRequest& req,
+                                                pb::CancelJobResponse& resp) {
+  absl::StatusOr<JobRecord> job = store_->GetJob(req.job_id());
+  if (!job.ok()) return job.status();
+  if (job->state == JobState::kSucceeded || job->state == JobState::kFailed) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("job ", job->id, " is ", JobStateName(job->state), ": cannot cancel"));
+  }
+  if (job->state != JobState::kCancelled) {
+    std::string why = "cancelled by client";
+    if (!req.reason().empty()) absl::StrAppend(&why, ": ", req.reason());
+    absl::Status s = store_->TransitionJob(job->id, {JobState::kCancelled, why, NowMs()});
+    // A race with the job reaching a terminal state on its own: report what it is now.
+    if (!s.ok() && !absl::IsFailedPrecondition(s)) return s;
+    if (s.ok()) spdlog::info("coordinator: job {} cancelled", job->id);
+    absl::MutexLock lock(&mu_);
+    table_->DropJob(job->id);
+  }
+  absl::StatusOr<JobRecord> now = store_->GetJob(req.job_id());
+  if (!now.ok()) return now.status();
+  ToProto(*now, *resp.mutable_job());
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::ListJobs(const pb::ListJobsRequest& req,
+                                               pb::ListJobsResponse& resp) {
+  ListJobsQuery q;
+  const int page = req.page_size() <= 0 ? 50 : std::min(req.page_size(), 500);
+  q.limit = page + 1;  // one more tells whether there is a next page
+  if (req.state_filter() != pb::JOB_STATE_UNSPECIFIED) {
+    q.state = static_cast<JobState>(static_cast<int>(req.state_filter()));
+  }
+  if (!req.page_token().empty()) {
+    // Token: "<created_unix_ms>:<job id>" of the last job of the previous page.
+    const size_t colon = req.page_token().find(':');
+    int64_t ms = 0;
+    if (colon == std::string::npos ||
+        !absl::SimpleAtoi(req.page_token().substr(0, colon), &ms)) {
+      return absl::InvalidArgumentError("page_token does not parse");
+    }
+    q.before = std::make_pair(ms, req.page_token().substr(colon + 1));
+  }
+  absl::StatusOr<std::vector<JobRecord>> jobs = store_->ListJobs(q);
+  if (!jobs.ok()) return jobs.status();
+  for (int i = 0; i < static_cast<int>(jobs->size()) && i < page; ++i) {
+    ToProto((*jobs)[i], *resp.add_jobs());
+  }
+  if (static_cast<int>(jobs->size()) > page) {
+    const JobRecord& last = (*jobs)[page - 1];
+    resp.set_next_page_token(absl::StrCat(last.created_unix_ms, ":", last.id));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::WatchJob(grpc::ServerContext& ctx,
+                                               const pb::WatchJobRequest& req,
+                                               grpc::ServerWriter<pb::JobEvent>& writer) {
+  absl::StatusOr<JobRecord> job = store_->GetJob(req.job_id());
+  if (!job.ok()) return job.status();
+  int64_t sequence = 0;
+  auto event = [&]() {
+    pb::JobEvent e;
+    e.set_time_unix_ms(NowMs());
+    e.set_sequence(++sequence);
+    return e;
+  };
+  {
+    pb::JobEvent e = event();
+    ToProto(*job, *e.mutable_snapshot());
+    if (!writer.Write(e)) return absl::OkStatus();
+  }
+  const double min_interval_s = req.min_interval_s() > 0 ? req.min_interval_s() : 1.0;
+  JobState state = job->state;
+  auto last_progress = std::chrono::steady_clock::now();
+  int64_t last_rays = -1;
+  auto last_rays_time = last_progress;
+  while (!IsTerminal(state)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    if (ctx.IsCancelled()) return absl::CancelledError("watch cancelled by the client");
+    if (stopping_) return absl::UnavailableError("coordinator shutting down");
+    job = store_->GetJob(req.job_id());
+    if (!job.ok()) return job.status();
+    const JobState from = state;
+    const bool changed = job->state != state;
+    state = job->state;
+    const auto now = std::chrono::steady_clock::now();
+    // A state change is preceded by fresh counters, so a client never shows the new state with
+    // old counts, and the terminal state change stays the last event.
+    if (changed || std::chrono::duration<double>(now - last_progress).count() >= min_interval_s) {
+      if (!WriteProgress(writer, event(), *job, state, now, last_rays, last_rays_time)) {
+        return absl::OkStatus();
+      }
+      last_progress = now;
+    }
+    if (changed) {
+      pb::JobEvent e = event();
+      auto* sc = e.mutable_state_change();
+      sc->set_from_state(static_cast<pb::JobState>(static_cast<int>(from)));
+      sc->set_to_state(static_cast<pb::JobState>(static_cast<int>(state)));
+      sc->set_error(job->error);
+      if (!writer.Write(e)) return absl::OkStatus();
+    }
+  }
+  return absl::OkStatus();
+}
+
+bool CoordinatorServer::Impl::WriteProgress(grpc::ServerWriter<pb::JobEvent>& writer,
+                                            pb::JobEvent e, const JobRecord& job_record,
+                                            JobState state,
+                                            std::chrono::steady_clock::time_point now,
+                                            int64_t& last_rays,
+                                            std::chrono::steady_clock::time_point& last_rays_time) {
+  const JobRecord* job = &job_record;
+  {
+    auto* p = e.mutable_progress();
+    auto* c = p->mutable_chunks();
+    c->set_chunks_total(job->counters.chunks_total);
+    c->set_chunks_done(job->counters.chunks_done);
+    c->set_chunks_leased(job->counters.chunks_leased);
+    c->set_chunk_retries(job->counters.chunk_retries);
+    {
+      absl::MutexLock lock(&mu_);
+      auto rt = runtime_.find(job->id);
+      if (rt != runtime_.end()) {
+        const JobRuntime& r = rt->second;
+        if (state == JobState::kCarving) {
+          p->set_rays_done(r.rays_carved);
+          p->set_rays_total(r.rays_to_carve);
+          if (last_rays >= 0) {
+            const double dt = std::chrono::duration<double>(now - last_rays_time).count();
+            if (dt > 0) p->set_rays_per_s((r.rays_carved - last_rays) / dt);
+          }
+          last_rays = r.rays_carved;
+          last_rays_time = now;
+        } else if (state == JobState::kIngesting) {
+          p->set_rays_done(r.rays_ingested);
+        }
+        for (const std::string& name : r.stage_order) {
+          const auto& [start, elapsed] = r.stages.at(name);
+          auto* st = p->add_stages();
+          st->set_stage(name);
+          const bool running = name == r.current_stage;
+          st->set_elapsed_s(running ? std::chrono::duration<double>(now - start).count()
+                                    : elapsed);
+          st->set_finished(!running);
+        }
+      }
+      std::set<std::string> active;
+      for (const auto& [worker, seen] : workers_) {
+        for (const std::string& lease : table_->LeasesOf(worker)) {
+          if (absl::StartsWith(lease, absl::StrCat(job->id, "/"))) active.insert(worker);
+        }
+      }
+      p->set_active_workers(static_cast<int32_t>(active.size()));
+    }
+    return writer.Write(e);
+  }
+}
+
+absl::Status CoordinatorServer::Impl::FetchArtifact(grpc::ServerContext& ctx,
+                                                    const pb::FetchArtifactRequest& req,
+                                                    grpc::ServerWriter<pb::ArtifactChunk>& writer) {
+  if (!ValidRelativePath(req.name())) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("artifact '", req.name(), "': must be relative, without '..'"));
+  }
+  absl::StatusOr<JobRecord> job = store_->GetJob(req.job_id());
+  if (!job.ok()) return job.status();
+  const fs::path path = fs::path(OutputDir(*job)) / req.name();
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) {
+    if (job->state != JobState::kSucceeded) {
+      return absl::FailedPreconditionError(absl::StrCat("job ", job->id, " is ",
+                                                        JobStateName(job->state), ": artifact '",
+                                                        req.name(), "' not written yet"));
+    }
+    return absl::NotFoundError(absl::StrCat("job ", job->id, ": no artifact '", req.name(), "'"));
+  }
+  const int64_t size = static_cast<int64_t>(fs::file_size(path, ec));
+  if (req.offset() < 0 || req.offset() > size) {
+    return absl::OutOfRangeError(absl::StrCat("offset ", req.offset(), " past the end (", size,
+                                              " bytes)"));
+  }
+  const int64_t chunk =
+      req.chunk_size_bytes() <= 0 ? (1 << 20)
+                                  : std::clamp<int64_t>(req.chunk_size_bytes(), 4096, 4 << 20);
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr) return absl::InternalError(absl::StrCat("open ", path.string()));
+  std::string buf(static_cast<size_t>(chunk), '\0');
+  // The hash covers the whole artifact, also the bytes before `offset`.
+  absl::StatusOr<std::string> sha = Sha256HexOfFile(path.string());
+  if (!sha.ok()) {
+    std::fclose(f);
+    return sha.status();
+  }
+  std::fseek(f, static_cast<long>(req.offset()), SEEK_SET);
+  int64_t offset = req.offset();
+  do {
+    if (ctx.IsCancelled()) break;
+    const size_t n = std::fread(buf.data(), 1, buf.size(), f);
+    pb::ArtifactChunk out;
+    out.set_offset(offset);
+    out.set_data(buf.data(), n);
+    out.set_total_size_bytes(size);
+    offset += static_cast<int64_t>(n);
+    if (offset >= size) {
+      out.set_last(true);
+      out.set_sha256_hex(*sha);
+    }
+    if (!writer.Write(out)) break;
+    if (n == 0) break;
+  } while (offset < size);
+  std::fclose(f);
+  return absl::OkStatus();
+}
+
+// ---- CarveTaskService
+
+absl::Status CoordinatorServer::Impl::RegisterWorker(grpc::ServerContext& ctx,
+                                                     const pb::RegisterWorkerRequest& req,
+                                                     pb::RegisterWorkerResponse& resp) {
+  if (stopping_) return absl::UnavailableError("coordinator shutting down");
+  std::string id;
+  {
+    absl::MutexLock lock(&mu_);
+    id = absl::StrCat("w-", instance_, "-", next_worker_++);
+    workers_[id] = NowMs();
+  }
+  spdlog::info("coordinator: worker {} registered (host {}, {} thread(s), peer {})", id,
+               req.hostname(), req.threads(), ctx.peer());
+  resp.set_worker_id(id);
+  resp.set_heartbeat_interval_s(spec_.heartbeat_interval_s);
+  resp.set_worker_timeout_s(spec_.worker_timeout_s);
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::Heartbeat(const pb::HeartbeatRequest& req,
+                                                pb::HeartbeatResponse& resp) {
+  if (req.worker_id().empty()) return absl::InvalidArgumentError("empty worker id");
+  absl::MutexLock lock(&mu_);
+  auto it = workers_.find(req.worker_id());
+  if (it == workers_.end()) {
+    return absl::NotFoundError(
+        absl::StrCat("worker ", req.worker_id(), " unknown or lost: register again"));
+  }
+  it->second = NowMs();
+  std::vector<std::string> held = table_->LeasesOf(req.worker_id());
+  const std::set<std::string> reported(req.active_lease_ids().begin(),
+                                       req.active_lease_ids().end());
+  if (req.report_leases()) {
+    // Leases the worker no longer reports are abandoned: give them back now rather than at
+    // the lease deadline.
+    for (const std::string& lease : held) {
+      if (reported.count(lease)) continue;
+      const size_t slash = lease.rfind('/');
+      int64_t gen = 0;
+      if (slash != std::string::npos && absl::SimpleAtoi(lease.substr(slash + 1), &gen)) {
+        (void)table_->Fail(lease, gen, absl::StrCat("abandoned by worker ", req.worker_id()),
+                           /*retryable=*/true);
+      }
+    }
+    held = table_->LeasesOf(req.worker_id());
+  }
+  const std::set<std::string> held_set(held.begin(), held.end());
+  for (const std::string& lease : reported) {
+    if (!held_set.count(lease)) resp.add_revoked_lease_ids(lease);
+  }
+  if (std::optional<int64_t> deadline = table_->Heartbeat(req.worker_id())) {
+    resp.set_lease_deadline_unix_ms(*deadline);
+  }
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
+                                                 const pb::LeaseChunkRequest& req,
+                                                 pb::LeaseChunkResponse& resp) {
+  if (req.worker_id().empty()) return absl::InvalidArgumentError("empty worker id");
+  const auto deadline = std::chrono::steady_clock::now() +
+                        std::chrono::duration<double>(std::clamp(req.wait_s(), 0.0, 30.0));
+  while (true) {
+    if (stopping_) return absl::UnavailableError("coordinator shutting down");
+    std::optional<LeaseTable::Grant> grant;
+    JobRuntime rt;
+    {
+      absl::MutexLock lock(&mu_);
+      if (!workers_.count(req.worker_id())) {
+        return absl::NotFoundError(
+            absl::StrCat("worker ", req.worker_id(), " unknown or lost: register again"));
+      }
+      Touch(req.worker_id());
+      absl::StatusOr<std::optional<LeaseTable::Grant>> g = table_->Lease(req.worker_id());
+      if (!g.ok()) return g.status();
+      grant = *g;
+      if (grant) rt = runtime_[grant->job_id];
+    }
+    if (grant) {
+      pb::Lease& lease = *resp.mutable_lease();
+      lease.set_job_id(grant->job_id);
+      lease.mutable_chunk()->set_x(grant->chunk.x);
+      lease.mutable_chunk()->set_y(grant->chunk.y);
+      lease.mutable_chunk()->set_z(grant->chunk.z);
+      lease.set_lease_id(grant->lease_id);
+      lease.set_generation(grant->generation);
+      lease.set_deadline_unix_ms(grant->deadline_unix_ms);
+      lease.set_attempt(grant->attempt);
+      pb::CarveParams& params = *lease.mutable_params();
+      params.set_resolution_m(rt.params.resolution_m);
+      params.set_method(static_cast<pb::CarveMethod>(rt.params.method));
+      absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(rt.params.resolution_m);
+      params.set_leaf_depth(grid.ok() ? grid->chunk_depth : 0);
+      params.set_tile_dir(rt.tiles_dir);
+      pb::WedgePayload& wedges = *lease.mutable_wedges();
+      wedges.set_wedge_count(grant->wedge_count);
+      const std::string path = ChunkSpillPath(
+          rt.spill_dir, ChunkKey(grant->chunk.x, grant->chunk.y, grant->chunk.z));
+      std::error_code ec;
+      const auto size = fs::file_size(path, ec);
+      if (!ec && spec_.max_inline_wedge_bytes > 0 &&
+          size <= static_cast<uintmax_t>(spec_.max_inline_wedge_bytes)) {
+        absl::StatusOr<ChunkSpillFile> file = ReadChunkSpillFile(path);
+        if (!file.ok()) return file.status();
+        wedges.set_inline_wedges(std::move(file->payload));
+      } else {
+        // The whole spill file; it carries its own checksums, which the worker checks.
+        wedges.mutable_location()->set_path(path);
+      }
+      spdlog::debug("coordinator: lease {} -> {} (attempt {})", grant->lease_id, req.worker_id(),
+                    grant->attempt);
+      return absl::OkStatus();
+    }
+    if (std::chrono::steady_clock::now() >= deadline || ctx.IsCancelled()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  resp.set_retry_after_s(0.25);
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::CheckLeaseJob(absl::string_view lease_id) {
+  absl::StatusOr<std::string> job_id = JobOfLease(lease_id);
+  if (!job_id.ok()) return job_id.status();
+  absl::StatusOr<JobRecord> job = store_->GetJob(*job_id);
+  if (!job.ok()) return job.status();
+  if (IsTerminal(job->state)) {
+    return absl::FailedPreconditionError(absl::StrCat("lease ", lease_id, ": job ", job->id,
+                                                      " is ", JobStateName(job->state)));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::CompleteChunk(const pb::CompleteChunkRequest& req,
+                                                    pb::CompleteChunkResponse& resp) {
+  if (absl::Status s = CheckLeaseJob(req.lease_id()); !s.ok()) {
+    // A tile finished after its job failed or was cancelled: the job's cleanup has already
+    // run, so remove the late tile here, or it would sit in a tiles dir that looks partial.
+    absl::StatusOr<std::string> id = JobOfLease(req.lease_id());
+    absl::StatusOr<JobRecord> job = id.ok() ? store_->GetJob(*id) : id.status();
+    if (job.ok() && (job->state == JobState::kFailed || job->state == JobState::kCancelled) &&
+        ValidRelativePath(req.tile().path())) {
+      std::error_code ec;
+      fs::remove(fs::path(TilesDir(*job)) / req.tile().path(), ec);
+    }
+    return s;
+  }
+  const std::string job_id = *JobOfLease(req.lease_id());
+  absl::MutexLock lock(&mu_);
+  Touch(req.worker_id());
+  LeaseTable::Tile tile{req.tile().path(), req.tile().size_bytes(), req.tile().sha256_hex()};
+  if (absl::Status s = table_->Complete(req.lease_id(), req.generation(), tile); !s.ok()) {
+    spdlog::info("coordinator: completion of {} by {} rejected: {}", req.lease_id(),
+                 req.worker_id(), s.ToString());
+    return s;
+  }
+  runtime_[job_id].rays_carved += req.stats().rays();
+  absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
+  if (p.ok()) {
+    resp.mutable_progress()->set_chunks_total(p->chunks_total);
+    resp.mutable_progress()->set_chunks_done(p->chunks_done);
+    resp.mutable_progress()->set_chunks_leased(p->chunks_leased);
+    resp.mutable_progress()->set_chunk_retries(p->chunk_retries);
+  }
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::FailChunk(const pb::FailChunkRequest& req,
+                                                pb::FailChunkResponse& resp) {
+  if (absl::Status s = CheckLeaseJob(req.lease_id()); !s.ok()) return s;
+  absl::MutexLock lock(&mu_);
+  Touch(req.worker_id());
+  absl::StatusOr<bool> requeued =
+      table_->Fail(req.lease_id(), req.generation(),
+                   absl::StrCat("worker ", req.worker_id(), ": ", req.reason()), req.retryable());
+  if (!requeued.ok()) return requeued.status();
+  spdlog::warn("coordinator: worker {} failed {}: {} ({})", req.worker_id(), req.lease_id(),
+               req.reason(), *requeued ? "requeued" : "job failed");
+  resp.set_requeued(*requeued);
+  return absl::OkStatus();
+}
+
+// ---- public shell
+
+CoordinatorServer::CoordinatorServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+CoordinatorServer::~CoordinatorServer() = default;
+
+absl::StatusOr<std::unique_ptr<CoordinatorServer>> CoordinatorServer::Start(CoordinatorSpec spec) {
+  auto impl = std::make_unique<Impl>(std::move(spec));
+  if (absl::Status s = impl->Start(); !s.ok()) return s;
+  return std::unique_ptr<CoordinatorServer>(new CoordinatorServer(std::move(impl)));
+}
+
+int CoordinatorServer::port() const { return impl_->port(); }
+void CoordinatorServer::Shutdown() { impl_->Shutdown(); }
+void CoordinatorServer::Wait() { impl_->Wait(); }
+
+}  // namespace carvemap

@@ -1,0 +1,90 @@
+// The coordinator server (DESIGN §5, §8): JobService (public) and CarveTaskService (internal)
+// on one gRPC port, over the SQLite job store and the lease table. A job runs in a background
+// thread: INGESTING (scan ➜ per-chunk spill files) ➜ CARVING (chunks leased to workers) ➜
+// MERGING ➜ SUCCEEDED, or FAILED with the reason.
+//
+// Shape of a tensorstore service: Spec (config, Validate) ➜ Start ➜ port() ➜ Wait/Shutdown.
+// gRPC stays behind the pimpl so this header is cheap to include.
+#ifndef CARVEMAP_SERVICES_RPC_COORDINATOR_SERVICE_H_
+#define CARVEMAP_SERVICES_RPC_COORDINATOR_SERVICE_H_
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+namespace carvemap {
+
+// What the merge step gets: the job's tiles and where the outputs go.
+struct MergeJobRequest {
+  std::string job_id;
+  std::string tiles_dir;   // the committed tiles of every chunk
+  std::string output_dir;  // octree.bt, level_0/, job.json go here
+  double resolution_m = 0.0625;
+  std::string job_json;  // the job document (id, input, parameters, counts) as JSON text
+};
+using MergeFunction = std::function<absl::Status(const MergeJobRequest&)>;
+
+struct CoordinatorSpec {
+  // "host:port"; port 0 picks a free port (see CoordinatorServer::port()).
+  std::string listen_address = "127.0.0.1:0";
+  // Input paths of SubmitJob are relative to this directory.
+  std::string data_root = ".";
+  // A job's outputs go to <output_root>/<output_name>/.
+  std::string output_root = "out";
+  // Empty: tiles go to <output_root>/<output_name>/tiles. Set: <storage_root>/<job_id>/tiles
+  // (a shared volume for a cluster).
+  std::string storage_root;
+  // The job store (jobs.db) and the spill files (<work_dir>/<job_id>/spill). Empty:
+  // <storage_root or output_root>/.carvemap.
+  std::string work_dir;
+  double heartbeat_interval_s = 5.0;
+  double worker_timeout_s = 15.0;  // no heartbeat for this long: the worker is lost
+  double lease_timeout_s = 30.0;
+  int max_attempts = 3;
+  // Sweeps expired leases and lost workers this often.
+  double sweep_interval_s = 0.5;
+  // Wedges up to this size go inline in the lease; larger ones by spill path. 0: always by
+  // path (local processes and a cluster's shared volume both see the spill files).
+  int64_t max_inline_wedge_bytes = 0;
+  // Keep the spill files after a job ends (debugging). Default: removed when the job ends.
+  bool keep_spill = false;
+  // The merge step; empty: MERGING is skipped with a warning (tiles only).
+  MergeFunction merge;
+
+  absl::Status Validate() const;
+};
+
+// The merge step of this build: MergeFirstOutputs (services/merge/first_outputs.h) in the
+// coordinator's process, until the merge service runs as its own process.
+MergeFunction FirstOutputsMerge();
+
+// Thread-safe. Destroying it shuts it down.
+class CoordinatorServer {
+ public:
+  // Opens the job store, resumes unfinished jobs, and starts serving.
+  static absl::StatusOr<std::unique_ptr<CoordinatorServer>> Start(CoordinatorSpec spec);
+  ~CoordinatorServer();
+  CoordinatorServer(const CoordinatorServer&) = delete;
+  CoordinatorServer& operator=(const CoordinatorServer&) = delete;
+
+  // The bound port (useful with port 0).
+  [[nodiscard]] int port() const;
+  // Stops accepting calls, ends streams, joins the job threads. Idempotent.
+  void Shutdown();
+  // Blocks until Shutdown() has been called (from another thread or a signal handler thread).
+  void Wait();
+
+  class Impl;
+
+ private:
+  explicit CoordinatorServer(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace carvemap
+
+#endif  // CARVEMAP_SERVICES_RPC_COORDINATOR_SERVICE_H_

@@ -1,0 +1,280 @@
+#include "services/rpc/job_client.h"
+
+#include <grpcpp/grpcpp.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/synchronization/mutex.h"
+#include "proto/carvemap/v1/jobs.grpc.pb.h"
+#include "services/grpc_status.h"
+#include "services/rpc/file_hash.h"
+
+namespace carvemap {
+namespace pb = ::carvemap::v1;
+
+namespace {
+
+std::string StateName(pb::JobState s) {
+  std::string name = pb::JobState_Name(s);
+  const std::string prefix = "JOB_STATE_";
+  return name.rfind(prefix, 0) == 0 ? name.substr(prefix.size()) : name;
+}
+
+bool IsTerminal(pb::JobState s) {
+  return s == pb::JOB_STATE_SUCCEEDED || s == pb::JOB_STATE_FAILED ||
+         s == pb::JOB_STATE_CANCELLED;
+}
+
+JobInfo FromProto(const pb::Job& j) {
+  JobInfo info;
+  info.job_id = j.job_id();
+  info.state = StateName(j.state());
+  info.terminal = IsTerminal(j.state());
+  info.input_path = j.input_path();
+  info.output_name = j.output_name();
+  info.error = j.error();
+  info.resolution_m = j.params().resolution_m();
+  info.chunks_total = j.progress().chunks_total();
+  info.chunks_done = j.progress().chunks_done();
+  info.chunks_leased = j.progress().chunks_leased();
+  info.chunk_retries = j.progress().chunk_retries();
+  info.created_unix_ms = j.created_unix_ms();
+  info.finished_unix_ms = j.finished_unix_ms();
+  return info;
+}
+
+std::unique_ptr<grpc::ClientContext> Context(double timeout_s = 30) {
+  auto ctx = std::make_unique<grpc::ClientContext>();
+  ctx->set_deadline(std::chrono::system_clock::now() +
+                    std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
+  return ctx;
+}
+
+}  // namespace
+
+class JobClient::Impl {
+ public:
+  explicit Impl(const std::string& address)
+      : channel(grpc::CreateChannel(address, grpc::InsecureChannelCredentials())),
+        stub(pb::JobService::NewStub(channel)) {}
+  std::shared_ptr<grpc::Channel> channel;
+  std::unique_ptr<pb::JobService::Stub> stub;
+  absl::Mutex mu;
+  grpc::ClientContext* watch_ctx ABSL_GUARDED_BY(mu) = nullptr;
+  bool watch_cancelled ABSL_GUARDED_BY(mu) = false;
+};
+
+JobClient::JobClient(const std::string& address) : impl_(std::make_unique<Impl>(address)) {}
+JobClient::~JobClient() = default;
+
+absl::Status JobClient::WaitForReady(double timeout_s) {
+  const auto deadline = std::chrono::system_clock::now() +
+                        std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000));
+  if (!impl_->channel->WaitForConnected(deadline)) {
+    return absl::UnavailableError("coordinator not reachable");
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<JobInfo> JobClient::Submit(const SubmitParams& params) {
+  pb::SubmitJobRequest req;
+  req.set_input_path(params.input_path);
+  req.set_output_name(params.output_name);
+  req.mutable_params()->set_resolution_m(params.resolution_m);
+  req.set_idempotency_key(params.idempotency_key);
+  pb::SubmitJobResponse resp;
+  auto ctx = Context();
+  if (absl::Status s = FromGrpcStatus(impl_->stub->SubmitJob(ctx.get(), req, &resp)); !s.ok()) {
+    return s;
+  }
+  return FromProto(resp.job());
+}
+
+absl::StatusOr<JobInfo> JobClient::Get(const std::string& job_id) {
+  pb::GetJobRequest req;
+  req.set_job_id(job_id);
+  pb::Job resp;
+  auto ctx = Context();
+  if (absl::Status s = FromGrpcStatus(impl_->stub->GetJob(ctx.get(), req, &resp)); !s.ok()) {
+    return s;
+  }
+  return FromProto(resp);
+}
+
+absl::StatusOr<std::vector<JobInfo>> JobClient::List(const std::string& state_filter,
+                                                     int limit) {
+  pb::ListJobsRequest req;
+  if (!state_filter.empty()) {
+    pb::JobState s;
+    if (!pb::JobState_Parse(absl::StrCat("JOB_STATE_", state_filter), &s)) {
+      return absl::InvalidArgumentError(absl::StrCat("unknown state '", state_filter, "'"));
+    }
+    req.set_state_filter(s);
+  }
+  std::vector<JobInfo> jobs;
+  do {
+    req.set_page_size(std::min(limit - static_cast<int>(jobs.size()), 500));
+    pb::ListJobsResponse resp;
+    auto ctx = Context();
+    if (absl::Status s = FromGrpcStatus(impl_->stub->ListJobs(ctx.get(), req, &resp)); !s.ok()) {
+      return s;
+    }
+    for (const pb::Job& j : resp.jobs()) jobs.push_back(FromProto(j));
+    req.set_page_token(resp.next_page_token());
+  } while (!req.page_token().empty() && static_cast<int>(jobs.size()) < limit);
+  return jobs;
+}
+
+absl::StatusOr<JobInfo> JobClient::Cancel(const std::string& job_id, const std::string& reason) {
+  pb::CancelJobRequest req;
+  req.set_job_id(job_id);
+  req.set_reason(reason);
+  pb::CancelJobResponse resp;
+  auto ctx = Context();
+  if (absl::Status s = FromGrpcStatus(impl_->stub->CancelJob(ctx.get(), req, &resp)); !s.ok()) {
+    return s;
+  }
+  return FromProto(resp.job());
+}
+
+absl::StatusOr<JobInfo> JobClient::Watch(
+    const std::string& job_id, double min_interval_s,
+    const std::function<void(const WatchUpdate&)>& on_update) {
+  pb::WatchJobRequest req;
+  req.set_job_id(job_id);
+  req.set_min_interval_s(min_interval_s);
+  grpc::ClientContext ctx;
+  {
+    absl::MutexLock lock(&impl_->mu);
+    if (impl_->watch_cancelled) return absl::CancelledError("watch cancelled");
+    impl_->watch_ctx = &ctx;
+  }
+  std::unique_ptr<grpc::ClientReader<pb::JobEvent>> reader = impl_->stub->WatchJob(&ctx, req);
+  WatchUpdate u;
+  pb::JobEvent e;
+  while (reader->Read(&e)) {
+    if (e.has_snapshot()) {
+      const JobInfo j = FromProto(e.snapshot());
+      u.state = j.state;
+      u.chunks_total = j.chunks_total;
+      u.chunks_done = j.chunks_done;
+    } else if (e.has_state_change()) {
+      u.state = StateName(e.state_change().to_state());
+    } else if (e.has_progress()) {
+      const auto& p = e.progress();
+      u.chunks_total = p.chunks().chunks_total();
+      u.chunks_done = p.chunks().chunks_done();
+      u.chunks_leased = p.chunks().chunks_leased();
+      u.chunk_retries = p.chunks().chunk_retries();
+      u.rays_done = p.rays_done();
+      u.rays_total = p.rays_total();
+      u.rays_per_s = p.rays_per_s();
+      u.active_workers = p.active_workers();
+      for (const auto& st : p.stages()) {
+        if (!st.finished()) {
+          u.stage = st.stage();
+          u.stage_elapsed_s = st.elapsed_s();
+        }
+      }
+    }
+    if (on_update) on_update(u);
+  }
+  grpc::Status status = reader->Finish();
+  bool cancelled;
+  {
+    absl::MutexLock lock(&impl_->mu);
+    impl_->watch_ctx = nullptr;
+    cancelled = impl_->watch_cancelled;
+  }
+  if (cancelled) return absl::CancelledError("watch cancelled");
+  if (absl::Status s = FromGrpcStatus(status); !s.ok()) return s;
+  return Get(job_id);
+}
+
+void JobClient::CancelWatch() {
+  absl::MutexLock lock(&impl_->mu);
+  impl_->watch_cancelled = true;
+  if (impl_->watch_ctx != nullptr) impl_->watch_ctx->TryCancel();
+}
+
+absl::Status JobClient::Fetch(const std::string& job_id, const std::string& name,
+                              const std::string& dest_path) {
+  pb::FetchArtifactRequest req;
+  req.set_job_id(job_id);
+  req.set_name(name);
+  grpc::ClientContext ctx;
+  std::unique_ptr<grpc::ClientReader<pb::ArtifactChunk>> reader =
+      impl_->stub->FetchArtifact(&ctx, req);
+  const std::string partial = dest_path + ".partial";
+  std::error_code ec;
+  if (auto parent = std::filesystem::path(dest_path).parent_path(); !parent.empty()) {
+    std::filesystem::create_directories(parent, ec);
+  }
+  std::FILE* f = std::fopen(partial.c_str(), "wb");
+  if (f == nullptr) return absl::FailedPreconditionError(absl::StrCat("cannot write ", partial));
+  pb::ArtifactChunk chunk;
+  std::string sha;
+  bool write_ok = true;
+  while (reader->Read(&chunk)) {
+    write_ok &= std::fwrite(chunk.data().data(), 1, chunk.data().size(), f) == chunk.data().size();
+    if (chunk.last()) sha = chunk.sha256_hex();
+  }
+  write_ok &= std::fclose(f) == 0;
+  absl::Status s = FromGrpcStatus(reader->Finish());
+  if (s.ok() && !write_ok) s = absl::DataLossError(absl::StrCat("writing ", partial, " failed"));
+  if (s.ok()) {
+    absl::StatusOr<std::string> got = Sha256HexOfFile(partial);
+    if (!got.ok()) {
+      s = got.status();
+    } else if (*got != sha) {
+      s = absl::DataLossError(absl::StrCat(name, ": SHA-256 mismatch after download"));
+    }
+  }
+  if (!s.ok()) {
+    std::filesystem::remove(partial, ec);
+    return s;
+  }
+  std::filesystem::rename(partial, dest_path, ec);
+  if (ec) return absl::InternalError(absl::StrCat("rename to ", dest_path, ": ", ec.message()));
+  return absl::OkStatus();
+}
+
+std::string FormatProgress(const WatchUpdate& u) {
+  std::string line = absl::StrFormat("%-9s", u.state);
+  if (u.state == "INGESTING") {
+    absl::StrAppendFormat(&line, " %.1f M rays read", u.rays_done * 1e-6);
+  } else if (u.chunks_total > 0) {
+    constexpr int kWidth = 24;
+    const int filled = static_cast<int>(kWidth * u.chunks_done / u.chunks_total);
+    absl::StrAppend(&line, " [", std::string(filled, '#'), std::string(kWidth - filled, '.'), "] ");
+    absl::StrAppendFormat(&line, "%d/%d chunks", u.chunks_done, u.chunks_total);
+    if (u.state == "CARVING") {
+      absl::StrAppendFormat(&line, "  %.2f M rays/s  %d worker(s)", u.rays_per_s * 1e-6,
+                            u.active_workers);
+      if (u.chunks_done > 0 && u.stage == "carve") {
+        const double eta =
+            u.stage_elapsed_s * (u.chunks_total - u.chunks_done) / u.chunks_done;
+        absl::StrAppendFormat(&line, "  ETA %d:%02d", static_cast<int>(eta) / 60,
+                              static_cast<int>(eta) % 60);
+      } else {
+        absl::StrAppend(&line, "  ETA --:--");
+      }
+    }
+    if (u.chunk_retries > 0) absl::StrAppendFormat(&line, "  %d retried", u.chunk_retries);
+  }
+  if (!u.stage.empty()) absl::StrAppendFormat(&line, "  (%s %.0f s)", u.stage, u.stage_elapsed_s);
+  return line;
+}
+
+std::string FormatJob(const JobInfo& j) {
+  std::string line = absl::StrFormat("%-18s %-10s %5d/%-5d chunks  %-24s -> %s", j.job_id, j.state,
+                                     j.chunks_done, j.chunks_total, j.input_path, j.output_name);
+  if (!j.error.empty()) absl::StrAppend(&line, "\n    ", j.error);
+  return line;
+}
+
+}  // namespace carvemap

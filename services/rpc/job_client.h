@@ -1,0 +1,85 @@
+// A JobService client for the CLI (`carvemap run|submit|watch|status|list|cancel|fetch`):
+// plain structs in and out, gRPC behind the pimpl. Thread-safe, except that one Watch runs at
+// a time; CancelWatch may be called from any thread (e.g. a signal handling thread).
+#ifndef CARVEMAP_SERVICES_RPC_JOB_CLIENT_H_
+#define CARVEMAP_SERVICES_RPC_JOB_CLIENT_H_
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+namespace carvemap {
+
+struct JobInfo {
+  std::string job_id;
+  std::string state;  // "QUEUED", ..., "SUCCEEDED", "FAILED", "CANCELLED"
+  bool terminal = false;
+  std::string input_path;
+  std::string output_name;
+  std::string error;
+  double resolution_m = 0;
+  int64_t chunks_total = 0, chunks_done = 0, chunks_leased = 0, chunk_retries = 0;
+  int64_t created_unix_ms = 0, finished_unix_ms = 0;
+};
+
+struct WatchUpdate {
+  std::string state;
+  int64_t chunks_total = 0, chunks_done = 0, chunks_leased = 0, chunk_retries = 0;
+  int64_t rays_done = 0, rays_total = 0;
+  double rays_per_s = 0;
+  int active_workers = 0;
+  std::string stage;       // the running stage ("ingest", "carve", "merge")
+  double stage_elapsed_s = 0;
+};
+
+struct SubmitParams {
+  std::string input_path;  // relative to the coordinator's data root
+  std::string output_name;  // "" = the job id
+  double resolution_m = 0;  // 0 = default
+  std::string idempotency_key;
+};
+
+class JobClient {
+ public:
+  // Does not connect yet; calls fail UNAVAILABLE if nothing listens.
+  explicit JobClient(const std::string& address);
+  ~JobClient();
+  JobClient(const JobClient&) = delete;
+  JobClient& operator=(const JobClient&) = delete;
+
+  // Waits until the channel is connected.
+  absl::Status WaitForReady(double timeout_s);
+  absl::StatusOr<JobInfo> Submit(const SubmitParams& params);
+  absl::StatusOr<JobInfo> Get(const std::string& job_id);
+  // state_filter "" = all; newest first; follows pages up to `limit` jobs.
+  absl::StatusOr<std::vector<JobInfo>> List(const std::string& state_filter, int limit);
+  absl::StatusOr<JobInfo> Cancel(const std::string& job_id, const std::string& reason);
+  // Streams the job's events into `on_update` until it is terminal; returns the final job.
+  // CANCELLED if CancelWatch was called.
+  absl::StatusOr<JobInfo> Watch(const std::string& job_id, double min_interval_s,
+                                const std::function<void(const WatchUpdate&)>& on_update);
+  void CancelWatch();
+  // Downloads artifact `name` of the job to `dest_path` (through "<dest>.partial" and a
+  // rename), checking the SHA-256 the server sends.
+  absl::Status Fetch(const std::string& job_id, const std::string& name,
+                     const std::string& dest_path);
+
+ private:
+  class Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// "carve  12/40 chunks  1.2 M rays/s  ETA 0:14" for a progress line; `elapsed_s` is the time
+// since the watch began.
+std::string FormatProgress(const WatchUpdate& u);
+// One line per job for `list`/`status`.
+std::string FormatJob(const JobInfo& job);
+
+}  // namespace carvemap
+
+#endif  // CARVEMAP_SERVICES_RPC_JOB_CLIENT_H_

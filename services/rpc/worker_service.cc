@@ -1,0 +1,416 @@
+#include "services/rpc/worker_service.h"
+
+#include <grpcpp/grpcpp.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <optional>
+#include <set>
+#include <thread>
+#include <vector>
+
+#include <spdlog/spdlog.h>
+
+#include "absl/base/thread_annotations.h"
+#include "absl/strings/str_cat.h"
+#include "absl/synchronization/mutex.h"
+#include "absl/synchronization/notification.h"
+#include "absl/time/time.h"
+#include "coordinator/chunk_spill.h"
+#include "proto/carvemap/v1/carve.grpc.pb.h"
+#include "services/geometry/octree_keys.h"
+#include "services/grpc_server_common.h"
+#include "services/grpc_status.h"
+#include "services/rpc/file_hash.h"
+#include "worker/chunk_carver.h"
+
+namespace carvemap {
+namespace fs = std::filesystem;
+namespace pb = ::carvemap::v1;
+
+namespace {
+
+constexpr char kVersion[] = "0.1.0";
+constexpr double kRpcTimeoutS = 10.0;
+
+// A transient coordinator problem: retry, and count towards "gone for good".
+bool IsTransient(const absl::Status& s) {
+  return absl::IsUnavailable(s) || absl::IsDeadlineExceeded(s) || absl::IsAborted(s) ||
+         absl::IsResourceExhausted(s);
+}
+
+std::string HostName() {
+  char name[256] = {};
+  if (gethostname(name, sizeof(name) - 1) != 0) return "unknown";
+  return name;
+}
+
+}  // namespace
+
+absl::Status WorkerSpec::Validate() const {
+  if (coordinator_address.empty()) {
+    return absl::InvalidArgumentError("worker: the coordinator address is empty");
+  }
+  if (threads < 1) return absl::InvalidArgumentError("worker: threads must be >= 1");
+  if (!(coordinator_lost_s > 0)) {
+    return absl::InvalidArgumentError("worker: coordinator_lost_s must be > 0");
+  }
+  return absl::OkStatus();
+}
+
+class WorkerServer::Impl {
+ public:
+  explicit Impl(WorkerSpec spec) : spec_(std::move(spec)) {}
+  ~Impl() { Shutdown(); }
+
+  absl::Status Start();
+  void Shutdown();
+  absl::Status Wait() {
+    ended_.WaitForNotification();
+    absl::MutexLock lock(&mu_);
+    return end_status_;
+  }
+  int port() const { return port_; }
+
+ private:
+  // Registers if not registered yet. UNAVAILABLE once the coordinator has been unreachable for
+  // coordinator_lost_s; CANCELLED when stopping.
+  absl::StatusOr<std::string> EnsureRegistered();
+  void CarveLoop();
+  void HeartbeatLoop();
+  // Carves one lease; returns the status to report (OK → CompleteChunk).
+  absl::Status Carve(const pb::Lease& lease, pb::TileInfo& tile, pb::CarveStats& stats);
+  void Report(const std::string& worker_id, const pb::Lease& lease, const absl::Status& carved,
+              const pb::TileInfo& tile, const pb::CarveStats& stats);
+  // Records a transient failure; returns true when the coordinator counts as gone.
+  bool Unreachable();
+  void Reachable() { unreachable_since_ms_ = -1; }
+  void End(absl::Status status);
+  // Sleeps up to `s` seconds; returns false when stopping.
+  bool Sleep(double s) {
+    return !stop_.WaitForNotificationWithTimeout(absl::Seconds(s));
+  }
+  std::unique_ptr<grpc::ClientContext> Context(double timeout_s = kRpcTimeoutS) {
+    auto ctx = std::make_unique<grpc::ClientContext>();
+    ctx->set_deadline(std::chrono::system_clock::now() +
+                      std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
+    return ctx;
+  }
+
+  const WorkerSpec spec_;
+  std::unique_ptr<pb::CarveTaskService::Stub> stub_;
+  std::unique_ptr<grpc::Server> health_;
+  int port_ = 0;
+  absl::Notification stop_;
+  absl::Notification ended_;
+  std::vector<std::thread> threads_;
+  std::atomic<int64_t> unreachable_since_ms_{-1};
+  std::atomic<int64_t> rays_since_heartbeat_{0};
+  absl::Mutex shutdown_mu_;
+
+  absl::Mutex mu_;
+  std::string worker_id_ ABSL_GUARDED_BY(mu_);
+  double heartbeat_interval_s_ ABSL_GUARDED_BY(mu_) = 5.0;
+  std::set<std::string> active_ ABSL_GUARDED_BY(mu_);
+  std::set<std::string> revoked_ ABSL_GUARDED_BY(mu_);
+  absl::Status end_status_ ABSL_GUARDED_BY(mu_);
+  bool ended_set_ ABSL_GUARDED_BY(mu_) = false;
+};
+
+int64_t SteadyMs() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+absl::Status WorkerServer::Impl::Start() {
+  if (absl::Status s = spec_.Validate(); !s.ok()) return s;
+  stub_ = pb::CarveTaskService::NewStub(
+      grpc::CreateChannel(spec_.coordinator_address, grpc::InsecureChannelCredentials()));
+  if (!spec_.listen_address.empty()) {
+    EnableHealthAndReflection();
+    grpc::ServerBuilder builder;
+    builder.AddListeningPort(spec_.listen_address, grpc::InsecureServerCredentials(), &port_);
+    health_ = builder.BuildAndStart();
+    if (health_ == nullptr || port_ == 0) {
+      return absl::UnavailableError(
+          absl::StrCat("worker: cannot listen on ", spec_.listen_address));
+    }
+    SetServing(*health_, "", true);
+  }
+  threads_.emplace_back([this] { HeartbeatLoop(); });
+  for (int i = 0; i < spec_.threads; ++i) threads_.emplace_back([this] { CarveLoop(); });
+  spdlog::info("worker: started ({} thread(s)), coordinator {}, health port {}", spec_.threads,
+               spec_.coordinator_address, port_);
+  return absl::OkStatus();
+}
+
+void WorkerServer::Impl::End(absl::Status status) {
+  {
+    absl::MutexLock lock(&mu_);
+    if (ended_set_) return;
+    ended_set_ = true;
+    end_status_ = std::move(status);
+  }
+  if (!stop_.HasBeenNotified()) stop_.Notify();
+  ended_.Notify();
+}
+
+void WorkerServer::Impl::Shutdown() {
+  absl::MutexLock shutdown_lock(&shutdown_mu_);
+  End(absl::OkStatus());
+  for (std::thread& t : threads_) {
+    if (t.joinable()) t.join();
+  }
+  threads_.clear();
+  if (health_ != nullptr) {
+    health_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
+    health_.reset();
+  }
+}
+
+bool WorkerServer::Impl::Unreachable() {
+  const int64_t now = SteadyMs();
+  int64_t expected = -1;
+  unreachable_since_ms_.compare_exchange_strong(expected, now);
+  const int64_t since = unreachable_since_ms_.load();
+  if (since >= 0 && now - since > static_cast<int64_t>(spec_.coordinator_lost_s * 1000)) {
+    End(absl::UnavailableError(absl::StrCat("coordinator ", spec_.coordinator_address,
+                                            " unreachable for ", (now - since) / 1000, " s")));
+    return true;
+  }
+  return false;
+}
+
+absl::StatusOr<std::string> WorkerServer::Impl::EnsureRegistered() {
+  while (!stop_.HasBeenNotified()) {
+    {
+      absl::MutexLock lock(&mu_);
+      if (!worker_id_.empty()) return worker_id_;
+    }
+    pb::RegisterWorkerRequest req;
+    req.set_hostname(HostName());
+    req.set_threads(spec_.threads);
+    req.set_version(kVersion);
+    req.set_has_shared_storage(true);
+    pb::RegisterWorkerResponse resp;
+    auto ctx = Context();
+    absl::Status s = FromGrpcStatus(stub_->RegisterWorker(ctx.get(), req, &resp));
+    if (s.ok()) {
+      Reachable();
+      absl::MutexLock lock(&mu_);
+      // Another thread may have registered meanwhile; one id per process is enough.
+      if (worker_id_.empty()) {
+        worker_id_ = resp.worker_id();
+        heartbeat_interval_s_ = resp.heartbeat_interval_s() > 0 ? resp.heartbeat_interval_s() : 5;
+        active_.clear();
+        spdlog::info("worker: registered as {} (heartbeat every {} s)", worker_id_,
+                     heartbeat_interval_s_);
+      }
+      return worker_id_;
+    }
+    if (!IsTransient(s)) {
+      End(s);
+      return s;
+    }
+    if (Unreachable()) return absl::UnavailableError("coordinator gone");
+    Sleep(0.2);
+  }
+  return absl::CancelledError("stopping");
+}
+
+void WorkerServer::Impl::HeartbeatLoop() {
+  while (true) {
+    double interval;
+    std::string id;
+    pb::HeartbeatRequest req;
+    {
+      absl::MutexLock lock(&mu_);
+      interval = heartbeat_interval_s_;
+      id = worker_id_;
+      for (const std::string& lease : active_) req.add_active_lease_ids(lease);
+    }
+    if (!Sleep(interval)) return;
+    if (id.empty()) continue;
+    req.set_worker_id(id);
+    req.set_rays_carved(rays_since_heartbeat_.exchange(0));
+    pb::HeartbeatResponse resp;
+    auto ctx = Context();
+    absl::Status s = FromGrpcStatus(stub_->Heartbeat(ctx.get(), req, &resp));
+    if (absl::IsNotFound(s)) {
+      // The coordinator declared us lost (or restarted): register again under a new id.
+      spdlog::warn("worker {}: unknown to the coordinator; registering again", id);
+      absl::MutexLock lock(&mu_);
+      if (worker_id_ == id) worker_id_.clear();
+      continue;
+    }
+    if (!s.ok()) {
+      spdlog::warn("worker {}: heartbeat: {}", id, s.ToString());
+      if (IsTransient(s)) Unreachable();
+      continue;
+    }
+    Reachable();
+    absl::MutexLock lock(&mu_);
+    for (const std::string& lease : resp.revoked_lease_ids()) revoked_.insert(lease);
+  }
+}
+
+absl::Status WorkerServer::Impl::Carve(const pb::Lease& lease, pb::TileInfo& tile,
+                                       pb::CarveStats& stats) {
+  const ChunkKey chunk(lease.chunk().x(), lease.chunk().y(), lease.chunk().z());
+  std::string payload;
+  switch (lease.wedges().source_case()) {
+    case pb::WedgePayload::kInlineWedges:
+      payload = lease.wedges().inline_wedges();
+      break;
+    case pb::WedgePayload::kLocation: {
+      // The spill file carries its own checksums; ReadChunkSpillFile checks them (DATA_LOSS).
+      absl::StatusOr<ChunkSpillFile> file = ReadChunkSpillFile(lease.wedges().location().path());
+      if (!file.ok()) return file.status();
+      if (file->chunk != chunk) {
+        return absl::DataLossError(absl::StrCat("spill file ", lease.wedges().location().path(),
+                                                " holds another chunk"));
+      }
+      payload = std::move(file->payload);
+      break;
+    }
+    default:
+      return absl::InvalidArgumentError("lease without wedges");
+  }
+  absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(lease.params().resolution_m());
+  if (!grid.ok()) return grid.status();
+  CarveChunkRequest req;
+  req.job_id = lease.job_id();
+  req.chunk = chunk;
+  req.grid = *grid;
+  req.wedge_payload = payload;
+  req.tiles_dir = lease.params().tile_dir();
+  absl::StatusOr<CarveChunkResult> result = CarveChunkToTile(req);
+  if (!result.ok()) return result.status();
+  absl::StatusOr<std::string> sha = Sha256HexOfFile(result->tile_path);
+  if (!sha.ok()) return sha.status();
+  std::error_code ec;
+  tile.set_path(fs::path(result->tile_path).lexically_relative(req.tiles_dir).string());
+  tile.set_size_bytes(static_cast<int64_t>(result->tile_bytes));
+  tile.set_sha256_hex(*sha);
+  stats.set_rays(static_cast<int64_t>(result->wedges));
+  stats.set_leaves(static_cast<int64_t>(result->leaves));
+  stats.set_carve_s(result->elapsed_s);
+  return absl::OkStatus();
+}
+
+void WorkerServer::Impl::Report(const std::string& worker_id, const pb::Lease& lease,
+                                const absl::Status& carved, const pb::TileInfo& tile,
+                                const pb::CarveStats& stats) {
+  // A few retries: losing a finished tile to one dropped call would cost a re-carve.
+  for (int attempt = 0; attempt < 5; ++attempt) {
+    absl::Status s;
+    auto ctx = Context();
+    if (carved.ok()) {
+      pb::CompleteChunkRequest req;
+      req.set_worker_id(worker_id);
+      req.set_lease_id(lease.lease_id());
+      req.set_generation(lease.generation());
+      *req.mutable_tile() = tile;
+      *req.mutable_stats() = stats;
+      pb::CompleteChunkResponse resp;
+      s = FromGrpcStatus(stub_->CompleteChunk(ctx.get(), req, &resp));
+      if (s.ok()) {
+        spdlog::info("worker {}: chunk {} done ({} rays, {:.2f} s; {}/{} chunks)", worker_id,
+                     lease.lease_id(), stats.rays(), stats.carve_s(),
+                     resp.progress().chunks_done(), resp.progress().chunks_total());
+      }
+    } else {
+      pb::FailChunkRequest req;
+      req.set_worker_id(worker_id);
+      req.set_lease_id(lease.lease_id());
+      req.set_generation(lease.generation());
+      req.set_reason(std::string(carved.message()));
+      // Corrupt or invalid wedges never carve: fail the job at once instead of retrying.
+      req.set_retryable(!absl::IsDataLoss(carved) && !absl::IsInvalidArgument(carved));
+      pb::FailChunkResponse resp;
+      s = FromGrpcStatus(stub_->FailChunk(ctx.get(), req, &resp));
+    }
+    if (s.ok()) {
+      Reachable();
+      return;
+    }
+    if (!IsTransient(s)) {
+      spdlog::warn("worker {}: report of {} rejected: {}", worker_id, lease.lease_id(),
+                   s.ToString());
+      return;
+    }
+    if (Unreachable() || !Sleep(0.5 * (attempt + 1))) return;
+  }
+}
+
+void WorkerServer::Impl::CarveLoop() {
+  while (!stop_.HasBeenNotified()) {
+    absl::StatusOr<std::string> id = EnsureRegistered();
+    if (!id.ok()) return;
+    pb::LeaseChunkRequest req;
+    req.set_worker_id(*id);
+    req.set_wait_s(1.0);
+    pb::LeaseChunkResponse resp;
+    auto ctx = Context(kRpcTimeoutS + 2.0);
+    absl::Status s = FromGrpcStatus(stub_->LeaseChunk(ctx.get(), req, &resp));
+    if (absl::IsNotFound(s)) {
+      absl::MutexLock lock(&mu_);
+      if (worker_id_ == *id) worker_id_.clear();
+      continue;
+    }
+    if (!s.ok()) {
+      if (!IsTransient(s)) spdlog::warn("worker {}: lease: {}", *id, s.ToString());
+      if (Unreachable()) return;
+      Sleep(0.5);
+      continue;
+    }
+    Reachable();
+    if (!resp.has_lease()) {
+      Sleep(resp.retry_after_s() > 0 ? resp.retry_after_s() : 1.0);
+      continue;
+    }
+    const pb::Lease& lease = resp.lease();
+    {
+      absl::MutexLock lock(&mu_);
+      active_.insert(lease.lease_id());
+    }
+    pb::TileInfo tile;
+    pb::CarveStats stats;
+    absl::Status carved = Carve(lease, tile, stats);
+    if (!carved.ok()) {
+      spdlog::error("worker {}: chunk {}: {}", *id, lease.lease_id(), carved.ToString());
+    }
+    rays_since_heartbeat_ += stats.rays();
+    bool revoked;
+    {
+      absl::MutexLock lock(&mu_);
+      active_.erase(lease.lease_id());
+      revoked = revoked_.erase(lease.lease_id()) > 0;
+    }
+    if (revoked) {
+      spdlog::info("worker {}: lease {} was revoked; result dropped", *id, lease.lease_id());
+      continue;
+    }
+    Report(*id, lease, carved, tile, stats);
+  }
+}
+
+// ---- public shell
+
+WorkerServer::WorkerServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+WorkerServer::~WorkerServer() = default;
+
+absl::StatusOr<std::unique_ptr<WorkerServer>> WorkerServer::Start(WorkerSpec spec) {
+  auto impl = std::make_unique<Impl>(std::move(spec));
+  if (absl::Status s = impl->Start(); !s.ok()) return s;
+  return std::unique_ptr<WorkerServer>(new WorkerServer(std::move(impl)));
+}
+
+int WorkerServer::port() const { return impl_->port(); }
+void WorkerServer::Shutdown() { impl_->Shutdown(); }
+absl::Status WorkerServer::Wait() { return impl_->Wait(); }
+
+}  // namespace carvemap

@@ -1,0 +1,49 @@
+// A carve worker (DESIGN §5, §8): registers with the coordinator, heartbeats, and loops
+// LeaseChunk ➜ read the wedges ➜ CarveChunkToTile ➜ CompleteChunk (or FailChunk with the
+// reason). Serves gRPC health + reflection on its own port so orchestration can probe it.
+// Shape as the coordinator: Spec ➜ Start ➜ port() ➜ Wait/Shutdown; gRPC behind the pimpl.
+#ifndef CARVEMAP_SERVICES_RPC_WORKER_SERVICE_H_
+#define CARVEMAP_SERVICES_RPC_WORKER_SERVICE_H_
+
+#include <memory>
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+namespace carvemap {
+
+struct WorkerSpec {
+  std::string coordinator_address;          // "host:port" of the CarveTaskService
+  std::string listen_address = "127.0.0.1:0";  // health endpoint; "" = none
+  int threads = 1;                          // chunks carved in parallel
+  // Give up (Wait returns UNAVAILABLE) after the coordinator has been unreachable this long.
+  double coordinator_lost_s = 20.0;
+  absl::Status Validate() const;
+};
+
+// Thread-safe. Destroying it shuts it down.
+class WorkerServer {
+ public:
+  static absl::StatusOr<std::unique_ptr<WorkerServer>> Start(WorkerSpec spec);
+  ~WorkerServer();
+  WorkerServer(const WorkerServer&) = delete;
+  WorkerServer& operator=(const WorkerServer&) = delete;
+
+  [[nodiscard]] int port() const;  // 0 without a health endpoint
+  // Stops leasing; a carve in progress finishes (its lease is then completed). Idempotent.
+  void Shutdown();
+  // Blocks until Shutdown() or until the coordinator is gone for good; returns why it ended
+  // (OK after Shutdown).
+  absl::Status Wait();
+
+  class Impl;
+
+ private:
+  explicit WorkerServer(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace carvemap
+
+#endif  // CARVEMAP_SERVICES_RPC_WORKER_SERVICE_H_

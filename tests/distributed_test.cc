@@ -1,0 +1,181 @@
+// Cross-service test (STYLE habit 13): a real coordinator and a real worker on 127.0.0.1:0 in
+// this process, talked to over gRPC as a client would. The process-level behaviour (`carvemap
+// run`, a SIGKILLed worker, bad jobs) is tests/tools/distributed_test.sh.
+#include <grpcpp/grpcpp.h>
+
+#include <chrono>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "proto/carvemap/v1/carve.grpc.pb.h"
+#include "proto/carvemap/v1/jobs.grpc.pb.h"
+#include "services/rpc/coordinator_service.h"
+#include "services/rpc/job_client.h"
+#include "services/rpc/worker_service.h"
+#include "services/sim/simulator.h"
+
+namespace carvemap {
+namespace {
+namespace fs = std::filesystem;
+namespace pb = ::carvemap::v1;
+
+class DistributedTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    root_ = fs::path(::testing::TempDir()) /
+            ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    fs::remove_all(root_);
+    fs::create_directories(root_ / "data");
+    CoordinatorSpec spec;
+    spec.data_root = (root_ / "data").string();
+    spec.output_root = (root_ / "out").string();
+    spec.heartbeat_interval_s = 0.5;
+    spec.worker_timeout_s = 2;
+    spec.merge = FirstOutputsMerge();
+    auto server = CoordinatorServer::Start(spec);
+    ASSERT_TRUE(server.ok()) << server.status();
+    coordinator_ = *std::move(server);
+    address_ = "127.0.0.1:" + std::to_string(coordinator_->port());
+    channel_ = grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
+    jobs_ = pb::JobService::NewStub(channel_);
+    carve_ = pb::CarveTaskService::NewStub(channel_);
+  }
+
+  // A small scan: the `room` preset with thinned scanners and a short walk.
+  std::string SimulateScan() {
+    SimulateOptions options;
+    options.preset = "room";
+    options.output_dir = (root_ / "data" / "sim").string();
+    options.rig.rate_hz = 5;
+    options.rig.beam_step_deg = 2;
+    options.max_duration_s = 8;
+    auto summary = Simulate(options, {});
+    EXPECT_TRUE(summary.ok()) << summary.status();
+    return "sim/scan.h5";
+  }
+
+  fs::path root_;
+  std::unique_ptr<CoordinatorServer> coordinator_;
+  std::string address_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<pb::JobService::Stub> jobs_;
+  std::unique_ptr<pb::CarveTaskService::Stub> carve_;
+};
+
+TEST_F(DistributedTest, SubmitValidates) {
+  auto submit = [&](const std::string& path, double resolution) {
+    grpc::ClientContext ctx;
+    pb::SubmitJobRequest req;
+    req.set_input_path(path);
+    req.mutable_params()->set_resolution_m(resolution);
+    pb::SubmitJobResponse resp;
+    return jobs_->SubmitJob(&ctx, req, &resp).error_code();
+  };
+  EXPECT_EQ(submit("/etc/passwd", 0), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(submit("../x.h5", 0), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(submit("missing.h5", 0), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(submit("missing.h5", 0.1), grpc::StatusCode::INVALID_ARGUMENT);
+
+  grpc::ClientContext ctx;
+  pb::GetJobRequest get;
+  get.set_job_id("j-nope");
+  pb::Job job;
+  EXPECT_EQ(jobs_->GetJob(&ctx, get, &job).error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
+TEST_F(DistributedTest, CarveTaskErrors) {
+  {
+    grpc::ClientContext ctx;
+    pb::HeartbeatRequest req;
+    req.set_worker_id("w-unknown");
+    pb::HeartbeatResponse resp;
+    EXPECT_EQ(carve_->Heartbeat(&ctx, req, &resp).error_code(), grpc::StatusCode::NOT_FOUND);
+  }
+  std::string worker_id;
+  {
+    grpc::ClientContext ctx;
+    pb::RegisterWorkerRequest req;
+    pb::RegisterWorkerResponse resp;
+    ASSERT_TRUE(carve_->RegisterWorker(&ctx, req, &resp).ok());
+    worker_id = resp.worker_id();
+    EXPECT_FALSE(worker_id.empty());
+    EXPECT_DOUBLE_EQ(resp.heartbeat_interval_s(), 0.5);
+  }
+  {
+    grpc::ClientContext ctx;
+    pb::LeaseChunkRequest req;
+    req.set_worker_id(worker_id);
+    pb::LeaseChunkResponse resp;
+    ASSERT_TRUE(carve_->LeaseChunk(&ctx, req, &resp).ok());
+    EXPECT_FALSE(resp.has_lease());
+    EXPECT_GT(resp.retry_after_s(), 0);
+  }
+  {
+    grpc::ClientContext ctx;
+    pb::CompleteChunkRequest req;
+    req.set_worker_id(worker_id);
+    req.set_lease_id("not a lease id");
+    pb::CompleteChunkResponse resp;
+    EXPECT_EQ(carve_->CompleteChunk(&ctx, req, &resp).error_code(),
+              grpc::StatusCode::INVALID_ARGUMENT);
+  }
+  {
+    grpc::ClientContext ctx;
+    pb::CompleteChunkRequest req;
+    req.set_worker_id(worker_id);
+    req.set_lease_id("j-nope/0,0,0/1");
+    req.set_generation(1);
+    pb::CompleteChunkResponse resp;
+    EXPECT_EQ(carve_->CompleteChunk(&ctx, req, &resp).error_code(), grpc::StatusCode::NOT_FOUND);
+  }
+}
+
+TEST_F(DistributedTest, JobRunsToSucceededWithAWorker) {
+  const std::string scan = SimulateScan();
+  WorkerSpec ws;
+  ws.coordinator_address = address_;
+  auto worker = WorkerServer::Start(ws);
+  ASSERT_TRUE(worker.ok()) << worker.status();
+
+  JobClient client(address_);
+  SubmitParams params;
+  params.input_path = scan;
+  params.output_name = "room";
+  params.idempotency_key = "k1";
+  auto job = client.Submit(params);
+  ASSERT_TRUE(job.ok()) << job.status();
+  // The same key and request: the same job, not a new one.
+  auto again = client.Submit(params);
+  ASSERT_TRUE(again.ok()) << again.status();
+  EXPECT_EQ(again->job_id, job->job_id);
+
+  int updates = 0;
+  auto done = client.Watch(job->job_id, 0.2, [&](const WatchUpdate&) { ++updates; });
+  ASSERT_TRUE(done.ok()) << done.status();
+  EXPECT_EQ(done->state, "SUCCEEDED") << done->error;
+  EXPECT_GT(done->chunks_total, 0);
+  EXPECT_EQ(done->chunks_done, done->chunks_total);
+  EXPECT_GE(updates, 2);
+  const fs::path out = root_ / "out" / "room";
+  EXPECT_TRUE(fs::exists(out / "job.json"));
+  EXPECT_TRUE(fs::exists(out / "octree.bt"));
+  int tiles = 0;
+  for (const auto& e : fs::directory_iterator(out / "tiles")) tiles += e.path().extension() == ".h5";
+  EXPECT_EQ(tiles, done->chunks_total);
+
+  // Fetch checks the server's SHA-256.
+  const fs::path fetched = root_ / "fetched.json";
+  ASSERT_TRUE(client.Fetch(job->job_id, "job.json", fetched.string()).ok());
+  EXPECT_EQ(fs::file_size(fetched), fs::file_size(out / "job.json"));
+  // A finished job cannot be cancelled.
+  EXPECT_TRUE(absl::IsFailedPrecondition(client.Cancel(job->job_id, "").status()));
+  (*worker)->Shutdown();
+}
+
+}  // namespace
+}  // namespace carvemap
