@@ -9,7 +9,7 @@ PACKAGES=(
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libhdf5-dev hdf5-tools libspdlog-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  libcli11-dev nlohmann-json3-dev libpng-dev libembree-dev libtbb-dev
+  libcli11-dev nlohmann-json3-dev libpng-dev libembree-dev libtbb-dev libssl-dev
   python3 python3-h5py python3-numpy
 )
 
