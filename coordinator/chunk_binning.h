@@ -11,15 +11,6 @@
 
 namespace carvemap {
 
-// Strict weak order on chunk keys: x, then y, then z. Spill listings are sorted by it.
-struct ChunkKeyLess {
-  bool operator()(const ChunkKey& a, const ChunkKey& b) const {
-    if (a.x() != b.x()) return a.x() < b.x();
-    if (a.y() != b.y()) return a.y() < b.y();
-    return a.z() < b.z();
-  }
-};
-
 // Coordinates beyond this are rejected (a wedge 1000 km away is a broken pose, not a building).
 inline constexpr double kMaxWorldCoordinateM = 1e6;
 

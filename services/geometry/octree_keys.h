@@ -25,6 +25,16 @@ inline constexpr int kMaxChunkDepth = 10;  // 1.95 mm leaves; Morton codes fit 3
 using ChunkKey = Eigen::Vector3i;  // floor(x / 2 m)
 using LeafKey = Eigen::Vector3i;   // floor(x / resolution)
 
+// Strict weak order on chunk keys: x, then y, then z. Spill listings, tile sets and the lease
+// table all list chunks in this order.
+struct ChunkKeyLess {
+  bool operator()(const ChunkKey& a, const ChunkKey& b) const {
+    if (a.x() != b.x()) return a.x() < b.x();
+    if (a.y() != b.y()) return a.y() < b.y();
+    return a.z() < b.z();
+  }
+};
+
 struct OctreeGrid {
   int chunk_depth = 5;  // k
 

@@ -20,15 +20,6 @@
 
 namespace carvemap {
 
-// Lexicographic (x, y, z) order of chunk keys, for maps and sorted lists.
-struct ChunkKeyLess {
-  bool operator()(const ChunkKey& a, const ChunkKey& b) const {
-    if (a.x() != b.x()) return a.x() < b.x();
-    if (a.y() != b.y()) return a.y() < b.y();
-    return a.z() < b.z();
-  }
-};
-
 // Parses "c_<x>_<y>_<z>.h5" (TileFileName); false for any other name (".partial" included).
 [[nodiscard]] bool ParseTileFileName(const std::string& name, ChunkKey& chunk);
 
