@@ -64,8 +64,9 @@ absl::Status RunDemo(const DemoFlags& flags) {
               (*reader)->path().size());
 
   std::printf("carvemap demo: carving with a local coordinator and %d workers\n", flags.workers);
-  const std::vector<std::string> run_args = {
+  std::vector<std::string> run_args = {
       "run", sim->scan_path, "-o", flags.output_dir, "--workers", std::to_string(flags.workers)};
+  if (flags.quiet) run_args.push_back("--quiet");
   absl::StatusOr<pid_t> child = SpawnSelf(run_args, /*log_path=*/"");
   if (!child.ok()) return child.status();
   int wait_status = 0;
