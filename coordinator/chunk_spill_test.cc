@@ -1,6 +1,5 @@
 #include "coordinator/chunk_spill.h"
 
-#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -20,9 +19,10 @@ namespace {
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
+// Under ::testing::TempDir(), which is private to this test process and removed at exit
+// (tests/test_main.cc).
 fs::path TempDir(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() /
-                       ("chunk_spill_test_" + std::to_string(::getpid()) + "_" + name);
+  const fs::path dir = fs::path(::testing::TempDir()) / name;
   fs::remove_all(dir);
   return dir;
 }

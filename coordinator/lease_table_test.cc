@@ -3,7 +3,6 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <unistd.h>
 
 #include <filesystem>
 #include <memory>
@@ -12,17 +11,6 @@
 
 namespace carvemap {
 namespace {
-
-// Removes this process's scratch directory when the test binary ends.
-class ScratchCleanup : public ::testing::Environment {
- public:
-  void TearDown() override {
-    std::error_code ignored;
-    std::filesystem::remove_all(
-        std::filesystem::temp_directory_path() / absl::StrCat("lease_table_test_", getpid()), ignored);
-  }
-};
-const auto* const kScratchCleanup = ::testing::AddGlobalTestEnvironment(new ScratchCleanup);
 
 using ::testing::ElementsAre;
 using ::testing::HasSubstr;
@@ -40,8 +28,8 @@ class LeaseTableTest : public ::testing::Test {
  protected:
   void SetUp() override {
     const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    std::filesystem::path dir = std::filesystem::temp_directory_path() /
-                                absl::StrCat("lease_table_test_", getpid()) / info->name();
+    // TempDir() is private to this test process (tests/test_main.cc) and removed at exit.
+    std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / info->name();
     std::filesystem::remove_all(dir);
     std::filesystem::create_directories(dir);
     path_ = (dir / "jobs.db").string();

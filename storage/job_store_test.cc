@@ -3,7 +3,6 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -14,24 +13,13 @@
 namespace carvemap {
 namespace {
 
-// Removes this process's scratch directory when the test binary ends.
-class ScratchCleanup : public ::testing::Environment {
- public:
-  void TearDown() override {
-    std::error_code ignored;
-    std::filesystem::remove_all(
-        std::filesystem::temp_directory_path() / absl::StrCat("job_store_test_", getpid()), ignored);
-  }
-};
-const auto* const kScratchCleanup = ::testing::AddGlobalTestEnvironment(new ScratchCleanup);
-
 using ::testing::HasSubstr;
 
 // A fresh directory per test under the test's temp dir.
 std::string TempPath(const std::string& name) {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  std::filesystem::path dir = std::filesystem::temp_directory_path() /
-                              absl::StrCat("job_store_test_", getpid()) /
+  // TempDir() is private to this test process (tests/test_main.cc) and removed at exit.
+  std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) /
                               absl::StrCat(info->test_suite_name(), ".", info->name());
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
