@@ -22,7 +22,6 @@
 // off (see the parameters below).
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -31,7 +30,6 @@
 #include <map>
 #include <random>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -43,7 +41,7 @@
 #include "services/geometry/octree_keys.h"
 #include "services/sim/simulator.h"
 #include "storage/tile_store.h"
-#include "worker/chunk_carver.h"
+#include "worker/spilled_chunk_carver.h"
 
 namespace carvemap {
 namespace {
@@ -83,33 +81,15 @@ absl::StatusOr<PipelineRun> RunPipeline(const std::string& scan, const std::stri
   run.ingest_s = SecondsSince(t0);
 
   t0 = Clock::now();
-  const std::vector<SpilledChunk>& chunks = run.ingest.chunks;
-  std::vector<absl::StatusOr<CarveChunkResult>> results(chunks.size(),
-                                                        absl::UnknownError("not carved"));
-  std::atomic<size_t> next{0};
-  auto work_fn = [&] {
-    for (size_t i; (i = next.fetch_add(1)) < chunks.size();) {
-      absl::StatusOr<ChunkSpillFile> f = ReadChunkSpillFile(chunks[i].path);
-      if (!f.ok()) {
-        results[i] = f.status();
-        continue;
-      }
-      CarveChunkRequest req;
-      req.job_id = "carve_accuracy";
-      req.chunk = chunks[i].chunk;
-      req.grid = grid;
-      req.wedge_payload = f->payload;
-      req.tiles_dir = work + "/tiles";
-      results[i] = CarveChunkToTile(req);
-    }
-  };
-  std::vector<std::thread> pool;
-  for (int t = 0; t < threads; ++t) pool.emplace_back(work_fn);
-  for (std::thread& t : pool) t.join();
-  for (const auto& r : results) {
-    if (!r.ok()) return r.status();
-    run.tile_paths.push_back(r->tile_path);
-  }
+  SpilledChunkCarveOptions options;
+  options.grid = grid;
+  options.job_id = "carve_accuracy";
+  options.tiles_dir = work + "/tiles";
+  options.threads = threads;
+  fs::create_directories(options.tiles_dir);
+  absl::StatusOr<SpilledChunkCarveTotals> carved = CarveSpilledChunks(run.ingest.chunks, options);
+  if (!carved.ok()) return carved.status();
+  run.tile_paths = std::move(carved->tile_paths);
   run.carve_s = SecondsSince(t0);
   fs::remove_all(work + "/spill");  // hundreds of MB; the tiles are what is checked
   return run;

@@ -8,13 +8,10 @@
 // run's OUT/tiles/ was removed at the start). (Each tile is itself written
 // atomically, so no file is ever half-written either way.)
 #include <algorithm>
-#include <atomic>
 #include <chrono>
-#include <condition_variable>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <system_error>
 #include <thread>
@@ -28,7 +25,7 @@
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
 #include "services/geometry/octree_keys.h"
-#include "worker/chunk_carver.h"
+#include "worker/spilled_chunk_carver.h"
 
 namespace carvemap {
 namespace {
@@ -50,88 +47,29 @@ double SecondsSince(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-struct CarveTotals {
-  uint64_t tiles = 0, tile_bytes = 0, leaves = 0, leaf_updates = 0;
-};
-
-// Carves `chunks` with `threads` workers pulling from a shared index (a work queue over the
-// list). Biggest chunks go first so that one large chunk does not finish alone at the end;
-// tile names and bytes do not depend on the order or the thread count.
-absl::StatusOr<CarveTotals> CarveAll(const std::vector<SpilledChunk>& chunks,
-                                     const OctreeGrid& grid, const std::string& job_id,
-                                     const std::string& tiles_dir, int threads,
-                                     uint64_t total_rays, ProgressLine& line) {
-  std::vector<size_t> order(chunks.size());
-  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return chunks[a].wedge_count > chunks[b].wedge_count;
-  });
-  uint64_t total_pairs = 0;
-  for (const SpilledChunk& c : chunks) total_pairs += c.wedge_count;
-
-  std::atomic<size_t> next{0};
-  std::atomic<size_t> done{0};
-  std::atomic<uint64_t> pairs_done{0};
-  std::atomic<bool> failed{false};
-  std::mutex mu;
-  std::condition_variable cv;
-  absl::Status first_error;  // guarded by mu
-  CarveTotals totals;        // guarded by mu
-
-  auto work = [&] {
-    while (!failed.load()) {
-      const size_t k = next.fetch_add(1);
-      if (k >= order.size()) break;
-      const SpilledChunk& c = chunks[order[k]];
-      absl::StatusOr<ChunkSpillFile> file = ReadChunkSpillFile(c.path);
-      absl::StatusOr<CarveChunkResult> r = absl::UnknownError("not carved");
-      if (!file.ok()) {
-        r = file.status();
-      } else {
-        CarveChunkRequest req;
-        req.job_id = job_id;
-        req.chunk = c.chunk;
-        req.grid = grid;
-        req.wedge_payload = file->payload;
-        req.tiles_dir = tiles_dir;
-        r = CarveChunkToTile(req);
-      }
-      std::lock_guard<std::mutex> lock(mu);
-      if (!r.ok()) {
-        if (first_error.ok()) first_error = r.status();
-        failed.store(true);
-      } else {
-        ++totals.tiles;
-        totals.tile_bytes += r->tile_bytes;
-        totals.leaves += r->leaves;
-        totals.leaf_updates += r->leaf_updates;
-      }
-      pairs_done.fetch_add(c.wedge_count);
-      done.fetch_add(1);
-      cv.notify_all();
-    }
-  };
+// Carves every chunk with a progress line; tile names and bytes do not depend on the order or
+// the thread count.
+absl::StatusOr<SpilledChunkCarveTotals> CarveAll(const std::vector<SpilledChunk>& chunks,
+                                                 const OctreeGrid& grid, const std::string& job_id,
+                                                 const std::string& tiles_dir, int threads,
+                                                 uint64_t total_rays, ProgressLine& line) {
   const Clock::time_point t0 = Clock::now();
-  std::vector<std::thread> pool;
-  const int n = std::max(1, std::min<int>(threads, static_cast<int>(chunks.size())));
-  for (int i = 0; i < n; ++i) pool.emplace_back(work);
-  {
-    std::unique_lock<std::mutex> lock(mu);
-    while (done.load() < chunks.size() && !failed.load()) {
-      cv.wait_for(lock, std::chrono::milliseconds(250));
-      // Rays carved so far, estimated from the wedge-chunk pairs done (a chunk's cost is
-      // roughly its number of wedges).
-      const double frac = total_pairs ? double(pairs_done.load()) / total_pairs : 1.0;
-      const double el = SecondsSince(t0);
-      const double rays_per_s = el > 0 ? frac * total_rays / el : 0.0;
-      const double eta = frac > 0 ? el * (1 - frac) / frac : 0.0;
-      line.Update("carve: %zu/%zu chunks, %.0f rays/s, ETA %.0f s", done.load(), chunks.size(),
-                  rays_per_s, eta);
-    }
-  }
-  for (std::thread& t : pool) t.join();
+  SpilledChunkCarveOptions options;
+  options.grid = grid;
+  options.job_id = job_id;
+  options.tiles_dir = tiles_dir;
+  options.threads = threads;
+  absl::StatusOr<SpilledChunkCarveTotals> totals =
+      CarveSpilledChunks(chunks, options, [&](const SpilledChunkCarveProgress& p) {
+        // Rays carved so far, estimated from the wedge-chunk pairs done.
+        const double frac = p.pairs_total ? double(p.pairs_done) / p.pairs_total : 1.0;
+        const double el = SecondsSince(t0);
+        const double rays_per_s = el > 0 ? frac * total_rays / el : 0.0;
+        const double eta = frac > 0 ? el * (1 - frac) / frac : 0.0;
+        line.Update("carve: %zu/%zu chunks, %.0f rays/s, ETA %.0f s", p.chunks_done,
+                    p.chunks_total, rays_per_s, eta);
+      });
   line.Finish();
-  if (!first_error.ok()) return first_error;
   return totals;
 }
 
@@ -177,7 +115,7 @@ absl::Status RunCarve(const CarveFlags& flags) {
 
   const Clock::time_point t1 = Clock::now();
   const std::string job_id = fs::path(flags.scan_path).stem().string();
-  absl::StatusOr<CarveTotals> carved = CarveAll(ingest->chunks, *grid, job_id, partial_dir.string(),
+  absl::StatusOr<SpilledChunkCarveTotals> carved = CarveAll(ingest->chunks, *grid, job_id, partial_dir.string(),
                                                 flags.threads, ingest->rays, line);
   if (!carved.ok()) {
     fs::remove_all(partial_dir, ec);
@@ -198,7 +136,7 @@ absl::Status RunCarve(const CarveFlags& flags) {
   const double total_s = SecondsSince(t0);
 
   const IngestResult& r = *ingest;
-  const CarveTotals& t = *carved;
+  const SpilledChunkCarveTotals& t = *carved;
   auto ull = [](uint64_t v) { return static_cast<unsigned long long>(v); };
   std::printf("scan %s: %llu frames, %llu rays, %llu returns%s\n", flags.scan_path.c_str(),
               ull(r.frames), ull(r.rays), ull(r.returns),
@@ -209,7 +147,7 @@ absl::Status RunCarve(const CarveFlags& flags) {
               ull(r.wedge_chunk_pairs), spill_bytes * 1e-6,
               r.rays ? double(spill_bytes) / r.rays : 0.0);
   std::printf("tiles: %llu in %s, %llu leaves, %.1f MB (%.1f B/ray), %llu leaf updates\n",
-              ull(t.tiles), tiles_dir.string().c_str(), ull(t.leaves), t.tile_bytes * 1e-6,
+              ull(t.tile_paths.size()), tiles_dir.string().c_str(), ull(t.leaves), t.tile_bytes * 1e-6,
               r.rays ? double(t.tile_bytes) / r.rays : 0.0, ull(t.leaf_updates));
   std::printf("resolution %.4f m, %d thread%s\n", grid->resolution_m(), flags.threads,
               flags.threads == 1 ? "" : "s");
