@@ -69,48 +69,29 @@ absl::StatusOr<IngestResult> IngestScan(const IngestOptions& options,
     }
     return spill.Add(wedge);
   };
-  absl::StatusOr<WedgeBuilder> builder =
-      WedgeBuilder::Create(scan.sensors(), options.wedges, std::move(sink));
-  if (!builder.ok()) return NameFile(scan.file(), builder.status());
-
-  // The loop of BuildWedges, inlined so that progress can count frames.
   IngestProgress p;
   for (int s = 0; s < static_cast<int>(scan.sensors().size()); ++s) {
     p.frames_total += scan.frame_count(s);
   }
-  const std::vector<TimedPose>& path = scan.timed_path();
-  std::span<const PathCovariance> cov;
-  if (scan.path_covariance().has_value()) cov = *scan.path_covariance();
-  std::unique_ptr<ScanReader::FrameStream> stream = scan.StreamFrames();
-  ScanFrame frame;
   double last_report_s = 0;
-  while (true) {
-    absl::StatusOr<bool> more = stream->Next(frame);
-    if (!more.ok()) return NameFile(scan.file(), more.status());
-    if (!*more) break;
-    absl::StatusOr<FrameContext> ctx = FrameContextAt(path, cov, frame.t, options.wedges.noise);
-    if (!ctx.ok()) {
-      return absl::InvalidArgumentError(absl::StrCat("scan_ingest ", scan.file(), ": frame at t=",
-                                                     frame.t, ": ", ctx.status().message()));
-    }
-    if (auto s = builder->AddFrame(frame, *ctx); !s.ok()) return NameFile(scan.file(), s);
-    ++p.frames_done;
-    if (progress) {
-      const double now_s = SecondsSince(t0);
-      if (now_s - last_report_s >= kProgressPeriodS) {
-        last_report_s = now_s;
-        p.rays = builder->stats().rays;
-        p.wedges = builder->stats().wedges + builder->stats().single_ray_wedges;
-        p.elapsed_s = now_s;
-        progress(p);
-      }
-    }
-  }
-  if (auto s = builder->Finish(); !s.ok()) return NameFile(scan.file(), s);
+  auto after_frame = [&](const WedgeBuilderStats& st) {
+    if (!progress) return;
+    const double now_s = SecondsSince(t0);
+    if (now_s - last_report_s < kProgressPeriodS) return;
+    last_report_s = now_s;
+    p.frames_done = st.frames;
+    p.rays = st.rays;
+    p.wedges = st.wedges + st.single_ray_wedges;
+    p.elapsed_s = now_s;
+    progress(p);
+  };
+  absl::StatusOr<WedgeBuilderStats> built =
+      BuildWedges(scan, options.wedges, std::move(sink), after_frame);
+  if (!built.ok()) return NameFile(scan.file(), built.status());
   absl::StatusOr<std::vector<SpilledChunk>> chunks = spill.Finish();
   if (!chunks.ok()) return NameFile(scan.file(), chunks.status());
 
-  const WedgeBuilderStats& st = builder->stats();
+  const WedgeBuilderStats& st = *built;
   result.chunks = *std::move(chunks);
   result.frames = st.frames;
   result.rays = st.rays;
@@ -118,9 +99,10 @@ absl::StatusOr<IngestResult> IngestScan(const IngestOptions& options,
   result.wedges = st.wedges + st.single_ray_wedges;
   result.single_ray_wedges = st.single_ray_wedges;
   result.wedge_chunk_pairs = spill.records_written();
-  result.default_covariance = cov.empty();
+  result.default_covariance = st.default_covariance;
   result.elapsed_s = SecondsSince(t0);
   if (progress) {
+    p.frames_done = st.frames;
     p.rays = st.rays;
     p.wedges = result.wedges;
     p.elapsed_s = result.elapsed_s;

@@ -225,9 +225,9 @@ absl::Status WedgeBuilder::Finish() {
   return absl::OkStatus();
 }
 
-absl::StatusOr<WedgeBuilderStats> BuildWedges(ScanReader& reader,
-                                              const WedgeBuilderOptions& options,
-                                              WedgeSink sink) {
+absl::StatusOr<WedgeBuilderStats> BuildWedges(
+    ScanReader& reader, const WedgeBuilderOptions& options, WedgeSink sink,
+    const std::function<void(const WedgeBuilderStats&)>& after_frame) {
   absl::StatusOr<WedgeBuilder> builder =
       WedgeBuilder::Create(reader.sensors(), options, std::move(sink));
   if (!builder.ok()) return builder.status();
@@ -246,6 +246,7 @@ absl::StatusOr<WedgeBuilderStats> BuildWedges(ScanReader& reader,
           absl::StrCat(reader.file(), ": frame at t=", frame.t, ": ", ctx.status().message()));
     }
     if (auto st = builder->AddFrame(frame, *ctx); !st.ok()) return st;
+    if (after_frame) after_frame(builder->stats());
   }
   if (auto st = builder->Finish(); !st.ok()) return st;
   WedgeBuilderStats stats = builder->stats();

@@ -134,9 +134,10 @@ class WedgeBuilder {
 
 // Streams every frame of `reader` (in time order) through a WedgeBuilder, computing each
 // frame's context from the reader's path and /path_cov (stats.default_covariance says when the
-// option defaults were used instead). REQUIRES: HDF5 calls serialized (see scan_reader.h).
-absl::StatusOr<WedgeBuilderStats> BuildWedges(ScanReader& reader,
-                                              const WedgeBuilderOptions& options,
-                                              WedgeSink sink);
+// option defaults were used instead). `after_frame`, if set, sees the running stats after every
+// frame (for progress). REQUIRES: HDF5 calls serialized (see scan_reader.h).
+absl::StatusOr<WedgeBuilderStats> BuildWedges(
+    ScanReader& reader, const WedgeBuilderOptions& options, WedgeSink sink,
+    const std::function<void(const WedgeBuilderStats&)>& after_frame = {});
 
 }  // namespace carvemap
