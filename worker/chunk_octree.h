@@ -11,6 +11,8 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -38,13 +40,19 @@ class ChunkOctree {
   ChunkOctree(ChunkOctree&&) = default;
   ChunkOctree& operator=(ChunkOctree&&) = default;
 
-  // Carves one wedge (eq 4.8): every finest leaf of this chunk whose box the wedge hull
-  // (MakeWedgeHull, kWedgeHullSigmas) touches receives, from each ray of the wedge, its carve
-  // map value at the leaf centre, LeafStats::Add(p, w) — skipping w < kMinRayWeight. A wedge
-  // that misses the chunk changes nothing. Rays shorter than 1 µm carve nothing.
+  // Carves wedges (eq 4.8): a finest leaf L of this chunk is touched by a wedge when the wedge
+  // hull (MakeWedgeHull, kWedgeHullSigmas) touches L's box. S(L), "the list of intersecting scan
+  // rays", is the SET of rays of the wedges that touch L: a ray shared by several such wedges
+  // (neighbouring wedges share edges: each ray of a line or grid sensor belongs to up to 4)
+  // votes once, with its carve map value at the leaf centre, LeafStats::Add(p, w), skipping
+  // w < kMinRayWeight. Rays are the same when their RayModels are bit-identical, as copies of
+  // one ray in several wedge records are. The set is exact within one call (the worker passes a
+  // chunk's whole payload); a ray given again in a later call votes again. A wedge that misses
+  // the chunk changes nothing; rays shorter than 1 µm carve nothing.
   // Errors (nothing changed): InvalidArgument for num_rays outside [1, 4] or a non-finite
-  // mean/covariance; FailedPrecondition after Simplify().
-  absl::Status CarveWedge(const Wedge& wedge);
+  // mean/covariance (naming the wedge); FailedPrecondition after Simplify().
+  absl::Status CarveWedges(std::span<const Wedge> wedges);
+  absl::Status CarveWedge(const Wedge& wedge) { return CarveWedges({&wedge, 1}); }
 
   // §4.3.2, bottom-up: 8 sibling leaves merge into their parent (LeafStats::Merge, exact sums)
   // when all 8 are observed leaves with the same label (interior iff p > 0.5). A node with an
@@ -68,6 +76,8 @@ class ChunkOctree {
   [[nodiscard]] bool simplified() const { return simplified_; }
   [[nodiscard]] uint64_t num_wedges() const { return num_wedges_; }  // carved, incl. misses
   [[nodiscard]] uint64_t num_leaf_updates() const { return num_leaf_updates_; }  // Add() calls
+  // (leaf, wedge) pairs the wedge hulls touched: leaf updates / this ≈ distinct rays per touch.
+  [[nodiscard]] uint64_t num_leaf_touches() const { return num_leaf_touches_; }
 
  private:
   using Level = absl::flat_hash_map<uint64_t, LeafStats>;  // Morton code at that depth → stats
@@ -80,6 +90,7 @@ class ChunkOctree {
   bool simplified_ = false;
   uint64_t num_wedges_ = 0;
   uint64_t num_leaf_updates_ = 0;
+  uint64_t num_leaf_touches_ = 0;
 };
 
 }  // namespace carvemap

@@ -58,7 +58,7 @@ struct WallScan {
 
 ChunkOctree Carve(const OctreeGrid& grid, const std::vector<Wedge>& wedges) {
   ChunkOctree tree(grid, ChunkKey(0, 0, 0));
-  for (const Wedge& w : wedges) EXPECT_TRUE(tree.CarveWedge(w).ok());
+  EXPECT_TRUE(tree.CarveWedges(wedges).ok());
   return tree;
 }
 
@@ -283,6 +283,57 @@ TEST(ChunkOctreeTest, LeafValuesAreEq48AtTheLeafCentre) {
     EXPECT_NEAR(l.stats.sum_w, expected.sum_w, 1e-12);
   }
   EXPECT_EQ(tree.num_wedges(), 1u);
+}
+
+// eq 4.8: S(L) is the set of rays of the wedges touching L. Neighbouring wedges share rays
+// (each inner ray of the grid belongs to 4 wedges); in one CarveWedges call a shared ray votes
+// once per leaf. Checked against brute force over every leaf of the chunk.
+TEST(ChunkOctreeTest, EachRayVotesOncePerLeafWhateverHowManyOfItsWedgesTouchIt) {
+  const OctreeGrid grid = Grid(5);
+  WallScan scan;
+  scan.n = 7;  // 6×6 wedges over 49 rays
+  const std::vector<Wedge> wedges = scan.Wedges();
+  ChunkOctree tree(grid, ChunkKey(0, 0, 0));
+  ASSERT_TRUE(tree.CarveWedges(wedges).ok());
+  std::vector<WedgeHull> hulls;
+  for (const Wedge& w : wedges) hulls.push_back(MakeWedgeHull(w, kWedgeHullSigmas));
+
+  uint64_t leaves_checked = 0, shared_ray_leaves = 0, expected_updates = 0;
+  const int n = grid.leaves_per_side();
+  for (int x = 0; x < n; ++x)
+    for (int y = 0; y < n; ++y)
+      for (int z = 0; z < n; ++z) {
+        const Eigen::AlignedBox3d box = LeafBox(grid, LeafKey(x, y, z));
+        std::map<std::tuple<int, int>, RayModel> rays;  // (i, j) of the grid → ray
+        int touching_wedges = 0;
+        for (size_t w = 0; w < wedges.size(); ++w) {
+          if (!HullIntersectsBox(hulls[w], box)) continue;
+          ++touching_wedges;
+          const int i = int(w) / (scan.n - 1), j = int(w) % (scan.n - 1);
+          for (auto [di, dj] : {std::pair{0, 0}, {1, 0}, {1, 1}, {0, 1}}) {
+            rays.emplace(std::tuple{i + di, j + dj}, scan.Ray(i + di, j + dj));
+          }
+        }
+        LeafStats expected;
+        for (const auto& [ij, ray] : rays) {
+          const CarveSample s = EvaluateCarveMap(ray, box.center());
+          if (s.w >= kMinRayWeight) expected.Add(s.p, s.w);
+        }
+        expected_updates += expected.count;
+        int depth = -1;
+        const LeafStats got = tree.StatsAt(box.center(), &depth);
+        ASSERT_EQ(got.count, expected.count) << x << " " << y << " " << z;
+        if (expected.count == 0) continue;
+        ++leaves_checked;
+        if (touching_wedges > 1 && rays.size() < 4u * touching_wedges) ++shared_ray_leaves;
+        EXPECT_NEAR(got.sum_w, expected.sum_w, 1e-12);
+        EXPECT_NEAR(got.sum_wp, expected.sum_wp, 1e-12);
+      }
+  EXPECT_GT(leaves_checked, 50u);
+  EXPECT_GT(shared_ray_leaves, 20u);  // the case under test occurs
+  EXPECT_EQ(tree.num_leaf_updates(), expected_updates);
+  // Counting each wedge's 4 rays would have given more votes than there are distinct rays.
+  EXPECT_GT(4 * tree.num_leaf_touches(), tree.num_leaf_updates());
 }
 
 // The carver inlines NodeBox's arithmetic; the boxes (hence the leaves touched) must not differ.

@@ -95,8 +95,12 @@ inline CarveSample PreparedRay::Evaluate(const Eigen::Vector3d& x) const {
     f_perp = std::exp(-exponent);
   }
   // Φ(z) = 0.5 erfc(−z/√2): F_s(x_∥) = Φ(x_∥/σ_s), 1 − F_p(x_∥) = Φ((L − x_∥)/σ_p).
-  const double F_s = 0.5 * std::erfc(-x_par * inv_sqrt2_sigma_s_);
-  const double one_minus_F_p = 0.5 * std::erfc((x_par - length_) * inv_sqrt2_sigma_p_);
+  // erfc(z) rounds to exactly 2 for z ≤ −6 (2 − 2e−17): skip the call there, which is most
+  // of the ray (x_∥ well past the sensor and well short of the point), bit-identically.
+  const double z_s = -x_par * inv_sqrt2_sigma_s_;
+  const double z_p = (x_par - length_) * inv_sqrt2_sigma_p_;
+  const double F_s = z_s <= -6.0 ? 1.0 : 0.5 * std::erfc(z_s);
+  const double one_minus_F_p = z_p <= -6.0 ? 1.0 : 0.5 * std::erfc(z_p);
   return CarveSample{F_s * f_perp * one_minus_F_p + 0.5 * (1.0 - f_perp), f_perp};
 }
 
