@@ -386,10 +386,36 @@ constexpr double kDefaultWalkS = 60;
 // error from the localization's, the same walk with an exact /path (drift off; clock jitter and
 // range noise still on). The map is built in the frame of the recorded (drifted) path while
 // the truth is in the true frame, so drift alone displaces surfaces by up to ~10 cm.
-void CheckOfficeAgainstTruth(bool drift) {
+// `via_harness`: carve through the local two-worker harness instead (`carvemap run --workers 2`:
+// a coordinator and two worker processes on loopback, the job submitted over RPC), then score
+// the tiles it kept in OUT/tiles.
+absl::StatusOr<PipelineRun> RunHarness(const std::string& scan, const std::string& out) {
+  const std::string carvemap = std::string(CARVEMAP_BINARY_DIR) + "/carvemap";
+  const std::string log = out + ".log";
+  const std::string cmd = "'" + carvemap + "' run '" + scan + "' -o '" + out +
+                          "' --workers 2 --quiet > '" + log + "' 2>&1";
+  const Clock::time_point t0 = Clock::now();
+  const int rc = std::system(cmd.c_str());
+  if (rc != 0) {
+    return absl::InternalError("`" + cmd + "` exited with " + std::to_string(rc) +
+                               "; its output is in " + log);
+  }
+  PipelineRun run;
+  run.carve_s = SecondsSince(t0);  // the whole `carvemap run`: ingest, carve, merge
+  run.ingest_s = std::nan("");     // inside the coordinator, not measured apart
+  for (const auto& e : fs::directory_iterator(out + "/tiles")) {
+    if (e.path().extension() == ".h5") run.tile_paths.push_back(e.path().string());
+  }
+  std::sort(run.tile_paths.begin(), run.tile_paths.end());
+  if (run.tile_paths.empty()) return absl::InternalError("no tiles in " + out + "/tiles");
+  return run;
+}
+
+void CheckOfficeAgainstTruth(bool drift, bool via_harness = false) {
   const Clock::time_point t0 = Clock::now();
   const std::string root = fs::path(::testing::TempDir()) /
                            (std::string("carve_accuracy_test") + (drift ? "_drift" : "_exact_path") +
+                            (via_harness ? "_harness" : "") +
                             (std::getenv("CARVE_ACCURACY_TAG") ? std::getenv("CARVE_ACCURACY_TAG")
                                                                 : ""));
   fs::remove_all(root);
@@ -411,7 +437,9 @@ void CheckOfficeAgainstTruth(bool drift) {
   absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(0.0625);
   ASSERT_TRUE(grid.ok());
   const int threads = int(EnvDouble("CARVE_ACCURACY_THREADS", 2));
-  absl::StatusOr<PipelineRun> run = RunPipeline(sim->scan_path, root + "/carve", *grid, threads);
+  absl::StatusOr<PipelineRun> run = via_harness
+                                        ? RunHarness(sim->scan_path, root + "/out")
+                                        : RunPipeline(sim->scan_path, root + "/carve", *grid, threads);
   ASSERT_TRUE(run.ok()) << run.status();
 
   const Clock::time_point t1 = Clock::now();
@@ -425,10 +453,10 @@ void CheckOfficeAgainstTruth(bool drift) {
   const double eval_s = SecondsSince(t1);
 
   std::printf(
-      "office seed 1, drift %s, %.0f s walk, %.0f Hz, %.2f deg beams: %llu rays; simulate %.1f s, "
-      "ingest %.1f s, carve %.1f s (%d threads), evaluate %.1f s\n",
-      drift ? "on" : "off", o.max_duration_s > 0 ? o.max_duration_s : sim->duration_s, o.rig.rate_hz, o.rig.beam_step_deg,
-      static_cast<unsigned long long>(run->ingest.rays),
+      "office seed 1, drift %s, %s, %.0f s walk, %.0f Hz, %.2f deg beams: %llu rays; simulate "
+      "%.1f s, ingest %.1f s, carve %.1f s (%d threads), evaluate %.1f s\n",
+      drift ? "on" : "off", via_harness ? "carvemap run --workers 2" : "in process", o.max_duration_s > 0 ? o.max_duration_s : sim->duration_s, o.rig.rate_hz, o.rig.beam_step_deg,
+      static_cast<unsigned long long>(sim->rays),
       sim_s, run->ingest_s, run->carve_s, threads, eval_s);
   std::printf(
       "labels: %.2f %% correct of %llu labelled observed leaves (free %llu/%llu = %.2f %%, "
@@ -464,8 +492,14 @@ void CheckOfficeAgainstTruth(bool drift) {
 
 TEST(CarveAccuracyTest, OfficeAgainstTruthExactPath) { CheckOfficeAgainstTruth(false); }
 
+// The issue's "end to end through the local two-worker harness": the same scan and scores, the
+// tiles made by separate coordinator and worker processes talking gRPC.
+TEST(CarveAccuracyTest, OfficeThroughLocalHarnessExactPath) {
+  CheckOfficeAgainstTruth(false, /*via_harness=*/true);
+}
+
 // The issue's own configuration (~10 cm localization drift). KNOWN TO FAIL today, so it is
-// disabled rather than weakened: it measures 75.2 % labels / 66.3 % surface against the
+// disabled rather than weakened: it measures 75.1 % labels / 65.4 % surface against the
 // required 97 % / 95 %. The map lives in the drifted frame, and the reported drift covariance
 // (eq 4.1) widens every ray's Gaussians, so 3σ wedges mark observed exterior far behind walls.
 // Run it with --gtest_also_run_disabled_tests; issue 3 stays open until it passes.
