@@ -1,5 +1,7 @@
 // `carvemap coordinator` and `carvemap worker`: the servers of DESIGN §8 on their own. Thin
 // shells: flags ➜ Spec ➜ Start ➜ Wait (services/rpc/).
+#include <sys/resource.h>
+
 #include <atomic>
 #include <cstdio>
 #include <filesystem>
@@ -45,6 +47,16 @@ void SetUpLogging(bool verbose) {
   spdlog::set_pattern("[%Y-%m-%d %H:%M:%S.%e] [%n] [%l] %v");
 }
 
+// One line at exit with what the process used (benchmarks read it: tests/bench/pipeline_bench.sh).
+void LogResourceUsage(const char* who) {
+  rusage u{};
+  if (getrusage(RUSAGE_SELF, &u) != 0) return;
+  const double cpu_s = double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) +
+                       1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+  spdlog::info("{}: resources: peak_rss_mib={:.1f} cpu_s={:.2f}", who, u.ru_maxrss / 1024.0,
+               cpu_s);
+}
+
 struct CoordinatorFlags {
   CoordinatorSpec spec;
   std::string port_file;
@@ -78,6 +90,7 @@ absl::Status RunCoordinator(CoordinatorFlags flags) {
   (*server)->Wait();
   (*server)->Shutdown();  // waits for a Shutdown still running on the signal thread
   stop->store(nullptr);
+  LogResourceUsage("coordinator");
   return absl::OkStatus();
 }
 
@@ -140,6 +153,7 @@ absl::Status RunWorker(const WorkerFlags& flags) {
   absl::Status ended = (*worker)->Wait();
   (*worker)->Shutdown();
   stop->store(nullptr);
+  LogResourceUsage("worker");
   return ended;
 }
 

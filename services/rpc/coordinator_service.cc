@@ -243,6 +243,9 @@ class CoordinatorServer::Impl {
     int64_t rays_ingested = 0;
     int64_t rays_carved = 0;    // wedges applied by workers (CompleteChunk stats)
     int64_t rays_to_carve = 0;  // wedge-chunk pairs of the job
+    // What the ingest measured (job.json "ingest"; absent for a job resumed by a restarted
+    // coordinator after its ingest): rays, returns, wedges, wedge-chunk pairs, spill bytes.
+    std::optional<nlohmann::json> ingest_counts;
     std::map<std::string, std::pair<std::chrono::steady_clock::time_point, double>> stages;
     std::vector<std::string> stage_order;
     std::optional<std::chrono::steady_clock::time_point> stage_start;
@@ -564,8 +567,19 @@ absl::Status CoordinatorServer::Impl::IngestStage(const JobRecord& job) {
   }
   if (absl::Status s = store_->AddChunks(job.id, chunks); !s.ok()) return s;
   {
+    uint64_t spill_bytes = 0;
+    for (const SpilledChunk& c : result->chunks) spill_bytes += c.file_bytes;
     absl::MutexLock lock(&mu_);
     runtime_[job.id].rays_to_carve = pairs;
+    runtime_[job.id].ingest_counts = nlohmann::json{
+        {"frames", result->frames},
+        {"rays", result->rays},
+        {"returns", result->returns},
+        {"wedges", result->wedges},
+        {"wedge_chunk_pairs", result->wedge_chunk_pairs},
+        {"spill_bytes", spill_bytes},
+        {"spill_bytes_per_ray",
+         result->rays > 0 ? double(spill_bytes) / double(result->rays) : 0.0}};
   }
   return absl::OkStatus();
 }
@@ -680,6 +694,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       nlohmann::json stages = nlohmann::json::object();
       for (const auto& [name, timing] : rt.stages) stages[name] = timing.second;
       doc["stage_seconds"] = stages;
+      if (rt.ingest_counts) doc["ingest"] = *rt.ingest_counts;
       req.job_json = doc.dump();
     }
     if (spec_.merge) {
