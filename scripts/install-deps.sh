@@ -11,10 +11,14 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libpng-dev libembree-dev libtbb-dev libssl-dev
   python3 python3-h5py python3-numpy
+  yamllint python3-yaml kubernetes-client
 )
 
 missing=()
 for p in "${PACKAGES[@]}"; do
+  # deploy/ tests need a kubectl; another vendor's package may provide it already (and Debian's
+  # would then conflict with it on /usr/bin/kubectl).
+  if [ "$p" = kubernetes-client ] && command -v kubectl >/dev/null; then continue; fi
   if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
     missing+=("$p")
   fi
