@@ -103,9 +103,11 @@ class WorkerServer::Impl {
   std::unique_ptr<pb::CarveTaskService::Stub> stub_;
   std::unique_ptr<grpc::Server> health_;
   int port_ = 0;
-  absl::Notification stop_;
+  absl::Notification stop_;            // no new leases
+  absl::Notification heartbeat_stop_;  // after the carve threads have drained
   absl::Notification ended_;
-  std::vector<std::thread> threads_;
+  std::vector<std::thread> threads_;   // carve threads
+  std::thread heartbeat_thread_;
   std::atomic<int64_t> unreachable_since_ms_{-1};
   std::atomic<int64_t> rays_since_heartbeat_{0};
   absl::Mutex shutdown_mu_;
@@ -140,7 +142,7 @@ absl::Status WorkerServer::Impl::Start() {
     }
     SetServing(*health_, "", true);
   }
-  threads_.emplace_back([this] { HeartbeatLoop(); });
+  heartbeat_thread_ = std::thread([this] { HeartbeatLoop(); });
   for (int i = 0; i < spec_.threads; ++i) threads_.emplace_back([this] { CarveLoop(); });
   spdlog::info("worker: started ({} thread(s)), coordinator {}, health port {}", spec_.threads,
                spec_.coordinator_address, port_);
@@ -161,10 +163,15 @@ void WorkerServer::Impl::End(absl::Status status) {
 void WorkerServer::Impl::Shutdown() {
   absl::MutexLock shutdown_lock(&shutdown_mu_);
   End(absl::OkStatus());
+  // Drain: the carve threads take no new lease once stop_ is notified but finish (and report)
+  // the chunk they hold, and the heartbeats go on meanwhile, so a worker scaled down or sent
+  // SIGTERM mid-chunk is not declared lost and its chunk is not carved twice.
   for (std::thread& t : threads_) {
     if (t.joinable()) t.join();
   }
   threads_.clear();
+  if (!heartbeat_stop_.HasBeenNotified()) heartbeat_stop_.Notify();
+  if (heartbeat_thread_.joinable()) heartbeat_thread_.join();
   if (health_ != nullptr) {
     health_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
     health_.reset();
@@ -232,7 +239,7 @@ void WorkerServer::Impl::HeartbeatLoop() {
       id = worker_id_;
       for (const std::string& lease : active_) req.add_active_lease_ids(lease);
     }
-    if (!Sleep(interval)) return;
+    if (heartbeat_stop_.WaitForNotificationWithTimeout(absl::Seconds(interval))) return;
     if (id.empty()) continue;
     req.set_worker_id(id);
     req.set_rays_carved(rays_since_heartbeat_.exchange(0));
