@@ -42,8 +42,10 @@ struct BoundaryFace {
   Eigen::Vector3d center;     // centre of the shared square, on the leaves' common plane, m
   double size_m = 0;          // side of the shared square, m
   // Fig 4.9: the point on the line through `center` along `axis` where p, linearly
-  // interpolated between the two leaves' centres (projected on that line), is 0.5. Lies between
-  // the two leaf centres; equals `center` moved along the axis.
+  // interpolated between the two leaves' centres (projected on that line), is 0.5, clamped to
+  // within kIsosurfaceLimitFraction × size_m of the face (IsosurfaceOffsetM: an unobserved
+  // exterior would otherwise put it on that leaf's centre). Equals `center` moved along the
+  // axis, strictly between the two leaf centres.
   Eigen::Vector3d isosurface;
   [[nodiscard]] double area_m2() const { return size_m * size_m; }
 };
@@ -65,5 +67,55 @@ struct ChunkNeighbourhood {
 // is of another grid or chunk than its slot says, or its leaves overlap or leave the chunk.
 [[nodiscard]] absl::StatusOr<std::vector<BoundaryFace>> ChunkBoundaryFaces(
     const ChunkNeighbourhood& hood);
+
+// The isosurface rule (Fig 4.9) shared by the faces above and the dense mesh. Returns the
+// signed distance, m, from the face plane to the isosurface, positive towards the exterior
+// leaf: p is linear from `p_interior` at the interior leaf's centre (`half_interior_m` behind
+// the plane) to `p_exterior` at the exterior leaf's centre (`half_exterior_m` in front), and
+// the result is where it crosses 0.5. Clamped to [−limit_m, +limit_m]. Why the clamp: an
+// unobserved or p = 0.5 exterior puts the crossing exactly on the exterior centre, which for a
+// 1 m unobserved node is 0.5 m away from the only evidence; a barely interior leaf
+// (p → 0.5⁺) puts it on the interior centre, where the six faces of a lone cell would collapse
+// to one point. Callers pass limit_m = kIsosurfaceLimitFraction × (side of the smaller leaf),
+// so the surface stays strictly inside the interior..exterior span and faces never collapse.
+// REQUIRES: p_interior > 0.5 ≥ p_exterior.
+inline constexpr double kIsosurfaceLimitFraction = 0.45;
+[[nodiscard]] double IsosurfaceOffsetM(double p_interior, double half_interior_m,
+                                       double p_exterior, double half_exterior_m,
+                                       double limit_m);
+
+// Leaf lookups in a ChunkNeighbourhood (global finest-cell coordinates), shared by the
+// boundary faces and the dense mesh. Borrows the tiles of `hood`, which must outlive it.
+// Not thread-safe for writes; const lookups may run concurrently.
+class NeighbourhoodIndex {
+ public:
+  // Validates every tile against its slot (grid, chunk key, leaf depths and coordinates,
+  // overlaps): InvalidArgument naming the chunk and the slot.
+  static absl::StatusOr<NeighbourhoodIndex> Build(const ChunkNeighbourhood& hood);
+
+  [[nodiscard]] const ChunkNeighbourhood& hood() const { return *hood_; }
+  // Slot of the chunk holding `cell`, or −1 outside the 3×3×3 chunks.
+  [[nodiscard]] int SlotOf(const LeafKey& cell) const;
+  // The stored leaf covering `cell`, or nullptr (unobserved; also outside the 27 chunks).
+  [[nodiscard]] const TileLeaf* StoredAt(const LeafKey& cell) const;
+  // True when some stored leaf intersects the node of `depth` whose first cell is `min_cell`.
+  // REQUIRES: the node is aligned to its depth and inside the 27 chunks.
+  [[nodiscard]] bool AnyStoredIn(const LeafKey& min_cell, int depth) const;
+  // The leaf covering `cell`: the stored one, or the maximal unobserved node of its chunk.
+  [[nodiscard]] OctreeLeafRef LeafAt(const LeafKey& cell) const;
+
+ private:
+  struct TileIndex {
+    const TileData* tile = nullptr;
+    std::vector<uint64_t> first;  // first finest Morton cell of each leaf, ascending
+    std::vector<uint64_t> end;    // one past its last cell
+    std::vector<uint32_t> row;    // the leaf's index in tile->leaves
+  };
+  // Index into slots_[s].first of the leaf containing Morton cell `code`, or −1.
+  [[nodiscard]] int64_t Find(int slot, uint64_t code) const;
+
+  const ChunkNeighbourhood* hood_ = nullptr;
+  std::array<TileIndex, 27> slots_;
+};
 
 }  // namespace carvemap

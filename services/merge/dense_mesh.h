@@ -1,0 +1,46 @@
+// The dense mesh (DESIGN §7 mesh/dense.ply) and the boundary faces (DESIGN §6 stage 1) of a
+// whole tiles directory, out of core: chunk by chunk, each from the tiles of its neighbourhood
+// fetched through the TileSet's bounded cache, then a small global step (the vertex weld, or
+// concatenation of faces). No logging and no files written here; the merge shell does that.
+//
+// Memory: the cache budget plus one neighbourhood (at most 27 decoded tiles, held while their
+// chunk is processed) plus the output (the per-chunk meshes until welded).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "services/merge/tile_set.h"
+#include "services/mesh/boundary_faces.h"
+#include "storage/ply_io.h"
+
+namespace carvemap {
+
+// Called after each chunk with (chunks done, chunks in total); returning false cancels the
+// run, which then returns Cancelled.
+using ChunkProgressFn = std::function<bool(uint64_t done, uint64_t total)>;
+
+struct DenseMeshResult {
+  TriangleMesh mesh;         // watertight; counter-clockwise seen from the interior
+  // Per vertex: 1 when it lies on a surface between interior and observed exterior space
+  // (evidence of scan points), 0 when it closes the carved volume against unobserved space.
+  std::vector<uint8_t> vertex_observed;
+  uint64_t chunks = 0;       // chunks meshed (tiles and their +1 neighbours)
+  uint64_t polygons = 0;     // corner polygons before triangulation
+  uint64_t centre_vertices = 0;
+};
+
+// Dual contouring (services/mesh/dual_contouring.h) of every tile of `tiles`. Errors: those of
+// TileSet::Get (NotFound, DataLoss, InvalidArgument naming the file), of the per-chunk stage,
+// or Cancelled.
+[[nodiscard]] absl::StatusOr<DenseMeshResult> BuildDenseMesh(
+    TileSet& tiles, const ChunkProgressFn& progress = nullptr);
+
+// All boundary faces of `tiles` (services/mesh/boundary_faces.h): the chunks' faces in
+// ChunkKeyLess order of their interior leaf's chunk, each chunk's in its deterministic order.
+[[nodiscard]] absl::StatusOr<std::vector<BoundaryFace>> CollectBoundaryFaces(
+    TileSet& tiles, const ChunkProgressFn& progress = nullptr);
+
+}  // namespace carvemap

@@ -1,0 +1,354 @@
+#include "services/mesh/dual_contouring.h"
+
+#include <algorithm>
+#include <utility>
+
+#include <Eigen/Geometry>
+
+#include "absl/container/flat_hash_map.h"
+
+namespace carvemap {
+namespace {
+
+struct KeyHash {
+  size_t operator()(const MeshVertexKey& k) const {
+    uint64_t h = 1469598103934665603ull;
+    for (int32_t x : k.v) h = (h ^ static_cast<uint32_t>(x)) * 1099511628211ull;
+    return h ^ (h >> 29);
+  }
+};
+
+// A leaf as the mesh needs it: its p, its half side (Fig 4.9's distance from the face to the
+// leaf's centre) and its label.
+struct CellLeaf {
+  double p = 0.5;
+  double half_m = 0;
+  bool interior = false;
+  bool observed = false;
+};
+
+// Finest-cell labels of the chunk plus a one-cell halo on its low sides: cells
+// [base − 1, base + n) per axis, each an index into `leaves` (0 = unobserved).
+class LabelWindow {
+ public:
+  LabelWindow(const NeighbourhoodIndex& index) : index_(index) {
+    const OctreeGrid& grid = index.hood().grid;
+    n_ = grid.leaves_per_side();
+    w_ = n_ + 1;
+    res_ = grid.resolution_m();
+    base_ = index.hood().chunk * n_;
+    cells_.assign(static_cast<size_t>(w_) * w_ * w_, 0);
+    leaves_.push_back(CellLeaf{0.5, 0.5 * res_, false, false});
+    const int k = grid.chunk_depth;
+    if (const TileData* own = index.hood().tiles[ChunkNeighbourhood::Index(0, 0, 0)]) {
+      for (const TileLeaf& leaf : own->leaves) {
+        const uint32_t id = Add(leaf);
+        const int s = 1 << (k - leaf.node.depth);
+        const Eigen::Vector3i lo = leaf.node.local * s;
+        for (int z = lo.z(); z < lo.z() + s; ++z) {
+          for (int y = lo.y(); y < lo.y() + s; ++y) {
+            uint32_t* row = &cells_[Index(Eigen::Vector3i(lo.x(), y, z))];
+            std::fill(row, row + s, id);
+          }
+        }
+      }
+    }
+    // The halo: one slab per low side, looked up leaf by leaf.
+    absl::flat_hash_map<const TileLeaf*, uint32_t> ids;
+    for (int z = -1; z < n_; ++z) {
+      for (int y = -1; y < n_; ++y) {
+        for (int x = -1; x < n_; ++x) {
+          if (x >= 0 && y >= 0 && z >= 0) {
+            x = n_;  // skip the chunk's own cells
+            continue;
+          }
+          const Eigen::Vector3i local(x, y, z);
+          const TileLeaf* leaf = index.StoredAt(base_ + local);
+          if (leaf == nullptr) continue;
+          auto [it, inserted] = ids.try_emplace(leaf, 0);
+          if (inserted) it->second = Add(*leaf);
+          cells_[Index(local)] = it->second;
+        }
+      }
+    }
+    for (const CellLeaf& l : leaves_) any_interior_ |= l.interior;
+  }
+
+  [[nodiscard]] bool any_interior() const { return any_interior_; }
+  // `local` = global cell − base, in [−1, n).
+  [[nodiscard]] const CellLeaf& At(const Eigen::Vector3i& local) const {
+    return leaves_[cells_[Index(local)]];
+  }
+  [[nodiscard]] int n() const { return n_; }
+  [[nodiscard]] double res() const { return res_; }
+  [[nodiscard]] const LeafKey& base() const { return base_; }
+
+ private:
+  uint32_t Add(const TileLeaf& leaf) {
+    const int k = index_.hood().grid.chunk_depth;
+    leaves_.push_back(CellLeaf{leaf.stats.p(), 0.5 * res_ * (1 << (k - leaf.node.depth)),
+                               leaf.stats.interior(), leaf.stats.observed()});
+    return static_cast<uint32_t>(leaves_.size() - 1);
+  }
+  [[nodiscard]] size_t Index(const Eigen::Vector3i& local) const {
+    return static_cast<size_t>(local.x() + 1) +
+           static_cast<size_t>(w_) * (static_cast<size_t>(local.y() + 1) +
+                                      static_cast<size_t>(w_) * static_cast<size_t>(local.z() + 1));
+  }
+
+  const NeighbourhoodIndex& index_;
+  int n_ = 0, w_ = 0;
+  double res_ = 0;
+  LeafKey base_;
+  std::vector<uint32_t> cells_;
+  std::vector<CellLeaf> leaves_;
+  bool any_interior_ = false;
+};
+
+// The faces around one grid corner g. Cell v ∈ [0, 8) of the 2×2×2 block around g is
+// g + o with o_a = ((v >> a) & 1) − 1; face id = 3 v + axis for the face of interior cell v
+// perpendicular to `axis` (each cell has exactly one such face touching g).
+class CornerMesher {
+ public:
+  CornerMesher(const LabelWindow& window, ChunkMesh& out) : win_(window), out_(out) {}
+
+  void Mesh(const Eigen::Vector3i& g_local) {
+    g_ = g_local;
+    int mask = 0;
+    for (int v = 0; v < 8; ++v) {
+      cell_[v] = &win_.At(g_ + Offset(v));
+      if (cell_[v]->interior) mask |= 1 << v;
+    }
+    if (mask == 0 || mask == 0xff) return;
+    std::array<int, 24> next;
+    next.fill(-1);
+    for (int v = 0; v < 8; ++v) {
+      if (!Interior(v)) continue;
+      for (int i = 0; i < 3; ++i) {
+        if (!Interior(v ^ (1 << i))) next[3 * v + i] = Partner(v, i);
+      }
+    }
+    std::array<bool, 24> seen{};
+    int polygon = 0;
+    std::vector<int> cycle;
+    for (int f = 0; f < 24; ++f) {
+      if (next[f] < 0 || seen[f]) continue;
+      cycle.clear();
+      for (int c = f; !seen[c]; c = next[c]) {
+        seen[c] = true;
+        cycle.push_back(c);
+      }
+      Triangulate(cycle, polygon++);
+    }
+  }
+
+ private:
+  static Eigen::Vector3i Offset(int v) {
+    return Eigen::Vector3i((v & 1) - 1, ((v >> 1) & 1) - 1, ((v >> 2) & 1) - 1);
+  }
+  [[nodiscard]] bool Interior(int v) const { return cell_[v]->interior; }
+  // +1 when the exterior neighbour of face (v, i) lies towards +axis i.
+  static int Sign(int v, int i) { return ((v >> i) & 1) ? -1 : 1; }
+
+  // The face joined to face (v, i) across its edge that enters g when the face is traversed
+  // counter-clockwise seen from the interior (its normal −sign·e_i). Following these links
+  // walks the faces around g counter-clockwise seen from the interior side.
+  [[nodiscard]] int Partner(int v, int i) const {
+    const int u = (i + 1) % 3, w = (i + 2) % 3;
+    // Edge directions from g along the face: +1 when the face lies on g's + side.
+    const int su = ((v >> u) & 1) ? 1 : -1;
+    const int sw = ((v >> w) & 1) ? 1 : -1;
+    // (su e_u × sw e_w) · n with n = −sign e_i and e_u × e_w = e_i.
+    const int sigma = su * sw * -Sign(v, i);
+    // Incoming edge along w when sigma > 0 (it lies on the face's −su side along u), else
+    // along u. Stepping across it from v flips that axis' bit.
+    const int ta = sigma > 0 ? u : w;
+    const int bt = 1 << ta, bi = 1 << i;
+    if (!Interior(v ^ bt)) return 3 * v + ta;                  // convex fold, same cell
+    if (!Interior(v ^ bt ^ bi)) return 3 * (v ^ bt) + i;       // flat
+    return 3 * (v ^ bt ^ bi) + ta;                             // concave fold
+  }
+
+  // Global key and position of face f's vertex (its Fig 4.9 isosurface point).
+  int Vertex(int f) {
+    const int v = f / 3, i = f % 3;
+    const int s = Sign(v, i);
+    Eigen::Vector3i lower = win_.base() + g_ + Offset(v);
+    if (s < 0) lower[i] -= 1;
+    MeshVertexKey key;
+    key.v = {lower.x(), lower.y(), lower.z(), i};
+    auto [it, inserted] = local_.try_emplace(key, 0);
+    if (!inserted) return it->second;
+    const CellLeaf& in = *cell_[v];
+    const CellLeaf& ex = *cell_[v ^ (1 << i)];
+    const double res = win_.res();
+    Eigen::Vector3d pos = (lower.cast<double>() + Eigen::Vector3d::Constant(0.5)) * res;
+    pos[i] = (lower[i] + 1) * res;
+    pos[i] += s * IsosurfaceOffsetM(in.p, in.half_m, ex.p, ex.half_m,
+                                    kIsosurfaceLimitFraction * res);
+    return it->second = Push(key, pos, ex.observed);
+  }
+
+  int Push(const MeshVertexKey& key, const Eigen::Vector3d& pos, bool observed) {
+    out_.vertex_keys.push_back(key);
+    out_.vertex_positions.push_back(pos);
+    out_.vertex_observed.push_back(observed ? 1 : 0);
+    return static_cast<int>(out_.vertex_keys.size() - 1);
+  }
+
+  // Whether faces f and h (both touching g) share an edge, i.e. a second corner.
+  [[nodiscard]] bool ShareEdge(int f, int h) const {
+    auto corners = [&](int face) {
+      const int v = face / 3, i = face % 3;
+      Eigen::Vector3i lo = Offset(v);  // relative to g
+      if (Sign(v, i) > 0) lo[i] += 1;  // the face plane
+      std::array<Eigen::Vector3i, 4> c;
+      const int u = (i + 1) % 3, w = (i + 2) % 3;
+      for (int j = 0; j < 4; ++j) {
+        c[j] = lo;
+        c[j][u] += j & 1;
+        c[j][w] += (j >> 1) & 1;
+      }
+      return c;
+    };
+    const auto a = corners(f), b = corners(h);
+    int common = 0;
+    for (const auto& x : a) {
+      for (const auto& y : b) common += (x == y);
+    }
+    return common >= 2;
+  }
+
+  [[nodiscard]] bool Good(int a, int b, int c) const {
+    const auto& p = out_.vertex_positions;
+    const double area2 = (p[b] - p[a]).cross(p[c] - p[a]).norm();
+    return area2 > 2e-4 * win_.res() * win_.res();
+  }
+
+  void Triangulate(const std::vector<int>& cycle, int polygon) {
+    ++out_.polygons;
+    const int m = static_cast<int>(cycle.size());
+    std::vector<int> vs(m);
+    for (int j = 0; j < m; ++j) vs[j] = Vertex(cycle[j]);
+    auto& tris = out_.triangles;
+    if (m == 3 && Good(vs[0], vs[1], vs[2])) {
+      tris.emplace_back(vs[0], vs[1], vs[2]);
+      return;
+    }
+    if (m == 4) {
+      // A diagonal is a new edge; it is used by no other polygon when its two faces share
+      // only the corner g (faces sharing an edge g–g' could meet again at g').
+      for (int r = 0; r < 2; ++r) {
+        const int a = vs[r], b = vs[r + 1], c = vs[r + 2], d = vs[(r + 3) % 4];
+        if (ShareEdge(cycle[r], cycle[r + 2])) continue;
+        if (!Good(a, b, c) || !Good(a, c, d)) continue;
+        tris.emplace_back(a, b, c);
+        tris.emplace_back(a, c, d);
+        return;
+      }
+    }
+    // Otherwise a fan around a vertex of its own at the polygon's mean.
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    bool observed = true;
+    for (int x : vs) {
+      mean += out_.vertex_positions[x];
+      observed = observed && out_.vertex_observed[x];
+    }
+    mean /= m;
+    const Eigen::Vector3i g = win_.base() + g_;
+    MeshVertexKey key;
+    key.v = {g.x(), g.y(), g.z(), 3 + polygon};
+    const int c = Push(key, mean, observed);
+    ++out_.centre_vertices;
+    for (int j = 0; j < m; ++j) tris.emplace_back(c, vs[j], vs[(j + 1) % m]);
+  }
+
+  const LabelWindow& win_;
+  ChunkMesh& out_;
+  Eigen::Vector3i g_;
+  std::array<const CellLeaf*, 8> cell_{};
+  absl::flat_hash_map<MeshVertexKey, int, KeyHash> local_;
+};
+
+}  // namespace
+
+absl::StatusOr<ChunkMesh> DualContourChunk(const ChunkNeighbourhood& hood) {
+  // Only the low-side neighbours are read; the rest are not validated either.
+  ChunkNeighbourhood low = hood;
+  for (int dz = -1; dz <= 1; ++dz) {
+    for (int dy = -1; dy <= 1; ++dy) {
+      for (int dx = -1; dx <= 1; ++dx) {
+        if (dx > 0 || dy > 0 || dz > 0) low.tiles[ChunkNeighbourhood::Index(dx, dy, dz)] = nullptr;
+      }
+    }
+  }
+  absl::StatusOr<NeighbourhoodIndex> index = NeighbourhoodIndex::Build(low);
+  if (!index.ok()) return index.status();
+  ChunkMesh out;
+  out.chunk = hood.chunk;
+  const LabelWindow window(*index);
+  if (!window.any_interior()) return out;
+  CornerMesher mesher(window, out);
+  const int n = window.n();
+  for (int z = 0; z < n; ++z) {
+    for (int y = 0; y < n; ++y) {
+      for (int x = 0; x < n; ++x) mesher.Mesh(Eigen::Vector3i(x, y, z));
+    }
+  }
+  return out;
+}
+
+TriangleMesh WeldChunkMeshes(std::span<const ChunkMesh> chunks,
+                             std::vector<uint8_t>* vertex_observed) {
+  struct Entry {
+    MeshVertexKey first;
+    Eigen::Vector3d pos;
+    uint8_t observed;
+  };
+  std::vector<Entry> all;
+  for (const ChunkMesh& c : chunks) {
+    for (size_t i = 0; i < c.vertex_keys.size(); ++i) {
+      all.push_back(Entry{c.vertex_keys[i], c.vertex_positions[i],
+                          i < c.vertex_observed.size() ? c.vertex_observed[i] : uint8_t{0}});
+    }
+  }
+  // Stable, so a key's position is the first chunk's (all chunks agree anyway).
+  std::stable_sort(all.begin(), all.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  all.erase(std::unique(all.begin(), all.end(),
+                        [](const auto& a, const auto& b) { return a.first == b.first; }),
+            all.end());
+  TriangleMesh mesh;
+  mesh.vertices.reserve(all.size());
+  for (const Entry& e : all) mesh.vertices.push_back(e.pos.cast<float>());
+  if (vertex_observed != nullptr) {
+    vertex_observed->clear();
+    for (const Entry& e : all) vertex_observed->push_back(e.observed);
+  }
+  auto global = [&](const MeshVertexKey& key) {
+    auto it = std::lower_bound(all.begin(), all.end(), key,
+                               [](const auto& a, const MeshVertexKey& k) { return a.first < k; });
+    return static_cast<int>(it - all.begin());
+  };
+  for (const ChunkMesh& c : chunks) {
+    std::vector<int> map(c.vertex_keys.size());
+    for (size_t i = 0; i < map.size(); ++i) map[i] = global(c.vertex_keys[i]);
+    for (const Eigen::Vector3i& t : c.triangles) {
+      mesh.triangles.emplace_back(map[t[0]], map[t[1]], map[t[2]]);
+    }
+  }
+  return mesh;
+}
+
+std::vector<ChunkKey> DenseMeshChunks(std::span<const ChunkKey> tile_chunks) {
+  std::vector<ChunkKey> out;
+  out.reserve(tile_chunks.size() * 8);
+  for (const ChunkKey& c : tile_chunks) {
+    for (int j = 0; j < 8; ++j) out.push_back(c + ChunkKey(j & 1, (j >> 1) & 1, (j >> 2) & 1));
+  }
+  std::sort(out.begin(), out.end(), ChunkKeyLess());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+}  // namespace carvemap
