@@ -269,11 +269,14 @@ absl::Status ChunkOctree::CarveWedges(std::span<const Wedge> wedges) {
               chunk_origin + FromLinearIndex(leaves[i]).cast<double>() * leaf_size;
           const Eigen::Vector3d x_leaf = 0.5 * (lo + (lo + Eigen::Vector3d::Constant(leaf_size)));
           const CarveSample s = ray->Evaluate(x_leaf);
-          // w = f_⊥ ∈ [0, 1] is how much the ray speaks about x_L. Below 1e-6 (x_L beyond
-          // ~5.3 σ_⊥ of the ray) its vote is 0.5 ± 1e-6, i.e. nothing, yet Add() would still
-          // count it and make the leaf "observed": far corners of a wedge hull would become
-          // observed p ≈ 0.5 (exterior) leaves that block the "all observed or none" merge of
-          // §4.3.2. Skipping also keeps sum_w clear of denormals.
+          // w = f_⊥ ∈ [0, 1] is how much the ray speaks about x_L. Tiny weights still count:
+          // a leaf in the middle of a wide wedge (sparse beams, far from the sensor) lies many
+          // σ_⊥ from all four rays, yet §4.2.1/§4.3.1 mean the wedge's interpolated volume to
+          // be carved, and every vote there is p = 0.5 + f_⊥/2 > 0.5, so the leaf is interior
+          // whatever the magnitude. With the cut at 1e-6 (x_L beyond ~5.3 σ_⊥) such leaves
+          // stayed unobserved, i.e. exterior pockets inside rooms; at 1e-15 (~8.3 σ_⊥) the
+          // office accuracy test observes 46 % more leaves at the same 98.5 % accuracy. The cut
+          // itself keeps sum_w clear of denormals.
           if (s.w < kMinRayWeight) continue;
           cell.stats.Add(s.p, s.w);
           ++updates;

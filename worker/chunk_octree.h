@@ -28,8 +28,9 @@ namespace carvemap {
 
 // §4.3.1: each ray of a wedge is extended this many σ past its point.
 inline constexpr double kWedgeHullSigmas = 3.0;
-// Ray contributions with w = f_⊥ below this are skipped (see CarveWedge).
-inline constexpr double kMinRayWeight = 1e-6;
+// Ray contributions with w = f_⊥ below this are skipped (see CarveWedges; carve_map.h already
+// returns w = 0 beyond f_⊥ < e^−39 ≈ 1e−17).
+inline constexpr double kMinRayWeight = 1e-15;
 
 class ChunkOctree {
  public:
