@@ -3,6 +3,19 @@
 // grid-size tolerance, then relaxation that merges adjacent regions whose planes are within
 // 15°. Planes are fitted by PCA on the faces' isosurface positions (Fig 4.9), weighted by area.
 //
+// The three stages:
+//  (a) flood fill: faces with the same axis and direction that share (part of) an edge;
+//  (b) PCA region growing over those groups, largest first (the seed merges "adjacent regions
+//      of voxel faces", Fig 4.6c): a group joins a region when every isosurface point of the
+//      group is within the tolerance of the union's plane and the region's own points stay
+//      within max(tolerance, their previous maximum). Whole groups, not single faces, so a
+//      lattice plane (a stair riser, one side of a step) is never split between two regions;
+//  (c) relaxation: adjacent regions within merge_angle_deg merge, smallest angle first, when
+//      their planes also meet where the regions touch (boundary_tolerance_factor) and the
+//      union's normal is within the angle of both. (b) never adds a group facing away from
+//      the region's normal and (c) merges only planes within the angle, so the two sides of a
+//      thin slab (a table top one cell thick) stay apart.
+//
 // A global stage: it takes the faces of the whole octree (or of one level).
 #pragma once
 
@@ -12,6 +25,7 @@
 
 #include <Eigen/Core>
 
+#include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "services/geometry/octree_keys.h"
 #include "services/mesh/boundary_faces.h"
@@ -24,6 +38,14 @@ struct PlanarRegionOptions {
   double distance_tolerance_m = 0;
   // §4.2.4: relaxation merges adjacent regions whose normals differ by less than this.
   double merge_angle_deg = 15.0;
+  // Relaxation also requires the two planes to meet where the regions touch: the mean of their
+  // shared face edges lies within this many tolerances of both planes (so parallel planes with
+  // a step between them, e.g. a floor and a stair tread, stay apart).
+  double boundary_tolerance_factor = 2.0;
+
+  // InvalidArgument for a negative or non-finite tolerance or factor, or a merge angle outside
+  // [0, 90].
+  [[nodiscard]] absl::Status Validate() const;
 };
 
 struct PlanarRegion {
@@ -39,9 +61,18 @@ struct PlanarRegion {
 struct PlanarRegionSet {
   std::vector<PlanarRegion> regions;  // deterministic order (by smallest face index)
   std::vector<int> face_region;       // per input face: its region id
+  // Region counts after each stage (job.json counts, tuning): (a) flood fill, (b) growing;
+  // regions.size() is the count after (c) relaxation.
+  size_t flood_fill_groups = 0;
+  size_t grown_regions = 0;
 };
 
-// Errors: InvalidArgument for negative tolerances or a merge angle outside [0, 90].
+// Faces are adjacent when they share an edge or part of one (mixed sizes allowed); their
+// corners must lie on `grid`'s lattice. The result depends on the faces' geometry only, not on
+// their order: shuffling the input permutes `faces` indices and region ids but gives the same
+// partition. O(n log n) in the number of faces (edges are matched by sorting).
+// Errors: InvalidArgument for bad options or a face that is not finite, has no size, or an
+// axis outside 0..2, or when the faces span more than 2^20 cells along an axis.
 [[nodiscard]] absl::StatusOr<PlanarRegionSet> FitPlanarRegions(std::span<const BoundaryFace> faces,
                                                               const OctreeGrid& grid,
                                                               const PlanarRegionOptions& options);

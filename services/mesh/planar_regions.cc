@@ -1,0 +1,627 @@
+#include "services/mesh/planar_regions.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <deque>
+#include <numeric>
+#include <queue>
+#include <tuple>
+#include <utility>
+
+#include <Eigen/Eigenvalues>
+
+#include "absl/container/flat_hash_map.h"
+#include "absl/strings/str_cat.h"
+
+namespace carvemap {
+
+absl::Status PlanarRegionOptions::Validate() const {
+  if (!std::isfinite(distance_tolerance_m) || distance_tolerance_m < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "planar_regions: distance_tolerance_m must be >= 0, got ", distance_tolerance_m));
+  }
+  if (!std::isfinite(merge_angle_deg) || merge_angle_deg < 0 || merge_angle_deg > 90) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "planar_regions: merge_angle_deg must be in [0, 90], got ", merge_angle_deg));
+  }
+  if (!std::isfinite(boundary_tolerance_factor) || boundary_tolerance_factor < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "planar_regions: boundary_tolerance_factor must be >= 0, got ",
+        boundary_tolerance_factor));
+  }
+  return absl::OkStatus();
+}
+
+namespace {
+
+using Eigen::Matrix3d;
+using Eigen::Vector3d;
+using Eigen::Vector3i;
+
+// Area-weighted moments of a set of faces, kept as sums so that growing and merging regions
+// refits their plane in O(1) (§4.2.4 asks for a PCA fit of every tentative union). Each face
+// is a uniform square of side s around its isosurface point (§4.3.3: PCA on the isosurface
+// positions), so it adds s²/12 of spread along its two in-plane axes: a single face or a
+// one-face-wide strip then still has a well-defined plane (the seed's "four corners" do the
+// same for voxel faces). Points are relative to a common origin to keep the sums well
+// conditioned.
+struct Moments {
+  double w = 0;                           // Σ a, m²
+  Vector3d s = Vector3d::Zero();          // Σ a p
+  Matrix3d ss = Matrix3d::Zero();         // Σ a (p pᵀ + s²/12 in-plane)
+  Vector3d sn = Vector3d::Zero();         // Σ a n: orients the PCA normal into free space
+
+  void AddFace(double a, const Vector3d& p, int axis, double side, const Vector3d& n) {
+    w += a;
+    s += a * p;
+    ss += a * (p * p.transpose());
+    const double spread = a * side * side / 12.0;
+    for (int i = 0; i < 3; ++i) {
+      if (i != axis) ss(i, i) += spread;
+    }
+    sn += a * n;
+  }
+  void Add(const Moments& o) {
+    w += o.w;
+    s += o.s;
+    ss += o.ss;
+    sn += o.sn;
+  }
+};
+
+struct Plane {
+  Vector3d centroid = Vector3d::Zero();  // relative to the origin
+  Vector3d normal = Vector3d::UnitZ();   // unit, oriented along Σ a n
+  Vector3d eigenvalues = Vector3d::Zero();
+  [[nodiscard]] double Distance(const Vector3d& p) const { return normal.dot(p - centroid); }
+};
+
+Plane FitPlane(const Moments& m) {
+  Plane plane;
+  plane.centroid = m.s / m.w;
+  Matrix3d cov = m.ss / m.w - plane.centroid * plane.centroid.transpose();
+  cov = 0.5 * (cov + cov.transpose());
+  Eigen::SelfAdjointEigenSolver<Matrix3d> eig(cov);
+  plane.eigenvalues = eig.eigenvalues().cwiseMax(0.0);
+  plane.normal = eig.eigenvectors().col(0).normalized();
+  if (plane.normal.dot(m.sn) < 0) plane.normal = -plane.normal;
+  return plane;
+}
+
+double AngleDeg(const Vector3d& a, const Vector3d& b) {
+  return std::acos(std::clamp(a.dot(b), -1.0, 1.0)) * 180.0 / M_PI;
+}
+
+// A face snapped to the finest lattice, in canonical (geometric) order.
+struct LatticeFace {
+  int axis = 0;
+  int sign = 1;                     // +1: normal along +axis
+  Vector3i corner = Vector3i::Zero();  // min corner, finest cells
+  int side = 1;                     // finest cells
+  uint32_t input = 0;               // index in the caller's face list
+};
+
+// The boundary between two face sets: the number of finest unit edges they share and the sum
+// of those edges' midpoints (in half cells, exact in doubles), for the relaxation's check that
+// two planes meet where their regions touch.
+struct Boundary {
+  double edges = 0;
+  Vector3d sum_mid2 = Vector3d::Zero();  // Σ 2·midpoint, cells
+  void Add(const Boundary& o) {
+    edges += o.edges;
+    sum_mid2 += o.sum_mid2;
+  }
+};
+
+struct Link {
+  uint32_t a = 0, b = 0;  // a < b
+  Boundary boundary;
+};
+
+// Sorts links by (a, b) and sums the boundaries of equal pairs.
+std::vector<Link> Aggregate(std::vector<Link> links) {
+  std::sort(links.begin(), links.end(),
+            [](const Link& x, const Link& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); });
+  std::vector<Link> out;
+  for (const Link& l : links) {
+    if (!out.empty() && out.back().a == l.a && out.back().b == l.b) {
+      out.back().boundary.Add(l.boundary);
+    } else {
+      out.push_back(l);
+    }
+  }
+  return out;
+}
+
+struct UnionFind {
+  std::vector<uint32_t> parent;
+  explicit UnionFind(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
+  uint32_t Find(uint32_t x) {
+    while (parent[x] != x) {
+      parent[x] = parent[parent[x]];
+      x = parent[x];
+    }
+    return x;
+  }
+  // The smaller root survives, so roots are the smallest canonical member.
+  void Union(uint32_t a, uint32_t b) {
+    a = Find(a);
+    b = Find(b);
+    if (a == b) return;
+    if (b < a) std::swap(a, b);
+    parent[b] = a;
+  }
+};
+
+// A connected set of same-direction faces (flood fill) or a grown region: members are
+// canonical face ids.
+struct Group {
+  Moments moments;
+  Plane plane;
+  std::vector<uint32_t> faces;
+  Vector3d box_min = Vector3d::Constant(INFINITY), box_max = Vector3d::Constant(-INFINITY);
+  double max_dist = 0;  // max |distance| of the isosurface points from `plane`
+  Vector3d axis_normal = Vector3d::Zero();  // flood-fill groups: their common face normal
+};
+
+class Fitter {
+ public:
+  Fitter(std::span<const BoundaryFace> faces, const OctreeGrid& grid,
+         const PlanarRegionOptions& options)
+      : in_(faces), res_(grid.resolution_m()), opt_(options) {
+    tol_ = options.distance_tolerance_m > 0 ? options.distance_tolerance_m : res_;
+  }
+
+  absl::StatusOr<PlanarRegionSet> Run() {
+    if (absl::Status s = Snap(); !s.ok()) return s;
+    if (absl::Status s = MatchEdges(); !s.ok()) return s;
+    FloodFill();
+    Grow();
+    Relax();
+    return Output();
+  }
+
+ private:
+  // --- Lattice snapping and canonical order -------------------------------------------------
+  absl::Status Snap() {
+    const size_t n = in_.size();
+    if (n >= (size_t{1} << 31)) return absl::InvalidArgumentError("planar_regions: too many faces");
+    std::vector<LatticeFace> lf(n);
+    for (size_t i = 0; i < n; ++i) {
+      const BoundaryFace& f = in_[i];
+      if (f.axis < 0 || f.axis > 2 || !(f.size_m > 0) || !std::isfinite(f.size_m) ||
+          !f.center.allFinite() || !f.isosurface.allFinite() || !f.normal.allFinite()) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("planar_regions: face ", i, " has a bad axis, size or position"));
+      }
+      LatticeFace& l = lf[i];
+      l.axis = f.axis;
+      l.sign = f.normal[f.axis] >= 0 ? 1 : -1;
+      l.side = std::max(1, static_cast<int>(std::lround(f.size_m / res_)));
+      for (int j = 0; j < 3; ++j) {
+        const double lo = j == f.axis ? f.center[j] : f.center[j] - 0.5 * f.size_m;
+        l.corner[j] = static_cast<int>(std::lround(lo / res_));
+      }
+      l.input = static_cast<uint32_t>(i);
+    }
+    // Canonical order depends on geometry only (ties, i.e. duplicated faces, by isosurface
+    // then input index), so the result does not depend on the caller's order (§4.2.4 asks
+    // for nothing else; a merge that reorders chunks must give the same regions).
+    std::vector<uint32_t> order(n);
+    std::iota(order.begin(), order.end(), 0u);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+      const LatticeFace& x = lf[a];
+      const LatticeFace& y = lf[b];
+      const auto kx = std::make_tuple(x.axis, x.sign, x.corner[x.axis], x.corner.x(),
+                                      x.corner.y(), x.corner.z(), x.side);
+      const auto ky = std::make_tuple(y.axis, y.sign, y.corner[y.axis], y.corner.x(),
+                                      y.corner.y(), y.corner.z(), y.side);
+      if (kx != ky) return kx < ky;
+      const Vector3d& pa = in_[a].isosurface;
+      const Vector3d& pb = in_[b].isosurface;
+      if (pa != pb) return std::lexicographical_compare(pa.data(), pa.data() + 3, pb.data(),
+                                                        pb.data() + 3);
+      return a < b;
+    });
+    faces_.resize(n);
+    for (size_t i = 0; i < n; ++i) faces_[i] = lf[order[i]];
+    if (n > 0) origin_ = in_[faces_[0].input].isosurface;
+    points_.resize(n);
+    for (size_t i = 0; i < n; ++i) points_[i] = in_[faces_[i].input].isosurface - origin_;
+    return absl::OkStatus();
+  }
+
+  // --- Adjacency: faces sharing (part of) an edge -------------------------------------------
+  // Every face edge is cut into finest unit edges, keyed by (start cell corner, direction);
+  // sorting the keys puts the faces that share a unit edge next to each other, whatever their
+  // sizes. O(E log E) with E = Σ 4·side.
+  absl::Status MatchEdges() {
+    if (faces_.empty()) return absl::OkStatus();
+    Vector3i lo = faces_[0].corner, hi = faces_[0].corner;
+    for (const LatticeFace& f : faces_) {
+      lo = lo.cwiseMin(f.corner);
+      hi = hi.cwiseMax(f.corner + Vector3i::Constant(f.side));
+    }
+    constexpr int kBits = 20;
+    if (((hi - lo).array() >= (1 << kBits)).any()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "planar_regions: faces span more than 2^", kBits, " cells along an axis"));
+    }
+    std::vector<std::pair<uint64_t, uint32_t>> keys;
+    size_t total = 0;
+    for (const LatticeFace& f : faces_) total += 4 * size_t(f.side);
+    keys.reserve(total);
+    auto key = [&](const Vector3i& p, int dir) {
+      const Vector3i q = p - lo;
+      return (uint64_t(q.x()) << (2 * kBits + 2)) | (uint64_t(q.y()) << (kBits + 2)) |
+             (uint64_t(q.z()) << 2) | uint64_t(dir);
+    };
+    for (uint32_t i = 0; i < faces_.size(); ++i) {
+      const LatticeFace& f = faces_[i];
+      const int b = (f.axis + 1) % 3, c = (f.axis + 2) % 3;
+      for (int t = 0; t < f.side; ++t) {
+        Vector3i p = f.corner;  // edges along b at c = 0 and c = side
+        p[b] += t;
+        keys.emplace_back(key(p, b), i);
+        p[c] += f.side;
+        keys.emplace_back(key(p, b), i);
+        p = f.corner;  // edges along c at b = 0 and b = side
+        p[c] += t;
+        keys.emplace_back(key(p, c), i);
+        p[b] += f.side;
+        keys.emplace_back(key(p, c), i);
+      }
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<Link> links;
+    for (size_t g = 0; g < keys.size();) {
+      size_t e = g + 1;
+      while (e < keys.size() && keys[e].first == keys[g].first) ++e;
+      if (e - g > 1) {
+        const uint64_t k = keys[g].first;
+        const int dir = int(k & 3);
+        Vector3i p(int((k >> (2 * kBits + 2)) & ((1u << kBits) - 1)),
+                   int((k >> (kBits + 2)) & ((1u << kBits) - 1)), int((k >> 2) & ((1u << kBits) - 1)));
+        p += lo;
+        Vector3d mid2 = 2.0 * p.cast<double>();
+        mid2[dir] += 1.0;
+        for (size_t x = g; x < e; ++x) {
+          for (size_t y = x + 1; y < e; ++y) {
+            if (keys[x].second == keys[y].second) continue;
+            links.push_back({std::min(keys[x].second, keys[y].second),
+                             std::max(keys[x].second, keys[y].second), Boundary{1.0, mid2}});
+          }
+        }
+      }
+      g = e;
+    }
+    face_links_ = Aggregate(std::move(links));
+    return absl::OkStatus();
+  }
+
+  Vector3d AxisNormal(const LatticeFace& f) const {
+    Vector3d n = Vector3d::Zero();
+    n[f.axis] = f.sign;
+    return n;
+  }
+
+  void AddFaceTo(Group& g, uint32_t i) const {
+    const LatticeFace& f = faces_[i];
+    const double side_m = f.side * res_;
+    g.moments.AddFace(side_m * side_m, points_[i], f.axis, side_m, AxisNormal(f));
+    g.faces.push_back(i);
+    g.box_min = g.box_min.cwiseMin(points_[i]);
+    g.box_max = g.box_max.cwiseMax(points_[i]);
+  }
+
+  double ExactMaxDist(const Group& g, const Plane& plane) const {
+    double m = 0;
+    for (uint32_t i : g.faces) m = std::max(m, std::abs(plane.Distance(points_[i])));
+    return m;
+  }
+
+  // Max over the group's bounding box of |a·(x − o)| (a linear function peaks at a corner).
+  static double BoxMaxAbs(const Group& g, const Vector3d& a, const Vector3d& o) {
+    double m = 0;
+    for (int c = 0; c < 8; ++c) {
+      const Vector3d x((c & 1) ? g.box_max.x() : g.box_min.x(),
+                       (c & 2) ? g.box_max.y() : g.box_min.y(),
+                       (c & 4) ? g.box_max.z() : g.box_min.z());
+      m = std::max(m, std::abs(a.dot(x - o)));
+    }
+    return m;
+  }
+
+  // --- (a) Flood fill: connected faces with the same normal (§4.2.4, Fig 4.6b) --------------
+  // Two faces with the same axis and direction that share an edge are coplanar, so every
+  // group lies exactly on one lattice plane.
+  void FloodFill() {
+    UnionFind uf(faces_.size());
+    for (const Link& l : face_links_) {
+      const LatticeFace& a = faces_[l.a];
+      const LatticeFace& b = faces_[l.b];
+      if (a.axis == b.axis && a.sign == b.sign) uf.Union(l.a, l.b);
+    }
+    face_comp_.assign(faces_.size(), 0);
+    std::vector<int64_t> comp_of_root(faces_.size(), -1);
+    for (uint32_t i = 0; i < faces_.size(); ++i) {  // ids in canonical order of first face
+      const uint32_t r = uf.Find(i);
+      if (comp_of_root[r] < 0) {
+        comp_of_root[r] = int64_t(comps_.size());
+        comps_.emplace_back();
+        comps_.back().axis_normal = AxisNormal(faces_[i]);
+      }
+      face_comp_[i] = uint32_t(comp_of_root[r]);
+      AddFaceTo(comps_[face_comp_[i]], i);
+    }
+    for (Group& g : comps_) {
+      g.plane = FitPlane(g.moments);
+      g.max_dist = ExactMaxDist(g, g.plane);
+    }
+    std::vector<Link> links;
+    for (const Link& l : face_links_) {
+      uint32_t a = face_comp_[l.a], b = face_comp_[l.b];
+      if (a == b) continue;
+      links.push_back({std::min(a, b), std::max(a, b), l.boundary});
+    }
+    comp_links_ = Aggregate(std::move(links));
+    comp_adj_.assign(comps_.size(), {});
+    for (uint32_t i = 0; i < comp_links_.size(); ++i) {
+      comp_adj_[comp_links_[i].a].push_back(comp_links_[i].b);
+      comp_adj_[comp_links_[i].b].push_back(comp_links_[i].a);
+    }
+    for (auto& adj : comp_adj_) std::sort(adj.begin(), adj.end());
+  }
+
+  // --- (b) PCA region growing (§4.2.4, Fig 4.6c) --------------------------------------------
+  // Seeds are the flood-fill groups by decreasing area; a region absorbs a neighbouring group
+  // when the PCA plane of their union keeps every isosurface point of the group within the
+  // tolerance ("the maximum distance of V from the plane is at most the grid size") and keeps
+  // the region's own points as close as before (within max(tolerance, their current maximum):
+  // a noisy flood-fill group is accepted as the seed says, but growing may not make it worse).
+  // The union plane comes from the summed moments in O(1); the candidate's points are checked
+  // exactly (after an O(1) rejection by its centroid); the region's points by a bound over its
+  // bounding box, recomputed exactly (within a budget) only when the bound is not enough.
+  bool TryAbsorb(Group& r, const Group& c) {
+    if (c.axis_normal.dot(r.plane.normal) <= 0) return false;  // faces must look the same way
+    Moments u = r.moments;
+    u.Add(c.moments);
+    const Plane p = FitPlane(u);
+    if (c.axis_normal.dot(p.normal) <= 0) return false;
+    // The mean of the candidate's points is within the tolerance if all of them are.
+    if (std::abs(p.Distance(c.plane.centroid)) > tol_) return false;
+    double cand = 0;
+    if (BoxMaxAbs(c, p.normal, p.centroid) <= tol_) {
+      cand = BoxMaxAbs(c, p.normal, p.centroid);
+    } else {
+      cand = ExactMaxDist(c, p);
+      if (cand > tol_) return false;
+    }
+    const double allowed = std::max(tol_, r.max_dist);
+    // |n'·(x − c')| ≤ |n·(x − c)| + |(n' − n)·(x − c)| + |n'·(c − c')| for the region's points.
+    double old = r.max_dist + BoxMaxAbs(r, p.normal - r.plane.normal, r.plane.centroid) +
+                 std::abs(p.normal.dot(r.plane.centroid - p.centroid));
+    if (old > allowed) {
+      if (recompute_budget_ < double(r.faces.size())) return false;
+      recompute_budget_ -= double(r.faces.size());
+      old = ExactMaxDist(r, p);
+      if (old > allowed) return false;
+    }
+    r.moments = u;
+    r.plane = p;
+    r.max_dist = std::max(old, cand);
+    r.faces.insert(r.faces.end(), c.faces.begin(), c.faces.end());
+    r.box_min = r.box_min.cwiseMin(c.box_min);
+    r.box_max = r.box_max.cwiseMax(c.box_max);
+    return true;
+  }
+
+  void Grow() {
+    const size_t nc = comps_.size();
+    std::vector<uint32_t> order(nc);
+    std::iota(order.begin(), order.end(), 0u);
+    std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+      return comps_[a].moments.w > comps_[b].moments.w;
+    });
+    comp_region_.assign(nc, -1);
+    std::vector<int64_t> tested_region(nc, -1);
+    std::vector<double> tested_weight(nc, 0);
+    // Exact rechecks of a region's points are bounded by a few passes over all faces in
+    // total, so growth stays near-linear whatever the input.
+    recompute_budget_ = 8.0 * double(faces_.size()) + 1e5;
+    for (uint32_t seed : order) {
+      if (comp_region_[seed] >= 0) continue;
+      const int64_t rid = int64_t(regions_.size());
+      Group r = comps_[seed];
+      std::vector<uint32_t> members = {seed};
+      comp_region_[seed] = rid;
+      std::deque<uint32_t> queue(comp_adj_[seed].begin(), comp_adj_[seed].end());
+      while (!queue.empty()) {
+        const uint32_t c = queue.front();
+        queue.pop_front();
+        if (comp_region_[c] >= 0) continue;
+        if (tested_region[c] == rid && tested_weight[c] == r.moments.w) continue;
+        tested_region[c] = rid;
+        tested_weight[c] = r.moments.w;
+        if (!TryAbsorb(r, comps_[c])) continue;
+        comp_region_[c] = rid;
+        members.push_back(c);
+        for (uint32_t d : comp_adj_[c]) {
+          if (comp_region_[d] < 0) queue.push_back(d);
+        }
+      }
+      regions_.push_back(std::move(r));
+    }
+  }
+
+  // --- (c) Relaxation: merge adjacent regions within 15° (§4.2.4, Fig 4.6d) -----------------
+  // Pairs are merged smallest angle first (a priority queue with lazy invalidation), refitting
+  // the union each time. Besides the seed's angle test the planes must stay consistent: both
+  // meet the regions' shared boundary (no step between parallel planes) and the union's plane
+  // is within the angle of both parts. Ties are broken by region ids, which come from the
+  // canonical face order, so the result does not depend on hash order.
+  bool Consistent(const Group& a, const Group& b, const Boundary& bd, Plane* merged) const {
+    if (AngleDeg(a.plane.normal, b.plane.normal) >= opt_.merge_angle_deg) return false;
+    const Vector3d q = bd.sum_mid2 / (2.0 * bd.edges) * res_ - origin_;
+    const double btol = opt_.boundary_tolerance_factor * tol_;
+    if (std::abs(a.plane.Distance(q)) > btol || std::abs(b.plane.Distance(q)) > btol) {
+      return false;
+    }
+    Moments u = a.moments;
+    u.Add(b.moments);
+    *merged = FitPlane(u);
+    return AngleDeg(merged->normal, a.plane.normal) < opt_.merge_angle_deg &&
+           AngleDeg(merged->normal, b.plane.normal) < opt_.merge_angle_deg;
+  }
+
+  void Relax() {
+    const uint32_t nr = uint32_t(regions_.size());
+    grown_regions_ = nr;
+    std::vector<Link> links;
+    for (const Link& l : comp_links_) {
+      const uint32_t a = uint32_t(comp_region_[l.a]), b = uint32_t(comp_region_[l.b]);
+      if (a != b) links.push_back({std::min(a, b), std::max(a, b), l.boundary});
+    }
+    links = Aggregate(std::move(links));
+    std::vector<absl::flat_hash_map<uint32_t, Boundary>> adj(nr);
+    for (const Link& l : links) {
+      adj[l.a][l.b] = l.boundary;
+      adj[l.b][l.a] = l.boundary;
+    }
+    std::vector<uint32_t> version(nr, 0);
+    std::vector<bool> alive(nr, true);
+    struct Candidate {
+      double angle;
+      uint32_t a, b, va, vb;
+      bool operator>(const Candidate& o) const {
+        return std::tie(angle, a, b) > std::tie(o.angle, o.a, o.b);
+      }
+    };
+    std::priority_queue<Candidate, std::vector<Candidate>, std::greater<Candidate>> pq;
+    // Queued pairs keep their key when a region's normal moves by less than kRequeueDeg, so a
+    // big region absorbing many small ones does not re-queue all its pairs each time (that
+    // would be quadratic); pairs are queued up to the angle plus twice that slack (both
+    // regions may have moved) and Consistent() checks the current planes.
+    constexpr double kRequeueDeg = 0.5;
+    std::vector<Vector3d> queued_normal(nr);
+    for (uint32_t i = 0; i < nr; ++i) queued_normal[i] = regions_[i].plane.normal;
+    auto push = [&](uint32_t a, uint32_t b) {
+      if (a > b) std::swap(a, b);
+      const double ang = AngleDeg(regions_[a].plane.normal, regions_[b].plane.normal);
+      if (ang < opt_.merge_angle_deg + 2 * kRequeueDeg) {
+        pq.push({ang, a, b, version[a], version[b]});
+      }
+    };
+    for (const Link& l : links) push(l.a, l.b);
+    std::vector<uint32_t> ns;
+    while (!pq.empty()) {
+      const Candidate c = pq.top();
+      pq.pop();
+      if (!alive[c.a] || !alive[c.b] || version[c.a] != c.va || version[c.b] != c.vb) continue;
+      auto it = adj[c.a].find(c.b);
+      if (it == adj[c.a].end()) continue;
+      Plane merged;
+      if (!Consistent(regions_[c.a], regions_[c.b], it->second, &merged)) continue;
+      // The region with more faces survives and absorbs the other's faces and neighbours, so
+      // every face and adjacency entry moves O(log n) times; ties keep the smaller id.
+      uint32_t k = c.a, g = c.b;
+      if (regions_[g].faces.size() > regions_[k].faces.size()) std::swap(k, g);
+      Group& keep = regions_[k];
+      Group& gone = regions_[g];
+      keep.moments.Add(gone.moments);
+      keep.plane = merged;
+      keep.faces.insert(keep.faces.end(), gone.faces.begin(), gone.faces.end());
+      keep.box_min = keep.box_min.cwiseMin(gone.box_min);
+      keep.box_max = keep.box_max.cwiseMax(gone.box_max);
+      gone.faces.clear();
+      gone.faces.shrink_to_fit();
+      alive[g] = false;
+      adj[k].erase(g);
+      ns.clear();
+      for (const auto& [n, bd] : adj[g]) {
+        if (n == k) continue;
+        adj[k][n].Add(bd);
+        const Boundary moved = adj[n][g];
+        adj[n].erase(g);
+        adj[n][k].Add(moved);
+        ns.push_back(n);
+      }
+      absl::flat_hash_map<uint32_t, Boundary>().swap(adj[g]);
+      if (AngleDeg(keep.plane.normal, queued_normal[k]) > kRequeueDeg) {
+        // The plane moved: every pair of the merged region gets a fresh key.
+        ++version[k];
+        queued_normal[k] = keep.plane.normal;
+        ns.clear();
+        for (const auto& [n, bd] : adj[k]) ns.push_back(n);
+      }
+      std::sort(ns.begin(), ns.end());
+      for (uint32_t n : ns) push(k, n);
+    }
+    std::vector<Group> kept;
+    for (uint32_t i = 0; i < nr; ++i) {
+      if (alive[i]) kept.push_back(std::move(regions_[i]));
+    }
+    regions_ = std::move(kept);
+  }
+
+  PlanarRegionSet Output() const {
+    PlanarRegionSet out;
+    out.flood_fill_groups = comps_.size();
+    out.grown_regions = grown_regions_;
+    out.face_region.assign(faces_.size(), -1);
+    std::vector<std::pair<uint32_t, size_t>> by_first;  // (smallest input index, region)
+    for (size_t r = 0; r < regions_.size(); ++r) {
+      uint32_t first = UINT32_MAX;
+      for (uint32_t f : regions_[r].faces) first = std::min(first, faces_[f].input);
+      by_first.emplace_back(first, r);
+    }
+    std::sort(by_first.begin(), by_first.end());
+    out.regions.reserve(regions_.size());
+    for (const auto& [first, r] : by_first) {
+      const Group& g = regions_[r];
+      PlanarRegion pr;
+      pr.id = int(out.regions.size());
+      pr.normal = g.plane.normal;
+      pr.centroid = g.plane.centroid + origin_;
+      pr.area_m2 = g.moments.w;
+      pr.eigenvalues = g.plane.eigenvalues;
+      pr.faces.reserve(g.faces.size());
+      for (uint32_t f : g.faces) {
+        pr.faces.push_back(faces_[f].input);
+        out.face_region[faces_[f].input] = pr.id;
+      }
+      std::sort(pr.faces.begin(), pr.faces.end());
+      out.regions.push_back(std::move(pr));
+    }
+    return out;
+  }
+
+  std::span<const BoundaryFace> in_;
+  double res_;
+  PlanarRegionOptions opt_;
+  double tol_ = 0;
+  Vector3d origin_ = Vector3d::Zero();
+  std::vector<LatticeFace> faces_;  // canonical order
+  std::vector<Vector3d> points_;    // isosurface points − origin, canonical order
+  std::vector<Link> face_links_;
+  std::vector<uint32_t> face_comp_;
+  std::vector<Group> comps_;
+  std::vector<Link> comp_links_;
+  std::vector<std::vector<uint32_t>> comp_adj_;
+  std::vector<int64_t> comp_region_;
+  std::vector<Group> regions_;
+  double recompute_budget_ = 0;
+  size_t grown_regions_ = 0;
+};
+
+}  // namespace
+
+absl::StatusOr<PlanarRegionSet> FitPlanarRegions(std::span<const BoundaryFace> faces,
+                                                 const OctreeGrid& grid,
+                                                 const PlanarRegionOptions& options) {
+  if (absl::Status s = options.Validate(); !s.ok()) return s;
+  return Fitter(faces, grid, options).Run();
+}
+
+}  // namespace carvemap

@@ -1,0 +1,348 @@
+#include "services/mesh/planar_regions.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <map>
+#include <numeric>
+#include <random>
+#include <set>
+
+#include <gtest/gtest.h>
+
+namespace carvemap {
+namespace {
+
+using Eigen::Vector3d;
+using Eigen::Vector3i;
+
+// A signed distance-like function: > 0 in free space (interior, p > 0.5), ≤ 0 in solid.
+using Field = std::function<double(const Vector3d&)>;
+
+// The boundary faces of a voxelised free space, as ChunkBoundaryFaces would report them for
+// finest leaves: every pair of axis neighbours in the cell box [lo, hi) with one free and one
+// solid cell gives a face; its isosurface point (Fig 4.9) is where `field`, linearly
+// interpolated between the two cell centres, crosses 0. `jitter_cells` moves it along the
+// axis by a uniform random amount (noise), seeded.
+std::vector<BoundaryFace> VoxelFaces(double res, const Vector3i& lo, const Vector3i& hi,
+                                     const Field& field, double jitter_cells = 0,
+                                     uint32_t seed = 1) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1, 1);
+  auto center = [&](const Vector3i& c) { return (c.cast<double>() + Vector3d::Constant(0.5)) * res; };
+  std::vector<BoundaryFace> faces;
+  for (int x = lo.x(); x < hi.x(); ++x) {
+    for (int y = lo.y(); y < hi.y(); ++y) {
+      for (int z = lo.z(); z < hi.z(); ++z) {
+        const Vector3i a(x, y, z);
+        const double fa = field(center(a));
+        for (int axis = 0; axis < 3; ++axis) {
+          Vector3i b = a;
+          b[axis] += 1;
+          if (b[axis] >= hi[axis]) continue;
+          const double fb = field(center(b));
+          if ((fa > 0) == (fb > 0)) continue;
+          const Vector3i& free_c = fa > 0 ? a : b;
+          const Vector3i& solid_c = fa > 0 ? b : a;
+          const double f_free = fa > 0 ? fa : fb;
+          const double f_solid = fa > 0 ? fb : fa;
+          BoundaryFace f;
+          f.axis = axis;
+          f.normal = Eigen::Vector3f::Zero();
+          f.normal[axis] = free_c[axis] > solid_c[axis] ? 1.0f : -1.0f;
+          f.size_m = res;
+          f.center = 0.5 * (center(a) + center(b));
+          const double t = std::clamp(f_solid / (f_solid - f_free), 0.0, 1.0);
+          f.isosurface = center(solid_c) + t * (center(free_c) - center(solid_c));
+          if (jitter_cells > 0) f.isosurface[axis] += jitter_cells * res * u(rng);
+          f.interior.min_cell = free_c;
+          f.interior.depth = 0;
+          f.exterior.min_cell = solid_c;
+          faces.push_back(f);
+        }
+      }
+    }
+  }
+  return faces;
+}
+
+constexpr double kRes = 0.0625;
+OctreeGrid Grid() { return OctreeGrid{5}; }  // 6.25 cm
+
+double Deg(const Vector3d& a, const Vector3d& b) {
+  return std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0)) * 180 / M_PI;
+}
+
+double TotalArea(const std::vector<BoundaryFace>& faces) {
+  double a = 0;
+  for (const BoundaryFace& f : faces) a += f.area_m2();
+  return a;
+}
+
+// Regions sorted by decreasing area.
+std::vector<PlanarRegion> ByArea(PlanarRegionSet set) {
+  std::vector<PlanarRegion> r = std::move(set.regions);
+  std::sort(r.begin(), r.end(),
+            [](const PlanarRegion& a, const PlanarRegion& b) { return a.area_m2 > b.area_m2; });
+  return r;
+}
+
+// Free space is the box [0, 4) × [0, 3) × [0, 2.5) m (cells aligned); one solid layer around.
+Field BoxRoom() {
+  return [](const Vector3d& p) {
+    return std::min({p.x(), 4.0 - p.x(), p.y(), 3.0 - p.y(), p.z(), 2.5 - p.z()});
+  };
+}
+std::vector<BoundaryFace> BoxRoomFaces() {
+  return VoxelFaces(kRes, Vector3i(-1, -1, -1), Vector3i(65, 49, 41), BoxRoom());
+}
+
+void CheckBoxRoom(const std::vector<BoundaryFace>& faces) {
+  absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(faces, Grid(), {});
+  ASSERT_TRUE(set.ok()) << set.status();
+  ASSERT_EQ(set->regions.size(), 6u);
+  ASSERT_EQ(set->face_region.size(), faces.size());
+  // (normal, area, plane offset along the normal's axis)
+  struct Expect {
+    Vector3d normal;
+    double area, offset;
+  };
+  const std::vector<Expect> expect = {
+      {Vector3d::UnitZ(), 12.0, 0.0},  {-Vector3d::UnitZ(), 12.0, 2.5},
+      {Vector3d::UnitX(), 7.5, 0.0},   {-Vector3d::UnitX(), 7.5, 4.0},
+      {Vector3d::UnitY(), 10.0, 0.0},  {-Vector3d::UnitY(), 10.0, 3.0}};
+  for (const Expect& e : expect) {
+    int found = 0;
+    for (const PlanarRegion& r : set->regions) {
+      if (r.normal.dot(e.normal) < 0.999999) continue;
+      ++found;
+      EXPECT_NEAR(r.area_m2, e.area, 1e-9);
+      int axis = 0;
+      e.normal.cwiseAbs().maxCoeff(&axis);
+      EXPECT_NEAR(r.centroid[axis], e.offset, 1e-9);
+      EXPECT_NEAR(r.eigenvalues[0], 0.0, 1e-9);  // exactly planar
+      for (uint32_t f : r.faces) {
+        EXPECT_EQ(set->face_region[f], r.id);
+        EXPECT_GT(faces[f].normal.cast<double>().dot(e.normal), 0.99);
+      }
+    }
+    EXPECT_EQ(found, 1) << e.normal.transpose();
+  }
+  for (size_t i = 0; i < set->regions.size(); ++i) EXPECT_EQ(set->regions[i].id, int(i));
+}
+
+TEST(PlanarRegions, BoxRoomGivesSixExactRegions) { CheckBoxRoom(BoxRoomFaces()); }
+
+// Half of the floor is made of coarse faces (2×2 cells), as next to a simplified big leaf
+// (§4.3.2): faces of different sizes that share part of an edge must still be adjacent.
+TEST(PlanarRegions, MixedFaceSizesAreAdjacent) {
+  std::vector<BoundaryFace> faces;
+  std::map<std::pair<int, int>, int> coarse;  // 2×2 blocks of floor faces with x < 2 m
+  for (const BoundaryFace& f : BoxRoomFaces()) {
+    if (f.axis == 2 && f.normal.z() > 0 && f.center.x() < 2.0) {
+      const int i = int(std::floor(f.center.x() / kRes)) / 2;
+      const int j = int(std::floor(f.center.y() / kRes)) / 2;
+      ++coarse[{i, j}];
+      continue;
+    }
+    faces.push_back(f);
+  }
+  for (const auto& [ij, n] : coarse) {
+    ASSERT_EQ(n, 4);
+    BoundaryFace f;
+    f.axis = 2;
+    f.size_m = 2 * kRes;
+    f.center = Vector3d((ij.first + 0.5) * 2 * kRes, (ij.second + 0.5) * 2 * kRes, 0.0);
+    f.isosurface = f.center;
+    faces.push_back(f);
+  }
+  CheckBoxRoom(faces);
+}
+
+// The flood fill alone would give one region per step of the zig-zag; PCA growing must turn
+// a gently sloped floor (and a noisy one) into one region with the true plane.
+TEST(PlanarRegions, SlopedAndNoisyPlanesAreOneRegion) {
+  for (const double slope_deg : {0.0, 3.0, 7.0}) {
+    for (const double jitter : {0.0, 0.4}) {
+      const double t = std::tan(slope_deg * M_PI / 180);
+      const Field field = [t](const Vector3d& p) { return p.z() - (0.53 + t * p.x()); };
+      const std::vector<BoundaryFace> faces =
+          VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(48, 48, 24), field, jitter, 7);
+      absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(faces, Grid(), {});
+      ASSERT_TRUE(set.ok()) << set.status();
+      SCOPED_TRACE(::testing::Message() << "slope " << slope_deg << "° jitter " << jitter);
+      ASSERT_EQ(set->regions.size(), 1u);
+      const PlanarRegion& r = set->regions[0];
+      EXPECT_NEAR(r.area_m2, TotalArea(faces), 1e-9);
+      EXPECT_LT(Deg(r.normal, Vector3d(-t, 0, 1)), 0.5);
+      EXPECT_NEAR(r.centroid.z() - t * r.centroid.x(), 0.53, 0.01);
+    }
+  }
+}
+
+// Two planes meeting along a crease: §4.2.4 relaxation merges them at 10°, not at 30°.
+std::vector<BoundaryFace> Crease(double angle_deg) {
+  const double t = std::tan(angle_deg * M_PI / 180);
+  const Field field = [t](const Vector3d& p) {
+    return p.z() - (0.5 + t * std::max(0.0, p.x() - 1.5));
+  };
+  return VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(48, 32, 48), field);
+}
+
+TEST(PlanarRegions, PlanesAtTenDegreesMerge) {
+  const std::vector<BoundaryFace> faces = Crease(10);
+  absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(faces, Grid(), {});
+  ASSERT_TRUE(set.ok()) << set.status();
+  EXPECT_EQ(set->regions.size(), 1u);
+  const std::vector<PlanarRegion> r = ByArea(*set);
+  EXPECT_NEAR(r[0].area_m2, TotalArea(faces), 1e-9);
+  EXPECT_LT(Deg(r[0].normal, Vector3d::UnitZ()), 10.0);
+}
+
+TEST(PlanarRegions, PlanesAtThirtyDegreesStayApart) {
+  const std::vector<BoundaryFace> faces = Crease(30);
+  absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(faces, Grid(), {});
+  ASSERT_TRUE(set.ok()) << set.status();
+  const std::vector<PlanarRegion> r = ByArea(*set);
+  ASSERT_GE(r.size(), 2u);
+  // Two dominant regions hold (nearly) everything; at most slivers along the crease remain.
+  EXPECT_GT(r[0].area_m2 + r[1].area_m2, 0.99 * TotalArea(faces));
+  EXPECT_LE(r.size(), 3u);
+  std::vector<double> angles = {Deg(r[0].normal, Vector3d::UnitZ()),
+                                Deg(r[1].normal, Vector3d::UnitZ())};
+  std::sort(angles.begin(), angles.end());
+  EXPECT_LT(angles[0], 1.0);
+  EXPECT_NEAR(angles[1], 30.0, 1.0);
+  std::printf("30° crease: %zu regions, areas %.3f + %.3f of %.3f m2\n", r.size(), r[0].area_m2,
+              r[1].area_m2, TotalArea(faces));
+}
+
+TEST(PlanarRegions, LShapedWallPairStaysTwoRegions) {
+  for (const double jitter : {0.0, 0.3}) {
+    const Field field = [](const Vector3d& p) { return std::min(p.x() - 1.0, p.y() - 1.0); };
+    const std::vector<BoundaryFace> faces =
+        VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(48, 48, 32), field, jitter, 3);
+    absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(faces, Grid(), {});
+    ASSERT_TRUE(set.ok()) << set.status();
+    ASSERT_EQ(set->regions.size(), 2u) << "jitter " << jitter;
+    for (const PlanarRegion& r : set->regions) {
+      EXPECT_NEAR(r.area_m2, 4.0, 1e-9);
+      EXPECT_TRUE(Deg(r.normal, Vector3d::UnitX()) < 1.0 || Deg(r.normal, Vector3d::UnitY()) < 1.0);
+    }
+  }
+}
+
+// A thin slab (a table top one cell thick) has faces up and down within a cell of each
+// other: they must never share a region (faces of a region look the same way).
+TEST(PlanarRegions, OppositeFacesOfAThinSlabStayApart) {
+  const Field field = [](const Vector3d& p) {
+    const bool slab = p.x() > 0.5 && p.x() < 1.5 && p.y() > 0.5 && p.y() < 1.5 &&
+                      p.z() > 0.75 && p.z() < 0.8125;
+    return slab ? -1.0 : 1.0;
+  };
+  const std::vector<BoundaryFace> faces =
+      VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(32, 32, 32), field);
+  absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(faces, Grid(), {});
+  ASSERT_TRUE(set.ok()) << set.status();
+  int up = 0, down = 0;
+  for (const PlanarRegion& r : set->regions) {
+    for (uint32_t f : r.faces) {
+      EXPECT_GT(faces[f].normal.cast<double>().dot(r.normal), 0) << "region " << r.id;
+    }
+    if (Deg(r.normal, Vector3d::UnitZ()) < 1) {
+      ++up;
+      EXPECT_NEAR(r.area_m2, 1.0, 1e-9);
+    }
+    if (Deg(r.normal, -Vector3d::UnitZ()) < 1) {
+      ++down;
+      EXPECT_NEAR(r.area_m2, 1.0, 1e-9);
+    }
+  }
+  EXPECT_EQ(up, 1);
+  EXPECT_EQ(down, 1);
+}
+
+// Same faces in another order → the same partition (as sets of faces).
+std::set<std::set<uint32_t>> Partition(const PlanarRegionSet& set,
+                                       const std::vector<uint32_t>& original_index) {
+  std::set<std::set<uint32_t>> out;
+  for (const PlanarRegion& r : set.regions) {
+    std::set<uint32_t> s;
+    for (uint32_t f : r.faces) s.insert(original_index[f]);
+    out.insert(s);
+  }
+  return out;
+}
+
+TEST(PlanarRegions, DeterministicUnderShuffledInput) {
+  // A room with a sloped, noisy floor and a crease: growing and relaxation both have choices.
+  const double t = std::tan(4 * M_PI / 180);
+  const Field field = [t](const Vector3d& p) {
+    return std::min({p.z() - (0.3 + t * p.x() + 0.2 * std::max(0.0, p.y() - 1.5)), p.x() - 0.2,
+                     2.8 - p.x(), p.y() - 0.2, 2.8 - p.y(), 2.2 - p.z()});
+  };
+  const std::vector<BoundaryFace> faces =
+      VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(48, 48, 40), field, 0.45, 11);
+  std::vector<uint32_t> identity(faces.size());
+  std::iota(identity.begin(), identity.end(), 0u);
+  absl::StatusOr<PlanarRegionSet> base = FitPlanarRegions(faces, Grid(), {});
+  ASSERT_TRUE(base.ok()) << base.status();
+  const auto expected = Partition(*base, identity);
+  EXPECT_GT(expected.size(), 5u);
+  std::mt19937 rng(301);
+  for (int trial = 0; trial < 3; ++trial) {
+    std::vector<uint32_t> perm = identity;
+    std::shuffle(perm.begin(), perm.end(), rng);
+    std::vector<BoundaryFace> shuffled;
+    for (uint32_t i : perm) shuffled.push_back(faces[i]);
+    absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(shuffled, Grid(), {});
+    ASSERT_TRUE(set.ok()) << set.status();
+    EXPECT_EQ(Partition(*set, perm), expected) << "trial " << trial;
+    // Region order follows the smallest face index of the given order.
+    for (size_t i = 1; i < set->regions.size(); ++i) {
+      EXPECT_LT(set->regions[i - 1].faces.front(), set->regions[i].faces.front());
+    }
+  }
+}
+
+TEST(PlanarRegions, RejectsBadInput) {
+  PlanarRegionOptions o;
+  o.merge_angle_deg = 95;
+  EXPECT_EQ(FitPlanarRegions({}, Grid(), o).status().code(), absl::StatusCode::kInvalidArgument);
+  o = {};
+  o.distance_tolerance_m = -1;
+  EXPECT_EQ(FitPlanarRegions({}, Grid(), o).status().code(), absl::StatusCode::kInvalidArgument);
+  std::vector<BoundaryFace> faces(1);
+  faces[0].size_m = 0;
+  faces[0].center = faces[0].isosurface = Vector3d::Zero();
+  EXPECT_EQ(FitPlanarRegions(faces, Grid(), {}).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  absl::StatusOr<PlanarRegionSet> empty = FitPlanarRegions({}, Grid(), {});
+  ASSERT_TRUE(empty.ok());
+  EXPECT_TRUE(empty->regions.empty());
+}
+
+// Office-scale input: a 12 m × 12 m × 3 m room at 3.125 cm with noisy isosurfaces (~0.4 M
+// faces) must stay within seconds (O(n log n)).
+TEST(PlanarRegions, OfficeSizedInputIsFast) {
+  const double res = 0.03125;
+  const Field field = [](const Vector3d& p) {
+    return std::min({p.x() - 0.1, 11.9 - p.x(), p.y() - 0.1, 11.9 - p.y(), p.z() - 0.05,
+                     3.0 - p.z()});
+  };
+  const std::vector<BoundaryFace> faces =
+      VoxelFaces(res, Vector3i(0, 0, 0), Vector3i(384, 384, 100), field, 0.3, 5);
+  const auto t0 = std::chrono::steady_clock::now();
+  absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(faces, OctreeGrid{6}, {});
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ASSERT_TRUE(set.ok()) << set.status();
+  ::testing::Test::RecordProperty("faces", int(faces.size()));
+  std::printf("%zu faces -> %zu regions in %.2f s\n", faces.size(), set->regions.size(), seconds);
+  EXPECT_EQ(set->regions.size(), 6u);
+  EXPECT_LT(seconds, 20.0);
+}
+
+}  // namespace
+}  // namespace carvemap
