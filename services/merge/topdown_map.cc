@@ -11,9 +11,15 @@
 #include "storage/atomic_file.h"
 
 namespace carvemap {
+namespace {
 
-TopdownMap::TopdownMap(const OctreeGrid& grid, const std::vector<ChunkKey>& chunks)
-    : grid_(grid) {
+nlohmann::json OrNull(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
+
+}  // namespace
+
+TopdownMap::TopdownMap(const OctreeGrid& grid, const std::vector<ChunkKey>& chunks,
+                       const TopdownZRange& z_range)
+    : grid_(grid), z_range_(z_range) {
   geometry_.resolution_m = grid.resolution_m();
   if (chunks.empty()) return;
   int min_x = INT_MAX, min_y = INT_MAX, max_x = INT_MIN, max_y = INT_MIN;
@@ -45,11 +51,24 @@ absl::Status TopdownMap::AddTile(const TileData& tile) {
                                                    ") outside the map's footprint"));
   }
   const double res = grid_.resolution_m();
+  const double lo = z_range_.z_lo_m, hi = z_range_.z_hi_m;
+  const double chunk_z0 = tile.chunk.z() * kChunkSizeM;
+  // Written so that a NaN bound (an empty range) skips the tile too.
+  if (!(chunk_z0 < hi && chunk_z0 + kChunkSizeM > lo)) return absl::OkStatus();
+  const bool whole_chunk = lo <= chunk_z0 && chunk_z0 + kChunkSizeM <= hi;
   for (const TileLeaf& leaf : tile.leaves) {
     if (!leaf.stats.observed()) continue;
     const int side = 1 << (k - leaf.node.depth);  // in finest columns
-    // §5.4: each node crossed by the column adds its probability of interior times its height.
-    const float add = static_cast<float>(leaf.stats.p() * side * res);
+    // §5.4: each node crossed by the column adds its probability of interior times its height
+    // (within the z range: the part of the node inside it, so a level's map sums the levels'
+    // open heights).
+    double height = side * res;
+    if (!whole_chunk) {
+      const double z0 = chunk_z0 + double(leaf.node.local.z()) * side * res;
+      height = std::min(z0 + side * res, hi) - std::max(z0, lo);
+      if (!(height > 0)) continue;
+    }
+    const float add = static_cast<float>(leaf.stats.p() * height);
     const int64_t col0 = chunk_col + int64_t{leaf.node.local.x()} * side;
     const int64_t up0 = chunk_row_from_bottom + int64_t{leaf.node.local.y()} * side;
     for (int dy = 0; dy < side; ++dy) {
@@ -88,7 +107,9 @@ absl::Status TopdownMap::Write(const std::string& png_path, const std::string& j
       {"format", "carvemap-topdown"},
       {"version", 1},
       {"level", level},
-      {"z_range", "all"},  // levels (§5.2) arrive later; level_0 spans the whole octree
+      {"z_range", z_range_.all() ? nlohmann::json("all")
+                                 : nlohmann::json::array({OrNull(z_range_.z_lo_m),
+                                                          OrNull(z_range_.z_hi_m)})},
       {"quantity",
        "expected open height (m): sum over observed octree leaves in the column of "
        "p(interior) x leaf height (seed §5.4)"},

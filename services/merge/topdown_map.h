@@ -5,10 +5,13 @@
 // above and below the building.
 //
 // One pixel per leaf column at the octree resolution over the xy footprint of the chunks with
-// tiles. Until levels exist (§5.2) the map covers the whole height of the octree (level_0).
+// tiles. By default the map covers the whole height of the octree; a z range (a level's
+// [split_z_low, split_z_high) from services/levels, §5.2) makes the map of one level, leaves
+// cut by the range adding only the height of their part inside it.
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -29,16 +32,30 @@ struct TopdownGeometry {
   int width = 0, height = 0;
 };
 
+// The elevations a map integrates: [z_lo_m, z_hi_m), m. The default is all of them; an empty
+// range (z_lo_m ≥ z_hi_m, or NaN) gives a map of zeros.
+struct TopdownZRange {
+  double z_lo_m = -std::numeric_limits<double>::infinity();
+  double z_hi_m = std::numeric_limits<double>::infinity();
+  [[nodiscard]] bool all() const {
+    return z_lo_m == -std::numeric_limits<double>::infinity() &&
+           z_hi_m == std::numeric_limits<double>::infinity();
+  }
+};
+
 class TopdownMap {
  public:
-  // Covers the xy footprint of `chunks` (an empty list gives a 0×0 map).
-  TopdownMap(const OctreeGrid& grid, const std::vector<ChunkKey>& chunks);
+  // Covers the xy footprint of `chunks` (an empty list gives a 0×0 map) and the elevations of
+  // `z_range`.
+  TopdownMap(const OctreeGrid& grid, const std::vector<ChunkKey>& chunks,
+             const TopdownZRange& z_range = {});
 
   // Adds a tile's observed leaves (any order, each tile once). Tiles outside the footprint
   // given to the constructor are an error (InvalidArgument naming the chunk).
   absl::Status AddTile(const TileData& tile);
 
   [[nodiscard]] const TopdownGeometry& geometry() const { return geometry_; }
+  [[nodiscard]] const TopdownZRange& z_range() const { return z_range_; }
   // Expected open height (m) of pixel (row, col).
   [[nodiscard]] float open_height_m(int row, int col) const {
     return height_m_[size_t(row) * geometry_.width + col];
@@ -49,12 +66,14 @@ class TopdownMap {
   [[nodiscard]] Image<uint8_t> ToGray8(double max_height_m) const;
 
   // Writes the PNG (ToGray8) and a JSON sidecar with the geometry, the scale and what the map
-  // covers, both through "<name>.partial" and a rename.
+  // covers ("z_range": "all", or [z_lo, z_hi] with null for an open end), both through
+  // "<name>.partial" and a rename.
   absl::Status Write(const std::string& png_path, const std::string& json_path,
                      double max_height_m, int level) const;
 
  private:
   OctreeGrid grid_;
+  TopdownZRange z_range_;
   int64_t min_leaf_x_ = 0, min_leaf_y_ = 0;  // leaf keys of column (col 0, bottom row)
   TopdownGeometry geometry_;
   std::vector<float> height_m_;  // row-major, row 0 = top (largest y)

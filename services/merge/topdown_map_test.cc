@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <limits>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -46,10 +47,10 @@ class TopdownMapTest : public ::testing::Test {
     slab.leaves = {Leaf(1, {0, 0, 0}, 0.2)};
     tiles_ = {box, coarse, stacked, slab};
   }
-  TopdownMap Build() {
+  TopdownMap Build(const TopdownZRange& z_range = {}) {
     std::vector<ChunkKey> chunks;
     for (const TileData& t : tiles_) chunks.push_back(t.chunk);
-    TopdownMap map(OctreeGrid{kK}, chunks);
+    TopdownMap map(OctreeGrid{kK}, chunks, z_range);
     for (const TileData& t : tiles_) EXPECT_TRUE(map.AddTile(t).ok());
     return map;
   }
@@ -119,6 +120,68 @@ TEST_F(TopdownMapTest, WritesPngAndSidecar) {
   EXPECT_DOUBLE_EQ(j["origin_m"][0].get<double>(), -2.0);
   EXPECT_DOUBLE_EQ(j["gray_scale"]["gray_255_m"].get<double>(), 3.0);
   EXPECT_EQ(j["image"], "topdown.png");
+}
+
+// A level's map (§5.2 split heights): leaves cut by [z_lo, z_hi) add the height of their part
+// inside it.
+TEST_F(TopdownMapTest, ZRangeIntegratesOnlyTheOverlap) {
+  TopdownMap map = Build(TopdownZRange{0.3, 2.6});
+  const TopdownGeometry& g = map.geometry();
+  for (int row = 0; row < g.height; ++row) {
+    for (int col = 0; col < g.width; ++col) {
+      const double x = g.origin_x_m + (col + 0.5) * kRes;
+      const double y = g.origin_y_m + (g.height - 1 - row + 0.5) * kRes;
+      double expected = 0;
+      // Box of 25 cm leaves over z ∈ [0, 2): the leaf [0.25, 0.5) adds 0.2, six more 1.5.
+      if (x > -1.5 && x < -0.5 && y > 0.5 && y < 1.25) expected = 1.7;
+      // 2 m leaves over [0, 2) and [2, 4): 1.7 + 0.6.
+      if (x > 0 && y > 0) expected = 2.3;
+      // The 1 m leaf over [0, 1) with p = 0.2: 0.7 m of it.
+      if (x > 0 && x < 1 && y > -2 && y < -1) expected = 0.2 * 0.7;
+      EXPECT_NEAR(map.open_height_m(row, col), expected, 1e-6) << "row " << row << " col " << col;
+    }
+  }
+}
+
+TEST_F(TopdownMapTest, ZRangesThatPartitionTheHeightSumToTheWholeMap) {
+  const TopdownMap all = Build();
+  const TopdownMap below = Build(TopdownZRange{-std::numeric_limits<double>::infinity(), 1.1});
+  const TopdownMap above = Build(TopdownZRange{1.1, std::numeric_limits<double>::infinity()});
+  const TopdownMap empty = Build(TopdownZRange{1.0, 1.0});
+  const TopdownMap outside = Build(TopdownZRange{-5.0, -1.0});
+  const TopdownGeometry& g = all.geometry();
+  double total = 0;
+  for (int row = 0; row < g.height; ++row) {
+    for (int col = 0; col < g.width; ++col) {
+      EXPECT_NEAR(below.open_height_m(row, col) + above.open_height_m(row, col),
+                  all.open_height_m(row, col), 1e-6);
+      EXPECT_EQ(empty.open_height_m(row, col), 0.0f);
+      EXPECT_EQ(outside.open_height_m(row, col), 0.0f);
+      total += below.open_height_m(row, col);
+    }
+  }
+  EXPECT_GT(total, 0);
+  EXPECT_FLOAT_EQ(below.max_open_height_m(), 1.1f);
+}
+
+TEST_F(TopdownMapTest, SidecarNamesTheZRange) {
+  const std::string dir = FreshDir();
+  ASSERT_TRUE(Build(TopdownZRange{0.3, 2.6})
+                  .Write(dir + "/a.png", dir + "/a.json", 3.0, 1)
+                  .ok());
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir + "/a.json"));
+  EXPECT_EQ(j["level"], 1);
+  ASSERT_TRUE(j["z_range"].is_array());
+  EXPECT_DOUBLE_EQ(j["z_range"][0].get<double>(), 0.3);
+  EXPECT_DOUBLE_EQ(j["z_range"][1].get<double>(), 2.6);
+  ASSERT_TRUE(Build(TopdownZRange{0.3, std::numeric_limits<double>::infinity()})
+                  .Write(dir + "/b.png", dir + "/b.json", 3.0, 1)
+                  .ok());
+  j = nlohmann::json::parse(std::ifstream(dir + "/b.json"));
+  EXPECT_TRUE(j["z_range"][1].is_null());
+  ASSERT_TRUE(Build().Write(dir + "/c.png", dir + "/c.json", 3.0, 0).ok());
+  j = nlohmann::json::parse(std::ifstream(dir + "/c.json"));
+  EXPECT_EQ(j["z_range"], "all");
 }
 
 TEST(TopdownMap, TileOutsideTheFootprintIsRejected) {
