@@ -1,0 +1,63 @@
+// Planar meshing of the octree's boundary faces (seed §4.2.5, §4.3.3 "Planar region meshing";
+// DESIGN §6 stage 2, §8): one watertight triangle mesh whose triangles lie on the planes of the
+// planar regions.
+//
+// How: the faces become a closed polygon mesh on the finest lattice (T-junctions of big and
+// small faces split, non-manifold octree edges separated into sheets); vertices where two or
+// more regions meet are placed by eq 4.9 (SVD over the regions' planes with the α rule for
+// nearly parallel planes), the others projected onto their region's plane; edge collapses that
+// keep the mesh a closed manifold then remove region interiors and straight runs of the chains
+// between two regions, so neighbouring regions keep exactly the same boundary vertices; last,
+// each region is re-triangulated in its plane (constrained Delaunay of its boundary plus
+// quadtree points, §4.2.5), or keeps its collapsed triangles when its boundary does not make a
+// valid polygon in the plane.
+#pragma once
+
+#include <span>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "services/geometry/octree_keys.h"
+#include "services/mesh/boundary_faces.h"
+#include "services/mesh/planar_regions.h"
+#include "storage/ply_io.h"
+
+namespace carvemap {
+
+struct PlanarMeshOptions {
+  // eq 4.9: a singular direction of the stacked plane normals is trusted only when its singular
+  // value is at least this fraction of the largest one (the seed's α = 0.2·s; see the .cc).
+  double alpha_fraction = 0.2;
+  // A vertex placed by eq 4.9 moves at most this many grid cells from its octree corner (the
+  // move is clamped; §4.2.5: shared vertices are "allowed to be displaced up to a distance
+  // threshold from their original position").
+  double max_displacement_cells = 3.0;
+  // A vertex of a chain between two regions is removed only when it lies within this distance
+  // (grid cells) of the segment joining its chain neighbours. 0 removes collinear ones only.
+  double chain_tolerance_cells = 0.5;
+  // §4.2.5: add quadtree points inside regions (bounded angles, bigger triangles on bigger
+  // regions). false: the regions' boundary vertices only (fewest triangles).
+  bool quadtree_points = true;
+  // Smallest quadtree cell that gets interior points, in grid cells (8: 0.5 m at 6.25 cm), so
+  // narrow regions keep only their boundary vertices.
+  int min_quadtree_cells = 8;
+
+  [[nodiscard]] absl::Status Validate() const;
+};
+
+struct PlanarMesh {
+  TriangleMesh mesh;              // counter-clockwise seen from free space (the faces' normals)
+  std::vector<int> triangle_region;  // per triangle: its PlanarRegion id
+};
+
+// The planar mesh of `faces` partitioned by `regions` (regions.face_region.size() ==
+// faces.size()). Faces are the closed boundary of the interior (all chunks' faces together);
+// their corners must lie on `grid`'s lattice. Deterministic for the same input.
+// Errors: InvalidArgument for bad options, mismatched sizes, faces off the lattice or a face
+// boundary that is not closed; Internal when a region cannot be triangulated.
+[[nodiscard]] absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
+                                                         const PlanarRegionSet& regions,
+                                                         const OctreeGrid& grid,
+                                                         const PlanarMeshOptions& options = {});
+
+}  // namespace carvemap
