@@ -1,7 +1,10 @@
 #include "storage/ply_io.h"
 
 #include <bit>
+#include <cstring>
+#include <fstream>
 #include <ostream>
+#include <sstream>
 
 #include "absl/strings/str_cat.h"
 #include "storage/atomic_file.h"
@@ -41,6 +44,146 @@ absl::Status WritePly(const std::string& path, const TriangleMesh& mesh,
       if (face_values) out.write(reinterpret_cast<const char*>(&(*face_values)[i]), sizeof(int));
     }
   });
+}
+
+namespace {
+
+int ScalarBytes(const std::string& type) {
+  if (type == "char" || type == "uchar" || type == "int8" || type == "uint8") return 1;
+  if (type == "short" || type == "ushort" || type == "int16" || type == "uint16") return 2;
+  if (type == "int" || type == "uint" || type == "float" || type == "int32" ||
+      type == "uint32" || type == "float32") {
+    return 4;
+  }
+  if (type == "double" || type == "float64") return 8;
+  return 0;
+}
+
+// A little-endian scalar of `type` from `p` as an int (floats truncated; only ints are used).
+int ScalarAsInt(const std::string& type, const char* p) {
+  if (type == "char" || type == "int8") return static_cast<int8_t>(p[0]);
+  if (type == "uchar" || type == "uint8") return static_cast<uint8_t>(p[0]);
+  if (type == "short" || type == "int16") { int16_t v; std::memcpy(&v, p, 2); return v; }
+  if (type == "ushort" || type == "uint16") { uint16_t v; std::memcpy(&v, p, 2); return v; }
+  int32_t v;
+  std::memcpy(&v, p, 4);
+  return v;
+}
+
+bool IsIntType(const std::string& type) {
+  return type != "float" && type != "float32" && type != "double" && type != "float64";
+}
+
+}  // namespace
+
+absl::StatusOr<PlyMesh> ReadPly(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open"));
+  auto bad = [&path](const std::string& why) {
+    return absl::DataLossError(absl::StrCat(path, ": ", why));
+  };
+  std::string line;
+  if (!std::getline(in, line) || line != "ply") return bad("not a PLY file");
+  std::string element;
+  size_t num_vertices = 0, num_faces = 0;
+  std::vector<std::string> vertex_props, vertex_names;
+  std::vector<std::string> face_props, face_names;  // after the index list
+  bool have_list = false, binary_le = false;
+  while (std::getline(in, line) && line != "end_header") {
+    std::istringstream ls(line);
+    std::string word;
+    ls >> word;
+    if (word == "format") {
+      std::string fmt;
+      ls >> fmt;
+      binary_le = fmt == "binary_little_endian";
+    } else if (word == "element") {
+      size_t count = 0;
+      ls >> element >> count;
+      if (element == "vertex") num_vertices = count;
+      else if (element == "face") num_faces = count;
+      else return bad("unsupported element '" + element + "'");
+    } else if (word == "property") {
+      std::string type;
+      ls >> type;
+      if (type == "list") {
+        std::string count_type, index_type, name;
+        ls >> count_type >> index_type >> name;
+        if (element != "face" || have_list || count_type != "uchar" ||
+            (index_type != "int" && index_type != "int32")) {
+          return bad("unsupported list property '" + line + "'");
+        }
+        have_list = true;
+        continue;
+      }
+      std::string name;
+      ls >> name;
+      if (ScalarBytes(type) == 0) return bad("unsupported property type '" + type + "'");
+      if (element == "vertex") {
+        vertex_props.push_back(type);
+        vertex_names.push_back(name);
+      } else if (element == "face") {
+        if (!have_list) return bad("face properties before vertex_indices are not supported");
+        face_props.push_back(type);
+        face_names.push_back(name);
+      }
+    }
+  }
+  if (line != "end_header") return bad("no end_header");
+  if (!binary_le) return bad("only binary_little_endian PLY is supported");
+  if (vertex_props.size() < 3 || vertex_names[0] != "x" || vertex_names[1] != "y" ||
+      vertex_names[2] != "z" || vertex_props[0] != "float" || vertex_props[1] != "float" ||
+      vertex_props[2] != "float") {
+    return bad("vertices must start with float x, y, z");
+  }
+  if (num_faces > 0 && !have_list) return bad("faces without vertex_indices");
+
+  PlyMesh out;
+  out.mesh.vertices.resize(num_vertices);
+  size_t vertex_bytes = 0;
+  for (const std::string& t : vertex_props) vertex_bytes += ScalarBytes(t);
+  std::vector<char> buf(std::max<size_t>(vertex_bytes, 8));
+  for (size_t i = 0; i < num_vertices; ++i) {
+    if (!in.read(buf.data(), static_cast<std::streamsize>(vertex_bytes))) {
+      return bad(absl::StrCat("truncated at vertex ", i, " of ", num_vertices));
+    }
+    std::memcpy(out.mesh.vertices[i].data(), buf.data(), 3 * sizeof(float));
+  }
+  std::vector<size_t> kept;  // face property indices returned
+  for (size_t p = 0; p < face_props.size(); ++p) {
+    if (IsIntType(face_props[p])) {
+      kept.push_back(p);
+      out.face_values.emplace_back(face_names[p], std::vector<int>{});
+    }
+  }
+  std::vector<int> idx;
+  for (size_t f = 0; f < num_faces; ++f) {
+    unsigned char count = 0;
+    if (!in.read(reinterpret_cast<char*>(&count), 1)) {
+      return bad(absl::StrCat("truncated at face ", f, " of ", num_faces));
+    }
+    idx.resize(count);
+    if (!in.read(reinterpret_cast<char*>(idx.data()), 4 * std::streamsize(count))) {
+      return bad(absl::StrCat("truncated at face ", f, " of ", num_faces));
+    }
+    for (int v : idx) {
+      if (v < 0 || static_cast<size_t>(v) >= num_vertices) {
+        return bad(absl::StrCat("face ", f, " has vertex index ", v, " (", num_vertices,
+                                " vertices)"));
+      }
+    }
+    std::vector<int> values(face_props.size(), 0);
+    for (size_t p = 0; p < face_props.size(); ++p) {
+      const int bytes = ScalarBytes(face_props[p]);
+      if (!in.read(buf.data(), bytes)) return bad(absl::StrCat("truncated at face ", f));
+      values[p] = ScalarAsInt(face_props[p], buf.data());
+    }
+    for (int j = 1; j + 1 < count; ++j) {
+      out.mesh.triangles.emplace_back(idx[0], idx[j], idx[j + 1]);
+      for (size_t k = 0; k < kept.size(); ++k) out.face_values[k].second.push_back(values[kept[k]]);
+    }
+  }
+  return out;
 }
 
 }  // namespace carvemap

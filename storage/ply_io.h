@@ -4,6 +4,7 @@
 
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -26,5 +27,19 @@ struct TriangleMesh {
 absl::Status WritePly(const std::string& path, const TriangleMesh& mesh,
                       const std::vector<int>* face_values = nullptr,
                       const std::string& face_property = "label");
+
+// A mesh read back from PLY, with its integer face properties by name.
+struct PlyMesh {
+  TriangleMesh mesh;                                      // polygons fanned into triangles
+  std::vector<std::pair<std::string, std::vector<int>>> face_values;  // one value per triangle
+};
+
+// Reads binary little-endian PLY as WritePly writes it and as DESIGN §7 specifies: vertex
+// properties of which the first three are float x y z (more scalar properties are skipped),
+// faces as a `list uchar int` (polygons are fanned into triangles) followed by scalar
+// properties, of which the int/uint/short/ushort/char/uchar ones are returned. Errors name the
+// file: NotFound, or DataLoss for an unsupported header, an index out of range or a
+// truncated body.
+absl::StatusOr<PlyMesh> ReadPly(const std::string& path);
 
 }  // namespace carvemap
