@@ -80,10 +80,14 @@ absl::Status RunDemo(const DemoFlags& flags) {
       "  input/scan.h5           the scans and the localizer's (drifted) path, DESIGN §3\n"
       "  input/gt/               the truth: building.json, surfaces.ply, objects.ply (DESIGN §4)\n"
       "  octree.bt               the carved occupancy octree (OctoMap binary; opens in octovis)\n"
-      "  level_0/topdown.png     open-height map (§5.4), with level_0/topdown.json\n"
-      "  job.json                parameters, counts and timings\n"
+      "  levels.json             floor and ceiling heights of each level (§5.2)\n"
+      "  level_<k>/topdown.png   open-height map of each level (§5.4), with topdown.json\n"
+      "  mesh/dense.ply          dual-contouring mesh of the octree (§4.3.3), watertight\n"
+      "  mesh/building.ply       planar mesh (§4.3.3; faces carry their planar region)\n"
+      "  job.json                parameters, counts, timings and any warnings\n"
       "  tiles/                  one HDF5 tile per 2 m chunk (storage/TILE_FORMAT.md)\n"
-      "floor plans, rooms and meshes are not in carvemap yet.\n",
+      "floor plans, rooms, furniture segmentation and the combined model are not in carvemap "
+      "yet.\n",
       std::filesystem::absolute(flags.output_dir).lexically_normal().c_str());
   return absl::OkStatus();
 }

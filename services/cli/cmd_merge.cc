@@ -1,5 +1,6 @@
-// `carvemap merge TILES_DIR -o OUT [--resolution R]`: the first merge outputs (DESIGN §7) from
-// a tiles directory: OUT/octree.bt, OUT/level_0/topdown.png (+ topdown.json) and OUT/job.json.
+// `carvemap merge TILES_DIR -o OUT [--resolution R]`: the merge (DESIGN §6, §7) of a tiles
+// directory: OUT/octree.bt, OUT/levels.json, OUT/level_<k>/topdown.png (+ topdown.json),
+// OUT/mesh/dense.ply, OUT/mesh/building.ply and OUT/job.json.
 #include <iomanip>
 #include <iostream>
 #include <memory>
@@ -11,7 +12,7 @@
 #include "absl/status/statusor.h"
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
-#include "services/merge/first_outputs.h"
+#include "services/merge/merge_job.h"
 
 namespace carvemap {
 namespace {
@@ -22,7 +23,7 @@ struct MergeFlags {
   bool quiet = false;
 };
 
-absl::Status RunMerge(MergeFlags& flags) {
+absl::Status RunMergeCommand(MergeFlags& flags) {
   flags.options.cache_budget_bytes = static_cast<uint64_t>(flags.cache_mb * (1 << 20));
   flags.options.job = {{"command", "carvemap merge"}};
   ProgressLine line(!flags.quiet);
@@ -31,7 +32,7 @@ absl::Status RunMerge(MergeFlags& flags) {
                 static_cast<unsigned long long>(p.done), static_cast<unsigned long long>(p.total));
     return true;
   };
-  absl::StatusOr<MergeSummary> summary = MergeFirstOutputs(flags.options, progress);
+  absl::StatusOr<MergeSummary> summary = carvemap::RunMerge(flags.options, progress);
   line.Finish();
   if (!summary.ok()) return summary.status();
   const MergeSummary& s = *summary;
@@ -46,14 +47,25 @@ absl::Status RunMerge(MergeFlags& flags) {
               << " px, origin (" << s.topdown_origin_x_m << ", " << s.topdown_origin_y_m
               << ") m, max open height " << s.max_open_height_m << " m\n";
   }
-  std::cout << "  " << s.topdown_json_path << "\n  " << s.job_json_path << "\n";
+  std::cout << "  " << s.topdown_json_path << "\n";
+  if (flags.options.meshes) {
+    std::cout << "  " << s.num_boundary_faces << " boundary faces, " << s.num_planar_regions
+              << " planar regions, " << s.num_levels << " level(s) (levels.json)\n"
+              << "  mesh/dense.ply: " << s.dense_triangles << " triangles\n";
+    if (s.building_triangles > 0) {
+      std::cout << "  mesh/building.ply: " << s.building_triangles << " triangles\n";
+    }
+    for (const std::string& w : s.warnings) std::cout << "  warning: " << w << "\n";
+  }
+  std::cout << "  " << s.job_json_path << "\n";
   return absl::OkStatus();
 }
 
 void RegisterMerge(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
-      "merge", "Merge carved tiles into the first outputs: octree.bt (OctoMap), "
-               "level_0/topdown.png (open height, §5.4) and job.json");
+      "merge", "Merge carved tiles into the job's outputs: octree.bt (OctoMap), levels.json, "
+               "level_<k>/topdown.png (open height, §5.4), mesh/dense.ply, mesh/building.ply "
+               "and job.json");
   auto flags = std::make_shared<MergeFlags>();
   cmd->add_option("tiles", flags->options.tiles_dir, "Directory of c_<x>_<y>_<z>.h5 tiles")
       ->required();
@@ -65,8 +77,10 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
   cmd->add_option("--topdown-max-m", flags->options.topdown_max_height_m,
                   "Open height drawn as white (255) in topdown.png")
       ->capture_default_str();
+  cmd->add_flag("!--no-meshes", flags->options.meshes,
+                "Skip faces, regions, levels and meshes (octree.bt, level_0 and job.json only)");
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress line");
-  cmd->callback([flags, &exit_code] { exit_code = ReportStatus("merge", RunMerge(*flags)); });
+  cmd->callback([flags, &exit_code] { exit_code = ReportStatus("merge", RunMergeCommand(*flags)); });
 }
 
 }  // namespace

@@ -81,17 +81,22 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
   const uint64_t num_tiles = tiles.chunks().size();
   std::error_code ec;
   const fs::path out(options.output_dir);
-  fs::create_directories(out / "level_0", ec);
-  if (ec) {
-    return absl::UnavailableError(
-        absl::StrCat((out / "level_0").string(), ": cannot create: ", ec.message()));
+  const std::vector<TopdownZRange> level_ranges =
+      options.levels.empty() ? std::vector<TopdownZRange>{TopdownZRange{}} : options.levels;
+  for (size_t k = 0; k < level_ranges.size(); ++k) {
+    const fs::path dir = out / absl::StrCat("level_", k);
+    fs::create_directories(dir, ec);
+    if (ec) {
+      return absl::UnavailableError(absl::StrCat(dir.string(), ": cannot create: ", ec.message()));
+    }
   }
   timings["merge.index"] = SecondsSince(t0);
 
   // octree.bt, with the per-tile counts and the topdown sums gathered on the same single
   // read of each tile.
   t0 = Clock::now();
-  TopdownMap topdown(tiles.grid(), tiles.chunks());
+  std::vector<TopdownMap> topdowns;
+  for (const TopdownZRange& range : level_ranges) topdowns.emplace_back(tiles.grid(), tiles.chunks(), range);
   uint64_t visited = 0;
   auto visit = [&](const TileData& tile) -> absl::Status {
     if (absl::Status s = Report(progress, "octree_bt", visited, num_tiles); !s.ok()) return s;
@@ -109,7 +114,10 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
         summary.exterior_observed_volume_m3 += volume;
       }
     }
-    return topdown.AddTile(tile);
+    for (TopdownMap& topdown : topdowns) {
+      if (absl::Status s = topdown.AddTile(tile); !s.ok()) return s;
+    }
+    return absl::OkStatus();
   };
   summary.octree_bt_path = (out / "octree.bt").string();
   absl::StatusOr<OctreeBtStats> bt = WriteOctreeBt(tiles, summary.octree_bt_path, visit);
@@ -119,22 +127,35 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
   timings["merge.octree_bt"] = SecondsSince(t0);
   if (absl::Status s = Report(progress, "octree_bt", num_tiles, num_tiles); !s.ok()) return s;
 
-  // level_0/topdown.png (§5.4)
+  // level_<k>/topdown.png (§5.4), one per level
   t0 = Clock::now();
-  if (absl::Status s = Report(progress, "topdown_png", 0, 1); !s.ok()) return s;
-  summary.topdown_png_path = (out / "level_0" / "topdown.png").string();
-  summary.topdown_json_path = (out / "level_0" / "topdown.json").string();
-  if (absl::Status s = topdown.Write(summary.topdown_png_path, summary.topdown_json_path,
-                                     options.topdown_max_height_m, /*level=*/0);
-      !s.ok()) {
-    return s;
+  if (absl::Status s = Report(progress, "topdown_png", 0, topdowns.size()); !s.ok()) return s;
+  std::vector<std::string> topdown_outputs;
+  for (size_t k = 0; k < topdowns.size(); ++k) {
+    const std::string level = absl::StrCat("level_", k);
+    const std::string png = (out / level / "topdown.png").string();
+    const std::string json = (out / level / "topdown.json").string();
+    if (absl::Status s = topdowns[k].Write(png, json, options.topdown_max_height_m, int(k));
+        !s.ok()) {
+      return s;
+    }
+    topdown_outputs.push_back(level + "/topdown.json");
+    if (topdowns[k].geometry().width > 0 && topdowns[k].geometry().height > 0) {
+      topdown_outputs.push_back(level + "/topdown.png");
+    }
+    if (k == 0) {
+      summary.topdown_png_path = png;
+      summary.topdown_json_path = json;
+    }
   }
-  const TopdownGeometry& geo = topdown.geometry();
+  const TopdownGeometry& geo = topdowns[0].geometry();
   summary.topdown_origin_x_m = geo.origin_x_m;
   summary.topdown_origin_y_m = geo.origin_y_m;
   summary.topdown_width = geo.width;
   summary.topdown_height = geo.height;
-  summary.max_open_height_m = topdown.max_open_height_m();
+  for (const TopdownMap& topdown : topdowns) {
+    summary.max_open_height_m = std::max<double>(summary.max_open_height_m, topdown.max_open_height_m());
+  }
   timings["merge.topdown_png"] = SecondsSince(t0);
 
   // job.json
@@ -152,7 +173,9 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
        {"topdown_max_height_m", options.topdown_max_height_m},
        {"bt_occupancy", "free = observed with p > 0.5 (interior), occupied = observed with "
                         "p <= 0.5, unknown = unobserved"},
-       {"topdown_levels", "level_0 covers the whole height (levels not yet computed)"}});
+       {"topdown_levels", options.levels.empty()
+                              ? "level_0 covers the whole height (no levels found)"
+                              : "level_<k> covers levels.json's [split_z_low, split_z_high)"}});
   const uint64_t total_leaves = summary.num_leaves;
   Put(job, "counts", "tiles", summary.num_tiles);
   Put(job, "counts", "leaves", total_leaves);
@@ -169,8 +192,8 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
   nlohmann::json outputs = job.contains("outputs") && job["outputs"].is_array()
                                ? job["outputs"]
                                : nlohmann::json::array();
-  std::vector<std::string> mine = {"octree.bt", "job.json", "level_0/topdown.json"};
-  if (geo.width > 0 && geo.height > 0) mine.push_back("level_0/topdown.png");
+  std::vector<std::string> mine = {"octree.bt", "job.json"};
+  mine.insert(mine.end(), topdown_outputs.begin(), topdown_outputs.end());
   for (const std::string& name : mine) {
     if (std::find(outputs.begin(), outputs.end(), name) == outputs.end()) outputs.push_back(name);
   }

@@ -18,6 +18,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "services/merge/topdown_map.h"
 
 namespace carvemap {
 
@@ -36,6 +37,12 @@ struct MergeOptions {
   uint64_t cache_budget_bytes = uint64_t{256} << 20;
   // Gray scale of topdown.png: 0 = no open height, 255 = ≥ this many metres (linear).
   double topdown_max_height_m = 3.0;
+  // The elevations of each level (§5.2, services/levels): level_<k>/topdown.png integrates
+  // levels[k]. Empty: one level_0 over the whole height.
+  std::vector<TopdownZRange> levels;
+  // RunMerge only (services/merge/merge_job.h): false skips the meshing stages (faces, regions,
+  // levels, dense and planar meshes), leaving the first outputs.
+  bool meshes = true;
 
   // InvalidArgument for empty dirs, a resolution that is not 2 m / 2^k, a non-object job or a
   // non-positive topdown_max_height_m.
@@ -75,6 +82,14 @@ struct MergeSummary {
   double topdown_origin_x_m = 0, topdown_origin_y_m = 0;
   int topdown_width = 0, topdown_height = 0;
   double max_open_height_m = 0;
+
+  // RunMerge's stages (0 when skipped).
+  uint64_t num_boundary_faces = 0;
+  uint64_t num_planar_regions = 0;
+  uint64_t num_levels = 0;
+  uint64_t dense_triangles = 0;
+  uint64_t building_triangles = 0;
+  std::vector<std::string> warnings;  // stages that could not produce their output, and why
 
   double seconds_total = 0;
   nlohmann::json job;  // exactly what was written to job.json

@@ -697,6 +697,25 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       if (rt.ingest_counts) doc["ingest"] = *rt.ingest_counts;
       req.job_json = doc.dump();
     }
+    // Merge stages show as "merge/<stage>" in the job's stage timings (WatchJob); a cancelled
+    // job or a stopping coordinator stops the merge at its next progress call.
+    std::string merge_stage;
+    std::chrono::steady_clock::time_point last_check{};
+    bool keep_going = true;
+    req.progress = [&](const std::string& stage, uint64_t, uint64_t) {
+      if (stage != merge_stage) {
+        merge_stage = stage;
+        EnterStage(job_id, "merge/" + stage);
+      }
+      if (stopping_) return false;
+      const auto now = std::chrono::steady_clock::now();
+      if (now - last_check > std::chrono::milliseconds(500)) {
+        last_check = now;
+        absl::StatusOr<JobRecord> j = store_->GetJob(job_id);
+        keep_going = !(j.ok() && IsTerminal(j->state));
+      }
+      return keep_going;
+    };
     if (spec_.merge) {
       absl::Status merged;
       {
@@ -704,7 +723,8 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
         merged = spec_.merge(req);
       }
       if (absl::Status s = merged; !s.ok()) {
-        FailJob(job_id, absl::StrCat("merge: ", s.message()));
+        if (stopping_) return;  // resumed by the next coordinator
+        if (!absl::IsCancelled(s)) FailJob(job_id, absl::StrCat("merge: ", s.message()));
         CleanUp(job_id, false);
         return;
       }

@@ -25,6 +25,9 @@ struct MergeJobRequest {
   std::string output_dir;  // octree.bt, level_0/, job.json go here
   double resolution_m = 0.0625;
   std::string job_json;  // the job document (id, input, parameters, counts) as JSON text
+  // Called by the merge as it goes (stage name, done, total); false = stop (job cancelled or
+  // coordinator stopping): the merge then returns Cancelled. May be empty.
+  std::function<bool(const std::string& stage, uint64_t done, uint64_t total)> progress;
 };
 using MergeFunction = std::function<absl::Status(const MergeJobRequest&)>;
 
@@ -58,8 +61,8 @@ struct CoordinatorSpec {
   absl::Status Validate() const;
 };
 
-// The merge step of this build: MergeFirstOutputs (services/merge/first_outputs.h) in the
-// coordinator's process, until the merge service runs as its own process.
+// The merge step of this build: RunMerge (services/merge/merge_job.h) in the coordinator's
+// process, until the merge service runs as its own process.
 MergeFunction FirstOutputsMerge();
 
 // Thread-safe. Destroying it shuts it down.

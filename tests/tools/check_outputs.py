@@ -1,0 +1,163 @@
+#!/usr/bin/env python3
+"""Checks a job's outputs (DESIGN §7) independently of carvemap's code, from the spec alone:
+
+  - every file job.json lists exists and is not empty;
+  - levels.json is a list of {index, floor_z, ceiling_z, split_z}, and when the job came from
+    the simulator (input/gt/building.json), each true level is matched by one whose floor and
+    ceiling are within --level-tol metres;
+  - each mesh/*.ply listed is binary little-endian PLY with float x y z vertices and
+    `list uchar int` faces, and is watertight: every undirected edge is used by exactly two
+    triangles, once in each direction, no triangle repeats or has a repeated vertex.
+
+Usage: check_outputs.py OUT_DIR [--level-tol 0.05] [--selftest]
+  --selftest: also checks that the checks can fail (a mesh with a triangle removed or flipped
+  is not watertight; levels moved by 2 × the tolerance do not match the truth).
+"""
+import argparse
+import json
+import os
+import sys
+
+import numpy as np
+
+
+def read_ply(path):
+    with open(path, "rb") as f:
+        if f.readline().strip() != b"ply":
+            raise ValueError(f"{path}: not a PLY file")
+        fmt, nv, nf, vprops, fprops, element, has_list = None, 0, 0, [], [], None, False
+        while True:
+            line = f.readline()
+            if not line:
+                raise ValueError(f"{path}: no end_header")
+            words = line.decode("ascii").split()
+            if not words:
+                continue
+            if words[0] == "end_header":
+                break
+            if words[0] == "format":
+                fmt = words[1]
+            elif words[0] == "element":
+                element = words[1]
+                if element == "vertex":
+                    nv = int(words[2])
+                elif element == "face":
+                    nf = int(words[2])
+            elif words[0] == "property":
+                if words[1] == "list":
+                    if element != "face" or words[2:4] != ["uchar", "int"]:
+                        raise ValueError(f"{path}: faces must be 'list uchar int' (DESIGN §7)")
+                    has_list = True
+                elif element == "vertex":
+                    vprops.append((words[2], words[1]))
+                else:
+                    fprops.append((words[2], words[1]))
+        if fmt != "binary_little_endian":
+            raise ValueError(f"{path}: format {fmt}, expected binary_little_endian")
+        if [p for p in vprops[:3]] != [("x", "float"), ("y", "float"), ("z", "float")]:
+            raise ValueError(f"{path}: vertices must start with float x y z")
+        sizes = {"float": 4, "int": 4, "uint": 4, "uchar": 1, "char": 1, "double": 8,
+                 "short": 2, "ushort": 2}
+        vdtype = np.dtype([(n, "<" + {"float": "f4", "int": "i4", "uint": "u4", "uchar": "u1",
+                                      "char": "i1", "double": "f8", "short": "i2",
+                                      "ushort": "u2"}[t]) for n, t in vprops])
+        verts = np.frombuffer(f.read(nv * vdtype.itemsize), dtype=vdtype, count=nv)
+        if not has_list and nf:
+            raise ValueError(f"{path}: faces without vertex_indices")
+        extra = sum(sizes[t] for _, t in fprops)
+        # Every face must be a triangle (count byte 3) for this fixed-width read.
+        fdtype = np.dtype([("n", "u1"), ("v", "<i4", (3,)), ("extra", "u1", (extra,))])
+        faces = np.frombuffer(f.read(nf * fdtype.itemsize), dtype=fdtype, count=nf)
+        if len(faces) != nf:
+            raise ValueError(f"{path}: truncated")
+        if nf and (faces["n"] != 3).any():
+            raise ValueError(f"{path}: non-triangle faces")
+    xyz = np.stack([verts["x"], verts["y"], verts["z"]], axis=1)
+    return xyz, faces["v"].astype(np.int64)
+
+
+def watertight_problems(path, xyz, tri):
+    problems = []
+    if tri.size and (tri.min() < 0 or tri.max() >= len(xyz)):
+        return [f"{path}: vertex index out of range"]
+    if ((tri[:, 0] == tri[:, 1]) | (tri[:, 1] == tri[:, 2]) | (tri[:, 0] == tri[:, 2])).any():
+        problems.append(f"{path}: triangles with a repeated vertex")
+    key = np.sort(tri, axis=1)
+    if len(np.unique(key, axis=0)) != len(key):
+        problems.append(f"{path}: duplicate triangles")
+    directed = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    lo, hi = directed.min(axis=1), directed.max(axis=1)
+    n = len(xyz) + 1
+    undirected = lo * n + hi
+    _, counts = np.unique(undirected, return_counts=True)
+    if (counts != 2).any():
+        problems.append(f"{path}: {(counts == 1).sum()} boundary and {(counts > 2).sum()} "
+                        "non-manifold edges")
+    dkey = directed[:, 0] * n + directed[:, 1]
+    if len(np.unique(dkey)) != len(dkey):
+        problems.append(f"{path}: inconsistently oriented triangles")
+    return problems
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("out")
+    ap.add_argument("--level-tol", type=float, default=0.05)
+    ap.add_argument("--selftest", action="store_true")
+    args = ap.parse_args()
+    problems = []
+    job = json.load(open(os.path.join(args.out, "job.json")))
+    for name in job.get("outputs", []):
+        p = os.path.join(args.out, name)
+        if not os.path.isfile(p) or os.path.getsize(p) == 0:
+            problems.append(f"{p}: listed in job.json but missing or empty")
+
+    levels = json.load(open(os.path.join(args.out, "levels.json")))
+    for lv in levels:
+        for key in ("index", "floor_z", "ceiling_z", "split_z"):
+            if key not in lv:
+                problems.append(f"levels.json: level without '{key}'")
+    gt = os.path.join(args.out, "input", "gt", "building.json")
+    if os.path.isfile(gt):
+        truth = json.load(open(gt)).get("levels", [])
+        for t in truth:
+            match = [lv for lv in levels
+                     if abs(lv["floor_z"] - t["floor_z"]) <= args.level_tol
+                     and abs(lv["ceiling_z"] - t["ceiling_z"]) <= args.level_tol]
+            if len(match) != 1:
+                problems.append(f"levels.json: true level {t} matched by {len(match)} levels "
+                                f"(tolerance {args.level_tol} m): {levels}")
+        print(f"levels: {[(round(l['floor_z'], 3), round(l['ceiling_z'], 3)) for l in levels]} "
+              f"truth {[(t['floor_z'], t['ceiling_z']) for t in truth]}")
+
+    for name in job.get("outputs", []):
+        if name.startswith("mesh/") and name.endswith(".ply"):
+            p = os.path.join(args.out, name)
+            xyz, tri = read_ply(p)
+            found = watertight_problems(p, xyz, tri)
+            problems += found
+            print(f"{name}: {len(xyz)} vertices, {len(tri)} triangles, "
+                  f"{'watertight' if not found else 'NOT watertight'}")
+
+    if args.selftest:
+        xyz, tri = read_ply(os.path.join(args.out, "mesh", "dense.ply"))
+        if not watertight_problems("cut", xyz, tri[:-1]):
+            problems.append("selftest: a mesh with a triangle removed passed as watertight")
+        flipped = tri.copy()
+        flipped[0] = flipped[0][::-1]
+        if not watertight_problems("flipped", xyz, flipped):
+            problems.append("selftest: a mesh with a flipped triangle passed as watertight")
+        if os.path.isfile(gt):
+            for t in json.load(open(gt)).get("levels", []):
+                moved = [dict(lv, floor_z=lv["floor_z"] + 2 * args.level_tol) for lv in levels]
+                if any(abs(lv["floor_z"] - t["floor_z"]) <= args.level_tol for lv in moved):
+                    problems.append("selftest: levels moved off the truth still matched")
+        print("selftest: the checks reject a cut mesh, a flipped triangle and moved levels")
+
+    for p in problems:
+        print("FAIL:", p, file=sys.stderr)
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
