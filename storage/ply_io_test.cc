@@ -64,5 +64,75 @@ TEST(PlyIoTest, UnwritableDirectoryIsAClearError) {
   EXPECT_NE(std::string(s.message()).find("/nonexistent-dir/x.ply"), std::string::npos);
 }
 
+TEST(PlyIoTest, ReadsBackWhatItWrites) {
+  TriangleMesh a;
+  a.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0.5f, -2.25f, 3}};
+  a.triangles = {{0, 1, 2}, {1, 3, 2}};
+  std::vector<int> regions = {4, -7};
+  const std::string path = testing::TempDir() + "/back.ply";
+  ASSERT_TRUE(WritePly(path, a, &regions, "region").ok());
+  absl::StatusOr<PlyMesh> b = ReadPly(path);
+  ASSERT_TRUE(b.ok()) << b.status();
+  EXPECT_EQ(b->mesh.vertices, a.vertices);
+  EXPECT_EQ(b->mesh.triangles, a.triangles);
+  ASSERT_EQ(b->face_values.size(), 1u);
+  EXPECT_EQ(b->face_values[0].first, "region");
+  EXPECT_EQ(b->face_values[0].second, regions);
+}
+
+TEST(PlyIoTest, ReadFansPolygonsAndSkipsExtraProperties) {
+  // A quad with a float face property and a vertex with an extra uchar, written by hand.
+  std::string data =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\n"
+      "property float y\nproperty float z\nproperty uchar red\nelement face 1\n"
+      "property list uchar int vertex_indices\nproperty float quality\n"
+      "property ushort part\nend_header\n";
+  const float xyz[4][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  for (const auto& v : xyz) {
+    data.append(reinterpret_cast<const char*>(v), 12);
+    data.push_back(char(200));
+  }
+  data.push_back(char(4));
+  const int idx[4] = {0, 1, 2, 3};
+  data.append(reinterpret_cast<const char*>(idx), 16);
+  const float q = 0.5f;
+  data.append(reinterpret_cast<const char*>(&q), 4);
+  const uint16_t part = 513;
+  data.append(reinterpret_cast<const char*>(&part), 2);
+  const std::string path = testing::TempDir() + "/quad.ply";
+  std::ofstream(path, std::ios::binary) << data;
+  absl::StatusOr<PlyMesh> m = ReadPly(path);
+  ASSERT_TRUE(m.ok()) << m.status();
+  ASSERT_EQ(m->mesh.triangles.size(), 2u);
+  EXPECT_EQ(m->mesh.triangles[1], Eigen::Vector3i(0, 2, 3));
+  EXPECT_EQ(m->mesh.vertices[2], Eigen::Vector3f(1, 1, 0));
+  ASSERT_EQ(m->face_values.size(), 1u);  // the float property is not returned
+  EXPECT_EQ(m->face_values[0].first, "part");
+  EXPECT_EQ(m->face_values[0].second, (std::vector<int>{513, 513}));
+}
+
+TEST(PlyIoTest, ReadErrorsNameTheFile) {
+  EXPECT_EQ(ReadPly(testing::TempDir() + "/missing.ply").status().code(),
+            absl::StatusCode::kNotFound);
+  TriangleMesh a;
+  a.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  a.triangles = {{0, 1, 2}};
+  const std::string path = testing::TempDir() + "/cut.ply";
+  ASSERT_TRUE(WritePly(path, a).ok());
+  std::string data = ReadAll(path);
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << data.substr(0, data.size() - 3);
+  absl::Status s = ReadPly(path).status();
+  EXPECT_EQ(s.code(), absl::StatusCode::kDataLoss);
+  EXPECT_NE(std::string(s.message()).find(path), std::string::npos) << s;
+  EXPECT_NE(std::string(s.message()).find("truncated"), std::string::npos) << s;
+  // An index out of range.
+  data[data.size() - 4] = 9;
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << data;
+  s = ReadPly(path).status();
+  EXPECT_NE(std::string(s.message()).find("vertex index 9"), std::string::npos) << s;
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << "ply\nformat ascii 1.0\nend_header\n";
+  EXPECT_EQ(ReadPly(path).status().code(), absl::StatusCode::kDataLoss);
+}
+
 }  // namespace
 }  // namespace carvemap
