@@ -124,55 +124,16 @@ TEST(DenseMesh, ProgressCanCancel) {
 
 // ---- Real carved data against ground truth -------------------------------------------------
 
-// Reads the triangles of a binary little-endian PLY as written by WritePly (float x y z
-// vertices, possibly with more float/int properties; faces as uchar-count int lists, possibly
-// followed by int properties).
+// The triangles of a PLY (the simulator's truth meshes) as vertex triples.
 std::vector<std::array<Eigen::Vector3d, 3>> ReadPlyTriangles(const std::string& path) {
   std::vector<std::array<Eigen::Vector3d, 3>> out;
-  std::ifstream in(path, std::ios::binary);
-  EXPECT_TRUE(in.good()) << path;
-  std::string line, element;
-  size_t nv = 0, nf = 0;
-  std::vector<std::string> vprops, fprops;
-  while (std::getline(in, line) && line != "end_header") {
-    std::istringstream ls(line);
-    std::string w;
-    ls >> w;
-    if (w == "element") {
-      ls >> element;
-      (element == "vertex" ? nv : nf) = 0;
-      size_t c;
-      ls >> c;
-      (element == "vertex" ? nv : nf) = c;
-    } else if (w == "property") {
-      std::string type;
-      ls >> type;
-      (element == "vertex" ? vprops : fprops).push_back(type);
-    }
+  absl::StatusOr<PlyMesh> ply = ReadPly(path);
+  EXPECT_TRUE(ply.ok()) << ply.status();
+  if (!ply.ok()) return out;
+  const auto& v = ply->mesh.vertices;
+  for (const Eigen::Vector3i& t : ply->mesh.triangles) {
+    out.push_back({v[t[0]].cast<double>(), v[t[1]].cast<double>(), v[t[2]].cast<double>()});
   }
-  std::vector<Eigen::Vector3d> v(nv);
-  for (size_t i = 0; i < nv; ++i) {
-    float xyz[3];
-    for (size_t p = 0; p < vprops.size(); ++p) {
-      const size_t bytes = (vprops[p] == "double") ? 8 : (vprops[p] == "uchar" ? 1 : 4);
-      char buf[8];
-      in.read(buf, bytes);
-      if (p < 3) std::memcpy(&xyz[p], buf, 4);
-    }
-    v[i] = Eigen::Vector3f(xyz[0], xyz[1], xyz[2]).cast<double>();
-  }
-  for (size_t i = 0; i < nf; ++i) {
-    unsigned char count = 0;
-    in.read(reinterpret_cast<char*>(&count), 1);
-    std::vector<int> idx(count);
-    in.read(reinterpret_cast<char*>(idx.data()), 4 * count);
-    for (size_t p = 1; p < fprops.size(); ++p) {
-      char buf[8];
-      in.read(buf, fprops[p] == "uchar" ? 1 : 4);
-    }
-    for (int j = 1; j + 1 < count; ++j) out.push_back({v[idx[0]], v[idx[j]], v[idx[j + 1]]});
-  }
-  EXPECT_TRUE(in.good()) << path;
   return out;
 }
 

@@ -27,13 +27,6 @@ double SecondsSince(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-absl::Status Report(const MergeProgressCallback& progress, const char* stage, uint64_t done,
-                    uint64_t total) {
-  if (progress && !progress(MergeProgress{stage, done, total})) {
-    return absl::CancelledError(absl::StrCat("merge cancelled during ", stage));
-  }
-  return absl::OkStatus();
-}
 
 // Sets job[a][b] = value, keeping whatever else the caller put under job[a].
 void Put(nlohmann::json& job, const char* a, const char* b, nlohmann::json value) {
@@ -42,6 +35,14 @@ void Put(nlohmann::json& job, const char* a, const char* b, nlohmann::json value
 }
 
 }  // namespace
+
+absl::Status ReportMergeProgress(const MergeProgressCallback& progress, const char* stage,
+                                 uint64_t done, uint64_t total) {
+  if (progress && !progress(MergeProgress{stage, done, total})) {
+    return absl::CancelledError(absl::StrCat("merge cancelled during ", stage));
+  }
+  return absl::OkStatus();
+}
 
 absl::Status MergeOptions::Validate() const {
   if (tiles_dir.empty()) return absl::InvalidArgumentError("merge: tiles_dir is empty");
@@ -71,7 +72,7 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
 
   // index
   Clock::time_point t0 = Clock::now();
-  if (absl::Status s = Report(progress, "index", 0, 1); !s.ok()) return s;
+  if (absl::Status s = ReportMergeProgress(progress, "index", 0, 1); !s.ok()) return s;
   absl::StatusOr<std::unique_ptr<TileSet>> opened =
       TileSet::Open(options.tiles_dir, options.resolution_m, options.cache_budget_bytes);
   if (!opened.ok()) return opened.status();
@@ -99,7 +100,7 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
   for (const TopdownZRange& range : level_ranges) topdowns.emplace_back(tiles.grid(), tiles.chunks(), range);
   uint64_t visited = 0;
   auto visit = [&](const TileData& tile) -> absl::Status {
-    if (absl::Status s = Report(progress, "octree_bt", visited, num_tiles); !s.ok()) return s;
+    if (absl::Status s = ReportMergeProgress(progress, "octree_bt", visited, num_tiles); !s.ok()) return s;
     ++visited;
     for (const TileLeaf& leaf : tile.leaves) {
       ++summary.num_leaves;
@@ -125,11 +126,11 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
   summary.num_tiles = bt->num_tiles;
   summary.num_bt_nodes = bt->num_nodes;
   timings["merge.octree_bt"] = SecondsSince(t0);
-  if (absl::Status s = Report(progress, "octree_bt", num_tiles, num_tiles); !s.ok()) return s;
+  if (absl::Status s = ReportMergeProgress(progress, "octree_bt", num_tiles, num_tiles); !s.ok()) return s;
 
   // level_<k>/topdown.png (§5.4), one per level
   t0 = Clock::now();
-  if (absl::Status s = Report(progress, "topdown_png", 0, topdowns.size()); !s.ok()) return s;
+  if (absl::Status s = ReportMergeProgress(progress, "topdown_png", 0, topdowns.size()); !s.ok()) return s;
   std::vector<std::string> topdown_outputs;
   for (size_t k = 0; k < topdowns.size(); ++k) {
     const std::string level = absl::StrCat("level_", k);
@@ -159,7 +160,7 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
   timings["merge.topdown_png"] = SecondsSince(t0);
 
   // job.json
-  if (absl::Status s = Report(progress, "job_json", 0, 1); !s.ok()) return s;
+  if (absl::Status s = ReportMergeProgress(progress, "job_json", 0, 1); !s.ok()) return s;
   nlohmann::json job = options.job.is_null() ? nlohmann::json::object() : options.job;
   Put(job, "versions", "carvemap", CARVEMAP_VERSION);
   Put(job, "versions", "tile_format", absl::StrCat(kTileFormat, "/", kTileVersion));

@@ -59,6 +59,9 @@ struct MergeProgress {
 // Return false to cancel: MergeFirstOutputs then stops at the next tile and returns Cancelled
 // (the outputs of the stage that was running are not written).
 using MergeProgressCallback = std::function<bool(const MergeProgress&)>;
+// Calls `progress` (when set); Cancelled ("merge cancelled during <stage>") when it says stop.
+absl::Status ReportMergeProgress(const MergeProgressCallback& progress, const char* stage,
+                                 uint64_t done, uint64_t total);
 
 struct MergeSummary {
   // Absolute-or-as-given paths of what was written.

@@ -40,13 +40,6 @@ ChunkProgressFn StageProgress(const MergeProgressCallback& progress, const char*
   };
 }
 
-absl::Status Report(const MergeProgressCallback& progress, const char* stage, uint64_t done,
-                    uint64_t total) {
-  if (progress && !progress(MergeProgress{stage, done, total})) {
-    return absl::CancelledError(absl::StrCat("merge cancelled during ", stage));
-  }
-  return absl::OkStatus();
-}
 
 }  // namespace
 
@@ -88,7 +81,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
 
   // planar regions (stage 2, §4.2.4)
   t0 = Clock::now();
-  if (absl::Status s = Report(progress, "planar_regions", 0, 1); !s.ok()) return s;
+  if (absl::Status s = ReportMergeProgress(progress, "planar_regions", 0, 1); !s.ok()) return s;
   absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(*faces, grid, PlanarRegionOptions{});
   if (!regions.ok()) return InStage("planar_regions", regions.status());
   counts["planar_regions"] = regions->regions.size();
@@ -97,7 +90,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   // levels (stage 3, §5.2) ➜ levels.json. The point-height fallback of §2.5 needs the scan,
   // which the merge does not read; without horizontal regions there is one level_0.
   t0 = Clock::now();
-  if (absl::Status s = Report(progress, "levels", 0, 1); !s.ok()) return s;
+  if (absl::Status s = ReportMergeProgress(progress, "levels", 0, 1); !s.ok()) return s;
   absl::StatusOr<LevelSplit> levels = SplitLevels(regions->regions, nullptr);
   if (!levels.ok()) return InStage("levels", levels.status());
   MergeOptions first = options;
@@ -137,7 +130,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   // planar mesh (§4.3.3, eq 4.9, §4.2.5) ➜ mesh/building.ply. For now it holds the planar mesh
   // of everything (issue 4); segmentation (§5.6) will split furniture off.
   t0 = Clock::now();
-  if (absl::Status s = Report(progress, "planar_mesh", 0, 1); !s.ok()) return s;
+  if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
   uint64_t building_triangles = 0;
   absl::StatusOr<PlanarMesh> planar = BuildPlanarMesh(*faces, *regions, grid);
   if (planar.ok()) {

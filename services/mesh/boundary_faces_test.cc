@@ -10,31 +10,15 @@
 
 #include <gtest/gtest.h>
 
+#include "services/mesh/mesh_test_util.h"
+
 namespace carvemap {
 namespace {
 
-LeafStats StatsWithP(double p) {
-  LeafStats s;
-  for (int i = 0; i < 3; ++i) s.Add(p, 0.5);
-  return s;
-}
-
-using Tiles = std::map<ChunkKey, TileData, ChunkKeyLess>;
-
-ChunkNeighbourhood HoodOf(const Tiles& tiles, const OctreeGrid& grid, const ChunkKey& chunk) {
-  ChunkNeighbourhood hood;
-  hood.grid = grid;
-  hood.chunk = chunk;
-  for (int dz = -1; dz <= 1; ++dz) {
-    for (int dy = -1; dy <= 1; ++dy) {
-      for (int dx = -1; dx <= 1; ++dx) {
-        auto it = tiles.find(chunk + ChunkKey(dx, dy, dz));
-        if (it != tiles.end()) hood.tiles[ChunkNeighbourhood::Index(dx, dy, dz)] = &it->second;
-      }
-    }
-  }
-  return hood;
-}
+using testing::AddLeaf;
+using testing::HoodOf;
+using testing::StatsWithP;
+using testing::Tiles;
 
 std::vector<BoundaryFace> AllFaces(const Tiles& tiles, const OctreeGrid& grid) {
   std::vector<BoundaryFace> all;
@@ -44,17 +28,6 @@ std::vector<BoundaryFace> AllFaces(const Tiles& tiles, const OctreeGrid& grid) {
     if (faces.ok()) all.insert(all.end(), faces->begin(), faces->end());
   }
   return all;
-}
-
-// Adds a leaf at global node (min_cell, depth) to the tile of its chunk.
-void AddLeaf(Tiles& tiles, const OctreeGrid& grid, const LeafKey& min_cell, int depth, double p) {
-  const int n = grid.leaves_per_side();
-  const ChunkKey chunk = ChunkOfLeaf(grid, min_cell);
-  TileData& t = tiles[chunk];
-  t.chunk = chunk;
-  t.grid = grid;
-  const int s = 1 << (grid.chunk_depth - depth);
-  t.leaves.push_back(TileLeaf{ChunkNode{(min_cell - chunk * n) / s, depth}, StatsWithP(p)});
 }
 
 // Brute force on the finest grid: label of every cell from the tiles (no tile row: exterior).
@@ -255,23 +228,7 @@ TEST(BoundaryFaces, RandomTilesGiveEveryFinestFaceOnce) {
     for (int j = 0; j < 8; ++j) {
       const ChunkKey c(j & 1, (j >> 1) & 1, (j >> 2) & 1);
       if (j == 5) continue;
-      std::uniform_real_distribution<double> u(0, 1);
-      std::function<void(const ChunkNode&)> grow = [&](const ChunkNode& node) {
-        if (node.depth == 3 || u(rng) < (node.depth == 0 ? 0.05 : 0.35)) {
-          if (u(rng) < 0.25) return;  // unobserved
-          static constexpr double kPs[] = {0.05, 0.3, 0.5, 0.51, 0.7, 0.95};
-          TileData& t = tiles[c];
-          t.chunk = c;
-          t.grid = grid;
-          t.leaves.push_back(TileLeaf{node, StatsWithP(kPs[rng() % 6])});
-          return;
-        }
-        for (int i = 0; i < 8; ++i) {
-          grow(ChunkNode{node.local * 2 + Eigen::Vector3i(i & 1, (i >> 1) & 1, (i >> 2) & 1),
-                         node.depth + 1});
-        }
-      };
-      grow(ChunkNode{});
+      testing::GrowRandomTile(rng, grid, c, 0.05, 0.35, 0.25, tiles);
     }
     const std::vector<BoundaryFace> faces = AllFaces(tiles, grid);
     const auto expected = BruteForceFaces(Densify(tiles, grid));

@@ -11,39 +11,15 @@
 #include <gtest/gtest.h>
 
 #include "services/mesh/mesh_checks.h"
+#include "services/mesh/mesh_test_util.h"
 
 namespace carvemap {
 namespace {
 
-LeafStats StatsWithP(double p) {
-  LeafStats s;
-  for (int i = 0; i < 3; ++i) s.Add(p, 0.5);
-  return s;
-}
-
-using Tiles = std::map<ChunkKey, TileData, ChunkKeyLess>;
-
-void AddLeaf(Tiles& tiles, const OctreeGrid& grid, const LeafKey& min_cell, int depth, double p) {
-  const int n = grid.leaves_per_side();
-  const ChunkKey chunk = ChunkOfLeaf(grid, min_cell);
-  TileData& t = tiles[chunk];
-  t.chunk = chunk;
-  t.grid = grid;
-  const int s = 1 << (grid.chunk_depth - depth);
-  t.leaves.push_back(TileLeaf{ChunkNode{(min_cell - chunk * n) / s, depth}, StatsWithP(p)});
-}
-
-ChunkNeighbourhood HoodOf(const Tiles& tiles, const OctreeGrid& grid, const ChunkKey& chunk) {
-  ChunkNeighbourhood hood;
-  hood.grid = grid;
-  hood.chunk = chunk;
-  for (int j = 0; j < 27; ++j) {
-    const ChunkKey d(j % 3 - 1, (j / 3) % 3 - 1, j / 9 - 1);
-    auto it = tiles.find(chunk + d);
-    if (it != tiles.end()) hood.tiles[j] = &it->second;
-  }
-  return hood;
-}
+using testing::AddLeaf;
+using testing::HoodOf;
+using testing::StatsWithP;
+using testing::Tiles;
 
 struct Meshed {
   TriangleMesh mesh;
@@ -203,26 +179,10 @@ TEST(DualContouring, RandomOctreesAreWatertight) {
     OctreeGrid grid;
     grid.chunk_depth = 3;
     Tiles tiles;
-    std::uniform_real_distribution<double> u(0, 1);
     for (int j = 0; j < 8; ++j) {
       const ChunkKey c(j & 1, (j >> 1) & 1, (j >> 2) & 1);
       if (j == 6) continue;
-      std::function<void(const ChunkNode&)> grow = [&](const ChunkNode& node) {
-        if (node.depth == 3 || u(rng) < (node.depth == 0 ? 0.05 : 0.3)) {
-          if (u(rng) < 0.2) return;
-          static constexpr double kPs[] = {0.05, 0.3, 0.5, 0.51, 0.7, 0.95};
-          TileData& t = tiles[c];
-          t.chunk = c;
-          t.grid = grid;
-          t.leaves.push_back(TileLeaf{node, StatsWithP(kPs[rng() % 6])});
-          return;
-        }
-        for (int i = 0; i < 8; ++i) {
-          grow(ChunkNode{node.local * 2 + Eigen::Vector3i(i & 1, (i >> 1) & 1, (i >> 2) & 1),
-                         node.depth + 1});
-        }
-      };
-      grow(ChunkNode{});
+      testing::GrowRandomTile(rng, grid, c, 0.05, 0.3, 0.2, tiles);
     }
     const Meshed m = MeshAll(tiles, grid);
     const MeshCheck check = CheckMesh(m.mesh);
