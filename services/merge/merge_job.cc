@@ -113,18 +113,21 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   }
   timings["merge.levels"] = SecondsSince(t0);
 
-  // dense mesh (§4.3.3) ➜ mesh/dense.ply
+  // dense mesh (§4.3.3) ➜ mesh/dense.ply; scoped: the mesh can be large and is not kept.
   t0 = Clock::now();
-  absl::StatusOr<DenseMeshResult> dense = BuildDenseMesh(tiles, StageProgress(progress, "dense_mesh"));
-  if (!dense.ok()) return InStage("dense_mesh", dense.status());
-  if (absl::Status s = WritePly((out / "mesh" / "dense.ply").string(), dense->mesh); !s.ok()) {
-    return InStage("dense_mesh", s);
+  uint64_t dense_triangles = 0;
+  {
+    absl::StatusOr<DenseMeshResult> dense =
+        BuildDenseMesh(tiles, StageProgress(progress, "dense_mesh"));
+    if (!dense.ok()) return InStage("dense_mesh", dense.status());
+    if (absl::Status s = WritePly((out / "mesh" / "dense.ply").string(), dense->mesh); !s.ok()) {
+      return InStage("dense_mesh", s);
+    }
+    dense_triangles = dense->mesh.triangles.size();
+    counts["dense_vertices"] = dense->mesh.vertices.size();
+    counts["dense_triangles"] = dense_triangles;
   }
   outputs.push_back("mesh/dense.ply");
-  counts["dense_vertices"] = dense->mesh.vertices.size();
-  counts["dense_triangles"] = dense->mesh.triangles.size();
-  const uint64_t dense_triangles = dense->mesh.triangles.size();
-  dense = absl::CancelledError("released");  // the mesh can be large: free it now
   timings["merge.dense_mesh"] = SecondsSince(t0);
 
   // planar mesh (§4.3.3, eq 4.9, §4.2.5) ➜ mesh/building.ply. For now it holds the planar mesh
