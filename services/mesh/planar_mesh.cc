@@ -1019,6 +1019,48 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces, cons
 
 }  // namespace
 
+namespace {
+
+// Two triangles on the same three vertices whose edges nothing else uses form a closed piece of
+// their own, with no volume: a one-cell pocket whose corners eq 4.9 put onto one plane. Both
+// go; the rest of the mesh stays closed (their edges had no other user).
+void DropPillows(PlanarMesh& out) {
+  auto edge_key = [](int a, int b) {
+    return (uint64_t(uint32_t(std::min(a, b))) << 32) | uint32_t(std::max(a, b));
+  };
+  absl::flat_hash_map<uint64_t, int> edge_uses;
+  absl::flat_hash_map<std::array<int, 3>, std::vector<int>> by_vertices;
+  for (int t = 0; t < static_cast<int>(out.mesh.triangles.size()); ++t) {
+    const Eigen::Vector3i& x = out.mesh.triangles[t];
+    for (int i = 0; i < 3; ++i) ++edge_uses[edge_key(x[i], x[(i + 1) % 3])];
+    std::array<int, 3> key = {x[0], x[1], x[2]};
+    std::sort(key.begin(), key.end());
+    by_vertices[key].push_back(t);
+  }
+  std::vector<char> drop(out.mesh.triangles.size(), 0);
+  bool any = false;
+  for (const auto& [key, ts] : by_vertices) {
+    if (ts.size() != 2) continue;
+    const bool alone = edge_uses[edge_key(key[0], key[1])] == 2 &&
+                       edge_uses[edge_key(key[1], key[2])] == 2 &&
+                       edge_uses[edge_key(key[0], key[2])] == 2;
+    if (!alone) continue;
+    drop[ts[0]] = drop[ts[1]] = 1;
+    any = true;
+  }
+  if (!any) return;
+  PlanarMesh kept;
+  kept.mesh.vertices = std::move(out.mesh.vertices);
+  for (size_t t = 0; t < drop.size(); ++t) {
+    if (drop[t]) continue;
+    kept.mesh.triangles.push_back(out.mesh.triangles[t]);
+    kept.triangle_region.push_back(out.triangle_region[t]);
+  }
+  out = std::move(kept);
+}
+
+}  // namespace
+
 absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
                                            const PlanarRegionSet& regions, const OctreeGrid& grid,
                                            const PlanarMeshOptions& options) {
@@ -1150,6 +1192,7 @@ absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
       out.triangle_region.push_back(r);
     }
   }
+  DropPillows(out);
   const MeshCheck check = CheckMesh(out.mesh);
   if (!check.watertight()) {
     return absl::InternalError(absl::StrCat("planar_mesh: not watertight: ", check.ToString()));
