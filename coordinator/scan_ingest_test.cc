@@ -10,6 +10,7 @@
 
 #include "coordinator/chunk_binning.h"
 #include "services/sim/simulator.h"
+#include "tests/support/thin_room_scan.h"
 
 namespace carvemap {
 namespace {
@@ -22,16 +23,9 @@ class ScanIngestTest : public ::testing::Test {
   static void SetUpTestSuite() {
     root_ = new std::string(fs::path(::testing::TempDir()) / "scan_ingest_test");
     fs::remove_all(*root_);
-    SimulateOptions o;
-    o.preset = "room";
-    o.seed = 2;
-    o.rig.rate_hz = 5;
-    o.rig.beam_step_deg = 2;
-    o.max_duration_s = 10;
-    o.output_dir = *root_ + "/sim";
-    absl::StatusOr<SimulationSummary> s = Simulate(o);
-    ASSERT_TRUE(s.ok()) << s.status();
-    scan_ = new std::string(s->scan_path);
+    absl::StatusOr<std::string> scan = testing::SimulateThinRoomScan(*root_ + "/sim", 2);
+    ASSERT_TRUE(scan.ok()) << scan.status();
+    scan_ = new std::string(*scan);
   }
   static void TearDownTestSuite() {
     delete root_;

@@ -12,6 +12,7 @@
 
 #include "coordinator/scan_ingest.h"
 #include "services/sim/simulator.h"
+#include "tests/support/thin_room_scan.h"
 #include "storage/tile_store.h"
 
 namespace carvemap {
@@ -32,17 +33,10 @@ class ChunkCarverTest : public ::testing::Test {
   static void SetUpTestSuite() {
     root_ = new std::string(fs::path(::testing::TempDir()) / "chunk_carver_test");
     fs::remove_all(*root_);
-    SimulateOptions o;
-    o.preset = "room";
-    o.seed = 4;
-    o.rig.rate_hz = 5;
-    o.rig.beam_step_deg = 2;
-    o.max_duration_s = 10;
-    o.output_dir = *root_ + "/sim";
-    absl::StatusOr<SimulationSummary> s = Simulate(o);
-    ASSERT_TRUE(s.ok()) << s.status();
+    absl::StatusOr<std::string> scan = testing::SimulateThinRoomScan(*root_ + "/sim", 4);
+    ASSERT_TRUE(scan.ok()) << scan.status();
     IngestOptions io;
-    io.scan_path = s->scan_path;
+    io.scan_path = *scan;
     io.spill_dir = *root_ + "/spill";
     absl::StatusOr<IngestResult> r = IngestScan(io);
     ASSERT_TRUE(r.ok()) << r.status();
