@@ -1,5 +1,6 @@
-// `carvemap merge TILES_DIR -o OUT [--resolution R]`: the merge (DESIGN §6, §7) of a tiles
-// directory: OUT/octree.bt, OUT/levels.json, OUT/level_<k>/topdown.png (+ topdown.json),
+// `carvemap merge TILES_DIR -o OUT [--scan SCAN.h5] [--resolution R]`: the merge (DESIGN §6, §7)
+// of a tiles directory: OUT/octree.bt, OUT/levels.json, OUT/level_<k>/topdown.png (+
+// topdown.json), with --scan OUT/level_<k>/floorplan.geojson, floorplan.svg and extruded.ply,
 // OUT/mesh/dense.ply, OUT/mesh/building.ply and OUT/job.json.
 #include <iomanip>
 #include <iostream>
@@ -52,6 +53,10 @@ absl::Status RunMergeCommand(MergeFlags& flags) {
     std::cout << "  " << s.num_boundary_faces << " boundary faces, " << s.num_planar_regions
               << " planar regions, " << s.num_levels << " level(s) (levels.json)\n"
               << "  mesh/dense.ply: " << s.dense_triangles << " triangles\n";
+    if (s.num_rooms > 0) {
+      std::cout << "  level_<k>/floorplan.geojson, floorplan.svg, extruded.ply: " << s.num_rooms
+                << " rooms\n";
+    }
     if (s.building_triangles > 0) {
       std::cout << "  mesh/building.ply: " << s.building_triangles << " triangles\n";
     }
@@ -70,6 +75,10 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
   cmd->add_option("tiles", flags->options.tiles_dir, "Directory of c_<x>_<y>_<z>.h5 tiles")
       ->required();
   cmd->add_option("-o,--output", flags->options.output_dir, "Output directory")->required();
+  cmd->add_option("--scan", flags->options.scan_path,
+                  "The job's scan.h5: its path gives the floor plans their lines of sight "
+                  "(without it: no floor plans)")
+      ->check(CLI::ExistingFile);
   cmd->add_option("--resolution", flags->options.resolution_m,
                   "Octree resolution in m (2 m / 2^k); default: the tiles'");
   cmd->add_option("--cache-mb", flags->cache_mb, "Decoded-tile cache budget in MiB")

@@ -43,6 +43,10 @@ struct MergeOptions {
   // RunMerge only (services/merge/merge_job.h): false skips the meshing stages (faces, regions,
   // levels, dense and planar meshes), leaving the first outputs.
   bool meshes = true;
+  // RunMerge only: the job's scan.h5 (DESIGN §3), whose /path (poses, small) gives the floor
+  // plans their scanner positions (§3.3.1 lines of sight, §3.3.2 unentered rooms). Empty: no
+  // floor plans (job.json says why under "warnings").
+  std::string scan_path;
 
   // InvalidArgument for empty dirs, a resolution that is not 2 m / 2^k, a non-object job or a
   // non-positive topdown_max_height_m.
@@ -92,6 +96,7 @@ struct MergeSummary {
   uint64_t num_levels = 0;
   uint64_t dense_triangles = 0;
   uint64_t building_triangles = 0;
+  uint64_t num_rooms = 0;  // over all levels' floor plans
   std::vector<std::string> warnings;  // stages that could not produce their output, and why
 
   double seconds_total = 0;

@@ -8,6 +8,9 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "services/floorplan/floorplan_export.h"
+#include "services/floorplan/floorplan_pipeline.h"
+#include "services/floorplan/octree_wall_samples.h"
 #include "services/levels/level_split.h"
 #include "services/merge/dense_mesh.h"
 #include "services/merge/tile_set.h"
@@ -16,6 +19,7 @@
 #include "services/mesh/planar_regions.h"
 #include "storage/atomic_file.h"
 #include "storage/ply_io.h"
+#include "storage/scan_reader.h"
 
 namespace carvemap {
 namespace {
@@ -40,6 +44,109 @@ ChunkProgressFn StageProgress(const MergeProgressCallback& progress, const char*
   };
 }
 
+
+// The recorded system path of the job's scan (DESIGN §3 /path): the scanner positions of the
+// floor plans (§3.3.1). Small (poses, not rays), so read whole.
+absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string& scan_path) {
+  absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan_path);
+  if (!reader.ok()) return reader.status();
+  std::vector<Eigen::Vector3d> positions;
+  positions.reserve((*reader)->path().size());
+  for (const PathRecord& r : (*reader)->path()) positions.emplace_back(r.x, r.y, r.z);
+  return positions;
+}
+
+// Floor plans per level (DESIGN §6 stages 4–5; seed §5.3, §3.3) ➜ level_<k>/floorplan.geojson,
+// floorplan.svg, extruded.ply. A level whose plan cannot be made is not fatal: the other outputs
+// stand and job.json says why under "warnings".
+absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
+                            const std::vector<BoundaryFace>& faces,
+                            const PlanarRegionSet& regions, const std::vector<Level>& levels,
+                            const fs::path& out, nlohmann::json& job, nlohmann::json& counts,
+                            nlohmann::json& timings, std::vector<std::string>& outputs,
+                            std::vector<std::string>& warnings,
+                            const MergeProgressCallback& progress) {
+  if (options.scan_path.empty()) {
+    warnings.push_back("floorplan: no scan given, so no scanner path for the lines of sight; "
+                       "no floor plans");
+    return absl::OkStatus();
+  }
+  if (levels.empty()) {
+    warnings.push_back("floorplan: no levels found; no floor plans");
+    return absl::OkStatus();
+  }
+  absl::StatusOr<std::vector<Eigen::Vector3d>> path = ReadPathPositions(options.scan_path);
+  if (!path.ok()) return path.status();
+  const OctreeLabelFn label_at = [&tiles](const Eigen::Vector3d& x) -> absl::StatusOr<OctreeLabel> {
+    absl::StatusOr<LeafQuery> q = tiles.Query(x);
+    if (!q.ok()) return q.status();
+    if (!q->stored || !q->stats.observed()) return OctreeLabel::kUnobserved;
+    return q->stats.interior() ? OctreeLabel::kInterior : OctreeLabel::kExterior;
+  };
+  nlohmann::json rooms = nlohmann::json::array();
+  size_t total_samples = 0, total_rooms = 0;
+  double seconds_samples = 0, seconds_plan = 0;
+  for (size_t k = 0; k < levels.size(); ++k) {
+    if (absl::Status s = ReportMergeProgress(progress, "floorplan", k, levels.size()); !s.ok()) {
+      return s;
+    }
+    Clock::time_point t0 = Clock::now();
+    OctreeWallSampleReport sample_report;
+    absl::StatusOr<WallSampleSet> samples =
+        OctreeWallSamples(faces, regions, tiles.grid(), levels[k], *path, label_at,
+                          OctreeWallSampleOptions{}, &sample_report);
+    if (!samples.ok()) {
+      if (absl::IsInvalidArgument(samples.status()) || absl::IsFailedPrecondition(samples.status())) {
+        warnings.push_back(absl::StrCat("floorplan level ", k, ": ", samples.status().message()));
+        continue;
+      }
+      return samples.status();  // reading the tiles failed: the merge fails
+    }
+    seconds_samples += SecondsSince(t0);
+    total_samples += samples->samples.size();
+    t0 = Clock::now();
+    absl::StatusOr<LevelFloorPlan> plan =
+        BuildLevelFloorPlan(*samples, static_cast<int>(k), FloorPlanOptions{});
+    seconds_plan += SecondsSince(t0);
+    if (!plan.ok()) {
+      warnings.push_back(absl::StrCat("floorplan level ", k, ": ", plan.status().message()));
+      continue;
+    }
+    const std::string level_name = absl::StrCat("level_", k);
+    const fs::path level_dir = out / level_name;
+    if (absl::Status s = WriteFloorPlanFiles(level_dir.string(), plan->plan, plan->outline);
+        !s.ok()) {
+      return s;
+    }
+    if (absl::Status s =
+            WriteExtrudedPly((level_dir / "extruded.ply").string(), plan->extruded);
+        !s.ok()) {
+      return s;
+    }
+    for (const char* name : {"floorplan.geojson", "floorplan.svg", "extruded.ply"}) {
+      outputs.push_back(absl::StrCat(level_name, "/", name));
+    }
+    for (auto& room : RoomsToJson(*plan)) rooms.push_back(room);
+    total_rooms += plan->plan.rooms.size();
+    nlohmann::json& lc = counts["floorplan_levels"][level_name];
+    lc = {{"wall_regions", sample_report.wall_regions},
+          {"wall_samples", samples->samples.size()},
+          {"samples_with_poses", sample_report.samples_with_poses},
+          {"filled_behind_occlusion", sample_report.filled_behind_occlusion},
+          {"poses", sample_report.poses},
+          {"interior_triangles", plan->labeling.interior_triangles},
+          {"initial_seeds", plan->labeling.initial_seeds},
+          {"removed_rooms", plan->labeling.removed_rooms},
+          {"rooms", plan->plan.rooms.size()},
+          {"extruded_triangles", plan->extruded.triangles.size()}};
+  }
+  job["rooms"] = rooms;
+  counts["wall_samples"] = total_samples;
+  counts["rooms"] = total_rooms;
+  timings["merge.wall_samples"] = seconds_samples;
+  timings["merge.floorplan"] = seconds_plan;
+  return absl::OkStatus();
+}
 
 }  // namespace
 
@@ -113,6 +220,14 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   }
   timings["merge.levels"] = SecondsSince(t0);
 
+  // floor plans (stages 4–5, §5.3, §3.3) ➜ level_<k>/floorplan.geojson, floorplan.svg,
+  // extruded.ply; job.json "rooms"
+  if (absl::Status s = FloorPlanStage(options, tiles, *faces, *regions, levels->levels, out, job,
+                                      counts, timings, outputs, warnings, progress);
+      !s.ok()) {
+    return InStage("floorplan", s);
+  }
+
   // dense mesh (§4.3.3) ➜ mesh/dense.ply; scoped: the mesh can be large and is not kept.
   t0 = Clock::now();
   uint64_t dense_triangles = 0;
@@ -176,6 +291,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   summary->num_levels = levels->levels.size();
   summary->dense_triangles = dense_triangles;
   summary->building_triangles = building_triangles;
+  summary->num_rooms = counts.value("rooms", uint64_t{0});
   summary->warnings = warnings;
   summary->seconds_total = SecondsSince(t_start);
   return summary;

@@ -681,7 +681,11 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
     {
       absl::MutexLock lock(&mu_);
       const JobRuntime& rt = runtime_[job_id];
-      req = {job_id, rt.tiles_dir, rt.output_dir, rt.params.resolution_m, ""};
+      req.job_id = job_id;
+      req.tiles_dir = rt.tiles_dir;
+      req.output_dir = rt.output_dir;
+      req.scan_path = (fs::path(spec_.data_root) / job->input_path).string();
+      req.resolution_m = rt.params.resolution_m;
       nlohmann::json doc = {{"job_id", job_id},
                             {"input_path", job->input_path},
                             {"output_name", job->output_name},

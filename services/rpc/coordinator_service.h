@@ -23,6 +23,7 @@ struct MergeJobRequest {
   std::string job_id;
   std::string tiles_dir;   // the committed tiles of every chunk
   std::string output_dir;  // octree.bt, level_0/, job.json go here
+  std::string scan_path;   // the job's input scan.h5 (the merge reads its /path)
   double resolution_m = 0.0625;
   std::string job_json;  // the job document (id, input, parameters, counts) as JSON text
   // Called by the merge as it goes (stage name, done, total); false = stop (job cancelled or

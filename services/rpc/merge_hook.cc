@@ -13,6 +13,7 @@ MergeFunction FirstOutputsMerge() {
     MergeOptions options;
     options.tiles_dir = req.tiles_dir;
     options.output_dir = req.output_dir;
+    options.scan_path = req.scan_path;
     options.resolution_m = req.resolution_m;
     nlohmann::json job = nlohmann::json::parse(req.job_json, nullptr, /*allow_exceptions=*/false);
     options.job = job.is_object() ? job : nlohmann::json::object({{"job_id", req.job_id}});

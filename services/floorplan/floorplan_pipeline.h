@@ -1,0 +1,53 @@
+// One level's floor plan from its wall samples (DESIGN §6 stage 5), the stages in the seed's
+// order: interior and rooms (§3.3.1–§3.3.2, room_labeling.h), one floor and ceiling height per
+// room (§3.3.4, extrusion.h), wall simplification that keeps doorways (§3.3.3,
+// floorplan_simplify.h), room polygons and walls (room_polygons.h), and the 2.5D extrusion
+// (§3.3.4). Shared by the merge (octree wall samples, §5.3) and `carvemap floorplan` (grid map
+// wall samples, §3.1.2), so both routes give the same outputs.
+//
+// Plain functions over plain data: no files, no logging.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include "absl/status/statusor.h"
+#include "services/floorplan/floor_plan.h"
+#include "services/floorplan/floorplan_simplify.h"
+#include "services/floorplan/room_labeling.h"
+#include "services/floorplan/room_polygons.h"
+#include "services/floorplan/wall_samples.h"
+#include "storage/ply_io.h"
+
+namespace carvemap {
+
+struct FloorPlanOptions {
+  RoomLabelingOptions rooms;
+  // §3.3.3: simplify the walls, with error bound r = simplify_error_m (0 = the samples' spacing).
+  bool simplify = true;
+  double simplify_error_m = 0;
+  // InvalidArgument naming the first bad field.
+  [[nodiscard]] absl::Status Validate() const;
+};
+
+struct LevelFloorPlan {
+  FloorPlan plan;             // simplified, with room heights
+  FloorPlanOutline outline;   // room polygons and walls
+  TriangleMesh extruded;      // the 2.5D model, watertight
+  RoomLabelingReport labeling;
+  SimplifyReport simplify;
+  size_t wall_samples = 0;
+  double seconds_rooms = 0, seconds_simplify = 0, seconds_outline = 0, seconds_extrude = 0;
+};
+
+// Errors: the stages' (LabelRooms: InvalidArgument for bad samples, FailedPrecondition when no
+// triangle is interior; TraceFloorPlan / ExtrudeFloorPlan: FailedPrecondition for a broken
+// triangulation), prefixed with the stage.
+[[nodiscard]] absl::StatusOr<LevelFloorPlan> BuildLevelFloorPlan(const WallSampleSet& samples,
+                                                                 int level,
+                                                                 const FloorPlanOptions& options);
+
+// job.json's "rooms" entries (issue 5): one object per room {level, room, area_m2, floor_z,
+// ceiling_z, centroid [x, y]} in room order.
+[[nodiscard]] nlohmann::json RoomsToJson(const LevelFloorPlan& result);
+
+}  // namespace carvemap

@@ -1,0 +1,910 @@
+#include "services/floorplan/room_labeling.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <exception>
+#include <limits>
+#include <numeric>
+#include <queue>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+#include <CGAL/Delaunay_triangulation_2.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Triangulation_face_base_with_info_2.h>
+#include <CGAL/Triangulation_vertex_base_with_info_2.h>
+#include <CGAL/Spatial_sort_traits_adapter_2.h>
+#include <CGAL/Hilbert_sort_2.h>
+#include <CGAL/Hilbert_policy_tags.h>
+#include <CGAL/property_map.h>
+
+#include "absl/container/flat_hash_map.h"
+#include "absl/strings/str_cat.h"
+
+namespace carvemap {
+namespace {
+
+using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Vb = CGAL::Triangulation_vertex_base_with_info_2<uint32_t, K>;
+using Fb = CGAL::Triangulation_face_base_with_info_2<int, K>;
+using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
+using Delaunay = CGAL::Delaunay_triangulation_2<K, Tds>;
+using CPoint = K::Point_2;
+using Eigen::Vector2d;
+
+// Sign of the turn a→b→c: +1 left, −1 right, 0 collinear. A Shewchuk-style static filter on
+// doubles (ccwerrboundA), falling back to CGAL's exact Epick predicate when uncertain: the walks
+// below rely on consistent signs (a vertex exactly on the segment must be seen as such).
+int Orient(const Vector2d& a, const Vector2d& b, const Vector2d& c) {
+  const double detl = (b.x() - a.x()) * (c.y() - a.y());
+  const double detr = (b.y() - a.y()) * (c.x() - a.x());
+  const double det = detl - detr;
+  const double bound = 3.3306690738754716e-16 * (std::abs(detl) + std::abs(detr));
+  if (det > bound) return 1;
+  if (-det > bound) return -1;
+  return static_cast<int>(
+      CGAL::orientation(CPoint(a.x(), a.y()), CPoint(b.x(), b.y()), CPoint(c.x(), c.y())));
+}
+
+// The finite faces of the Delaunay triangulation as flat arrays (faster to walk than handles).
+// fv: CCW vertex ids; fn[f][i]: the face across the edge opposite fv[f][i], −1 outside the hull.
+struct Mesh {
+  std::vector<Vector2d> pts;
+  std::vector<std::array<int, 3>> fv;
+  std::vector<std::array<int, 3>> fn;
+  std::vector<int> vface;  // one incident face per vertex
+  std::vector<std::pair<int, int>> hull_edges;  // (face, index of the opposite vertex)
+
+  int IndexIn(int f, int v) const { return fv[f][0] == v ? 0 : (fv[f][1] == v ? 1 : 2); }
+
+  // Calls fn(face) for the faces around v until it returns true; returns whether it did.
+  template <typename Fn>
+  bool AnyFaceAround(int v, Fn&& fn) const {
+    const int f0 = vface[v];
+    if (f0 < 0) return false;
+    int f = f0;
+    do {  // counter-clockwise
+      if (fn(f)) return true;
+      f = fn_ccw(f, v);
+    } while (f >= 0 && f != f0);
+    if (f == f0) return false;
+    for (f = fn_cw(f0, v); f >= 0; f = fn_cw(f, v)) {  // the rest, clockwise from f0
+      if (fn(f)) return true;
+    }
+    return false;
+  }
+  int fn_ccw(int f, int v) const { return fn[f][(IndexIn(f, v) + 1) % 3]; }
+  int fn_cw(int f, int v) const { return fn[f][(IndexIn(f, v) + 2) % 3]; }
+};
+
+// Where a walk starts: at a vertex, inside a face, on an edge (face, opposite index), or nowhere.
+struct Start {
+  enum Kind { kNone, kVertex, kFace, kEdge } kind = kNone;
+  int id = -1;
+  int edge = -1;
+};
+
+bool InClosedFace(const Mesh& m, int f, const Vector2d& b) {
+  const auto& v = m.fv[f];
+  return Orient(m.pts[v[0]], m.pts[v[1]], b) >= 0 && Orient(m.pts[v[1]], m.pts[v[2]], b) >= 0 &&
+         Orient(m.pts[v[2]], m.pts[v[0]], b) >= 0;
+}
+
+// §3.3.1: calls on_face(f) for every face whose interior the segment (a, b) crosses, in order
+// from `start` (which must be where a is). Crossings are exclusive of triangle edges: running
+// along an edge or touching a vertex carves nothing. Stops at b or where the segment leaves the
+// convex hull (a hull is convex, so it never re-enters).
+template <typename OnFace>
+void Walk(const Mesh& m, const Vector2d& a, const Vector2d& b, Start start, OnFace&& on_face) {
+  if (a == b) return;
+  Start::Kind kind = start.kind;
+  int cur = start.id;
+  if (kind == Start::kEdge) {
+    const auto& v = m.fv[cur];
+    const int x = v[(start.edge + 1) % 3], y = v[(start.edge + 2) % 3];
+    const int side = Orient(m.pts[x], m.pts[y], b);
+    if (side > 0) {
+      kind = Start::kFace;
+    } else if (side < 0) {
+      cur = m.fn[cur][start.edge];
+      if (cur < 0) return;
+      kind = Start::kFace;
+    } else {  // along the edge, towards one of its ends
+      const int w = (m.pts[x] - a).dot(b - a) > 0 ? x : y;
+      if ((b - a).squaredNorm() < (m.pts[w] - a).squaredNorm()) return;
+      kind = Start::kVertex;
+      cur = w;
+    }
+  }
+  // Bounded: every step moves forward along the segment through a new face or vertex.
+  for (size_t steps = 0, limit = 2 * (m.fv.size() + m.pts.size()) + 8;
+       kind != Start::kNone && steps < limit; ++steps) {
+    if (kind == Start::kVertex) {
+      const int v = cur;
+      const Vector2d& pv = m.pts[v];
+      if (pv == b) return;
+      int next_face = -1, along = -1;
+      m.AnyFaceAround(v, [&](int f) {
+        const int i = m.IndexIn(f, v);
+        const int x = m.fv[f][(i + 1) % 3], y = m.fv[f][(i + 2) % 3];
+        const int ox = Orient(pv, m.pts[x], b);
+        if (ox > 0) {
+          const int oy = Orient(pv, m.pts[y], b);
+          if (oy < 0) {
+            next_face = f;
+            return true;
+          }
+          if (oy == 0 && (m.pts[y] - pv).dot(b - pv) > 0) {
+            along = y;
+            return true;
+          }
+        } else if (ox == 0 && (m.pts[x] - pv).dot(b - pv) > 0) {
+          along = x;
+          return true;
+        }
+        return false;
+      });
+      if (next_face >= 0) {
+        kind = Start::kFace;
+        cur = next_face;
+      } else if (along >= 0) {
+        if ((b - pv).squaredNorm() < (m.pts[along] - pv).squaredNorm()) return;
+        cur = along;
+      } else {
+        return;  // v is on the hull and the segment leaves it here
+      }
+      continue;
+    }
+    // Face state: the segment crosses the interior of `cur`.
+    const int f = cur;
+    on_face(f);
+    const auto& v = m.fv[f];
+    const int o[3] = {Orient(a, b, m.pts[v[0]]), Orient(a, b, m.pts[v[1]]),
+                      Orient(a, b, m.pts[v[2]])};
+    int exit = -1;
+    for (int i = 0; i < 3; ++i) {
+      if (o[(i + 1) % 3] < 0 && o[(i + 2) % 3] > 0) exit = i;
+    }
+    if (exit >= 0) {
+      if (Orient(m.pts[v[(exit + 1) % 3]], m.pts[v[(exit + 2) % 3]], b) >= 0) return;  // b in f
+      cur = m.fn[f][exit];
+      if (cur < 0) return;
+      continue;
+    }
+    // No edge exit: the segment leaves through the vertex on it (ahead of it).
+    if (InClosedFace(m, f, b)) return;
+    int on_line = -1;
+    for (int i = 0; i < 3; ++i) {
+      if (o[i] == 0) on_line = v[i];
+    }
+    if (on_line < 0) return;  // cannot happen with exact predicates
+    kind = Start::kVertex;
+    cur = on_line;
+  }
+}
+
+// Where pose q lies in the mesh (CGAL point location).
+Start LocatePose(const Delaunay& dt, const Vector2d& q, Delaunay::Face_handle* hint) {
+  Delaunay::Locate_type lt;
+  int li = -1;
+  const Delaunay::Face_handle fh = dt.locate(CPoint(q.x(), q.y()), lt, li, *hint);
+  Start s;
+  switch (lt) {
+    case Delaunay::VERTEX:
+      s.kind = Start::kVertex;
+      s.id = static_cast<int>(fh->vertex(li)->info());
+      break;
+    case Delaunay::EDGE:
+      s.kind = Start::kEdge;
+      if (dt.is_infinite(fh)) {
+        const Delaunay::Face_handle other = fh->neighbor(li);
+        s.id = other->info();
+        s.edge = other->index(fh);
+      } else {
+        s.id = fh->info();
+        s.edge = li;
+      }
+      break;
+    case Delaunay::FACE:
+      s.kind = Start::kFace;
+      s.id = fh->info();
+      break;
+    default:
+      break;  // outside the convex hull
+  }
+  if (!dt.is_infinite(fh)) *hint = fh;
+  return s;
+}
+
+// Where segment (a, b), a outside the hull, enters it; kNone if it misses the hull.
+Start HullEntry(const Mesh& m, const Vector2d& a, const Vector2d& b) {
+  for (const auto& [f, i] : m.hull_edges) {
+    const int x = m.fv[f][(i + 1) % 3], y = m.fv[f][(i + 2) % 3];
+    const Vector2d &px = m.pts[x], &py = m.pts[y];
+    if (Orient(px, py, a) >= 0 || Orient(px, py, b) <= 0) continue;
+    const int ox = Orient(a, b, px), oy = Orient(a, b, py);
+    if (ox > 0 && oy < 0) return {Start::kEdge, f, i};
+    if (ox == 0) return {Start::kVertex, x, -1};
+    if (oy == 0) return {Start::kVertex, y, -1};
+  }
+  return {};
+}
+
+// §3.3.1 carving of every line of sight from one scanner position s strictly inside face f0, in
+// one sweep instead of one walk per segment: angular windows (open, < 180°, bounded by rays
+// through vertices) are pushed from face to face, a face is carved when a live target (a sample
+// seen from s) lies strictly inside its window, and a window splits at its face's far vertex.
+// Each face is visited once per window, not once per segment: in a corridor a 20 m line of
+// sight crosses ~800 sliver triangles, and a pose sees ~1000 samples.
+// Occlusion: when a face's far vertex V is met, every live target in the window whose segment
+// passes within r of V before reaching its sample is truncated there (it stops carving); (s, V)
+// itself is carved by V's own ray when s sees V (the per-segment walk carves it explicitly). Window splits use exact orientation predicates; target
+// membership uses pseudo-angles (only membership of near-collinear targets can differ).
+// Returns the number of truncated segments.
+struct FanScratch {
+  std::vector<std::pair<double, int>> targets;  // (angle from s, vertex), ascending
+  std::vector<double> angle;                    // targets' angles
+  std::vector<int> next_alive;                  // union-find: first live target at or after i
+  std::vector<double> vangle;                   // per-vertex angle cache, valid where
+  std::vector<uint32_t> vstamp;                 //   vstamp == stamp
+  uint32_t stamp = 0;
+  // A window: the face it enters, the face it comes from, the vertices bounding it (lo → hi
+  // counter-clockwise) and its targets as a range [ia, ib) of the doubled target list
+  // (index i ≥ n is target i − n turned once more around: angles stay ascending).
+  struct Item {
+    int face, from, lo, hi, ia, ib;
+    double alpha;  // lo's angle in the doubled list's coordinates
+  };
+  std::vector<Item> stack;
+};
+
+// A pseudo-angle of direction (x, y) in [−2, 2): monotone in the true angle (atan2 mapped from
+// [−π, π) to [−2, 2)), with no trigonometry. Period 4.
+double PseudoAngle(double x, double y) {
+  const double sum = std::abs(x) + std::abs(y);
+  if (sum == 0) return 0;
+  const double p = y / sum;
+  if (x >= 0) return p;
+  return y > 0 ? 2 - p : -2 - p;
+}
+
+size_t CarveFan(const Mesh& m, const Vector2d& s, int f0, const std::vector<int>& seen,
+                double occ_r, FanScratch& w, std::vector<char>& interior) {
+  const int n = static_cast<int>(seen.size());
+  if (n == 0) return 0;
+  constexpr double kTwoPi = 4;  // pseudo-angles (PseudoAngle): a full turn is 4, half a turn 2
+  constexpr double kPi = 2;
+  if (w.vstamp.size() != m.pts.size()) {
+    w.vstamp.assign(m.pts.size(), 0);
+    w.vangle.resize(m.pts.size());
+    w.stamp = 0;
+  }
+  ++w.stamp;
+  auto angle_of = [&](int v) {
+    if (w.vstamp[v] != w.stamp) {
+      const Vector2d d = m.pts[v] - s;
+      w.vangle[v] = PseudoAngle(d.x(), d.y());
+      w.vstamp[v] = w.stamp;
+    }
+    return w.vangle[v];
+  };
+  w.targets.clear();
+  for (int v : seen) w.targets.emplace_back(angle_of(v), v);
+  std::sort(w.targets.begin(), w.targets.end());
+  w.angle.resize(n);
+  for (int i = 0; i < n; ++i) w.angle[i] = w.targets[i].first;
+  w.next_alive.resize(n + 1);
+  std::iota(w.next_alive.begin(), w.next_alive.end(), 0);
+  auto find = [&](int i) {
+    while (w.next_alive[i] != i) {
+      w.next_alive[i] = w.next_alive[w.next_alive[i]];
+      i = w.next_alive[i];
+    }
+    return i;
+  };
+  auto ang_u = [&](int i) { return i < n ? w.angle[i] : w.angle[i - n] + kTwoPi; };
+  auto lower = [&](int ia, int ib, double x) {  // first index in [ia, ib) with angle ≥ x
+    while (ia < ib) {
+      const int mid = (ia + ib) / 2;
+      if (ang_u(mid) < x) ia = mid + 1; else ib = mid;
+    }
+    return ia;
+  };
+  auto upper = [&](int ia, int ib, double x) {  // first index in [ia, ib) with angle > x
+    while (ia < ib) {
+      const int mid = (ia + ib) / 2;
+      if (ang_u(mid) <= x) ia = mid + 1; else ib = mid;
+    }
+    return ia;
+  };
+  auto first_live = [&](int ia, int ib) {  // in the doubled list (same coordinates); −1 if none
+    int shift = 0;
+    if (ia >= n) {
+      ia -= n;
+      ib -= n;
+      shift = n;
+    }
+    if (ia >= ib) return -1;
+    int k = find(ia);
+    if (ib <= n) return k < ib ? k + shift : -1;
+    if (k < n) return k + shift;
+    k = find(0);
+    return k < ib - n ? k + n + shift : -1;
+  };
+  size_t truncated = 0;
+  const double r2 = occ_r * occ_r;
+  // Truncates the live targets of the window whose segment passes V's ball before its end.
+  auto occlude = [&](int v, int ia, int ib, double alpha) {
+    const Vector2d e = m.pts[v] - s;
+    const double dv2 = e.squaredNorm();
+    if (dv2 <= r2 || ia >= ib) return;  // a sample at the scanner: no meaningful direction
+    // The cone of directions meeting V's ball: e turned by ±asin(r/|e|).
+    const double sn = occ_r / std::sqrt(dv2), cs = std::sqrt(1 - sn * sn);
+    const double g0 = angle_of(v);
+    auto turn = [&](double a) {  // a − g0 wrapped to (−2, 2]
+      while (a - g0 > kPi) a -= kTwoPi;
+      while (a - g0 <= -kPi) a += kTwoPi;
+      return a - g0;
+    };
+    const double minus = turn(PseudoAngle(cs * e.x() + sn * e.y(), cs * e.y() - sn * e.x()));
+    const double plus = turn(PseudoAngle(cs * e.x() - sn * e.y(), cs * e.y() + sn * e.x()));
+    double g = g0;  // within half a turn of the window's start (the window spans < half a turn)
+    while (g < alpha - kPi) g += kTwoPi;
+    while (g >= alpha + kPi) g -= kTwoPi;
+    const int a = upper(ia, ib, g + minus), b = lower(ia, ib, g + plus);
+    for (int i = first_live(a, b); i >= 0; i = first_live(i + 1, b)) {
+      const int t_index = i < n ? i : i - n;
+      const int p = w.targets[t_index].second;
+      if (p == v) continue;
+      const Vector2d d = m.pts[p] - s;
+      const double t = e.dot(d) / d.squaredNorm();
+      if (t < 0 || t >= 1 || (e - t * d).squaredNorm() > r2) continue;
+      w.next_alive[t_index] = t_index + 1;
+      ++truncated;
+    }
+  };
+  interior[f0] = 1;
+  w.stack.clear();
+  {
+    const auto& v = m.fv[f0];
+    for (int k = 0; k < 3; ++k) {
+      const int lo_v = v[(k + 1) % 3], hi_v = v[(k + 2) % 3];
+      const double lo = angle_of(lo_v), hi = angle_of(hi_v);
+      const int ia = upper(0, n, lo);
+      const int ib = lo < hi ? lower(0, n, hi) : n + lower(0, n, hi);
+      for (int j = 0; j < 3; ++j) occlude(v[j], ia, ib, lo);
+      if (m.fn[f0][k] >= 0 && first_live(ia, ib) >= 0) {
+        w.stack.push_back({m.fn[f0][k], f0, lo_v, hi_v, ia, ib, lo});
+      }
+    }
+  }
+  for (size_t visits = 0, limit = 4 * m.fv.size() + 16; !w.stack.empty() && visits < limit;
+       ++visits) {
+    const FanScratch::Item it = w.stack.back();
+    w.stack.pop_back();
+    if (first_live(it.ia, it.ib) < 0) continue;  // truncated since it was pushed
+    const int f = it.face;
+    interior[f] = 1;
+    const auto& v = m.fv[f];
+    const int e = m.fn[f][0] == it.from ? 0 : (m.fn[f][1] == it.from ? 1 : 2);
+    const int apex = v[e];
+    occlude(apex, it.ia, it.ib, it.alpha);
+    const Vector2d& pa = m.pts[apex];
+    const bool after_lo = Orient(s, m.pts[it.lo], pa) > 0;
+    const bool before_hi = Orient(s, pa, m.pts[it.hi]) > 0;
+    const int to_lo_side = m.fn[f][(e + 1) % 3];  // across edge (Y, apex): the window's lo side
+    const int to_hi_side = m.fn[f][(e + 2) % 3];  // across edge (apex, X)
+    auto push = [&](int face, int lo, int hi, int ia, int ib, double alpha) {
+      if (face >= 0 && first_live(ia, ib) >= 0) {
+        w.stack.push_back({face, f, lo, hi, ia, ib, alpha});
+      }
+    };
+    if (after_lo && before_hi) {
+      double g = angle_of(apex);  // counter-clockwise of α by less than 180°
+      while (g <= it.alpha) g += kTwoPi;
+      while (g > it.alpha + kTwoPi) g -= kTwoPi;
+      push(to_lo_side, it.lo, apex, it.ia, lower(it.ia, it.ib, g), it.alpha);
+      push(to_hi_side, apex, it.hi, upper(it.ia, it.ib, g), it.ib, g);
+    } else if (!after_lo) {
+      push(to_hi_side, it.lo, it.hi, it.ia, it.ib, it.alpha);
+    } else {
+      push(to_lo_side, it.lo, it.hi, it.ia, it.ib, it.alpha);
+    }
+  }
+  return truncated;
+}
+
+// A circumcircle and the key that orders circles (§3.3.2 "largest radius"), ties broken by the
+// triangle's centroid so the order depends on geometry only, never on input order.
+struct Circle {
+  double cx = 0, cy = 0, r = 0;
+  double gx = 0, gy = 0;
+};
+bool Larger(const Circle& a, const Circle& b) {
+  return std::tie(a.r, a.gx, a.gy) > std::tie(b.r, b.gx, b.gy);
+}
+bool Overlap(const Circle& a, const Circle& b) {
+  const double dx = a.cx - b.cx, dy = a.cy - b.cy, rr = a.r + b.r;
+  return dx * dx + dy * dy < rr * rr;
+}
+
+// §3.3.2 room seeds: interior faces whose circumcircle is the largest of every interior
+// circumcircle it intersects. Circles go into a grid per radius octave (cell = twice the
+// octave's largest radius), so a query looks at ≤ 5×5 cells per octave at or above its own and
+// exits at the first larger overlapping circle: about linear, not O(n²).
+std::vector<int> FindSeeds(const Mesh& m, const std::vector<Circle>& circles,
+                           const std::vector<char>& interior) {
+  std::vector<int> faces;
+  double rmin = std::numeric_limits<double>::infinity();
+  for (size_t f = 0; f < interior.size(); ++f) {
+    if (interior[f]) {
+      faces.push_back(static_cast<int>(f));
+      rmin = std::min(rmin, circles[f].r);
+    }
+  }
+  if (faces.empty()) return {};
+  rmin = std::max(rmin, 1e-9);
+  auto level_of = [&](double r) { return std::clamp(static_cast<int>(std::floor(std::log2(r / rmin))), 0, 60); };
+  auto cell_size = [&](int level) { return std::ldexp(rmin, level + 1); };
+  auto key = [](int level, int64_t ix, int64_t iy) {
+    return (static_cast<uint64_t>(level) << 58) ^ (static_cast<uint64_t>(ix & 0x1FFFFFFF) << 29) ^
+           static_cast<uint64_t>(iy & 0x1FFFFFFF);
+  };
+  absl::flat_hash_map<uint64_t, std::vector<int>> grid;
+  int max_level = 0;
+  for (int f : faces) {
+    const Circle& c = circles[f];
+    const int level = level_of(c.r);
+    max_level = std::max(max_level, level);
+    const double cs = cell_size(level);
+    grid[key(level, static_cast<int64_t>(std::floor(c.cx / cs)),
+             static_cast<int64_t>(std::floor(c.cy / cs)))]
+        .push_back(f);
+  }
+  std::vector<int> seeds;
+  for (int f : faces) {
+    const Circle& c = circles[f];
+    bool beaten = false;
+    // Adjacent circles always overlap (they share an edge's ends): most faces stop here.
+    for (int n : m.fn[f]) {
+      if (n >= 0 && interior[n] && Larger(circles[n], c)) beaten = true;
+    }
+    for (int level = level_of(c.r); !beaten && level <= max_level; ++level) {
+      const double cs = cell_size(level);
+      const double reach = c.r + cs;  // every circle of this octave has r < cs
+      const int64_t x0 = static_cast<int64_t>(std::floor((c.cx - reach) / cs));
+      const int64_t x1 = static_cast<int64_t>(std::floor((c.cx + reach) / cs));
+      const int64_t y0 = static_cast<int64_t>(std::floor((c.cy - reach) / cs));
+      const int64_t y1 = static_cast<int64_t>(std::floor((c.cy + reach) / cs));
+      for (int64_t ix = x0; !beaten && ix <= x1; ++ix) {
+        for (int64_t iy = y0; !beaten && iy <= y1; ++iy) {
+          const auto it = grid.find(key(level, ix, iy));
+          if (it == grid.end()) continue;
+          for (int g : it->second) {
+            if (Larger(circles[g], c) && Overlap(circles[g], c)) {
+              beaten = true;
+              break;
+            }
+          }
+        }
+      }
+    }
+    if (!beaten) seeds.push_back(f);
+  }
+  return seeds;
+}
+
+// §3.3.2 greedy partition: flood fill from the seeds, longest shared edge first. Returns the
+// label (index into seeds) per face, −1 for exterior. An interior component without a seed
+// (possible only when a larger circle of another component overlaps all of its circles) gets
+// its largest circle as an extra seed, appended to `seeds`, so every interior face is labelled.
+std::vector<int> Partition(const Mesh& m, const std::vector<Circle>& circles,
+                           const std::vector<char>& interior, std::vector<int>& seeds) {
+  struct Item {
+    double len, mx, my;  // the edge: longest first; its midpoint breaks ties (unique per edge)
+    int face, label;
+    bool operator<(const Item& o) const {
+      return std::tie(len, mx, my) < std::tie(o.len, o.mx, o.my);
+    }
+  };
+  std::vector<int> label(m.fv.size(), -1);
+  std::priority_queue<Item> queue;
+  auto push_edges = [&](int f) {
+    for (int i = 0; i < 3; ++i) {
+      const int n = m.fn[f][i];
+      if (n < 0 || !interior[n] || label[n] >= 0) continue;
+      const Vector2d& p = m.pts[m.fv[f][(i + 1) % 3]];
+      const Vector2d& q = m.pts[m.fv[f][(i + 2) % 3]];
+      queue.push({(p - q).norm(), 0.5 * (p.x() + q.x()), 0.5 * (p.y() + q.y()), n, label[f]});
+    }
+  };
+  auto fill = [&]() {
+    while (!queue.empty()) {
+      const Item it = queue.top();
+      queue.pop();
+      if (label[it.face] >= 0) continue;
+      label[it.face] = it.label;
+      push_edges(it.face);
+    }
+  };
+  for (size_t k = 0; k < seeds.size(); ++k) label[seeds[k]] = static_cast<int>(k);
+  for (int s : seeds) push_edges(s);
+  fill();
+  std::vector<int> orphans;
+  for (size_t f = 0; f < m.fv.size(); ++f) {
+    if (interior[f] && label[f] < 0) orphans.push_back(static_cast<int>(f));
+  }
+  std::sort(orphans.begin(), orphans.end(),
+            [&](int a, int b) { return Larger(circles[a], circles[b]); });
+  for (int f : orphans) {
+    if (label[f] >= 0) continue;
+    label[f] = static_cast<int>(seeds.size());
+    seeds.push_back(f);
+    push_edges(f);
+    fill();
+  }
+  return label;
+}
+
+}  // namespace
+
+absl::Status RoomLabelingOptions::Validate() const {
+  if (!std::isfinite(occlusion_diameter_m) || occlusion_diameter_m < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: occlusion_diameter_m must be finite and ≥ 0, got ", occlusion_diameter_m));
+  }
+  if (!std::isfinite(max_door_width_m) || max_door_width_m <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: max_door_width_m must be finite and > 0, got ", max_door_width_m));
+  }
+  if (max_rounds < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("room labeling: max_rounds must be ≥ 1, got ", max_rounds));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<FloorPlan> LabelRooms(const WallSampleSet& samples,
+                                     const RoomLabelingOptions& options,
+                                     RoomLabelingReport* report) {
+  if (absl::Status s = options.Validate(); !s.ok()) return s;
+  if (absl::Status s = samples.Validate(); !s.ok()) return s;
+  RoomLabelingReport rep;
+
+  // Distinct positions, sorted, so that vertex ids (and everything after) do not depend on the
+  // input order. A duplicated position is one vertex with the union of the samples' poses and
+  // the median floor / ceiling (the medians keep floor < ceiling).
+  std::vector<uint32_t> order(samples.samples.size());
+  std::iota(order.begin(), order.end(), 0u);
+  auto pos_less = [&](uint32_t a, uint32_t b) {
+    const Vector2d &p = samples.samples[a].position, &q = samples.samples[b].position;
+    return std::tie(p.x(), p.y()) < std::tie(q.x(), q.y());
+  };
+  std::sort(order.begin(), order.end(), pos_less);
+  Mesh m;
+  std::vector<std::vector<uint32_t>> vposes;
+  std::vector<double> vfloor, vceil;
+  for (size_t i = 0; i < order.size();) {
+    size_t j = i;
+    std::vector<double> fl, ce;
+    std::vector<uint32_t> poses;
+    while (j < order.size() && samples.samples[order[j]].position == samples.samples[order[i]].position) {
+      const WallSample& s = samples.samples[order[j]];
+      fl.push_back(s.floor_z);
+      ce.push_back(s.ceiling_z);
+      poses.insert(poses.end(), s.poses.begin(), s.poses.end());
+      ++j;
+    }
+    auto median = [](std::vector<double>& v) {
+      std::sort(v.begin(), v.end());
+      const size_t n = v.size();
+      return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+    };
+    std::sort(poses.begin(), poses.end());
+    poses.erase(std::unique(poses.begin(), poses.end()), poses.end());
+    m.pts.push_back(samples.samples[order[i]].position);
+    vfloor.push_back(median(fl));
+    vceil.push_back(median(ce));
+    vposes.push_back(std::move(poses));
+    i = j;
+  }
+  rep.samples = m.pts.size();
+  if (m.pts.size() < 3) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: need at least 3 distinct wall samples, got ", m.pts.size()));
+  }
+
+  Delaunay dt;
+  try {
+    // Hilbert order (deterministic, unlike spatial_sort's shuffle) and one-by-one insertion
+    // with the previous vertex as hint: the same triangulation for the same positions, even
+    // where four samples are cocircular.
+    std::vector<uint32_t> ins(m.pts.size());
+    std::iota(ins.begin(), ins.end(), 0u);
+    std::vector<CPoint> cpts;
+    cpts.reserve(m.pts.size());
+    for (const Vector2d& p : m.pts) cpts.emplace_back(p.x(), p.y());
+    auto pmap = CGAL::make_property_map(cpts);
+    using SortTraits = CGAL::Spatial_sort_traits_adapter_2<K, decltype(pmap)>;
+    CGAL::Hilbert_sort_2<SortTraits, CGAL::Hilbert_sort_median_policy> sort(SortTraits{pmap});
+    sort(ins.begin(), ins.end());
+    Delaunay::Face_handle hint;
+    for (uint32_t i : ins) {
+      const Delaunay::Vertex_handle vh = dt.insert(cpts[i], hint);
+      vh->info() = i;
+      hint = vh->face();
+    }
+  } catch (const std::exception& e) {
+    return absl::InternalError(absl::StrCat("room labeling: CGAL triangulation failed: ", e.what()));
+  }
+  if (dt.dimension() < 2) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: the ", m.pts.size(), " distinct wall samples are collinear"));
+  }
+
+  // Flat face arrays.
+  int nf = 0;
+  for (auto fit = dt.finite_faces_begin(); fit != dt.finite_faces_end(); ++fit) fit->info() = nf++;
+  for (auto fit = dt.all_faces_begin(); fit != dt.all_faces_end(); ++fit) {
+    if (dt.is_infinite(fit)) fit->info() = -1;
+  }
+  m.fv.resize(nf);
+  m.fn.resize(nf);
+  m.vface.assign(m.pts.size(), -1);
+  for (auto fit = dt.finite_faces_begin(); fit != dt.finite_faces_end(); ++fit) {
+    const int f = fit->info();
+    for (int i = 0; i < 3; ++i) {
+      const int v = static_cast<int>(fit->vertex(i)->info());
+      m.fv[f][i] = v;
+      m.fn[f][i] = fit->neighbor(i)->info();
+      if (m.vface[v] < 0) m.vface[v] = f;
+      if (m.fn[f][i] < 0) m.hull_edges.emplace_back(f, i);
+    }
+  }
+  rep.triangles = static_cast<size_t>(nf);
+
+  // §3.3.1 carving.
+  std::vector<char> interior(nf, 0), entered(nf, 0);
+  const double occ_r =
+      0.5 * (options.occlusion_diameter_m > 0 ? options.occlusion_diameter_m : samples.spacing_m);
+  const size_t np = samples.poses.size();
+  std::vector<Start> pose_at(np);
+  {
+    Delaunay::Face_handle hint;
+    for (size_t i = 0; i < np; ++i) pose_at[i] = LocatePose(dt, samples.poses[i], &hint);
+  }
+  // §3.3.2: a room is entered if the path crosses one of its triangles or a pose lies in one.
+  for (const Start& s : pose_at) {
+    if (s.kind == Start::kFace) entered[s.id] = 1;
+    if (s.kind == Start::kEdge) {
+      entered[s.id] = 1;
+      if (const int n = m.fn[s.id][s.edge]; n >= 0) entered[n] = 1;
+    }
+  }
+  std::vector<int> crossed;
+  auto mark = [&](int f) { interior[f] = 1; };
+  // One line of sight by a walk: for poses on an edge, a vertex or outside the hull.
+  auto carve_sight = [&](int vid, const Vector2d& s) {
+    const Vector2d& p = m.pts[vid];
+    // Walk back from the sample to the scanner (the walk starts at a known vertex, no point
+    // location), collecting crossed faces and the first occluding sample seen from s: a vertex
+    // of a crossed face whose ball meets (s, p) before p. Vertices not on a crossed face are
+    // not tested: with samples at spacing d_s the ball of any sample within d_s/2 of the
+    // segment is (almost always) reached by a face the segment crosses.
+    const Vector2d d = p - s;
+    const double len2 = d.squaredNorm();
+    if (len2 == 0) return;
+    int occluder = -1;
+    double best = 2;
+    crossed.clear();
+    Walk(m, p, s, {Start::kVertex, vid, -1}, [&](int f) {
+      crossed.push_back(f);
+      for (int w : m.fv[f]) {
+        if (w == vid) continue;
+        const Vector2d e = m.pts[w] - s;
+        const double t = e.dot(d) / len2;
+        if (t < 0 || t >= 1) continue;
+        const double dist2 = (e - t * d).squaredNorm();
+        if (dist2 > occ_r * occ_r) continue;
+        const double entry = t - std::sqrt((occ_r * occ_r - dist2) / len2);
+        if (entry < best || (entry == best && w < occluder)) {
+          best = entry;
+          occluder = w;
+        }
+      }
+    });
+    if (occluder < 0) {
+      for (int f : crossed) interior[f] = 1;
+    } else {
+      // §3.3.1: truncate to (s, p'), so a wall scanned from both sides keeps its samples.
+      ++rep.truncated_segments;
+      Walk(m, m.pts[occluder], s, {Start::kVertex, occluder, -1}, mark);
+    }
+  };
+  {
+    std::vector<std::vector<int>> seen_from(np);
+    for (size_t vid = 0; vid < m.pts.size(); ++vid) {
+      for (uint32_t pi : vposes[vid]) seen_from[pi].push_back(static_cast<int>(vid));
+    }
+    FanScratch scratch;
+    for (size_t pi = 0; pi < np; ++pi) {
+      const Vector2d& s = samples.poses[pi];
+      std::vector<int>& seen = seen_from[pi];
+      // A sample at the scanner's own position has no line of sight to carve.
+      seen.erase(std::remove_if(seen.begin(), seen.end(), [&](int v) { return m.pts[v] == s; }),
+                 seen.end());
+      rep.sight_segments += seen.size();
+      if (pose_at[pi].kind == Start::kFace) {
+        rep.truncated_segments += CarveFan(m, s, pose_at[pi].id, seen, occ_r, scratch, interior);
+      } else {
+        for (int v : seen) carve_sight(v, s);
+      }
+      std::vector<int>().swap(seen);
+    }
+  }
+  // Scanner-to-scanner segments (§3.3.1). Not occlusion-checked: the path passes through
+  // doorways, whose jambs are samples within d_s/2 of it, and a real walk cannot pass a wall.
+  {
+    size_t next_break = 0;
+    for (size_t i = 1; i < np; ++i) {
+      while (next_break < samples.path_breaks.size() && samples.path_breaks[next_break] < i) {
+        ++next_break;
+      }
+      if (next_break < samples.path_breaks.size() && samples.path_breaks[next_break] == i) continue;
+      Vector2d a = samples.poses[i - 1], b = samples.poses[i];
+      Start start = pose_at[i - 1];
+      if (start.kind == Start::kNone) {
+        if (pose_at[i].kind != Start::kNone) {
+          std::swap(a, b);
+          start = pose_at[i];
+        } else {
+          start = HullEntry(m, a, b);  // both outside: clip to the hull
+        }
+      }
+      if (start.kind == Start::kNone) continue;
+      Walk(m, a, b, start, [&](int f) {
+        interior[f] = 1;
+        entered[f] = 1;
+      });
+    }
+  }
+  for (char c : interior) rep.interior_triangles += c ? 1 : 0;
+  if (rep.interior_triangles == 0) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "room labeling: no interior triangle: ", rep.sight_segments, " sight segments from ", np,
+        " poses carved none of the ", nf, " triangles"));
+  }
+
+  // Circumcircles (§3.3.2).
+  std::vector<Circle> circles(nf);
+  for (int f = 0; f < nf; ++f) {
+    const Vector2d &a = m.pts[m.fv[f][0]], &b = m.pts[m.fv[f][1]], &c = m.pts[m.fv[f][2]];
+    const CPoint cc = CGAL::circumcenter(CPoint(a.x(), a.y()), CPoint(b.x(), b.y()),
+                                         CPoint(c.x(), c.y()));
+    Circle& k = circles[f];
+    k.cx = cc.x();
+    k.cy = cc.y();
+    k.r = std::hypot(a.x() - k.cx, a.y() - k.cy);
+    k.gx = (a.x() + b.x() + c.x()) / 3;
+    k.gy = (a.y() + b.y() + c.y()) / 3;
+  }
+
+  // §3.3.2 refinement. Each round partitions, then (1) drops, for every pair of rooms sharing a
+  // border longer than a door, the seed with the smaller circle — all such seeds at once: a
+  // border too long for a door is transitive ("same room"), and the largest seed of each group
+  // of rooms so joined is never dropped, so no room is lost and hallways merge in few rounds;
+  // (2) only when no seed was dropped, removes the rooms the path never entered and recomputes
+  // the seeds. Merging first keeps a room the path entered only partly (an L-shaped room with
+  // two seeds) from losing its unvisited half.
+  std::vector<int> seeds = FindSeeds(m, circles, interior);
+  rep.initial_seeds = seeds.size();
+  std::vector<int> label;
+  std::vector<int> part_seeds;  // the seeds of `label` (the last partition)
+  rep.converged = false;
+  while (rep.rounds < options.max_rounds) {
+    ++rep.rounds;
+    label = Partition(m, circles, interior, seeds);
+    part_seeds = seeds;
+    const size_t k = seeds.size();
+    absl::flat_hash_map<uint64_t, double> border;
+    for (int f = 0; f < nf; ++f) {
+      if (label[f] < 0) continue;
+      for (int i = 0; i < 3; ++i) {
+        const int n = m.fn[f][i];
+        if (n < f || n < 0 || label[n] < 0 || label[n] == label[f]) continue;
+        const uint64_t lo = std::min(label[f], label[n]), hi = std::max(label[f], label[n]);
+        border[(lo << 32) | hi] +=
+            (m.pts[m.fv[f][(i + 1) % 3]] - m.pts[m.fv[f][(i + 2) % 3]]).norm();
+      }
+    }
+    std::vector<char> drop(k, 0);
+    bool dropped = false;
+    for (const auto& [pair, len] : border) {
+      if (len <= options.max_door_width_m) continue;
+      const int a = static_cast<int>(pair >> 32), b = static_cast<int>(pair & 0xFFFFFFFFu);
+      drop[Larger(circles[seeds[a]], circles[seeds[b]]) ? b : a] = 1;
+      dropped = true;
+    }
+    if (dropped) {
+      std::vector<int> kept;
+      for (size_t i = 0; i < k; ++i) {
+        if (drop[i]) {
+          ++rep.merged_seeds;
+        } else {
+          kept.push_back(seeds[i]);
+        }
+      }
+      seeds = std::move(kept);
+      continue;
+    }
+    if (options.remove_unentered_rooms) {
+      std::vector<char> room_entered(k, 0);
+      for (int f = 0; f < nf; ++f) {
+        if (label[f] >= 0 && entered[f]) room_entered[label[f]] = 1;
+      }
+      size_t removed = 0;
+      for (size_t i = 0; i < k; ++i) removed += room_entered[i] ? 0 : 1;
+      if (removed > 0) {
+        if (removed == k) {
+          return absl::FailedPreconditionError(absl::StrCat(
+              "room labeling: the path (", np, " poses) enters none of the ", k,
+              " rooms, so all would be removed"));
+        }
+        rep.removed_rooms += removed;
+        for (int f = 0; f < nf; ++f) {
+          if (label[f] >= 0 && !room_entered[label[f]]) interior[f] = 0;
+        }
+        seeds = FindSeeds(m, circles, interior);
+        continue;
+      }
+    }
+    rep.converged = true;
+    break;
+  }
+
+  // Output: every vertex; interior triangles in face order (CCW, as CGAL keeps them); rooms
+  // largest area first, ties by the seed's circle.
+  seeds = std::move(part_seeds);
+  FloorPlan plan;
+  plan.vertices = m.pts;
+  plan.vertex_floor_z = std::move(vfloor);
+  plan.vertex_ceiling_z = std::move(vceil);
+  const size_t k = seeds.size();
+  std::vector<double> area(k, 0);
+  std::vector<int> out_index(nf, -1);
+  for (int f = 0; f < nf; ++f) {
+    if (label[f] < 0) continue;
+    const Vector2d &a = m.pts[m.fv[f][0]], &b = m.pts[m.fv[f][1]], &c = m.pts[m.fv[f][2]];
+    area[label[f]] += 0.5 * ((b - a).x() * (c - a).y() - (b - a).y() * (c - a).x());
+    out_index[f] = static_cast<int>(plan.triangles.size());
+    plan.triangles.push_back({static_cast<uint32_t>(m.fv[f][0]), static_cast<uint32_t>(m.fv[f][1]),
+                              static_cast<uint32_t>(m.fv[f][2])});
+  }
+  std::vector<int> room_order(k);
+  std::iota(room_order.begin(), room_order.end(), 0);
+  std::sort(room_order.begin(), room_order.end(), [&](int a, int b) {
+    if (area[a] != area[b]) return area[a] > area[b];
+    return Larger(circles[seeds[a]], circles[seeds[b]]);
+  });
+  std::vector<int> room_of_label(k, -1);
+  for (size_t r = 0; r < k; ++r) {
+    const int l = room_order[r];
+    room_of_label[l] = static_cast<int>(r);
+    FloorPlanRoom room;
+    room.seed_triangle = out_index[seeds[l]];
+    room.seed_radius_m = circles[seeds[l]].r;
+    room.area_m2 = area[l];
+    plan.rooms.push_back(room);
+  }
+  plan.triangle_room.reserve(plan.triangles.size());
+  for (int f = 0; f < nf; ++f) {
+    if (label[f] >= 0) plan.triangle_room.push_back(room_of_label[label[f]]);
+  }
+  if (report != nullptr) *report = rep;
+  return plan;
+}
+
+}  // namespace carvemap
