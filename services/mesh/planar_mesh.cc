@@ -1059,6 +1059,61 @@ void DropPillows(PlanarMesh& out) {
   out = std::move(kept);
 }
 
+// Zero-area triangles (three collinear vertices: eq 4.9 moved a chain vertex onto its
+// neighbours' line, or float rounding did) are removed by flipping their longest edge with the
+// triangle across it (Lawson's flip): (m, a, b) and (b, a, d), covering the quad m-a-d-b, become
+// (m, a, d) and (m, d, b). Every edge stays shared by two triangles with opposite directions;
+// a flip that would duplicate an edge or leave a zero-area triangle is skipped.
+void FlipDegenerateTriangles(PlanarMesh& out, double area_epsilon_m2) {
+  std::vector<Eigen::Vector3i>& tris = out.mesh.triangles;
+  const std::vector<Eigen::Vector3f>& v = out.mesh.vertices;
+  auto area = [&v](const Eigen::Vector3i& t) {
+    const Eigen::Vector3d a = v[t[0]].cast<double>(), b = v[t[1]].cast<double>(),
+                          c = v[t[2]].cast<double>();
+    return 0.5 * (b - a).cross(c - a).norm();
+  };
+  auto key = [](int a, int b) { return (uint64_t(uint32_t(a)) << 32) | uint32_t(b); };
+  absl::flat_hash_map<uint64_t, int> edge_tri;  // directed edge ➜ its triangle
+  for (int t = 0; t < static_cast<int>(tris.size()); ++t) {
+    for (int i = 0; i < 3; ++i) edge_tri[key(tris[t][i], tris[t][(i + 1) % 3])] = t;
+  }
+  for (int pass = 0; pass < 4; ++pass) {
+    bool changed = false;
+    for (int t = 0; t < static_cast<int>(tris.size()); ++t) {
+      const Eigen::Vector3i x = tris[t];
+      if (x[0] == x[1] || x[1] == x[2] || x[0] == x[2] || area(x) >= area_epsilon_m2) continue;
+      int im = 0;
+      double longest = -1;
+      for (int i = 0; i < 3; ++i) {
+        const double l = (v[x[(i + 1) % 3]] - v[x[(i + 2) % 3]]).squaredNorm();
+        if (l > longest) longest = l, im = i;
+      }
+      const int m = x[im], a = x[(im + 1) % 3], b = x[(im + 2) % 3];
+      auto across = edge_tri.find(key(b, a));
+      if (across == edge_tri.end()) continue;
+      const int s = across->second;
+      const Eigen::Vector3i y = tris[s];
+      int d = -1;
+      for (int i = 0; i < 3; ++i) {
+        if (y[i] != a && y[i] != b) d = y[i];
+      }
+      if (d < 0 || d == m || edge_tri.contains(key(m, d)) || edge_tri.contains(key(d, m))) continue;
+      const Eigen::Vector3i n1(m, a, d), n2(m, d, b);
+      if (area(n1) < area_epsilon_m2 || area(n2) < area_epsilon_m2) continue;
+      for (const Eigen::Vector3i& old : {x, y}) {
+        for (int i = 0; i < 3; ++i) edge_tri.erase(key(old[i], old[(i + 1) % 3]));
+      }
+      tris[t] = n1;
+      tris[s] = n2;
+      for (int u : {t, s}) {
+        for (int i = 0; i < 3; ++i) edge_tri[key(tris[u][i], tris[u][(i + 1) % 3])] = u;
+      }
+      changed = true;
+    }
+    if (!changed) break;
+  }
+}
+
 }  // namespace
 
 absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
@@ -1193,6 +1248,7 @@ absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
     }
   }
   DropPillows(out);
+  FlipDegenerateTriangles(out, 1e-12);  // CheckMesh's default area epsilon
   const MeshCheck check = CheckMesh(out.mesh);
   if (!check.watertight()) {
     return absl::InternalError(absl::StrCat("planar_mesh: not watertight: ", check.ToString()));
