@@ -15,11 +15,14 @@
 #include "services/merge/merge_test_util.h"
 #include "services/mesh/mesh_checks.h"
 #include "tests/support/carved_preset.h"
+#include "tests/support/truth_distance.h"
 
 namespace carvemap {
 namespace {
 
 using testing::FreshDir;
+using testing::ReadPlyTriangles;
+using testing::TruthDistance;
 
 // Random tiles on a 3×2×2 block of chunks (one left out), written to `dir`.
 std::vector<TileData> WriteRandomTiles(const std::string& dir, int k, uint32_t seed) {
@@ -123,74 +126,6 @@ TEST(DenseMesh, ProgressCanCancel) {
 }
 
 // ---- Real carved data against ground truth -------------------------------------------------
-
-// The triangles of a PLY (the simulator's truth meshes) as vertex triples.
-std::vector<std::array<Eigen::Vector3d, 3>> ReadPlyTriangles(const std::string& path) {
-  std::vector<std::array<Eigen::Vector3d, 3>> out;
-  absl::StatusOr<PlyMesh> ply = ReadPly(path);
-  EXPECT_TRUE(ply.ok()) << ply.status();
-  if (!ply.ok()) return out;
-  const auto& v = ply->mesh.vertices;
-  for (const Eigen::Vector3i& t : ply->mesh.triangles) {
-    out.push_back({v[t[0]].cast<double>(), v[t[1]].cast<double>(), v[t[2]].cast<double>()});
-  }
-  return out;
-}
-
-double PointTriangleDistance(const Eigen::Vector3d& p, const std::array<Eigen::Vector3d, 3>& t) {
-  const Eigen::Vector3d& a = t[0];
-  const Eigen::Vector3d ab = t[1] - a, ac = t[2] - a, ap = p - a;
-  const Eigen::Vector3d n = ab.cross(ac);
-  const double nn = n.squaredNorm();
-  auto seg = [](const Eigen::Vector3d& p, const Eigen::Vector3d& s0, const Eigen::Vector3d& s1) {
-    const Eigen::Vector3d d = s1 - s0;
-    const double l = d.squaredNorm();
-    const double u = l > 0 ? std::clamp((p - s0).dot(d) / l, 0.0, 1.0) : 0.0;
-    return (s0 + u * d - p).norm();
-  };
-  if (nn > 1e-18) {
-    // Barycentric coordinates of the projection.
-    const double w1 = ap.cross(ac).dot(n) / nn, w2 = ab.cross(ap).dot(n) / nn;
-    if (w1 >= 0 && w2 >= 0 && w1 + w2 <= 1) return std::abs(ap.dot(n)) / std::sqrt(nn);
-  }
-  return std::min({seg(p, t[0], t[1]), seg(p, t[1], t[2]), seg(p, t[2], t[0])});
-}
-
-// Distance from points to a triangle soup, through a uniform grid of triangle bounding boxes;
-// distances beyond `cap_m` are reported as cap_m.
-class TruthDistance {
- public:
-  TruthDistance(std::vector<std::array<Eigen::Vector3d, 3>> tris, double cell_m, double cap_m)
-      : tris_(std::move(tris)), cell_(cell_m), cap_(cap_m) {
-    for (size_t i = 0; i < tris_.size(); ++i) {
-      Eigen::Vector3d lo = tris_[i][0].cwiseMin(tris_[i][1]).cwiseMin(tris_[i][2]);
-      Eigen::Vector3d hi = tris_[i][0].cwiseMax(tris_[i][1]).cwiseMax(tris_[i][2]);
-      const Eigen::Vector3i a = Cell(lo.array() - cap_), b = Cell(hi.array() + cap_);
-      for (int z = a.z(); z <= b.z(); ++z)
-        for (int y = a.y(); y <= b.y(); ++y)
-          for (int x = a.x(); x <= b.x(); ++x) grid_[Key(Eigen::Vector3i(x, y, z))].push_back(i);
-    }
-  }
-  double operator()(const Eigen::Vector3d& p) const {
-    auto it = grid_.find(Key(Cell(p)));
-    double best = cap_;
-    if (it == grid_.end()) return best;
-    for (size_t i : it->second) best = std::min(best, PointTriangleDistance(p, tris_[i]));
-    return best;
-  }
-
- private:
-  Eigen::Vector3i Cell(const Eigen::Vector3d& p) const {
-    return (p / cell_).array().floor().cast<int>();
-  }
-  static uint64_t Key(const Eigen::Vector3i& c) {
-    return (uint64_t(uint32_t(c.x() + (1 << 20))) << 42) |
-           (uint64_t(uint32_t(c.y() + (1 << 20))) << 21) | uint64_t(uint32_t(c.z() + (1 << 20)));
-  }
-  std::vector<std::array<Eigen::Vector3d, 3>> tris_;
-  double cell_, cap_;
-  std::unordered_map<uint64_t, std::vector<size_t>> grid_;
-};
 
 struct PresetCase {
   const char* preset;
