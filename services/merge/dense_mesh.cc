@@ -6,12 +6,12 @@
 #include "services/mesh/dual_contouring.h"
 
 namespace carvemap {
-namespace {
 
-// Fetches the tiles of `chunk`'s neighbourhood (only slots with all offsets ≤ 0 when
+// dense_mesh.h: the tiles of `chunk`'s neighbourhood (only slots with all offsets ≤ 0 when
 // `low_only`). `hold` keeps them alive while the chunk is processed, whatever the cache evicts.
-absl::StatusOr<ChunkNeighbourhood> Fetch(TileSet& tiles, const ChunkKey& chunk, bool low_only,
-                                         std::array<std::shared_ptr<const TileData>, 27>& hold) {
+absl::StatusOr<ChunkNeighbourhood> FetchNeighbourhood(
+    TileSet& tiles, const ChunkKey& chunk, bool low_only,
+    std::array<std::shared_ptr<const TileData>, 27>& hold) {
   ChunkNeighbourhood hood;
   hood.grid = tiles.grid();
   hood.chunk = chunk;
@@ -32,15 +32,13 @@ absl::StatusOr<ChunkNeighbourhood> Fetch(TileSet& tiles, const ChunkKey& chunk, 
   return hood;
 }
 
-}  // namespace
-
 absl::StatusOr<DenseMeshResult> BuildDenseMesh(TileSet& tiles, const ChunkProgressFn& progress) {
   const std::vector<ChunkKey> chunks = DenseMeshChunks(tiles.chunks());
   std::vector<ChunkMesh> meshes;
   DenseMeshResult result;
   std::array<std::shared_ptr<const TileData>, 27> hold;
   for (size_t i = 0; i < chunks.size(); ++i) {
-    absl::StatusOr<ChunkNeighbourhood> hood = Fetch(tiles, chunks[i], /*low_only=*/true, hold);
+    absl::StatusOr<ChunkNeighbourhood> hood = FetchNeighbourhood(tiles, chunks[i], /*low_only=*/true, hold);
     if (!hood.ok()) return hood.status();
     absl::StatusOr<ChunkMesh> mesh = DualContourChunk(*hood);
     if (!mesh.ok()) return mesh.status();
@@ -62,7 +60,7 @@ absl::StatusOr<std::vector<BoundaryFace>> CollectBoundaryFaces(TileSet& tiles,
   std::array<std::shared_ptr<const TileData>, 27> hold;
   const std::vector<ChunkKey>& chunks = tiles.chunks();
   for (size_t i = 0; i < chunks.size(); ++i) {
-    absl::StatusOr<ChunkNeighbourhood> hood = Fetch(tiles, chunks[i], /*low_only=*/false, hold);
+    absl::StatusOr<ChunkNeighbourhood> hood = FetchNeighbourhood(tiles, chunks[i], /*low_only=*/false, hold);
     if (!hood.ok()) return hood.status();
     absl::StatusOr<std::vector<BoundaryFace>> f = ChunkBoundaryFaces(*hood);
     if (!f.ok()) return f.status();

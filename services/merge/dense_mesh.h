@@ -7,7 +7,9 @@
 // chunk is processed) plus the output (the per-chunk meshes until welded).
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <memory>
 #include <functional>
 #include <vector>
 
@@ -31,6 +33,13 @@ struct DenseMeshResult {
   uint64_t polygons = 0;     // corner polygons before triangulation
   uint64_t centre_vertices = 0;
 };
+
+// The tiles of `chunk`'s 3×3×3 neighbourhood through the cache (only the slots with all offsets
+// ≤ 0 when `low_only`); `hold` keeps them alive while the chunk is processed, whatever the
+// cache evicts. Errors: TileSet::Get's.
+[[nodiscard]] absl::StatusOr<ChunkNeighbourhood> FetchNeighbourhood(
+    TileSet& tiles, const ChunkKey& chunk, bool low_only,
+    std::array<std::shared_ptr<const TileData>, 27>& hold);
 
 // Dual contouring (services/mesh/dual_contouring.h) of every tile of `tiles`. Errors: those of
 // TileSet::Get (NotFound, DataLoss, InvalidArgument naming the file), of the per-chunk stage,
