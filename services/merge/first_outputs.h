@@ -97,6 +97,7 @@ struct MergeSummary {
   uint64_t dense_triangles = 0;
   uint64_t building_triangles = 0;
   uint64_t num_rooms = 0;  // over all levels' floor plans
+  uint64_t num_objects = 0;  // segmented objects (§5.6)
   std::vector<std::string> warnings;  // stages that could not produce their output, and why
 
   double seconds_total = 0;

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <filesystem>
 #include <limits>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -13,10 +14,13 @@
 #include "services/floorplan/octree_wall_samples.h"
 #include "services/levels/level_split.h"
 #include "services/merge/dense_mesh.h"
+#include "services/merge/segment_tiles.h"
 #include "services/merge/tile_set.h"
 #include "services/mesh/mesh_checks.h"
 #include "services/mesh/planar_mesh.h"
 #include "services/mesh/planar_regions.h"
+#include "services/segment/object_meshes.h"
+#include "services/segment/plan_volume.h"
 #include "storage/atomic_file.h"
 #include "storage/ply_io.h"
 #include "storage/scan_reader.h"
@@ -65,7 +69,8 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
                             const fs::path& out, nlohmann::json& job, nlohmann::json& counts,
                             nlohmann::json& timings, std::vector<std::string>& outputs,
                             std::vector<std::string>& warnings,
-                            const MergeProgressCallback& progress) {
+                            const MergeProgressCallback& progress,
+                            std::vector<std::pair<Level, FloorPlan>>& plans) {
   if (options.scan_path.empty()) {
     warnings.push_back("floorplan: no scan given, so no scanner path for the lines of sight; "
                        "no floor plans");
@@ -127,6 +132,7 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
       outputs.push_back(absl::StrCat(level_name, "/", name));
     }
     for (auto& room : RoomsToJson(*plan)) rooms.push_back(room);
+    plans.emplace_back(levels[k], plan->plan);
     total_rooms += plan->plan.rooms.size();
     nlohmann::json& lc = counts["floorplan_levels"][level_name];
     lc = {{"wall_regions", sample_report.wall_regions},
@@ -146,6 +152,189 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
   timings["merge.wall_samples"] = seconds_samples;
   timings["merge.floorplan"] = seconds_plan;
   return absl::OkStatus();
+}
+
+
+// The planar mesh (§4.3.3, eq 4.9, §4.2.5) of `faces` ➜ mesh/building.ply with face property
+// `region`. A mesh that cannot be built is not fatal: nullopt, and job.json says why.
+absl::StatusOr<std::optional<TriangleMesh>> PlanarBuildingMesh(
+    const std::vector<BoundaryFace>& faces, const PlanarRegionSet& regions,
+    const OctreeGrid& grid, const fs::path& out, nlohmann::json& counts,
+    std::vector<std::string>& outputs, std::vector<std::string>& warnings) {
+  absl::StatusOr<PlanarMesh> planar = BuildPlanarMesh(faces, regions, grid);
+  if (!planar.ok()) {
+    if (absl::IsCancelled(planar.status())) return planar.status();
+    warnings.push_back(std::string(planar.status().message()));
+    return std::optional<TriangleMesh>();
+  }
+  const MeshCheck check = CheckMesh(planar->mesh);
+  if (!check.watertight()) {
+    warnings.push_back("planar_mesh: not watertight (" + check.ToString() + ")");
+  }
+  if (absl::Status s = WritePly((out / "mesh" / "building.ply").string(), planar->mesh,
+                                &planar->triangle_region, "region");
+      !s.ok()) {
+    return s;
+  }
+  outputs.push_back("mesh/building.ply");
+  counts["building_vertices"] = planar->mesh.vertices.size();
+  counts["building_triangles"] = planar->mesh.triangles.size();
+  counts["building_watertight"] = check.watertight();
+  return std::optional<TriangleMesh>(std::move(planar->mesh));
+}
+
+struct SegmentStageResult {
+  uint64_t building_triangles = 0;
+  uint64_t objects = 0;
+};
+
+// DESIGN §6 stages 6–8 (seed §5.5, §5.6): the tiles segmented against the extruded plans into
+// building and object tiles (in <out>/.segment, removed afterwards), the building tiles' faces,
+// regions and planar mesh, the object tiles' dense mesh split into objects, and combined.ply.
+absl::StatusOr<SegmentStageResult> SegmentStage(
+    const MergeOptions& options, TileSet& tiles,
+    const std::vector<std::pair<Level, FloorPlan>>& plans, const fs::path& out,
+    nlohmann::json& job, nlohmann::json& counts, nlohmann::json& timings,
+    std::vector<std::string>& outputs, std::vector<std::string>& warnings,
+    const MergeProgressCallback& progress) {
+  SegmentStageResult result;
+  const OctreeGrid grid = tiles.grid();
+  const SegmentOptions seg_options;
+  Clock::time_point t0 = Clock::now();
+  std::vector<PlanLevelInput> inputs;
+  for (const auto& [level, plan] : plans) {
+    inputs.push_back(PlanLevelInput{&plan, level.index, level.split_z_low, level.split_z_high});
+  }
+  absl::StatusOr<PlanVolume> volume = RasterizePlanVolume(
+      inputs, grid.resolution_m(), seg_options.trim_distance_m + 2 * grid.resolution_m());
+  if (!volume.ok()) return volume.status();
+  const fs::path work = out / ".segment";
+  std::error_code ec;
+  fs::remove_all(work, ec);
+  absl::StatusOr<SegmentTilesResult> segmented =
+      SegmentTiles(tiles, *volume, seg_options, (work / "building").string(),
+                   (work / "objects").string(), StageProgress(progress, "segmentation"));
+  if (!segmented.ok()) return segmented.status();
+  counts["segmented_chunks"] = segmented->chunks;
+  counts["object_cells"] = segmented->object_cells;
+  counts["unobserved_object_cells"] = segmented->unobserved_object_cells;
+  counts["trimmed_cells"] = segmented->trimmed_cells;
+  timings["merge.segmentation"] = SecondsSince(t0);
+
+  // The building: faces, regions and planar mesh of the building tiles.
+  t0 = Clock::now();
+  std::optional<TriangleMesh> building;
+  {
+    absl::StatusOr<std::unique_ptr<TileSet>> btiles =
+        TileSet::Open((work / "building").string(), grid.resolution_m(),
+                      options.cache_budget_bytes);
+    if (!btiles.ok()) return btiles.status();
+    absl::StatusOr<std::vector<BoundaryFace>> bfaces =
+        CollectBoundaryFaces(**btiles, StageProgress(progress, "building_faces"));
+    if (!bfaces.ok()) return bfaces.status();
+    if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
+    absl::StatusOr<PlanarRegionSet> bregions =
+        FitPlanarRegions(*bfaces, grid, PlanarRegionOptions{});
+    if (!bregions.ok()) return bregions.status();
+    counts["building_planar_regions"] = bregions->regions.size();
+    absl::StatusOr<std::optional<TriangleMesh>> planar =
+        PlanarBuildingMesh(*bfaces, *bregions, grid, out, counts, outputs, warnings);
+    if (!planar.ok()) return planar.status();
+    building = std::move(*planar);
+    if (!building) {
+      // The planar mesher failed (its reason is in the warnings): the building volume's dense
+      // mesh stands in, watertight by construction, so combined.ply stays whole.
+      absl::StatusOr<DenseMeshResult> dense =
+          BuildDenseMesh(**btiles, StageProgress(progress, "building_dense_mesh"));
+      if (!dense.ok()) return dense.status();
+      if (absl::Status s = WritePly((out / "mesh" / "building.ply").string(), dense->mesh);
+          !s.ok()) {
+        return s;
+      }
+      warnings.push_back("segmentation: mesh/building.ply is the dense mesh of the building "
+                         "volume, not a planar one");
+      outputs.push_back("mesh/building.ply");
+      counts["building_vertices"] = dense->mesh.vertices.size();
+      counts["building_triangles"] = dense->mesh.triangles.size();
+      counts["building_watertight"] = CheckMesh(dense->mesh).watertight();
+      counts["building_planar"] = false;
+      building = std::move(dense->mesh);
+    } else {
+      counts["building_planar"] = true;
+    }
+    result.building_triangles = building->triangles.size();
+  }
+  timings["merge.planar_mesh"] = SecondsSince(t0);
+
+  // The objects: dense mesh of the object tiles, split into closed pieces.
+  t0 = Clock::now();
+  std::vector<SegmentedObject> objects;
+  ObjectSplitReport split_report;
+  if (segmented->object_tiles > 0) {
+    absl::StatusOr<std::unique_ptr<TileSet>> otiles =
+        TileSet::Open((work / "objects").string(), grid.resolution_m(),
+                      options.cache_budget_bytes);
+    if (!otiles.ok()) return otiles.status();
+    absl::StatusOr<DenseMeshResult> dense =
+        BuildDenseMesh(**otiles, StageProgress(progress, "object_mesh"));
+    if (!dense.ok()) return dense.status();
+    ObjectSplitOptions split;
+    split.min_thickness_m = 2 * grid.resolution_m();  // one-cell films are carving noise
+    objects = SplitObjects(dense->mesh, *volume, split, &split_report);
+  }
+  fs::remove_all(work, ec);  // scratch: every output below is written from memory
+  const fs::path objects_dir = out / "mesh" / "objects";
+  fs::remove_all(objects_dir, ec);
+  fs::create_directories(objects_dir, ec);
+  if (ec) {
+    return absl::UnavailableError(
+        absl::StrCat(objects_dir.string(), ": cannot create: ", ec.message()));
+  }
+  TriangleMesh all_objects;
+  std::vector<int> object_of_face;
+  nlohmann::json listed = nlohmann::json::array();
+  for (const SegmentedObject& o : objects) {
+    const std::string name = absl::StrCat("mesh/objects/", o.id, ".ply");
+    if (absl::Status s = WritePly((out / name).string(), o.mesh); !s.ok()) return s;
+    outputs.push_back(name);
+    all_objects.Append(o.mesh);
+    object_of_face.insert(object_of_face.end(), o.mesh.triangles.size(), o.id);
+    listed.push_back({{"id", o.id},
+                      {"level", o.level},
+                      {"room", o.room},
+                      {"aabb", {{o.box.min().x(), o.box.min().y(), o.box.min().z()},
+                                {o.box.max().x(), o.box.max().y(), o.box.max().z()}}},
+                      {"volume_m3", o.volume_m3},
+                      {"triangles", o.mesh.triangles.size()},
+                      {"mesh", name}});
+  }
+  if (absl::Status s = WritePly((out / "mesh" / "objects.ply").string(), all_objects,
+                                &object_of_face, "object");
+      !s.ok()) {
+    return s;
+  }
+  outputs.push_back("mesh/objects.ply");
+  // combined = building + objects; face property `object`: −1 for the building.
+  TriangleMesh combined = building ? *building : TriangleMesh{};
+  std::vector<int> combined_object(combined.triangles.size(), -1);
+  combined.Append(all_objects);
+  combined_object.insert(combined_object.end(), object_of_face.begin(), object_of_face.end());
+  if (absl::Status s = WritePly((out / "mesh" / "combined.ply").string(), combined,
+                                &combined_object, "object");
+      !s.ok()) {
+    return s;
+  }
+  outputs.push_back("mesh/combined.ply");
+  job["objects"] = listed;
+  counts["objects"] = objects.size();
+  counts["object_triangles"] = all_objects.triangles.size();
+  counts["object_components"] = split_report.components;
+  counts["objects_dropped_small"] = split_report.dropped_small;
+  counts["objects_dropped_cavities"] = split_report.dropped_cavities;
+  counts["objects_dropped_ceiling"] = split_report.dropped_ceiling;
+  timings["merge.object_mesh"] = SecondsSince(t0);
+  result.objects = objects.size();
+  return result;
 }
 
 }  // namespace
@@ -222,8 +411,9 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
 
   // floor plans (stages 4–5, §5.3, §3.3) ➜ level_<k>/floorplan.geojson, floorplan.svg,
   // extruded.ply; job.json "rooms"
+  std::vector<std::pair<Level, FloorPlan>> plans;
   if (absl::Status s = FloorPlanStage(options, tiles, *faces, *regions, levels->levels, out, job,
-                                      counts, timings, outputs, warnings, progress);
+                                      counts, timings, outputs, warnings, progress, plans);
       !s.ok()) {
     return InStage("floorplan", s);
   }
@@ -245,34 +435,33 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   outputs.push_back("mesh/dense.ply");
   timings["merge.dense_mesh"] = SecondsSince(t0);
 
-  // planar mesh (§4.3.3, eq 4.9, §4.2.5) ➜ mesh/building.ply. For now it holds the planar mesh
-  // of everything (issue 4); segmentation (§5.6) will split furniture off.
+  // §5.5–§5.6 segmentation against the floor plans, then the building's planar mesh and the
+  // objects' dense meshes ➜ mesh/building.ply, mesh/objects.ply, mesh/objects/<id>.ply,
+  // mesh/combined.ply. Without floor plans the building mesh holds everything (issue 4's).
   t0 = Clock::now();
-  if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
-  uint64_t building_triangles = 0;
-  absl::StatusOr<PlanarMesh> planar = BuildPlanarMesh(*faces, *regions, grid);
-  if (planar.ok()) {
-    const MeshCheck check = CheckMesh(planar->mesh);
-    if (!check.watertight()) {
-      warnings.push_back("planar_mesh: not watertight (" + check.ToString() + ")");
+  uint64_t building_triangles = 0, object_count = 0;
+  if (plans.empty()) {
+    warnings.push_back("segmentation: no floor plan, so no objects; mesh/building.ply is the "
+                       "planar mesh of everything");
+    // An earlier merge into the same folder may have left objects: they are not this job's.
+    std::error_code ec;
+    for (const char* stale : {"objects", "objects.ply", "combined.ply"}) {
+      fs::remove_all(out / "mesh" / stale, ec);
     }
-    if (absl::Status s = WritePly((out / "mesh" / "building.ply").string(), planar->mesh,
-                                  &planar->triangle_region, "region");
-        !s.ok()) {
-      return InStage("planar_mesh", s);
-    }
-    outputs.push_back("mesh/building.ply");
-    building_triangles = planar->mesh.triangles.size();
-    counts["building_vertices"] = planar->mesh.vertices.size();
-    counts["building_triangles"] = building_triangles;
-    counts["building_watertight"] = check.watertight();
-  } else if (absl::IsCancelled(planar.status())) {
-    return planar.status();
+    if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
+    absl::StatusOr<std::optional<TriangleMesh>> building =
+        PlanarBuildingMesh(*faces, *regions, grid, out, counts, outputs, warnings);
+    if (!building.ok()) return InStage("planar_mesh", building.status());
+    if (*building) building_triangles = (*building)->triangles.size();
+    timings["merge.planar_mesh"] = SecondsSince(t0);
   } else {
-    // Not fatal: the other outputs stand; job.json says why building.ply is missing.
-    warnings.push_back(std::string(planar.status().message()));
+    absl::StatusOr<SegmentStageResult> seg =
+        SegmentStage(options, tiles, plans, out, job, counts, timings, outputs, warnings,
+                     progress);
+    if (!seg.ok()) return InStage("segmentation", seg.status());
+    building_triangles = seg->building_triangles;
+    object_count = seg->objects;
   }
-  timings["merge.planar_mesh"] = SecondsSince(t0);
 
   // The first outputs write job.json last, with everything above in it.
   for (auto& [key, value] : counts.items()) job["counts"][key] = value;
@@ -292,6 +481,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   summary->dense_triangles = dense_triangles;
   summary->building_triangles = building_triangles;
   summary->num_rooms = counts.value("rooms", uint64_t{0});
+  summary->num_objects = object_count;
   summary->warnings = warnings;
   summary->seconds_total = SecondsSince(t_start);
   return summary;

@@ -3,13 +3,24 @@
 //   boundary_faces   faces between interior and exterior leaves (§4.3.2, Fig 4.9)
 //   planar_regions   flood fill, PCA growing, 15° relaxation (§4.2.4)
 //   levels           floors and ceilings from horizontal regions (§5.2) ➜ levels.json
+//   floorplan        wall samples, rooms, extrusion per level (§5.3, §3.3) ➜
+//                    level_<k>/floorplan.geojson, floorplan.svg, extruded.ply (needs the scan)
 //   dense_mesh       dual contouring (§4.3.3) ➜ mesh/dense.ply
-//   planar_mesh      eq 4.9 vertices + §4.2.5 triangulation ➜ mesh/building.ply (face property
-//                    `region`)
+//   segmentation     with floor plans: every tile split against the extruded plans into
+//                    building and object tiles (§5.5 trimming, §5.6; services/segment), in
+//                    <out>/.segment while the merge runs
+//   building_faces, planar_mesh   the building tiles' faces, regions and planar mesh ➜
+//                    mesh/building.ply (face property `region`); without floor plans the
+//                    planar mesh of everything
+//   object_mesh      dual contouring of the object tiles, split into objects ➜
+//                    mesh/objects.ply (face property `object`), mesh/objects/<id>.ply,
+//                    mesh/combined.ply (`object`, −1 = building); job.json "objects"
 //   octree_bt, topdown_png, job_json   MergeFirstOutputs: octree.bt, level_<k>/topdown.png per
 //                    level, job.json last (its presence means the merge finished)
-// Every file goes through "<name>.partial" and a rename. A planar mesh that cannot be built is
-// not fatal: job.json then lists the reason under "warnings" and omits mesh/building.ply.
+// Every file goes through "<name>.partial" and a rename. A stage that cannot make its output
+// for a reason of the data (no scan, no level, a planar mesh that fails) is not fatal: job.json
+// lists why under "warnings"; when the building's planar mesh fails, building.ply is the
+// building volume's dense mesh instead (counts.building_planar = false).
 #pragma once
 
 #include "absl/status/statusor.h"

@@ -76,9 +76,12 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
   EXPECT_EQ(s->num_boundary_faces, 2u * (32 * 24 + 32 * 20 + 24 * 20));
   EXPECT_EQ(s->num_planar_regions, 6u);
   EXPECT_EQ(s->num_levels, 1u);
-  // Tiles without a scan: no path for the floor plans' lines of sight, and job.json says so.
-  ASSERT_EQ(s->warnings.size(), 1u);
+  // Tiles without a scan: no path for the floor plans' lines of sight, so no plan to segment
+  // objects against; job.json says both.
+  ASSERT_EQ(s->warnings.size(), 2u);
   EXPECT_NE(s->warnings[0].find("floorplan: no scan given"), std::string::npos) << s->warnings[0];
+  EXPECT_NE(s->warnings[1].find("segmentation: no floor plan"), std::string::npos)
+      << s->warnings[1];
 
   // levels.json (DESIGN §7): the floor and ceiling are the isosurfaces of Fig 4.9, between the
   // shell's and the room's leaf centres: p 0.1 → 0.9 crosses 0.5 halfway, on the leaf border.

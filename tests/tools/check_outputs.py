@@ -7,7 +7,9 @@
     ceiling are within --level-tol metres;
   - each mesh/*.ply listed is binary little-endian PLY with float x y z vertices and
     `list uchar int` faces, and is watertight: every undirected edge is used by exactly two
-    triangles, once in each direction, no triangle repeats or has a repeated vertex.
+    triangles, once in each direction, no triangle repeats or has a repeated vertex;
+  - every object of job.json has its fields and its listed mesh; combined.ply has exactly the
+    triangles of building.ply and objects.ply.
 
 Usage: check_outputs.py OUT_DIR [--level-tol 0.05] [--selftest]
   --selftest: also checks that the checks can fail (a mesh with a triangle removed or flipped
@@ -138,6 +140,23 @@ def main():
             problems += found
             print(f"{name}: {len(xyz)} vertices, {len(tri)} triangles, "
                   f"{'watertight' if not found else 'NOT watertight'}")
+
+    # §7 objects: every listed object has its mesh; combined.ply = building.ply + objects.ply.
+    outputs = set(job.get("outputs", []))
+    for obj in job.get("objects", []):
+        for key in ("id", "level", "room", "aabb", "volume_m3", "triangles", "mesh"):
+            if key not in obj:
+                problems.append(f"job.json: object without '{key}': {obj}")
+        if obj.get("mesh") not in outputs:
+            problems.append(f"job.json: object {obj.get('id')} mesh {obj.get('mesh')} not listed")
+    if {"mesh/combined.ply", "mesh/objects.ply", "mesh/building.ply"} <= outputs:
+        counts = [len(read_ply(os.path.join(args.out, "mesh", n))[1])
+                  for n in ("building.ply", "objects.ply", "combined.ply")]
+        if counts[0] + counts[1] != counts[2]:
+            problems.append(f"combined.ply has {counts[2]} triangles, building + objects "
+                            f"{counts[0]} + {counts[1]}")
+        print(f"objects: {len(job.get('objects', []))}; combined = building + objects "
+              f"({counts[2]} = {counts[0]} + {counts[1]})")
 
     if args.selftest:
         xyz, tri = read_ply(os.path.join(args.out, "mesh", "dense.ply"))

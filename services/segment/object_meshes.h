@@ -1,0 +1,65 @@
+// The objects of a building, one watertight mesh each (seed §5.6.2; DESIGN §6 stage 8, §7
+// mesh/objects.ply, mesh/objects/<id>.ply): the dense mesh (dual_contouring.h) of the object
+// volume (segment_chunk.h) split into its connected pieces.
+//
+// Why components of the mesh and not of the leaves: dual contouring joins the faces of one
+// 6-connected set of interior cells into one closed surface (dual_contouring.h), so the mesh's
+// edge-connected components are exactly the objects' surfaces, found with one union-find over
+// the triangles, without a second pass over the octree.
+//
+// Plain data; no files, no logging.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "services/segment/plan_volume.h"
+#include "storage/ply_io.h"
+
+namespace carvemap {
+
+struct ObjectSplitOptions {
+  // Pieces smaller than this are specks (noise on floors and walls), dropped, m³.
+  double min_volume_m3 = 0.001;
+  // Pieces whose bounding box is thinner than this on any axis are dropped too (one-cell films
+  // where the carved walls bulge into a room past the plan's tolerance), m. 0 = keep.
+  double min_thickness_m = 0;
+  // Pieces whose top is within this of their room's ceiling and that are no taller than it are
+  // the carved ceiling's unevenness (grazing views put it a cell or two low), not objects, m.
+  double ceiling_film_m = 0.15;
+  // Pieces touching the ceiling (as above) that are at most this deep on one horizontal side
+  // and at least door_header_min_width_m long on the other are the wall over a doorway: the
+  // plan's rooms run through the door, so §5.6's rule makes door headers objects (the seed
+  // counts door frames as objects); users of a furniture list do not want them. m.
+  double door_header_depth_m = 0.4;
+  double door_header_min_width_m = 0.6;
+};
+
+struct SegmentedObject {
+  int id = 0;                 // 0.. in output order
+  int level = -1;             // the plan level holding the centre of its box (−1 none)
+  int room = -1;              // the room under that centre (−1 none)
+  Eigen::AlignedBox3d box;    // m
+  double volume_m3 = 0;       // enclosed volume (divergence theorem)
+  TriangleMesh mesh;          // watertight, counter-clockwise seen from outside (normals out)
+};
+
+struct ObjectSplitReport {
+  uint64_t components = 0;     // closed surfaces found
+  uint64_t dropped_small = 0;  // below min_volume_m3 or min_thickness_m
+  uint64_t dropped_ceiling = 0;  // ceiling films and door headers
+  uint64_t dropped_cavities = 0;  // inner surfaces of hollow objects (negative volume)
+};
+
+// `object_mesh`: dual contouring of the object volume, counter-clockwise seen from the free
+// space (normals into the objects, as dual_contouring.h makes them). Objects are ordered by
+// level, then by the min corner of their box (x, y, z), so ids are deterministic. An inner
+// surface (a free cavity enclosed in an object) is dropped: its object stays watertight, filled.
+[[nodiscard]] std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
+                                                        const PlanVolume& plan,
+                                                        const ObjectSplitOptions& options,
+                                                        ObjectSplitReport* report = nullptr);
+
+}  // namespace carvemap

@@ -1,0 +1,146 @@
+#include "services/segment/object_meshes.h"
+
+#include <map>
+
+#include <gtest/gtest.h>
+
+#include "services/mesh/dual_contouring.h"
+#include "services/mesh/mesh_checks.h"
+#include "services/segment/segment_chunk.h"
+#include "services/segment/segment_test_util.h"
+
+namespace carvemap {
+namespace {
+
+using testing::RectanglePlan;
+
+// A box as 12 triangles facing into it (as dual contouring orients the object volume's surface:
+// counter-clockwise seen from the free space, i.e. normals into the object).
+TriangleMesh InwardBox(const Eigen::Vector3f& lo, const Eigen::Vector3f& hi) {
+  TriangleMesh m;
+  for (int i = 0; i < 8; ++i) {
+    m.vertices.emplace_back(i & 1 ? hi.x() : lo.x(), i & 2 ? hi.y() : lo.y(),
+                            i & 4 ? hi.z() : lo.z());
+  }
+  const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
+                           {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  for (const auto& q : quads) {  // outward quads, reversed
+    m.triangles.emplace_back(q[0], q[2], q[1]);
+    m.triangles.emplace_back(q[0], q[3], q[2]);
+  }
+  return m;
+}
+
+TriangleMesh Reversed(TriangleMesh m) {
+  for (Eigen::Vector3i& t : m.triangles) std::swap(t[1], t[2]);
+  return m;
+}
+
+class ObjectMeshesTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    plan_ = RectanglePlan({{{0, 0}, {4, 4}, 0.0, 2.5}, {{4, 0}, {8, 4}, 0.0, 2.5}});
+    const PlanLevelInput in{&plan_, 0, -1.0, 3.0};
+    volume_ = *RasterizePlanVolume({&in, 1}, 0.0625, 1.0);
+  }
+  FloorPlan plan_;
+  PlanVolume volume_;
+};
+
+TEST_F(ObjectMeshesTest, SplitsPiecesOrientsThemOutwardAndDropsSpecksAndCavities) {
+  TriangleMesh all;
+  all.Append(InwardBox({5, 1, 0}, {6, 2, 0.5}));             // a table in room 1
+  all.Append(InwardBox({1, 1, 0}, {2, 3, 1}));               // a cabinet in room 0 ...
+  all.Append(Reversed(InwardBox({1.2f, 1.2f, 0.2f}, {1.8f, 2.8f, 0.8f})));  // ... hollow
+  all.Append(InwardBox({3, 3, 1}, {3.05f, 3.05f, 1.05f}));   // a speck
+  ObjectSplitReport report;
+  const std::vector<SegmentedObject> objects =
+      SplitObjects(all, volume_, ObjectSplitOptions{}, &report);
+  EXPECT_EQ(report.components, 4u);
+  EXPECT_EQ(report.dropped_small, 1u);
+  EXPECT_EQ(report.dropped_cavities, 1u);
+  ASSERT_EQ(objects.size(), 2u);
+  // Ordered by box min x: the cabinet first.
+  EXPECT_EQ(objects[0].id, 0);
+  EXPECT_EQ(objects[0].room, 0);
+  EXPECT_EQ(objects[0].level, 0);
+  EXPECT_NEAR(objects[0].volume_m3, 2.0, 1e-5);  // the outer surface's volume: filled
+  EXPECT_TRUE(objects[0].box.isApprox(
+      Eigen::AlignedBox3d(Eigen::Vector3d(1, 1, 0), Eigen::Vector3d(2, 3, 1))));
+  EXPECT_EQ(objects[1].id, 1);
+  EXPECT_EQ(objects[1].room, 1);
+  EXPECT_NEAR(objects[1].volume_m3, 0.5, 1e-6);
+  for (const SegmentedObject& o : objects) {
+    EXPECT_EQ(o.mesh.vertices.size(), 8u);
+    EXPECT_EQ(o.mesh.triangles.size(), 12u);
+    EXPECT_TRUE(CheckMesh(o.mesh).watertight()) << CheckMesh(o.mesh).ToString();
+  }
+  // Thin pieces go with min_thickness_m.
+  ObjectSplitOptions thin;
+  thin.min_thickness_m = 0.6;
+  EXPECT_EQ(SplitObjects(all, volume_, thin).size(), 1u);
+}
+
+TEST_F(ObjectMeshesTest, EmptyMeshHasNoObjects) {
+  ObjectSplitReport report;
+  EXPECT_TRUE(SplitObjects(TriangleMesh{}, volume_, ObjectSplitOptions{}, &report).empty());
+  EXPECT_EQ(report.components, 0u);
+}
+
+// The whole path on a synthetic octree: a room with a box on its floor, segmented, dual
+// contoured and split, gives one watertight object where the box is.
+TEST(SegmentThenMesh, BoxOnTheFloorComesOutAsOneObject) {
+  const OctreeGrid grid = *OctreeGrid::FromResolution(0.0625);
+  const FloorPlan plan = RectanglePlan({{{0.25, 0.25}, {1.75, 1.75}, 0.25, 1.75}});
+  const PlanLevelInput in{&plan, 0, -1.0, 3.0};
+  const PlanVolume volume = *RasterizePlanVolume({&in, 1}, grid.resolution_m(), 1.5);
+  const TileData tile = testing::FinestTile(grid, [](const Eigen::Vector3d& c) {
+    const bool in_room =
+        testing::Inside(c, Eigen::Vector3d::Constant(0.25), Eigen::Vector3d::Constant(1.75));
+    const bool in_box = testing::Inside(c, {0.75, 0.5, 0.25}, {1.25, 1.25, 0.75});
+    return in_room && !in_box ? 0.8 : 0.2;
+  });
+  ChunkNeighbourhood alone;
+  alone.grid = grid;
+  alone.chunk = ChunkKey::Zero();
+  alone.tiles[ChunkNeighbourhood::Index(0, 0, 0)] = &tile;
+  absl::StatusOr<SegmentedChunk> seg = SegmentChunk(alone, volume, SegmentOptions{});
+  ASSERT_TRUE(seg.ok()) << seg.status();
+  std::map<ChunkKey, TileData, ChunkKeyLess> tiles{{ChunkKey::Zero(), seg->objects}};
+  std::vector<ChunkMesh> meshes;
+  const std::vector<ChunkKey> keys{ChunkKey::Zero()};
+  for (const ChunkKey& chunk : DenseMeshChunks(keys)) {
+    ChunkNeighbourhood hood;
+    hood.grid = grid;
+    hood.chunk = chunk;
+    for (int j = 0; j < 27; ++j) {
+      auto it = tiles.find(chunk + ChunkKey(j % 3 - 1, (j / 3) % 3 - 1, j / 9 - 1));
+      if (it != tiles.end()) hood.tiles[j] = &it->second;
+    }
+    absl::StatusOr<ChunkMesh> m = DualContourChunk(hood);
+    ASSERT_TRUE(m.ok()) << m.status();
+    meshes.push_back(std::move(*m));
+  }
+  const TriangleMesh dense = WeldChunkMeshes(meshes);
+  ObjectSplitReport report;
+  const std::vector<SegmentedObject> objects =
+      SplitObjects(dense, volume, ObjectSplitOptions{}, &report);
+  ASSERT_EQ(objects.size(), 1u) << report.components << " pieces";
+  const SegmentedObject& o = objects[0];
+  EXPECT_TRUE(CheckMesh(o.mesh).watertight()) << CheckMesh(o.mesh).ToString();
+  EXPECT_EQ(o.room, 0);
+  // The box is 0.5 × 0.75 × 0.5 m; the segmented object is cut one cell above the floor
+  // (§5.6: the floor's boundary layer is building), so 0.5 × 0.75 × 0.4375 m, its surface
+  // within a cell of the box's faces.
+  const double r = grid.resolution_m();
+  EXPECT_NEAR(o.box.min().x(), 0.75, r);
+  EXPECT_NEAR(o.box.max().x(), 1.25, r);
+  EXPECT_NEAR(o.box.min().y(), 0.5, r);
+  EXPECT_NEAR(o.box.max().y(), 1.25, r);
+  EXPECT_NEAR(o.box.min().z(), 0.3125, r);
+  EXPECT_NEAR(o.box.max().z(), 0.75, r);
+  EXPECT_NEAR(o.volume_m3, 0.5 * 0.75 * 0.4375, 0.15 * 0.5 * 0.75 * 0.4375);
+}
+
+}  // namespace
+}  // namespace carvemap

@@ -1,0 +1,239 @@
+#include "services/segment/segment_chunk.h"
+
+#include <array>
+#include <cmath>
+#include <optional>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+
+namespace carvemap {
+namespace {
+
+// The exact mirror of a leaf's evidence: Σw(1 − p) = Σw − Σwp, Σw(1 − p)² = Σw − 2Σwp + Σwp².
+LeafStats Mirrored(const LeafStats& s) {
+  LeafStats m = s;
+  m.sum_wp = s.sum_w - s.sum_wp;
+  m.sum_wp2 = std::max(0.0, s.sum_w - 2 * s.sum_wp + s.sum_wp2);
+  return m;
+}
+
+// An interior-reading leaf for a cell that was exterior: the mirror when that is clearly
+// interior, else the fixed kUnobservedObjectP (unobserved space, or p exactly 0.5).
+LeafStats AsInterior(const LeafStats* s) {
+  if (s != nullptr && s->observed()) {
+    LeafStats m = Mirrored(*s);
+    if (m.interior()) return m;
+  }
+  LeafStats u;
+  u.Add(kUnobservedObjectP, 1.0);
+  return u;
+}
+
+// What a cell's key is: its leaf row (−1 unstored) and its class. Uniform keys merge.
+struct CellKey {
+  int32_t leaf = -1;
+  CellSegment segment = CellSegment::kBuilding;
+  friend bool operator==(const CellKey&, const CellKey&) = default;
+};
+
+// What the first observed cell along a line says.
+enum class Hit { kNothing, kFree, kSolid, kWall };
+
+// The hidden-space test of segment_chunk.h for the unobserved cell centred at `c`.
+bool HiddenBehindSolid(const NeighbourhoodIndex& index, const PlanVolume& plan,
+                       const Eigen::Vector3d& c, const SegmentOptions& options) {
+  const Eigen::Vector2d away = PlanAwayFromWalls(plan, c);
+  if (away.isZero()) return false;
+  const OctreeGrid& grid = index.hood().grid;
+  const double res = grid.resolution_m();
+  const int steps = static_cast<int>(std::ceil(options.hidden_fill_m / res));
+  auto march = [&](double sign) {
+    for (int s = 1; s <= steps; ++s) {
+      const Eigen::Vector3d p = c + sign * s * res * Eigen::Vector3d(away.x(), away.y(), 0);
+      const LeafKey cell = LeafOf(grid, p);
+      if (index.SlotOf(cell) < 0) return Hit::kNothing;
+      if (const TileLeaf* leaf = index.StoredAt(cell); leaf && leaf->stats.observed()) {
+        return leaf->stats.interior() ? Hit::kFree : Hit::kSolid;
+      }
+      if (sign < 0) {
+        const PlanColumn col = LookupPlan(plan, p);
+        if (col.room < 0 || col.signed_distance_m < 0) return Hit::kWall;
+      }
+    }
+    return Hit::kNothing;
+  };
+  if (march(+1) != Hit::kSolid) return false;
+  const Hit back = march(-1);
+  return back == Hit::kSolid || back == Hit::kWall;
+}
+
+class ChunkSegmenter {
+ public:
+  ChunkSegmenter(const NeighbourhoodIndex& index, const PlanVolume& plan,
+                 const SegmentOptions& options)
+      : tile_(index.hood().tiles[ChunkNeighbourhood::Index(0, 0, 0)]),
+        k_(index.hood().grid.chunk_depth),
+        n_(index.hood().grid.leaves_per_side()) {
+    const OctreeGrid& grid = index.hood().grid;
+    const TileData* tile = tile_;
+    const ChunkKey chunk = index.hood().chunk;
+    const double res = grid.resolution_m();
+    cells_.assign(static_cast<size_t>(n_) * n_ * n_, CellKey{});
+    if (tile != nullptr) {
+      for (size_t row = 0; row < tile->leaves.size(); ++row) {
+        const ChunkNode& node = tile->leaves[row].node;
+        const int s = 1 << (k_ - node.depth);
+        const Eigen::Vector3i lo = node.local * s;
+        for (int z = lo.z(); z < lo.z() + s; ++z) {
+          for (int y = lo.y(); y < lo.y() + s; ++y) {
+            for (int x = lo.x(); x < lo.x() + s; ++x) {
+              cells_[Index(x, y, z)].leaf = static_cast<int32_t>(row);
+            }
+          }
+        }
+      }
+    }
+    const LeafKey base = chunk * n_;
+    for (int z = 0; z < n_; ++z) {
+      for (int y = 0; y < n_; ++y) {
+        for (int x = 0; x < n_; ++x) {
+          CellKey& c = cells_[Index(x, y, z)];
+          const LeafStats* s = c.leaf >= 0 ? &tile->leaves[c.leaf].stats : nullptr;
+          const bool observed = s != nullptr && s->observed();
+          const Eigen::Vector3d centre = LeafCenter(grid, base + Eigen::Vector3i(x, y, z));
+          c.segment =
+              ClassifyCell(plan, centre, s != nullptr && s->interior(), observed, res, options);
+          if (c.segment == CellSegment::kObject && !observed &&
+              !HiddenBehindSolid(index, plan, centre, options)) {
+            c.segment = CellSegment::kBuilding;
+          }
+          if (c.segment == CellSegment::kObject) {
+            ++object_cells_;
+            unobserved_object_cells_ += !observed;
+          }
+          if (c.segment == CellSegment::kTrimmed) ++trimmed_cells_;
+        }
+      }
+    }
+  }
+
+  void Emit(SegmentedChunk& out) {
+    if (std::optional<CellKey> root = Visit(0, Eigen::Vector3i::Zero(), out)) {
+      Write(ChunkNode{Eigen::Vector3i::Zero(), 0}, *root, out);
+    }
+    out.object_cells = object_cells_;
+    out.unobserved_object_cells = unobserved_object_cells_;
+    out.trimmed_cells = trimmed_cells_;
+    if (object_cells_ == 0) out.objects.leaves.clear();
+  }
+
+ private:
+  [[nodiscard]] size_t Index(int x, int y, int z) const {
+    return static_cast<size_t>(x) +
+           static_cast<size_t>(n_) * (static_cast<size_t>(y) + static_cast<size_t>(n_) * z);
+  }
+
+  // The key of the node (depth, local) when all its cells share one; otherwise emits its
+  // uniform children and returns nothing.
+  std::optional<CellKey> Visit(int depth, const Eigen::Vector3i& local, SegmentedChunk& out) {
+    if (depth == k_) return cells_[Index(local.x(), local.y(), local.z())];
+    std::array<std::optional<CellKey>, 8> child;
+    bool uniform = true;
+    for (int c = 0; c < 8; ++c) {
+      child[c] = Visit(depth + 1, 2 * local + Eigen::Vector3i(c & 1, (c >> 1) & 1, (c >> 2) & 1),
+                       out);
+      uniform = uniform && child[c].has_value() && *child[c] == *child[0];
+    }
+    if (uniform) return child[0];
+    for (int c = 0; c < 8; ++c) {
+      if (!child[c]) continue;
+      Write(ChunkNode{2 * local + Eigen::Vector3i(c & 1, (c >> 1) & 1, (c >> 2) & 1), depth + 1},
+            *child[c], out);
+    }
+    return std::nullopt;
+  }
+
+  void Write(const ChunkNode& node, const CellKey& key, SegmentedChunk& out) {
+    const LeafStats* s = key.leaf >= 0 ? &tile_->leaves[key.leaf].stats : nullptr;
+    switch (key.segment) {
+      case CellSegment::kFree:  // free for both: stays free, and borders objects
+        out.building.leaves.push_back(TileLeaf{node, *s});
+        out.objects.leaves.push_back(TileLeaf{node, Mirrored(*s)});
+        break;
+      case CellSegment::kTrimmed:  // exterior for both
+        out.building.leaves.push_back(TileLeaf{node, Mirrored(*s)});
+        break;
+      case CellSegment::kObject:
+        out.building.leaves.push_back(TileLeaf{node, AsInterior(s)});
+        out.objects.leaves.push_back(TileLeaf{node, AsInterior(s)});
+        break;
+      case CellSegment::kBuilding:  // as carved; exterior (unstored) for the objects
+        if (s != nullptr) out.building.leaves.push_back(TileLeaf{node, *s});
+        break;
+    }
+  }
+
+  const TileData* tile_;
+  int k_, n_;
+  std::vector<CellKey> cells_;
+  uint64_t object_cells_ = 0, unobserved_object_cells_ = 0, trimmed_cells_ = 0;
+};
+
+}  // namespace
+
+absl::Status SegmentOptions::Validate() const {
+  if (!(trim_distance_m >= 0) || !std::isfinite(trim_distance_m)) {
+    return absl::InvalidArgumentError("segment: trim_distance_m must be finite and ≥ 0");
+  }
+  if (!(hidden_fill_m >= 0) || !std::isfinite(hidden_fill_m)) {
+    return absl::InvalidArgumentError("segment: hidden_fill_m must be finite and ≥ 0");
+  }
+  if (!std::isfinite(plan_tolerance_m)) {
+    return absl::InvalidArgumentError("segment: plan_tolerance_m must be finite");
+  }
+  return absl::OkStatus();
+}
+
+CellSegment ClassifyCell(const PlanVolume& plan, const Eigen::Vector3d& centre, bool interior,
+                         bool observed, double res_m, const SegmentOptions& options) {
+  const PlanColumn col = LookupPlan(plan, centre);
+  if (interior) {
+    // §5.5: only levels with a plan trim; space above or below every level is kept.
+    return col.level >= 0 && col.signed_distance_m < -options.trim_distance_m
+               ? CellSegment::kTrimmed
+               : CellSegment::kFree;
+  }
+  if (col.room < 0 || (!observed && !options.unobserved_is_object)) return CellSegment::kBuilding;
+  const double tol = options.plan_tolerance_m < 0 ? res_m : options.plan_tolerance_m;
+  // The whole cell inside: its half diagonal (2D) from the walls, its half side from the floor
+  // and ceiling, plus the tolerance.
+  const double half = 0.5 * res_m;
+  if (col.signed_distance_m < half * std::sqrt(2.0) + tol) return CellSegment::kBuilding;
+  if (centre.z() - half < col.floor_z + tol || centre.z() + half > col.ceiling_z - tol) {
+    return CellSegment::kBuilding;
+  }
+  return CellSegment::kObject;
+}
+
+absl::StatusOr<SegmentedChunk> SegmentChunk(const ChunkNeighbourhood& hood,
+                                            const PlanVolume& plan,
+                                            const SegmentOptions& options) {
+  if (absl::Status s = options.Validate(); !s.ok()) return s;
+  absl::StatusOr<NeighbourhoodIndex> index = NeighbourhoodIndex::Build(hood);
+  if (!index.ok()) return index.status();
+  const TileData* tile = hood.tiles[ChunkNeighbourhood::Index(0, 0, 0)];
+  const ChunkKey& chunk = hood.chunk;
+  const OctreeGrid& grid = hood.grid;
+  SegmentedChunk out;
+  for (TileData* t : {&out.building, &out.objects}) {
+    t->chunk = chunk;
+    t->grid = grid;
+    if (tile != nullptr) t->params = tile->params;
+  }
+  ChunkSegmenter segmenter(*index, plan, options);
+  segmenter.Emit(out);
+  return out;
+}
+
+}  // namespace carvemap

@@ -1,0 +1,91 @@
+// Segmentation of one chunk of the octree against the extruded floor plans (seed §5.5, §5.6;
+// DESIGN §6 stages 6–7). Every finest cell gets one of four classes:
+//   - free: interior in the octree (p > 0.5) and within d of the plan (§5.5);
+//   - trimmed: interior in the octree but farther than d = trim_distance_m from the plan's
+//     interior (2D, on its level): space seen through windows and open doors, not meshed;
+//   - object: exterior in the octree and interior in the extruded plan, the cell's whole box
+//     inside it (§5.6: "volume intersected by the boundary of the 2.5D floor plan is considered
+//     exterior", so walls, floors and ceilings stay building). Observed solid space always;
+//     unobserved space only where it is hidden behind a solid surface (below);
+//   - building: every other exterior cell.
+// The result is two tiles of the same chunk that the existing stages mesh unchanged:
+//   - building: interior = free ∪ object (the union of both models' interiors, §5.6), so its
+//     planar mesh keeps the wall surfaces hidden behind furniture; trimmed cells are exterior;
+//   - objects: interior = object cells only, so its dense mesh is the objects, closed at the
+//     back where they touch the plan's walls and floors.
+// Unobserved space: §4.3.2 makes it exterior, and the seed fills the hidden backs of furniture
+// "based on the wall location" (§5.6.2, Fig 5.18e). But a backpack's line scanners leave much
+// of a room unswept (measured on the simulated office: 96 % of the candidate object cells were
+// unobserved, most of them empty air near walls and floors), so unobserved space is object
+// only when, looking along the plan's wall normal through the cell, the first observed cell
+// away from the nearest wall is solid and the first one towards it is solid or the wall itself,
+// both within hidden_fill_m: the space between a shelf's seen front and the wall behind it,
+// or inside a chair's seen shell; not a pocket of unswept air in front of an empty wall.
+// Relabelled leaves keep their evidence mirrored (p → 1 − p, sums mirrored exactly) so the
+// Fig 4.9 isosurface between an object and the free space beside it sits where the octree put
+// it; unobserved cells that become interior get p = kUnobservedObjectP.
+//
+// Plain function over plain data: no files, no logging. Per chunk, so it runs out of core.
+#pragma once
+
+#include <cstdint>
+
+#include "absl/status/statusor.h"
+#include "services/geometry/octree_keys.h"
+#include "services/mesh/boundary_faces.h"
+#include "services/segment/plan_volume.h"
+#include "storage/tile_store.h"
+
+namespace carvemap {
+
+struct SegmentOptions {
+  // §5.5: interior octree space farther than this from the floor plan's interior is dropped
+  // (the seed's Fig 5.14 uses a 1 m buffer), m. The PlanVolume must be rasterized with a margin
+  // larger than this: columns beyond its raster count as farther.
+  double trim_distance_m = 1.0;
+  // §5.6.1: the plan is aligned with the octree but simplified (§3.3.3 moves walls by up to the
+  // error bound) and its floor/ceiling heights are medians; a cell is an object only when its
+  // box lies inside the extruded plan by at least this much more, m. < 0: one finest cell
+  // (the carved walls and ceilings seen at grazing angles lie up to a cell or two inside the
+  // plan's, measured on the simulated office).
+  double plan_tolerance_m = -1;
+  // §4.3.2 counts unobserved space as exterior, so inside the plan it is object (the hidden
+  // backs and insides of furniture). false: unobserved space is never object.
+  bool unobserved_is_object = true;
+  // How far the hidden-space test above looks each way, m.
+  double hidden_fill_m = 1.0;
+  // InvalidArgument naming the bad field.
+  [[nodiscard]] absl::Status Validate() const;
+};
+
+// p given to unobserved cells that the segmentation turns into interior (objects' hidden
+// backs and insides): clearly interior, so the isosurface sits near the cell boundary.
+inline constexpr double kUnobservedObjectP = 0.75;
+
+enum class CellSegment : uint8_t { kFree = 0, kTrimmed = 1, kObject = 2, kBuilding = 3 };
+
+// The class of a finest cell with centre `centre`, interior (p > 0.5) or not, observed or not,
+// from the plan alone (an unobserved cell it calls object still needs the hidden-space test of
+// SegmentChunk). `res_m` is the finest resolution.
+[[nodiscard]] CellSegment ClassifyCell(const PlanVolume& plan, const Eigen::Vector3d& centre,
+                                       bool interior, bool observed, double res_m,
+                                       const SegmentOptions& options);
+
+struct SegmentedChunk {
+  TileData building;  // same chunk and grid as the input
+  TileData objects;   // no leaves when the chunk has no object cell
+  uint64_t object_cells = 0;
+  uint64_t unobserved_object_cells = 0;  // of object_cells
+  uint64_t trimmed_cells = 0;
+};
+
+// Segments `hood.chunk` (its tile may be null: all unobserved); the neighbours' tiles serve the
+// hidden-space test across chunk borders (beyond them it sees nothing and fails). Leaves are
+// split only where the class changes inside them; uniform runs stay one leaf.
+// InvalidArgument: bad options, or NeighbourhoodIndex::Build's errors (a tile of another chunk
+// or grid than its slot).
+[[nodiscard]] absl::StatusOr<SegmentedChunk> SegmentChunk(const ChunkNeighbourhood& hood,
+                                                          const PlanVolume& plan,
+                                                          const SegmentOptions& options);
+
+}  // namespace carvemap

@@ -1,0 +1,281 @@
+#include "services/segment/segment_chunk.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "services/segment/segment_test_util.h"
+
+namespace carvemap {
+namespace {
+
+using testing::FinestTile;
+using testing::Inside;
+using testing::RectanglePlan;
+
+LeafStats WithP(double p) {
+  LeafStats s;
+  s.Add(p, 0.5);
+  s.Add(p, 0.25);
+  return s;
+}
+
+// The finest cells of a tile, each with the stats of the leaf covering it (count 0: none).
+std::vector<LeafStats> Cells(const TileData& t, int* covered_twice = nullptr) {
+  const int n = t.grid.leaves_per_side(), k = t.grid.chunk_depth;
+  std::vector<LeafStats> cells(static_cast<size_t>(n) * n * n);
+  std::vector<int> cover(cells.size(), 0);
+  for (const TileLeaf& l : t.leaves) {
+    const int s = 1 << (k - l.node.depth);
+    const Eigen::Vector3i lo = l.node.local * s;
+    for (int z = lo.z(); z < lo.z() + s; ++z)
+      for (int y = lo.y(); y < lo.y() + s; ++y)
+        for (int x = lo.x(); x < lo.x() + s; ++x) {
+          const size_t i = x + static_cast<size_t>(n) * (y + static_cast<size_t>(n) * z);
+          cells[i] = l.stats;
+          ++cover[i];
+        }
+  }
+  if (covered_twice) {
+    *covered_twice = 0;
+    for (int c : cover) *covered_twice += c > 1;
+  }
+  return cells;
+}
+
+// A chunk alone: its tile (may be null) and no neighbours.
+absl::StatusOr<SegmentedChunk> SegmentAlone(const TileData* tile, const ChunkKey& chunk,
+                                            const OctreeGrid& grid, const PlanVolume& volume,
+                                            const SegmentOptions& options) {
+  ChunkNeighbourhood hood;
+  hood.grid = grid;
+  hood.chunk = chunk;
+  hood.tiles[ChunkNeighbourhood::Index(0, 0, 0)] = tile;
+  return SegmentChunk(hood, volume, options);
+}
+
+class SegmentChunkTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    grid_ = *OctreeGrid::FromResolution(0.0625);
+    // One room [0.25, 1.75]² with floor 0.25 and ceiling 1.75, in chunk (0, 0, 0).
+    plan_ = RectanglePlan({{{0.25, 0.25}, {1.75, 1.75}, 0.25, 1.75}});
+    const PlanLevelInput in{&plan_, 0, -1.0, 3.0};
+    volume_ = *RasterizePlanVolume({&in, 1}, grid_.resolution_m(), 1.5);
+  }
+
+  // The chunk at the finest depth: free inside the room, solid walls, floor and ceiling, and a
+  // solid box [0.75, 1.25]² × [0.25, 0.75] standing on the floor; one leaf per cell.
+  TileData RoomWithBox() const {
+    return FinestTile(grid_, [](const Eigen::Vector3d& c) {
+      const bool in_room = Inside(c, Eigen::Vector3d::Constant(0.25), Eigen::Vector3d::Constant(1.75));
+      const bool in_box = Inside(c, {0.75, 0.75, 0.25}, {1.25, 1.25, 0.75});
+      return in_room && !in_box ? 0.9 : 0.2;
+    });
+  }
+
+  OctreeGrid grid_;
+  FloorPlan plan_;
+  PlanVolume volume_;
+};
+
+TEST_F(SegmentChunkTest, ClassifiesCellsByTheOctreeAndThePlan) {
+  const double r = grid_.resolution_m();
+  const SegmentOptions o;
+  // Free space in the room, and interior space 0.5 m outside the plan (within the 1 m buffer).
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, true, true, r, o), CellSegment::kFree);
+  EXPECT_EQ(ClassifyCell(volume_, {-0.25, 1.0, 1.0}, true, true, r, o), CellSegment::kFree);
+  // §5.5: interior space more than 1 m outside the plan is trimmed; above every level it stays.
+  EXPECT_EQ(ClassifyCell(volume_, {3.0, 1.0, 1.0}, true, true, r, o), CellSegment::kTrimmed);
+  EXPECT_EQ(ClassifyCell(volume_, {3.0, 1.0, 5.0}, true, true, r, o), CellSegment::kFree);
+  // Solid or unobserved in the room's volume: object; on the plan's walls, floor or ceiling,
+  // or outside it: building.
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, false, true, r, o), CellSegment::kObject);
+  EXPECT_EQ(ClassifyCell(volume_, {0.28125, 1.0, 1.0}, false, true, r, o), CellSegment::kBuilding);
+  EXPECT_EQ(ClassifyCell(volume_, {0.21875, 1.0, 1.0}, false, true, r, o), CellSegment::kBuilding);
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 0.28125}, false, true, r, o), CellSegment::kBuilding);
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.71875}, false, true, r, o), CellSegment::kBuilding);
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 0.34375}, false, true, r, o), CellSegment::kObject);
+  EXPECT_EQ(ClassifyCell(volume_, {5.0, 1.0, 1.0}, false, true, r, o), CellSegment::kBuilding);
+  SegmentOptions no_fill;
+  no_fill.unobserved_is_object = false;
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, false, false, r, o), CellSegment::kObject);
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, false, false, r, no_fill),
+            CellSegment::kBuilding);
+}
+
+TEST_F(SegmentChunkTest, BoxOnTheFloorBecomesObjectAndFreeSpaceForTheBuilding) {
+  const TileData tile = RoomWithBox();
+  absl::StatusOr<SegmentedChunk> seg =
+      SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, SegmentOptions{});
+  ASSERT_TRUE(seg.ok()) << seg.status();
+  // The box's cells are 8 × 8 × 8; its bottom layer touches the plan's floor (§5.6: volume on
+  // the plan's boundary is building), so 8 × 8 × 7 are objects.
+  EXPECT_EQ(seg->object_cells, 8u * 8u * 7u);
+  EXPECT_EQ(seg->trimmed_cells, 0u);
+
+  int twice = 0;
+  const std::vector<LeafStats> in = Cells(tile);
+  const std::vector<LeafStats> building = Cells(seg->building, &twice);
+  EXPECT_EQ(twice, 0);
+  const std::vector<LeafStats> objects = Cells(seg->objects, &twice);
+  EXPECT_EQ(twice, 0);
+  const int n = grid_.leaves_per_side();
+  int object_interior = 0, building_changed = 0;
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const size_t i = x + static_cast<size_t>(n) * (y + static_cast<size_t>(n) * z);
+        const Eigen::Vector3d c = LeafCenter(grid_, Eigen::Vector3i(x, y, z));
+        const bool object = c.x() > 0.75 && c.x() < 1.25 && c.y() > 0.75 && c.y() < 1.25 &&
+                            c.z() > 0.3125 && c.z() < 0.75;
+        // Objects tile: interior exactly on the object cells, their p mirrored (0.2 ➜ 0.8);
+        // free space mirrored to exterior (0.9 ➜ 0.1); walls unstored.
+        EXPECT_EQ(objects[i].interior(), object) << c.transpose();
+        if (object) {
+          ++object_interior;
+          EXPECT_NEAR(objects[i].p(), 0.8, 1e-9);
+        } else if (in[i].interior()) {
+          EXPECT_NEAR(objects[i].p(), 0.1, 1e-9);
+        } else {
+          EXPECT_FALSE(objects[i].observed());
+        }
+        // Building tile: the objects become free space; everything else as carved.
+        EXPECT_EQ(building[i].interior(), in[i].interior() || object) << c.transpose();
+        if (!object) {
+          EXPECT_DOUBLE_EQ(building[i].p(), in[i].p());
+          EXPECT_EQ(building[i].count, in[i].count);
+        } else {
+          ++building_changed;
+        }
+      }
+  EXPECT_EQ(object_interior, 8 * 8 * 7);
+  EXPECT_EQ(building_changed, 8 * 8 * 7);
+}
+
+TEST_F(SegmentChunkTest, LeavesSplitOnlyWhereTheClassChanges) {
+  // One observed solid leaf over the whole chunk: the room's volume inside it is object.
+  TileData tile;
+  tile.grid = grid_;
+  tile.leaves.push_back(TileLeaf{ChunkNode{Eigen::Vector3i::Zero(), 0}, WithP(0.2)});
+  absl::StatusOr<SegmentedChunk> seg =
+      SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, SegmentOptions{});
+  ASSERT_TRUE(seg.ok()) << seg.status();
+  uint64_t expected = 0;  // counted with the rule itself
+  const int n = grid_.leaves_per_side();
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        expected += ClassifyCell(volume_, LeafCenter(grid_, Eigen::Vector3i(x, y, z)), false,
+                                 true, grid_.resolution_m(),
+                                 SegmentOptions{}) == CellSegment::kObject;
+      }
+  EXPECT_GT(expected, 1000u);
+  EXPECT_EQ(seg->object_cells, expected);
+  EXPECT_EQ(seg->unobserved_object_cells, 0u);
+  // Far fewer leaves than cells: uniform octants stay whole.
+  EXPECT_LT(seg->objects.leaves.size(), expected / 3);
+  int twice = 0;
+  const std::vector<LeafStats> cells = Cells(seg->building, &twice);
+  EXPECT_EQ(twice, 0);
+  for (const LeafStats& c : cells) EXPECT_TRUE(c.observed());  // the chunk stays covered
+  for (const TileLeaf& l : seg->objects.leaves) {
+    EXPECT_TRUE(l.stats.interior());
+    EXPECT_NEAR(l.stats.p(), 0.8, 1e-12);
+  }
+}
+
+TEST_F(SegmentChunkTest, UnobservedSpaceIsObjectOnlyWhenHiddenBehindSolid) {
+  // The room is free space except: a shelf's seen front, solid, x ∈ [0.5, 1.5], y ∈ [0.75,
+  // 0.875), z ∈ [0.25, 1.25), with unswept (unobserved) space between it and the south wall;
+  // and unswept air in front of the empty north wall (y ∈ [1.375, 1.75)) with free space
+  // before it.
+  const TileData tile = FinestTile(grid_, [](const Eigen::Vector3d& c) {
+    const bool in_room = Inside(c, Eigen::Vector3d::Constant(0.25), Eigen::Vector3d::Constant(1.75));
+    const bool shelf_x = c.x() > 0.5 && c.x() < 1.5 && c.z() < 1.25;
+    const bool front = shelf_x && c.y() > 0.75 && c.y() < 0.875;
+    const bool behind = shelf_x && c.y() < 0.75;
+    const bool air = c.x() > 0.5 && c.x() < 1.5 && c.y() > 1.375;
+    if (in_room && (behind || air)) return -1.0;  // unobserved
+    return in_room && !front ? 0.9 : 0.2;
+  });
+  const int n = grid_.leaves_per_side();
+  absl::StatusOr<SegmentedChunk> seg =
+      SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, SegmentOptions{});
+  ASSERT_TRUE(seg.ok()) << seg.status();
+  const std::vector<LeafStats> objects = Cells(seg->objects);
+  int hidden = 0, front = 0, air = 0;
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const Eigen::Vector3d c = LeafCenter(grid_, Eigen::Vector3i(x, y, z));
+        if (!objects[x + n * (y + n * z)].interior()) continue;
+        if (c.y() > 1.375) ++air;
+        else if (c.y() > 0.75) ++front;
+        else ++hidden;
+      }
+  EXPECT_EQ(air, 0);
+  // The front: x cells 8..23 (16), z cells above the floor band, 5..19 (15).
+  EXPECT_EQ(front, 16 * 2 * 15);
+  // Behind it, down to the wall band (y cells 6..11 of 4..11: the two nearest the wall are
+  // building): 16 × 6 × 15, less those near the shelf's west end that are nearer the west wall
+  // than the south one: their line of sight runs along x, through the hidden space to free
+  // space past the shelf's east end (the rule's known blind spot in corners).
+  EXPECT_LE(hidden, 16 * 6 * 15);
+  EXPECT_GT(hidden, 0.75 * 16 * 6 * 15);
+  EXPECT_EQ(seg->unobserved_object_cells, static_cast<uint64_t>(hidden));
+  // Without the fill, unobserved space is never object.
+  SegmentOptions no_fill;
+  no_fill.unobserved_is_object = false;
+  seg = SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, no_fill);
+  ASSERT_TRUE(seg.ok());
+  EXPECT_EQ(seg->unobserved_object_cells, 0u);
+  EXPECT_EQ(seg->object_cells, 16u * 2u * 15u);
+}
+
+TEST_F(SegmentChunkTest, InteriorFarOutsideThePlanIsTrimmed) {
+  // Chunk (2, 0, 0) spans x ∈ [4, 6): at least 2.25 m from the room. One interior leaf.
+  TileData tile;
+  tile.grid = grid_;
+  tile.chunk = ChunkKey(2, 0, 0);
+  tile.leaves.push_back(TileLeaf{ChunkNode{Eigen::Vector3i::Zero(), 0}, WithP(0.9)});
+  absl::StatusOr<SegmentedChunk> seg =
+      SegmentAlone(&tile, tile.chunk, grid_, volume_, SegmentOptions{});
+  ASSERT_TRUE(seg.ok()) << seg.status();
+  const uint64_t n = grid_.leaves_per_side();
+  EXPECT_EQ(seg->trimmed_cells, n * n * n);
+  ASSERT_EQ(seg->building.leaves.size(), 1u);
+  EXPECT_FALSE(seg->building.leaves[0].stats.interior());
+  EXPECT_NEAR(seg->building.leaves[0].stats.p(), 0.1, 1e-9);
+  EXPECT_TRUE(seg->objects.leaves.empty());
+  // A wider buffer keeps it (the raster must reach past the buffer).
+  SegmentOptions wide;
+  wide.trim_distance_m = 5;
+  const PlanLevelInput in{&plan_, 0, -1.0, 3.0};
+  const PlanVolume far = *RasterizePlanVolume({&in, 1}, grid_.resolution_m(), 6.0);
+  seg = SegmentAlone(&tile, tile.chunk, grid_, far, wide);
+  ASSERT_TRUE(seg.ok());
+  EXPECT_EQ(seg->trimmed_cells, 0u);
+  EXPECT_TRUE(seg->building.leaves[0].stats.interior());
+}
+
+TEST_F(SegmentChunkTest, RejectsAMismatchedTileAndBadOptions) {
+  TileData tile;
+  tile.grid = grid_;
+  tile.chunk = ChunkKey(1, 0, 0);
+  absl::StatusOr<SegmentedChunk> seg =
+      SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, SegmentOptions{});
+  ASSERT_TRUE(absl::IsInvalidArgument(seg.status()));
+  EXPECT_NE(seg.status().message().find("chunk"), std::string::npos);
+  SegmentOptions bad;
+  bad.trim_distance_m = -1;
+  EXPECT_TRUE(absl::IsInvalidArgument(
+      SegmentAlone(nullptr, ChunkKey::Zero(), grid_, volume_, bad).status()));
+  bad = SegmentOptions{};
+  bad.plan_tolerance_m = std::nan("");
+  EXPECT_TRUE(absl::IsInvalidArgument(
+      SegmentAlone(nullptr, ChunkKey::Zero(), grid_, volume_, bad).status()));
+}
+
+}  // namespace
+}  // namespace carvemap
