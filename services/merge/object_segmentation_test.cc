@@ -171,22 +171,10 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   // Wall cover: points on the true walls (vertical truth triangles, ~10 cm apart) that the
   // scans reached (within 20 cm of the dense mesh), and the share of them within 5 cm and
   // 10 cm of building.ply; `hidden`: those with a true object within 10 cm (behind furniture).
-  std::vector<std::array<Eigen::Vector3d, 3>> bt;
-  for (const Eigen::Vector3i& t : building->mesh.triangles) {
-    bt.push_back({building->mesh.vertices[t[0]].cast<double>(),
-                  building->mesh.vertices[t[1]].cast<double>(),
-                  building->mesh.vertices[t[2]].cast<double>()});
-  }
-  const testing::TruthDistance to_building(std::move(bt), 0.25, 0.2);
-  absl::StatusOr<PlyMesh> dense = ReadPly(out + "/mesh/dense.ply");
-  ASSERT_TRUE(dense.ok()) << dense.status();
-  std::vector<std::array<Eigen::Vector3d, 3>> dt;
-  for (const Eigen::Vector3i& t : dense->mesh.triangles) {
-    dt.push_back({dense->mesh.vertices[t[0]].cast<double>(),
-                  dense->mesh.vertices[t[1]].cast<double>(),
-                  dense->mesh.vertices[t[2]].cast<double>()});
-  }
-  const testing::TruthDistance to_dense(std::move(dt), 0.25, 0.2);
+  const testing::TruthDistance to_building(
+      testing::ReadPlyTriangles(out + "/mesh/building.ply"), 0.25, 0.2);
+  const testing::TruthDistance to_dense(testing::ReadPlyTriangles(out + "/mesh/dense.ply"), 0.25,
+                                        0.2);
   size_t wall_points = 0, covered5 = 0, covered10 = 0, hidden = 0, hidden_covered = 0;
   for (const auto& t : testing::ReadPlyTriangles(carved->gt_dir + "/surfaces.ply")) {
     const Eigen::Vector3d n = (t[1] - t[0]).cross(t[2] - t[0]);
