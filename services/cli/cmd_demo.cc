@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
 #include <thread>
@@ -14,6 +15,7 @@
 #include <sys/wait.h>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
@@ -25,6 +27,57 @@
 
 namespace carvemap {
 namespace {
+
+// The short summary of a finished job (issue 6): levels, rooms with areas, objects, triangle
+// counts and time per stage, from its levels.json and job.json. A file that cannot be read is
+// skipped: the outputs list below still says where everything is.
+void PrintJobSummary(const std::string& out_dir) {
+  namespace fs = std::filesystem;
+  auto read = [](const fs::path& p) -> nlohmann::json {
+    std::ifstream in(p);
+    if (!in) return nullptr;
+    return nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+  };
+  const nlohmann::json levels = read(fs::path(out_dir) / "levels.json");
+  const nlohmann::json job = read(fs::path(out_dir) / "job.json");
+  if (!job.is_object()) return;
+  std::printf("\nsummary:\n");
+  if (levels.is_array()) {
+    std::printf("  levels: %zu\n", levels.size());
+    for (const auto& l : levels) {
+      std::printf("    level %d: floor %.2f m, ceiling %.2f m\n", l.value("index", 0),
+                  l.value("floor_z", 0.0), l.value("ceiling_z", 0.0));
+    }
+  }
+  const nlohmann::json rooms = job.value("rooms", nlohmann::json::array());
+  std::printf("  rooms: %zu\n", rooms.size());
+  for (const auto& r : rooms) {
+    std::printf("    level %d room %d: %.1f m², floor %.2f m, ceiling %.2f m\n",
+                r.value("level", 0), r.value("room", 0), r.value("area_m2", 0.0),
+                r.value("floor_z", 0.0), r.value("ceiling_z", 0.0));
+  }
+  const nlohmann::json counts = job.value("counts", nlohmann::json::object());
+  std::printf("  objects: %zu\n", job.value("objects", nlohmann::json::array()).size());
+  std::printf("  triangles: dense %llu, building %llu, objects %llu\n",
+              (unsigned long long)counts.value("dense_triangles", uint64_t{0}),
+              (unsigned long long)counts.value("building_triangles", uint64_t{0}),
+              (unsigned long long)counts.value("object_triangles", uint64_t{0}));
+  std::vector<std::pair<double, std::string>> times;
+  const nlohmann::json timings = job.value("timings_s", nlohmann::json::object());
+  for (const auto& [stage, seconds] : timings.items()) {
+    if (seconds.is_number() && seconds.get<double>() >= 0.01) {
+      times.emplace_back(seconds.get<double>(), stage);
+    }
+  }
+  std::sort(times.rbegin(), times.rend());
+  std::printf("  seconds per stage (≥ 0.01 s):");
+  for (const auto& [seconds, stage] : times) std::printf(" %s %.2f;", stage.c_str(), seconds);
+  std::printf("\n");
+  const nlohmann::json warnings = job.value("warnings", nlohmann::json::array());
+  for (const auto& w : warnings) {
+    if (w.is_string()) std::printf("  warning: %s\n", w.get<std::string>().c_str());
+  }
+}
 
 struct DemoFlags {
   std::string output_dir = "out/demo";
@@ -75,20 +128,24 @@ absl::Status RunDemo(const DemoFlags& flags) {
     return absl::AbortedError("carvemap run failed (its message is above)");
   }
 
+  const std::string out_dir =
+      std::filesystem::absolute(flags.output_dir).lexically_normal().string();
+  PrintJobSummary(out_dir);
   std::printf(
       "\noutputs in %s:\n"
       "  input/scan.h5           the scans and the localizer's (drifted) path, DESIGN §3\n"
       "  input/gt/               the truth: building.json, surfaces.ply, objects.ply (DESIGN §4)\n"
       "  octree.bt               the carved occupancy octree (OctoMap binary; opens in octovis)\n"
       "  levels.json             floor and ceiling heights of each level (§5.2)\n"
-      "  level_<k>/topdown.png   open-height map of each level (§5.4), with topdown.json\n"
-      "  mesh/dense.ply          dual-contouring mesh of the octree (§4.3.3), watertight\n"
-      "  mesh/building.ply       planar mesh (§4.3.3; faces carry their planar region)\n"
-      "  job.json                parameters, counts, timings and any warnings\n"
-      "  tiles/                  one HDF5 tile per 2 m chunk (storage/TILE_FORMAT.md)\n"
-      "floor plans, rooms, furniture segmentation and the combined model are not in carvemap "
-      "yet.\n",
-      std::filesystem::absolute(flags.output_dir).lexically_normal().c_str());
+      "  level_<k>/              topdown.png open-height map (§5.4); floorplan.geojson and .svg,\n"
+      "                          the rooms (§3.3); extruded.ply, the 2.5D model\n"
+      "  mesh/dense.ply          dual-contouring mesh of the whole octree (§4.3.3), watertight\n"
+      "  mesh/building.ply       planar mesh of the building without furniture (§5.6)\n"
+      "  mesh/objects.ply        the furniture; mesh/objects/<id>.ply one watertight mesh each\n"
+      "  mesh/combined.ply       building + objects\n"
+      "  job.json                parameters, counts, rooms, objects, timings and any warnings\n"
+      "  tiles/                  one HDF5 tile per 2 m chunk (storage/TILE_FORMAT.md)\n",
+      out_dir.c_str());
   return absl::OkStatus();
 }
 
