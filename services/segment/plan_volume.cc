@@ -41,12 +41,6 @@ void Edt1d(std::vector<float>& f, std::vector<float>& d, std::vector<int>& v,
       }
       break;
     }
-    if (s <= z[k]) {  // k == 0: q dominates the first parabola everywhere
-      v[0] = q;
-      z[0] = -kInf;
-      z[1] = kInf;
-      continue;
-    }
     ++k;
     v[k] = q;
     z[k] = s;
@@ -113,6 +107,10 @@ absl::StatusOr<PlanVolume> RasterizePlanVolume(std::span<const PlanLevelInput> l
     r.z_low = in.z_low;
     r.z_high = in.z_high;
     r.res = res_m;
+    for (const FloorPlanRoom& room : plan.rooms) {
+      r.room_floor_z.push_back(room.floor_z);
+      r.room_ceiling_z.push_back(room.ceiling_z);
+    }
     if (!plan.triangles.empty()) {
       Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
       Eigen::Vector2d hi = -lo;
@@ -135,8 +133,6 @@ absl::StatusOr<PlanVolume> RasterizePlanVolume(std::span<const PlanLevelInput> l
           RasterizeFloorPlan(plan, r.width, r.height, res_m, r.origin.x(), r.origin.y());
       const size_t n = static_cast<size_t>(r.width) * r.height;
       r.room.assign(n, -1);
-      r.floor_z.assign(n, std::numeric_limits<float>::quiet_NaN());
-      r.ceiling_z.assign(n, std::numeric_limits<float>::quiet_NaN());
       for (int row = 0; row < r.height; ++row) {
         const int j = r.height - 1 - row;  // image rows run top down, ours bottom up
         for (int i = 0; i < r.width; ++i) {
@@ -144,8 +140,6 @@ absl::StatusOr<PlanVolume> RasterizePlanVolume(std::span<const PlanLevelInput> l
           if (room < 0 || room >= static_cast<int>(plan.rooms.size())) continue;
           const size_t c = static_cast<size_t>(j) * r.width + i;
           r.room[c] = room;
-          r.floor_z[c] = static_cast<float>(plan.rooms[room].floor_z);
-          r.ceiling_z[c] = static_cast<float>(plan.rooms[room].ceiling_z);
         }
       }
       const std::vector<float> to_outside = SquaredDistanceTo(r.room, r.width, r.height, false);
@@ -170,39 +164,51 @@ absl::StatusOr<PlanVolume> RasterizePlanVolume(std::span<const PlanLevelInput> l
   return out;
 }
 
+namespace {
+
+// The raster of the level whose z range holds x.z(), or null.
+const PlanLevelRaster* LevelAt(const PlanVolume& volume, double z) {
+  for (const PlanLevelRaster& r : volume.levels) {
+    if (z >= r.z_low && z < r.z_high) return &r;
+  }
+  return nullptr;
+}
+
+// x's column (i, j) in `r`; may lie outside [0, width) × [0, height).
+Eigen::Vector2i ColumnOf(const PlanLevelRaster& r, const Eigen::Vector3d& x) {
+  return Eigen::Vector2i(static_cast<int>(std::floor((x.x() - r.origin.x()) / r.res)),
+                         static_cast<int>(std::floor((x.y() - r.origin.y()) / r.res)));
+}
+
+}  // namespace
+
 PlanColumn LookupPlan(const PlanVolume& volume, const Eigen::Vector3d& x) {
   PlanColumn col;
-  for (const PlanLevelRaster& r : volume.levels) {
-    if (x.z() < r.z_low || x.z() >= r.z_high) continue;
-    col.level = r.level;
-    if (r.width == 0) return col;
-    const int i = static_cast<int>(std::floor((x.x() - r.origin.x()) / r.res));
-    const int j = static_cast<int>(std::floor((x.y() - r.origin.y()) / r.res));
-    if (i < 0 || j < 0 || i >= r.width || j >= r.height) return col;
-    const size_t c = static_cast<size_t>(j) * r.width + i;
-    col.room = r.room[c];
-    col.signed_distance_m = r.signed_distance[c];
-    if (col.room >= 0) {
-      col.floor_z = r.floor_z[c];
-      col.ceiling_z = r.ceiling_z[c];
-    }
-    return col;
+  const PlanLevelRaster* r = LevelAt(volume, x.z());
+  if (r == nullptr) return col;
+  col.level = r->level;
+  const Eigen::Vector2i ij = ColumnOf(*r, x);
+  if (ij.x() < 0 || ij.y() < 0 || ij.x() >= r->width || ij.y() >= r->height) return col;
+  const size_t c = static_cast<size_t>(ij.y()) * r->width + ij.x();
+  col.room = r->room[c];
+  col.signed_distance_m = r->signed_distance[c];
+  if (col.room >= 0) {
+    col.floor_z = r->room_floor_z[col.room];
+    col.ceiling_z = r->room_ceiling_z[col.room];
   }
   return col;
 }
 
 Eigen::Vector2d PlanAwayFromWalls(const PlanVolume& volume, const Eigen::Vector3d& x) {
-  for (const PlanLevelRaster& r : volume.levels) {
-    if (x.z() < r.z_low || x.z() >= r.z_high) continue;
-    const int i = static_cast<int>(std::floor((x.x() - r.origin.x()) / r.res));
-    const int j = static_cast<int>(std::floor((x.y() - r.origin.y()) / r.res));
-    if (i < 1 || j < 1 || i + 1 >= r.width || j + 1 >= r.height) return Eigen::Vector2d::Zero();
-    auto d = [&r](int a, int b) { return r.signed_distance[static_cast<size_t>(b) * r.width + a]; };
-    const Eigen::Vector2d g(d(i + 1, j) - d(i - 1, j), d(i, j + 1) - d(i, j - 1));
-    if (!g.allFinite() || g.norm() < 1e-9) return Eigen::Vector2d::Zero();
-    return g.normalized();
-  }
-  return Eigen::Vector2d::Zero();
+  const PlanLevelRaster* r = LevelAt(volume, x.z());
+  if (r == nullptr) return Eigen::Vector2d::Zero();
+  const Eigen::Vector2i ij = ColumnOf(*r, x);
+  const int i = ij.x(), j = ij.y();
+  if (i < 1 || j < 1 || i + 1 >= r->width || j + 1 >= r->height) return Eigen::Vector2d::Zero();
+  auto d = [r](int a, int b) { return r->signed_distance[static_cast<size_t>(b) * r->width + a]; };
+  const Eigen::Vector2d g(d(i + 1, j) - d(i - 1, j), d(i, j + 1) - d(i, j - 1));
+  if (!g.allFinite() || g.norm() < 1e-9) return Eigen::Vector2d::Zero();
+  return g.normalized();
 }
 
 }  // namespace carvemap

@@ -31,8 +31,8 @@ struct PlanLevelRaster {
   double res = 0;
   int width = 0, height = 0;
   std::vector<int> room;             // index into the plan's rooms; −1 outside the plan
-  std::vector<float> floor_z;        // of the column's room (NaN outside), m
-  std::vector<float> ceiling_z;      // m
+  std::vector<double> room_floor_z;   // per room of the plan (§3.3.4 medians), m
+  std::vector<double> room_ceiling_z; // m
   // Signed distance from the column's centre to the plan's boundary, m: positive inside (the
   // distance to the nearest outside column centre minus res/2), negative outside (minus the
   // distance to the nearest inside column centre plus res/2). Exact Euclidean distances between

@@ -5,8 +5,6 @@
 #include <optional>
 #include <vector>
 
-#include "absl/strings/str_cat.h"
-
 namespace carvemap {
 namespace {
 
