@@ -48,6 +48,7 @@ absl::StatusOr<CarveChunkResult> CarveChunkToTile(const CarveChunkRequest& reque
   if (!wedges.ok()) return Prefixed(chunk, wedges.status());
 
   ChunkOctree tree(request.grid, chunk);
+  if (request.region != nullptr) tree.RestrictTo(*request.region);
   // The whole payload in one call: eq 4.8's set of rays per leaf is exact within a call.
   if (absl::Status s = tree.CarveWedges(*wedges); !s.ok()) return Prefixed(chunk, s);
   tree.Simplify();

@@ -9,6 +9,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "services/geometry/chunk_region.h"
 #include "services/geometry/octree_keys.h"
 
 namespace carvemap {
@@ -20,6 +21,8 @@ struct CarveChunkRequest {
   std::string_view wedge_payload;  // wedge records (storage/WEDGE_FORMAT.md), in spill order
   std::string tiles_dir;           // the tile is written here (atomically)
   double sigmas = 3.0;             // must match the ingest's
+  // Carve only inside this part of the chunk (§5.6.1's second pass); null: the whole chunk.
+  const ChunkRegion* region = nullptr;
 };
 
 struct CarveChunkResult {

@@ -42,8 +42,10 @@ struct LeafLister {
   const WedgeHull& hull;
   Eigen::Vector3d chunk_origin;
   std::vector<uint32_t>& out;
+  const ChunkRegion* region;  // null: the whole chunk
 
   void Visit(const ChunkNode& node, uint64_t planes, bool in_box) {
+    if (region != nullptr && !region->Intersects(node)) return;
     // NodeBox's arithmetic, inlined: chunk·2 m is exact, local·size is exact (size is a power
     // of two, local < 2^10), so the one rounding of the sum is NodeBox's and the box is
     // bit-identical to it — the coordinator binned this wedge with the same chunk box.
@@ -207,7 +209,7 @@ absl::Status ChunkOctree::CarveWedges(std::span<const Wedge> wedges) {
       }
       wedge_rays.push_back(ids);
       const WedgeHull hull = MakeWedgeHull(wedge, kWedgeHullSigmas);
-      LeafLister lister{grid_, hull, chunk_origin, leaves};
+      LeafLister lister{grid_, hull, chunk_origin, leaves, region_ ? &*region_ : nullptr};
       // ≤ 56 planes: the brute-force hull has one per triple of its ≤ 8 points (C(8,3) = 56),
       // prisms ≤ 18, boxes 6; so every plane has a bit.
       assert(hull.planes.size() <= 64);

@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -21,6 +22,7 @@
 #include "absl/container/flat_hash_map.h"
 #include "absl/status/status.h"
 #include "services/geometry/carving_types.h"
+#include "services/geometry/chunk_region.h"
 #include "services/geometry/octree_keys.h"
 #include "storage/tile_store.h"
 
@@ -53,6 +55,9 @@ class ChunkOctree {
   // Errors (nothing changed): InvalidArgument for num_rays outside [1, 4] or a non-finite
   // mean/covariance (naming the wedge); FailedPrecondition after Simplify().
   absl::Status CarveWedges(std::span<const Wedge> wedges);
+  // Later carving touches only the leaves inside `region` (§5.6.1: a second, finer pass over
+  // the nodes that hold objects); the rest of the chunk stays unobserved.
+  void RestrictTo(ChunkRegion region) { region_ = std::move(region); }
   absl::Status CarveWedge(const Wedge& wedge) { return CarveWedges({&wedge, 1}); }
 
   // §4.3.2, bottom-up: 8 sibling leaves merge into their parent (LeafStats::Merge, exact sums)
@@ -88,6 +93,7 @@ class ChunkOctree {
   // levels_[d]: observed leaves at depth d. Carving fills levels_[k] only; Simplify moves
   // merged parents up.
   std::vector<Level> levels_;
+  std::optional<ChunkRegion> region_;
   bool simplified_ = false;
   uint64_t num_wedges_ = 0;
   uint64_t num_leaf_updates_ = 0;

@@ -263,6 +263,33 @@ TEST(ChunkOctreeTest, DeterministicWhateverTheInsertionOrder) {
   EXPECT_TRUE(SameLeaves(a.Leaves(), c.Leaves(), /*exact=*/false));
 }
 
+// §5.6.1's second pass: restricted to a region, the carve is the whole carve's leaves inside
+// the region, the same sums, and nothing outside.
+TEST(ChunkOctreeTest, RestrictedCarvingIsTheWholeCarveInsideTheRegion) {
+  const OctreeGrid grid = Grid(5);
+  const std::vector<Wedge> wedges = WallScan().Wedges();
+  const ChunkOctree whole = Carve(grid, wedges);
+  // The octant x < 1 m, y < 1 m, z < 1 m and one 25 cm cell in front of the wall's upper part.
+  const ChunkRegion region(3, [] {
+    std::vector<Eigen::Vector3i> cells;
+    for (int z = 0; z < 4; ++z)
+      for (int y = 0; y < 4; ++y)
+        for (int x = 0; x < 4; ++x) cells.emplace_back(x, y, z);
+    cells.emplace_back(3, 5, 5);
+    return cells;
+  }());
+  ChunkOctree part(grid, ChunkKey(0, 0, 0));
+  part.RestrictTo(region);
+  ASSERT_TRUE(part.CarveWedges(wedges).ok());
+  std::vector<TileLeaf> expected;
+  for (const TileLeaf& leaf : whole.Leaves()) {
+    if (region.Intersects(leaf.node)) expected.push_back(leaf);
+  }
+  ASSERT_GT(expected.size(), 100u);
+  ASSERT_LT(expected.size(), whole.Leaves().size() / 2);
+  EXPECT_TRUE(SameLeaves(part.Leaves(), expected, /*exact=*/true));
+}
+
 TEST(ChunkOctreeTest, LeafValuesAreEq48AtTheLeafCentre) {
   const OctreeGrid grid = Grid(5);
   WallScan scan;

@@ -1,0 +1,80 @@
+#include "services/geometry/chunk_region.h"
+
+#include <cassert>
+
+#include "absl/strings/str_cat.h"
+
+namespace carvemap {
+namespace {
+
+size_t CellIndex(const Eigen::Vector3i& c, int depth) {
+  const size_t n = size_t{1} << depth;
+  return size_t(c.x()) + n * (size_t(c.y()) + n * size_t(c.z()));
+}
+
+}  // namespace
+
+ChunkRegion::ChunkRegion(int depth, const std::vector<Eigen::Vector3i>& cells) : depth_(depth) {
+  assert(depth >= 0 && depth <= kMaxDepth);
+  const int n = 1 << depth;
+  std::vector<bool> bits(size_t(n) * n * n, false);
+  for (const Eigen::Vector3i& c : cells) {
+    if ((c.array() >= 0).all() && (c.array() < n).all()) bits[CellIndex(c, depth)] = true;
+  }
+  Build(std::move(bits));
+}
+
+void ChunkRegion::Build(std::vector<bool> cells) {
+  count_ = 0;
+  for (bool b : cells) count_ += b;
+  any_.assign(depth_ + 1, {});
+  any_[depth_] = std::move(cells);
+  for (int d = depth_ - 1; d >= 0; --d) {
+    const int n = 1 << d;
+    any_[d].assign(size_t(n) * n * n, false);
+    for (int z = 0; z < 2 * n; ++z)
+      for (int y = 0; y < 2 * n; ++y)
+        for (int x = 0; x < 2 * n; ++x) {
+          if (any_[d + 1][CellIndex({x, y, z}, d + 1)]) any_[d][CellIndex({x / 2, y / 2, z / 2}, d)] = true;
+        }
+  }
+}
+
+bool ChunkRegion::Intersects(const ChunkNode& node) const {
+  if (count_ == 0) return false;
+  if (node.depth <= depth_) return any_[node.depth][CellIndex(node.local, node.depth)];
+  const int sh = node.depth - depth_;
+  const Eigen::Vector3i cell(node.local.x() >> sh, node.local.y() >> sh, node.local.z() >> sh);
+  return any_[depth_][CellIndex(cell, depth_)];
+}
+
+std::string ChunkRegion::Encode() const {
+  if (any_.empty()) return {};
+  const std::vector<bool>& cells = any_[depth_];
+  std::string bytes((cells.size() + 7) / 8, '\0');
+  for (size_t i = 0; i < cells.size(); ++i) {
+    if (cells[i]) bytes[i / 8] = char(uint8_t(bytes[i / 8]) | (1u << (i % 8)));
+  }
+  return bytes;
+}
+
+absl::StatusOr<ChunkRegion> ChunkRegion::Decode(int depth, std::string_view bits) {
+  if (depth < 0 || depth > kMaxDepth) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("chunk region: depth ", depth, " outside [0, ", kMaxDepth, "]"));
+  }
+  const size_t cells = size_t{1} << (3 * depth);
+  if (bits.size() != (cells + 7) / 8) {
+    return absl::InvalidArgumentError(absl::StrCat("chunk region: ", bits.size(),
+                                                   " bytes for depth ", depth, " (expected ",
+                                                   (cells + 7) / 8, ")"));
+  }
+  std::vector<bool> set(cells, false);
+  for (size_t i = 0; i < cells; ++i) set[i] = (uint8_t(bits[i / 8]) >> (i % 8)) & 1u;
+  ChunkRegion region;
+  region.depth_ = depth;
+  region.Build(std::move(set));
+  return region;
+}
+
+}  // namespace carvemap

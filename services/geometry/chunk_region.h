@@ -1,0 +1,60 @@
+// A part of one 2 m chunk, as a set of its cells at one depth (cells of 2 m / 2^depth): what a
+// second carving pass is limited to. Seed §5.6.1: "we can recarve the nodes of the octree
+// containing object geometry" at a finer resolution; carving whole chunks finer costs the
+// whole chunk's volume (on the simulated office, ~7 s and ~10 MB per chunk at 1.5625 cm),
+// carving only the nodes around the objects a small part of that.
+//
+// Queries for a node of any depth are O(1): the region keeps, for every coarser depth, which
+// nodes hold a set cell.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "absl/status/statusor.h"
+#include "services/geometry/octree_keys.h"
+
+namespace carvemap {
+
+class ChunkRegion {
+ public:
+  // Depths a region may have: 32³ cells at 5 (6.25 cm, the job's usual grid) is 4 KiB.
+  static constexpr int kMaxDepth = 7;
+
+  // The empty region (contains nothing).
+  ChunkRegion() = default;
+  // The cells of `depth` listed in `cells` (local coordinates in [0, 2^depth)³; others are
+  // ignored). REQUIRES: 0 ≤ depth ≤ kMaxDepth.
+  ChunkRegion(int depth, const std::vector<Eigen::Vector3i>& cells);
+
+  [[nodiscard]] int depth() const { return depth_; }
+  [[nodiscard]] bool empty() const { return count_ == 0; }
+  [[nodiscard]] uint64_t count() const { return count_; }  // cells set at depth()
+  // True when some cell of the region lies in `node` (a node of this chunk at any depth).
+  [[nodiscard]] bool Intersects(const ChunkNode& node) const;
+  // The cells as bits, x fastest, then y, then z; bit i is bit (i % 8) of byte i / 8.
+  [[nodiscard]] std::string Encode() const;
+  // InvalidArgument for a depth outside [0, kMaxDepth] or a size that is not (2^depth)³ / 8
+  // bytes (rounded up).
+  static absl::StatusOr<ChunkRegion> Decode(int depth, std::string_view bits);
+
+ private:
+  void Build(std::vector<bool> cells);
+
+  int depth_ = 0;
+  uint64_t count_ = 0;
+  // any_[d]: the nodes of depth d holding a cell, indexed like Encode; any_[depth_] = cells.
+  std::vector<std::vector<bool>> any_;
+};
+
+// One chunk of a second carving pass and the part of it to carve.
+struct RecarveChunk {
+  ChunkKey chunk = ChunkKey::Zero();
+  ChunkRegion region;
+};
+
+}  // namespace carvemap

@@ -1,0 +1,64 @@
+#include "services/geometry/chunk_region.h"
+
+#include <gtest/gtest.h>
+
+namespace carvemap {
+namespace {
+
+ChunkNode Node(int depth, int x, int y, int z) { return ChunkNode{Eigen::Vector3i(x, y, z), depth}; }
+
+TEST(ChunkRegionTest, EmptyIntersectsNothing) {
+  const ChunkRegion none;
+  EXPECT_TRUE(none.empty());
+  EXPECT_FALSE(none.Intersects(Node(0, 0, 0, 0)));
+  const ChunkRegion also_none(3, {{-1, 0, 0}, {8, 0, 0}});  // outside the chunk: ignored
+  EXPECT_TRUE(also_none.empty());
+  EXPECT_FALSE(also_none.Intersects(Node(0, 0, 0, 0)));
+}
+
+TEST(ChunkRegionTest, NodesOfEveryDepth) {
+  // One cell (5, 2, 7) at depth 3 (25 cm cells).
+  const ChunkRegion r(3, {{5, 2, 7}});
+  EXPECT_EQ(r.count(), 1u);
+  EXPECT_TRUE(r.Intersects(Node(0, 0, 0, 0)));   // the chunk
+  EXPECT_TRUE(r.Intersects(Node(1, 1, 0, 1)));   // the octant holding it
+  EXPECT_FALSE(r.Intersects(Node(1, 0, 0, 1)));  // another octant
+  EXPECT_TRUE(r.Intersects(Node(2, 2, 1, 3)));
+  EXPECT_FALSE(r.Intersects(Node(2, 2, 1, 2)));
+  EXPECT_TRUE(r.Intersects(Node(3, 5, 2, 7)));
+  EXPECT_FALSE(r.Intersects(Node(3, 5, 2, 6)));
+  EXPECT_FALSE(r.Intersects(Node(3, 4, 2, 7)));
+  // Finer nodes: inside the cell or not.
+  EXPECT_TRUE(r.Intersects(Node(5, 5 * 4 + 3, 2 * 4, 7 * 4 + 1)));
+  EXPECT_FALSE(r.Intersects(Node(5, 6 * 4, 2 * 4, 7 * 4)));
+}
+
+TEST(ChunkRegionTest, EncodeDecodeRoundTrip) {
+  const ChunkRegion r(5, {{0, 0, 0}, {31, 31, 31}, {3, 17, 9}, {4, 17, 9}});
+  const std::string bits = r.Encode();
+  EXPECT_EQ(bits.size(), 32u * 32 * 32 / 8);
+  absl::StatusOr<ChunkRegion> back = ChunkRegion::Decode(5, bits);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(back->count(), 4u);
+  EXPECT_EQ(back->Encode(), bits);
+  for (int d = 0; d <= 7; ++d) {
+    const int s = 1 << d;
+    for (const Eigen::Vector3i& probe :
+         {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(s - 1, s - 1, s - 1),
+                                        Eigen::Vector3i(s / 2, s / 2, s / 2)}) {
+      EXPECT_EQ(back->Intersects(ChunkNode{probe, d}), r.Intersects(ChunkNode{probe, d}));
+    }
+  }
+  EXPECT_FALSE(ChunkRegion::Decode(5, bits.substr(1)).ok());
+  EXPECT_FALSE(ChunkRegion::Decode(9, bits).ok());
+  EXPECT_FALSE(ChunkRegion::Decode(-1, "").ok());
+  // Depth 1: 8 cells in one byte.
+  absl::StatusOr<ChunkRegion> tiny = ChunkRegion::Decode(1, std::string(1, char(0x81)));
+  ASSERT_TRUE(tiny.ok());
+  EXPECT_TRUE(tiny->Intersects(Node(1, 0, 0, 0)));
+  EXPECT_TRUE(tiny->Intersects(Node(1, 1, 1, 1)));
+  EXPECT_FALSE(tiny->Intersects(Node(1, 1, 0, 0)));
+}
+
+}  // namespace
+}  // namespace carvemap
