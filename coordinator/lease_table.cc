@@ -180,6 +180,43 @@ std::optional<int64_t> LeaseTable::Heartbeat(absl::string_view worker_id) {
   return deadline;
 }
 
+absl::Status LeaseTable::Requeue(absl::string_view job_id, const std::vector<ChunkCoord>& keys,
+                                 absl::string_view reason) {
+  auto it = jobs_.find(job_id);
+  if (it == jobs_.end()) {
+    return absl::NotFoundError(absl::StrCat("requeue: job ", job_id, " is not loaded"));
+  }
+  JobEntry& job = it->second;
+  std::vector<ChunkUpdate> updates;
+  updates.reserve(keys.size());
+  for (const ChunkCoord& key : keys) {
+    auto c = job.chunks.find(key);
+    if (c == job.chunks.end()) {
+      return absl::NotFoundError(
+          absl::StrCat("requeue: job ", job.id, " has no chunk ", KeyText(key)));
+    }
+    ChunkUpdate u{c->second, c->second.generation};
+    u.chunk.state = ChunkState::kQueued;
+    u.chunk.generation += 1;
+    u.chunk.attempts = 0;
+    u.chunk.deadline_unix_ms = 0;
+    u.chunk.worker_id.clear();
+    u.chunk.last_error = std::string(reason);
+    u.chunk.tile_path.clear();
+    u.chunk.tile_size_bytes = 0;
+    u.chunk.tile_sha256_hex.clear();
+    updates.push_back(std::move(u));
+  }
+  if (absl::Status s = store_.UpdateChunks(updates, clock_.NowUnixMs()); !s.ok()) return s;
+  for (const ChunkUpdate& u : updates) {
+    ChunkRecord& current = job.chunks.at(u.chunk.key);
+    if (current.state == ChunkState::kLeased) ForgetLease(current);
+    current = u.chunk;
+    job.queued.insert(current.key);
+  }
+  return absl::OkStatus();
+}
+
 absl::Status LeaseTable::Complete(absl::string_view lease_id, int64_t generation,
                                   const Tile& tile) {
   absl::StatusOr<ParsedLease> parsed = ParseLeaseId(lease_id);

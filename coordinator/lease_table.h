@@ -92,6 +92,14 @@ class LeaseTable {
   // unknown: completing them is NOT_FOUND. No store write: the job's state is the caller's.
   void DropJob(absl::string_view job_id);
 
+  // Puts chunks of a loaded job back in the queue for another pass over them (§5.6.1: the
+  // object chunks carved again at a finer resolution), whatever their state, with a fresh
+  // attempt budget. Their generation is raised by one, so no lease of an earlier pass can
+  // complete them. `reason` is stored as last_error. One store transaction. NOT_FOUND if the
+  // job is not loaded or a key is not one of its chunks (then nothing changes).
+  absl::Status Requeue(absl::string_view job_id, const std::vector<ChunkCoord>& keys,
+                       absl::string_view reason);
+
   // The next QUEUED chunk for `worker_id`, or nullopt if nothing is queued. Jobs in load order
   // (oldest first), chunks by key (x, y, z): deterministic. The chunk becomes LEASED with
   // generation + 1 and deadline now + lease_timeout.

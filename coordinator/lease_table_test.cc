@@ -191,6 +191,47 @@ TEST_F(LeaseTableTest, ExpiredButNotReassignedCompletionIsAccepted) {
   EXPECT_FALSE(none->has_value());  // and b is no longer queued
 }
 
+TEST_F(LeaseTableTest, RequeueStartsAnotherPassThatEarlierLeasesCannotComplete) {
+  AddJob("j-1", 3);
+  LeaseTable::Grant a = MustLease("w-1");
+  LeaseTable::Grant b = MustLease("w-1");
+  LeaseTable::Grant c = MustLease("w-2");
+  ASSERT_TRUE(table_->Complete(a.lease_id, a.generation, TileFor(a)).ok());
+  ASSERT_TRUE(table_->Complete(b.lease_id, b.generation, TileFor(b)).ok());
+  // c is still leased; a is done; b stays done (not in the pass).
+  absl::Status unknown = table_->Requeue("j-1", {{0, 0, 0}, {5, 5, 5}}, "finer pass");
+  EXPECT_EQ(unknown.code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(StoredChunk("j-1", {0, 0, 0}).state, ChunkState::kDone);  // nothing changed
+  EXPECT_EQ(table_->Requeue("j-9", {{0, 0, 0}}, "x").code(), absl::StatusCode::kNotFound);
+
+  ASSERT_TRUE(table_->Requeue("j-1", {{0, 0, 0}, {0, 0, 2}}, "finer pass").ok());
+  EXPECT_FALSE(table_->AllDone("j-1"));
+  EXPECT_TRUE(table_->LeasesOf("w-2").empty());  // c's lease is void
+  const ChunkRecord stored = StoredChunk("j-1", {0, 0, 0});
+  EXPECT_EQ(stored.state, ChunkState::kQueued);
+  EXPECT_EQ(stored.generation, 2);
+  EXPECT_EQ(stored.attempts, 0);
+  EXPECT_TRUE(stored.tile_path.empty());
+  EXPECT_EQ(stored.last_error, "finer pass");
+  // The earlier pass's lease of c, late: rejected, it belongs to the other pass.
+  absl::Status late = table_->Complete(c.lease_id, c.generation, TileFor(c));
+  EXPECT_EQ(late.code(), absl::StatusCode::kFailedPrecondition);
+
+  LeaseTable::Grant a2 = MustLease("w-3");
+  LeaseTable::Grant c2 = MustLease("w-3");
+  EXPECT_EQ(a2.chunk, (ChunkCoord{0, 0, 0}));
+  EXPECT_EQ(a2.generation, 3);
+  EXPECT_EQ(a2.attempt, 1);  // a fresh attempt budget
+  EXPECT_EQ(c2.chunk, (ChunkCoord{0, 0, 2}));
+  EXPECT_FALSE(table_->Lease("w-3")->has_value());
+  ASSERT_TRUE(table_->Complete(a2.lease_id, a2.generation, TileFor(a2)).ok());
+  ASSERT_TRUE(table_->Complete(c2.lease_id, c2.generation, TileFor(c2)).ok());
+  EXPECT_TRUE(table_->AllDone("j-1"));
+  auto job = store_->GetJob("j-1");
+  ASSERT_TRUE(job.ok());
+  EXPECT_EQ(job->counters.chunks_done, 3);
+}
+
 TEST_F(LeaseTableTest, HeartbeatExtendsAllLeasesOfTheWorker) {
   AddJob("j-1", 3);
   MustLease("w-1");
