@@ -92,7 +92,7 @@ struct ChunkRecord {
   // The latest lease. Kept when the chunk is requeued, so a late completion of that lease can
   // still be matched (coordinator/lease_table.h decides whether to accept it).
   std::string lease_id;
-  int64_t generation = 0;  // 0 = never leased; +1 on every lease
+  int64_t generation = 0;  // 0 = never leased; +1 on every lease (and LeaseTable::Requeue)
   std::string worker_id;
   int64_t deadline_unix_ms = 0;  // deadline of the lease as first granted (see JOB_STORE.md)
   int32_t attempts = 0;          // how often the chunk has been leased

@@ -18,6 +18,7 @@
 #include "services/rpc/job_client.h"
 #include "services/rpc/worker_service.h"
 #include "services/sim/simulator.h"
+#include "storage/tile_store.h"
 
 namespace carvemap {
 namespace {
@@ -36,7 +37,13 @@ class DistributedTest : public ::testing::Test {
     spec.output_root = (root_ / "out").string();
     spec.heartbeat_interval_s = 0.5;
     spec.worker_timeout_s = 2;
-    spec.merge = FirstOutputsMerge();
+    // A test may look into the merge's request first (merge_hook_), then the real merge runs.
+    spec.merge = [this](const MergeJobRequest& req) -> absl::Status {
+      if (merge_hook_) {
+        if (absl::Status s = merge_hook_(req); !s.ok()) return s;
+      }
+      return FirstOutputsMerge()(req);
+    };
     auto server = CoordinatorServer::Start(spec);
     ASSERT_TRUE(server.ok()) << server.status();
     coordinator_ = *std::move(server);
@@ -60,6 +67,7 @@ class DistributedTest : public ::testing::Test {
   }
 
   fs::path root_;
+  std::function<absl::Status(const MergeJobRequest&)> merge_hook_;
   std::unique_ptr<CoordinatorServer> coordinator_;
   std::string address_;
   std::shared_ptr<grpc::Channel> channel_;
@@ -68,11 +76,12 @@ class DistributedTest : public ::testing::Test {
 };
 
 TEST_F(DistributedTest, SubmitValidates) {
-  auto submit = [&](const std::string& path, double resolution) {
+  auto submit = [&](const std::string& path, double resolution, double object_resolution = 0) {
     grpc::ClientContext ctx;
     pb::SubmitJobRequest req;
     req.set_input_path(path);
     req.mutable_params()->set_resolution_m(resolution);
+    req.mutable_params()->set_object_resolution_m(object_resolution);
     pb::SubmitJobResponse resp;
     return jobs_->SubmitJob(&ctx, req, &resp).error_code();
   };
@@ -80,6 +89,11 @@ TEST_F(DistributedTest, SubmitValidates) {
   EXPECT_EQ(submit("../x.h5", 0), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(submit("missing.h5", 0), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(submit("missing.h5", 0.1), grpc::StatusCode::INVALID_ARGUMENT);
+  // §5.6.1's object resolution: 2 m / 2^k, not coarser than the job's, not below 0.78 cm.
+  EXPECT_EQ(submit("missing.h5", 0.03125, 0.0625), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(submit("missing.h5", 0, 0.02), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(submit("missing.h5", 0, 0.00390625), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(submit("missing.h5", 0, 0.0625), grpc::StatusCode::NOT_FOUND);  // = no second pass
 
   grpc::ClientContext ctx;
   pb::GetJobRequest get;
@@ -174,6 +188,83 @@ TEST_F(DistributedTest, JobRunsToSucceededWithAWorker) {
   EXPECT_EQ(fs::file_size(fetched), fs::file_size(out / "job.json"));
   // A finished job cannot be cancelled.
   EXPECT_TRUE(absl::IsFailedPrecondition(client.Cancel(job->job_id, "").status()));
+  (*worker)->Shutdown();
+}
+
+// §5.6.1: during the merge, chunks go to the workers once more at a finer resolution, into
+// <job dir>/object_tiles; the job's own tiles and counters are as before afterwards.
+TEST_F(DistributedTest, MergeCarvesChunksAgainFinerThroughTheWorkers) {
+  const std::string scan = SimulateScan();
+  WorkerSpec ws;
+  ws.coordinator_address = address_;
+  auto worker = WorkerServer::Start(ws);
+  ASSERT_TRUE(worker.ok()) << worker.status();
+
+  // Looked at inside the merge, before the real merge's own pass replaces object_tiles.
+  std::vector<RecarveChunk> again;
+  absl::StatusOr<std::string> dir = absl::UnknownError("recarve not called");
+  std::vector<std::pair<double, size_t>> fine_tiles;    // resolution, leaves
+  std::vector<std::pair<double, size_t>> coarse_tiles;  // the job's tile of the same chunk
+  std::vector<int> fine_above, coarse_above;             // leaves in the chunk's upper half
+  double object_resolution = 0;
+  merge_hook_ = [&](const MergeJobRequest& req) -> absl::Status {
+    object_resolution = req.object_resolution_m;
+    for (const auto& e : fs::directory_iterator(req.tiles_dir)) {
+      absl::StatusOr<TileData> tile = ReadTile(e.path().string());
+      if (tile.ok() && tile->chunk.z() == 0 && tile->params.num_wedges > 100 && again.size() < 3) {
+        // The first two whole (the one cell of depth 0), the third only in its lower half.
+        again.push_back(RecarveChunk{
+            tile->chunk, again.size() < 2 ? ChunkRegion(0, {{0, 0, 0}})
+                                          : ChunkRegion(1, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0},
+                                                            {1, 1, 0}})});
+      }
+    }
+    if (!req.recarve) return absl::InternalError("no recarve in the merge request");
+    dir = req.recarve(again, 0.03125);
+    if (!dir.ok()) return absl::OkStatus();
+    for (const RecarveChunk& c : again) {
+      for (auto [folder, list] : {std::pair{*dir, &fine_tiles},
+                                  std::pair{req.tiles_dir, &coarse_tiles}}) {
+        absl::StatusOr<TileData> t =
+            ReadTile((fs::path(folder) / TileFileName(c.chunk)).string());
+        if (!t.ok()) continue;
+        list->emplace_back(t->grid.resolution_m(), t->leaves.size());
+        // Observed leaves above the region's half (local z ≥ 1 m).
+        int above = 0;
+        for (const TileLeaf& leaf : t->leaves) {
+          above += NodeBox(t->grid, c.chunk, leaf.node).min().z() >= c.chunk.z() * 2.0 + 1.0;
+        }
+        (list == &fine_tiles ? fine_above : coarse_above).push_back(above);
+      }
+    }
+    return absl::OkStatus();
+  };
+  JobClient client(address_);
+  SubmitParams params;
+  params.input_path = scan;
+  params.output_name = "room";
+  auto job = client.Submit(params);
+  ASSERT_TRUE(job.ok()) << job.status();
+  auto done = client.Watch(job->job_id, 0.2, [](const WatchUpdate&) {});
+  ASSERT_TRUE(done.ok()) << done.status();
+  EXPECT_EQ(done->state, "SUCCEEDED") << done->error;
+  EXPECT_DOUBLE_EQ(object_resolution, 0.015625);  // the default: a quarter of 6.25 cm
+  ASSERT_TRUE(dir.ok()) << dir.status();
+  EXPECT_EQ(fs::path(*dir), root_ / "out" / "room" / "object_tiles");
+  ASSERT_EQ(again.size(), 3u);
+  ASSERT_EQ(fine_tiles.size(), 3u);
+  ASSERT_EQ(coarse_tiles.size(), 3u);
+  for (size_t i = 0; i < 3; ++i) {
+    EXPECT_DOUBLE_EQ(fine_tiles[i].first, 0.03125);
+    EXPECT_DOUBLE_EQ(coarse_tiles[i].first, 0.0625);  // the job's tiles stay
+  }
+  // Whole chunks: more leaves at the finer grid. The third: nothing carved above its region.
+  EXPECT_GT(fine_tiles[0].second, coarse_tiles[0].second);
+  EXPECT_GT(fine_tiles[1].second, coarse_tiles[1].second);
+  EXPECT_GT(coarse_above[2], 0);
+  EXPECT_EQ(fine_above[2], 0);
+  EXPECT_GT(fine_tiles[2].second, 0u);
+  EXPECT_EQ(done->chunks_done, done->chunks_total);
   (*worker)->Shutdown();
 }
 

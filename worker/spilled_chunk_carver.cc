@@ -4,9 +4,11 @@
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
+#include <filesystem>
 #include <mutex>
 #include <thread>
 
+#include "absl/strings/str_cat.h"
 #include "worker/chunk_carver.h"
 
 namespace carvemap {
@@ -49,6 +51,9 @@ absl::StatusOr<SpilledChunkCarveTotals> CarveSpilledChunks(
         req.grid = options.grid;
         req.wedge_payload = file->payload;
         req.tiles_dir = options.tiles_dir;
+        if (auto it = options.regions.find(c.chunk); it != options.regions.end()) {
+          req.region = &it->second;
+        }
         r = CarveChunkToTile(req);
       }
       std::lock_guard<std::mutex> lock(mu);
@@ -80,6 +85,22 @@ absl::StatusOr<SpilledChunkCarveTotals> CarveSpilledChunks(
   if (!first_error.ok()) return first_error;
   if (progress) progress(state);
   return totals;
+}
+
+absl::StatusOr<std::vector<SpilledChunk>> FindSpilledChunks(const std::string& spill_dir,
+                                                            const std::vector<ChunkKey>& chunks) {
+  std::vector<SpilledChunk> found;
+  found.reserve(chunks.size());
+  for (const ChunkKey& key : chunks) {
+    SpilledChunk c;
+    c.chunk = key;
+    c.path = ChunkSpillPath(spill_dir, key);
+    std::error_code ec;
+    c.file_bytes = std::filesystem::file_size(c.path, ec);
+    if (ec) return absl::NotFoundError(absl::StrCat(c.path, ": no spill file: ", ec.message()));
+    found.push_back(std::move(c));
+  }
+  return found;
 }
 
 }  // namespace carvemap

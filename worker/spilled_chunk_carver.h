@@ -4,11 +4,13 @@
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
 #include "coordinator/chunk_spill.h"
+#include "services/geometry/chunk_region.h"
 #include "services/geometry/octree_keys.h"
 
 namespace carvemap {
@@ -18,6 +20,8 @@ struct SpilledChunkCarveOptions {
   std::string job_id;     // recorded in every tile
   std::string tiles_dir;  // must exist
   int threads = 1;
+  // §5.6.1's second pass: a chunk listed here is carved only inside its region.
+  std::map<ChunkKey, ChunkRegion, ChunkKeyLess> regions;
 };
 
 struct SpilledChunkCarveProgress {
@@ -38,5 +42,11 @@ struct SpilledChunkCarveTotals {
 absl::StatusOr<SpilledChunkCarveTotals> CarveSpilledChunks(
     const std::vector<SpilledChunk>& chunks, const SpilledChunkCarveOptions& options,
     const std::function<void(const SpilledChunkCarveProgress&)>& progress = {});
+
+// The spill files of `chunks` under `spill_dir` (an ingest's, kept for §5.6.1's re-carving of
+// the object chunks at a finer grid). NotFound naming the file of a chunk the ingest did not
+// spill. wedge_count is 0: the spill is not read here, so the carving order is the given one.
+absl::StatusOr<std::vector<SpilledChunk>> FindSpilledChunks(const std::string& spill_dir,
+                                                            const std::vector<ChunkKey>& chunks);
 
 }  // namespace carvemap

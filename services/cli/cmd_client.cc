@@ -70,6 +70,9 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
                      "Output folder name under the coordinator's output root (default: job id)");
   submit->add_option("--resolution", flags->submit.resolution_m,
                      "Leaf size in metres: 0.0625, 0.03125, 0.015625 or 0.0078125 (0: default)");
+  submit->add_option("--object-resolution", flags->submit.object_resolution_m,
+                     "Leaf size the object chunks are carved again at (seed §5.6.1); 0: a "
+                     "quarter of --resolution, equal to it: no re-carving");
   submit->add_option("--idempotency-key", flags->submit.idempotency_key,
                      "Submitting twice with the same key returns the first job");
   submit->add_flag("--watch", flags->watch, "Watch the job until it ends");

@@ -57,7 +57,13 @@ void PrintJobSummary(const std::string& out_dir) {
                 r.value("floor_z", 0.0), r.value("ceiling_z", 0.0));
   }
   const nlohmann::json counts = job.value("counts", nlohmann::json::object());
-  std::printf("  objects: %zu\n", job.value("objects", nlohmann::json::array()).size());
+  std::printf("  objects: %zu", job.value("objects", nlohmann::json::array()).size());
+  if (counts.contains("recarved_chunks")) {
+    std::printf(" (meshed at %g cm: %llu chunks carved again around them, §5.6.1)",
+                100 * counts.value("object_resolution_m", 0.0),
+                (unsigned long long)counts.value("recarved_chunks", uint64_t{0}));
+  }
+  std::printf("\n");
   std::printf("  triangles: dense %llu, building %llu, objects %llu\n",
               (unsigned long long)counts.value("dense_triangles", uint64_t{0}),
               (unsigned long long)counts.value("building_triangles", uint64_t{0}),
@@ -144,7 +150,8 @@ absl::Status RunDemo(const DemoFlags& flags) {
       "  mesh/objects.ply        the furniture; mesh/objects/<id>.ply one watertight mesh each\n"
       "  mesh/combined.ply       building + objects\n"
       "  job.json                parameters, counts, rooms, objects, timings and any warnings\n"
-      "  tiles/                  one HDF5 tile per 2 m chunk (storage/TILE_FORMAT.md)\n",
+      "  tiles/                  one HDF5 tile per 2 m chunk (storage/TILE_FORMAT.md)\n"
+      "  object_tiles/           the chunks holding objects, carved again finer (§5.6.1)\n",
       out_dir.c_str());
   return absl::OkStatus();
 }

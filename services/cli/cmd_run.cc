@@ -37,6 +37,7 @@ struct RunFlags {
   std::string output_dir;
   int workers = 2;
   double resolution_m = 0.0625;
+  double object_resolution_m = 0;  // 0 = resolution / 4
   std::string storage_root;
   // Short defaults on one machine: a killed worker's chunks come back within seconds.
   double heartbeat_interval_s = 1.0;
@@ -160,10 +161,11 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   submit.input_path = scan.filename().string();
   submit.output_name = out.filename().string();
   submit.resolution_m = flags.resolution_m;
+  submit.object_resolution_m = flags.object_resolution_m;
   // The job id follows from the key (and tiles record it), so repeated runs of the same scan
-  // and resolution give byte-identical tiles whatever the number of workers.
-  submit.idempotency_key =
-      absl::StrCat("carvemap run ", scan.filename().string(), " ", flags.resolution_m);
+  // and resolutions give byte-identical tiles whatever the number of workers.
+  submit.idempotency_key = absl::StrCat("carvemap run ", scan.filename().string(), " ",
+                                        flags.resolution_m, " ", flags.object_resolution_m);
   absl::StatusOr<JobInfo> job = state.client->Submit(submit);
   if (!job.ok()) return job.status();
   {
@@ -217,6 +219,11 @@ void RegisterRun(CLI::App& app, int& exit_code) {
   cmd->add_option("--workers", flags->workers, "Worker processes")->capture_default_str();
   cmd->add_option("--resolution", flags->resolution_m,
                   "Leaf size in metres: 0.0625, 0.03125, 0.015625 or 0.0078125")
+      ->capture_default_str();
+  cmd->add_option("--object-resolution", flags->object_resolution_m,
+                  "Leaf size the chunks holding furniture are carved again at before the "
+                  "objects are meshed (seed §5.6.1); 0 = a quarter of --resolution (at least "
+                  "0.0078125), equal to --resolution = no re-carving")
       ->capture_default_str();
   cmd->add_option("--storage-root", flags->storage_root,
                   "Keep tiles under <storage-root>/<job>/tiles instead of OUT/tiles");

@@ -53,6 +53,13 @@ absl::Status MergeOptions::Validate() const {
       return absl::InvalidArgumentError(absl::StrCat("merge: ", grid.status().message()));
     }
   }
+  if (object_resolution_m != 0) {
+    absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(object_resolution_m);
+    if (!grid.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("merge: object resolution: ", grid.status().message()));
+    }
+  }
   if (!job.is_object() && !job.is_null()) {
     return absl::InvalidArgumentError("merge: job must be a JSON object");
   }

@@ -18,6 +18,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "services/geometry/chunk_region.h"
 #include "services/merge/topdown_map.h"
 
 namespace carvemap {
@@ -47,6 +48,18 @@ struct MergeOptions {
   // plans their scanner positions (§3.3.1 lines of sight, §3.3.2 unentered rooms). Empty: no
   // floor plans (job.json says why under "warnings").
   std::string scan_path;
+  // RunMerge only, §5.6.1 (Fig 5.17): the chunks that hold objects are carved again at this
+  // finer resolution (2 m / 2^k, below resolution_m), so that the furniture's boards, legs and
+  // rods, thinner than a cell, survive; the objects are then segmented and meshed from those
+  // tiles. Carving needs the job's wedges, which the merge does not have: `recarve` does it
+  // (the coordinator leases the chunks to its workers; tests carve in process). 0 or no
+  // `recarve`: the objects come from the job's tiles.
+  double object_resolution_m = 0;
+  // Carves each of `chunks`, inside its region only, at `resolution_m` into one tile each and
+  // returns the directory that holds them (storage/TILE_FORMAT.md names). Errors fail the merge.
+  std::function<absl::StatusOr<std::string>(const std::vector<RecarveChunk>& chunks,
+                                            double resolution_m)>
+      recarve;
 
   // InvalidArgument for empty dirs, a resolution that is not 2 m / 2^k, a non-object job or a
   // non-positive topdown_max_height_m.

@@ -1,6 +1,7 @@
 #include "services/merge/merge_job.h"
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <limits>
 #include <optional>
@@ -188,6 +189,81 @@ struct SegmentStageResult {
   uint64_t objects = 0;
 };
 
+// Where the objects are meshed from: a directory of object tiles at a resolution, and, when
+// that is finer than the job's, the extruded plans rasterized at it.
+struct ObjectSource {
+  std::string dir;
+  double resolution_m = 0;
+  std::optional<PlanVolume> finer_volume;
+};
+
+// §5.6.1 (Fig 5.17): the chunks that hold object cells carved again at the finer resolution
+// by the caller's `recarve`, only around their objects (ObjectRecarveRegion: "recarve the
+// nodes of the octree containing object geometry"), segmented again against the plans
+// rasterized at that resolution (objects only, inside the same regions), into
+// <work>/finer_objects. The plan's walls keep the job's tolerance (one coarse cell): the plan
+// came from the coarse octree, so it is no more exact than that, and a finer tolerance would
+// turn the re-carved walls' skin into objects. No region (objects too small): no re-carving.
+absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLevelInput> inputs,
+                            const std::vector<ChunkKey>& chunks, const OctreeGrid& grid,
+                            const PlanVolume& coarse_volume, const fs::path& work,
+                            ObjectSource& source, nlohmann::json& counts,
+                            nlohmann::json& timings, const MergeProgressCallback& progress) {
+  const double res = options.object_resolution_m;
+  Clock::time_point t0 = Clock::now();
+  if (absl::Status s = ReportMergeProgress(progress, "recarve", 0, chunks.size()); !s.ok()) {
+    return s;
+  }
+  std::vector<RecarveChunk> again;
+  ChunkRegionMap regions;
+  double region_volume = 0;  // in chunks
+  {
+    absl::StatusOr<std::unique_ptr<TileSet>> objects =
+        TileSet::Open(source.dir, grid.resolution_m(), options.cache_budget_bytes);
+    if (!objects.ok()) return objects.status();
+    for (const ChunkKey& chunk : chunks) {
+      absl::StatusOr<std::shared_ptr<const TileData>> tile = (*objects)->Get(chunk);
+      if (!tile.ok()) return tile.status();
+      ChunkRegion region = ObjectRecarveRegion(**tile, coarse_volume, /*margin_cells=*/1);
+      if (region.empty()) continue;
+      region_volume += std::ldexp(double(region.count()), -3 * region.depth());
+      regions.emplace(chunk, region);
+      again.push_back(RecarveChunk{chunk, std::move(region)});
+    }
+  }
+  counts["recarved_chunks"] = again.size();
+  if (again.empty()) return absl::OkStatus();
+  // The share of those chunks' volume carved again.
+  counts["recarved_volume_fraction"] = region_volume / double(again.size());
+  absl::StatusOr<std::string> dir = options.recarve(again, res);
+  if (!dir.ok()) {
+    return absl::Status(dir.status().code(), absl::StrCat("re-carving ", again.size(),
+                                                          " object chunks at ", res, " m: ",
+                                                          dir.status().message()));
+  }
+  timings["merge.recarve"] = SecondsSince(t0);
+
+  t0 = Clock::now();
+  absl::StatusOr<std::unique_ptr<TileSet>> tiles =
+      TileSet::Open(*dir, res, options.cache_budget_bytes);
+  if (!tiles.ok()) return tiles.status();
+  SegmentOptions seg;
+  seg.plan_tolerance_m = grid.resolution_m();
+  absl::StatusOr<PlanVolume> volume =
+      RasterizePlanVolume(inputs, res, seg.trim_distance_m + 2 * grid.resolution_m());
+  if (!volume.ok()) return volume.status();
+  source.dir = (work / "finer_objects").string();
+  absl::StatusOr<SegmentTilesResult> segmented =
+      SegmentTiles(**tiles, *volume, seg, "", source.dir,
+                   StageProgress(progress, "recarve_segmentation"), &regions);
+  if (!segmented.ok()) return segmented.status();
+  counts["recarved_object_cells"] = segmented->object_cells;
+  source.resolution_m = res;
+  source.finer_volume = std::move(*volume);
+  timings["merge.recarve_segmentation"] = SecondsSince(t0);
+  return absl::OkStatus();
+}
+
 // DESIGN §6 stages 6–8 (seed §5.5, §5.6): the tiles segmented against the extruded plans into
 // building and object tiles (in <out>/.segment, removed afterwards), the building tiles' faces,
 // regions and planar mesh, the object tiles' dense mesh split into objects, and combined.ply.
@@ -266,21 +342,32 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   }
   timings["merge.planar_mesh"] = SecondsSince(t0);
 
-  // The objects: dense mesh of the object tiles, split into closed pieces.
-  t0 = Clock::now();
+  // The objects: dense mesh of the object tiles (carved again finer first when the caller
+  // can, §5.6.1), split into closed pieces.
   std::vector<SegmentedObject> objects;
   ObjectSplitReport split_report;
+  t0 = Clock::now();
   if (segmented->object_tiles > 0) {
+    ObjectSource source{(work / "objects").string(), grid.resolution_m(), std::nullopt};
+    const bool finer = options.recarve && options.object_resolution_m > 0 &&
+                       options.object_resolution_m < grid.resolution_m();
+    if (finer) {
+      absl::Status s = RecarveObjects(options, inputs, segmented->object_chunks, grid, *volume,
+                                      work, source, counts, timings, progress);
+      if (!s.ok()) return s;
+    }
+    counts["object_resolution_m"] = source.resolution_m;
+    t0 = Clock::now();
     absl::StatusOr<std::unique_ptr<TileSet>> otiles =
-        TileSet::Open((work / "objects").string(), grid.resolution_m(),
-                      options.cache_budget_bytes);
+        TileSet::Open(source.dir, source.resolution_m, options.cache_budget_bytes);
     if (!otiles.ok()) return otiles.status();
     absl::StatusOr<DenseMeshResult> dense =
         BuildDenseMesh(**otiles, StageProgress(progress, "object_mesh"));
     if (!dense.ok()) return dense.status();
     ObjectSplitOptions split;
     split.min_thickness_m = 2 * grid.resolution_m();  // one-cell films are carving noise
-    objects = SplitObjects(dense->mesh, *volume, split, &split_report);
+    objects = SplitObjects(dense->mesh, source.finer_volume ? *source.finer_volume : *volume,
+                           split, &split_report);
   }
   fs::remove_all(work, ec);  // scratch: every output below is written from memory
   const fs::path objects_dir = out / "mesh" / "objects";

@@ -12,7 +12,10 @@
 //   building_faces, planar_mesh   the building tiles' faces, regions and planar mesh ➜
 //                    mesh/building.ply (face property `region`); without floor plans the
 //                    planar mesh of everything
-//   object_mesh      dual contouring of the object tiles, split into objects ➜
+//   recarve, recarve_segmentation   with MergeOptions::recarve (§5.6.1): the chunks holding
+//                    objects carved again at object_resolution_m around their objects, and
+//                    segmented again, in <out>/.segment/finer_objects
+//   object_mesh      dual contouring of the (finer) object tiles, split into objects ➜
 //                    mesh/objects.ply (face property `object`), mesh/objects/<id>.ply,
 //                    mesh/combined.ply (`object`, −1 = building); job.json "objects"
 //   octree_bt, topdown_png, job_json   MergeFirstOutputs: octree.bt, level_<k>/topdown.png per

@@ -5,7 +5,9 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <string>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "services/merge/dense_mesh.h"
@@ -14,24 +16,31 @@
 
 namespace carvemap {
 
+using ChunkRegionMap = std::map<ChunkKey, ChunkRegion, ChunkKeyLess>;
+
 struct SegmentTilesResult {
   uint64_t chunks = 0;
   uint64_t building_tiles = 0;
-  uint64_t object_tiles = 0;   // chunks with at least one object cell
-  uint64_t object_cells = 0;   // finest cells
+  uint64_t object_tiles = 0;            // chunks with at least one object cell
+  std::vector<ChunkKey> object_chunks;  // those chunks, in the TileSet's order
+  uint64_t object_cells = 0;            // finest cells
   uint64_t unobserved_object_cells = 0;
   uint64_t trimmed_cells = 0;
 };
 
 // Writes building tiles to `building_dir` and object tiles to `objects_dir` (both created;
-// tiles replace any there). Only chunks with a tile are segmented: object volume in a chunk
-// that no wedge reached is not found. Errors: TileSet::Get's, SegmentChunk's, WriteTile's
+// tiles replace any there). An empty `building_dir` writes no building tiles (the finer
+// re-carving of §5.6.1 wants the objects only). `only_in` (that pass): each chunk's objects
+// only inside its region (SegmentChunk); a chunk not in the map has none. Only chunks with a
+// tile are segmented: object volume in a chunk that no wedge reached is not found. Errors: TileSet::Get's, SegmentChunk's, WriteTile's
 // (naming the file), Unavailable naming a directory that cannot be created, Cancelled.
 [[nodiscard]] absl::StatusOr<SegmentTilesResult> SegmentTiles(TileSet& tiles,
                                                               const PlanVolume& plan,
                                                               const SegmentOptions& options,
                                                               const std::string& building_dir,
                                                               const std::string& objects_dir,
-                                                              const ChunkProgressFn& progress);
+                                                              const ChunkProgressFn& progress,
+                                                              const ChunkRegionMap* only_in =
+                                                                  nullptr);
 
 }  // namespace carvemap

@@ -52,11 +52,15 @@ struct ResolvedParams {
   double resolution_m = kDefaultResolutionM;
   int method = pb::CARVE_METHOD_PROBABILISTIC;
   int workers_hint = 0;
+  double object_resolution_m = kDefaultResolutionM;  // = resolution_m: no re-carving
 };
 
 std::string ParamsToJson(const ResolvedParams& p) {
   nlohmann::json j = {
-      {"resolution_m", p.resolution_m}, {"method", p.method}, {"workers_hint", p.workers_hint}};
+      {"resolution_m", p.resolution_m},
+      {"method", p.method},
+      {"workers_hint", p.workers_hint},
+      {"object_resolution_m", p.object_resolution_m}};
   return j.dump();
 }
 
@@ -67,6 +71,8 @@ ResolvedParams ParamsFromJson(const std::string& text) {
     p.resolution_m = j.value("resolution_m", kDefaultResolutionM);
     p.method = j.value("method", static_cast<int>(pb::CARVE_METHOD_PROBABILISTIC));
     p.workers_hint = j.value("workers_hint", 0);
+    // Jobs stored before §5.6.1's re-carving existed merge as they were submitted.
+    p.object_resolution_m = j.value("object_resolution_m", p.resolution_m);
   }
   return p;
 }
@@ -94,6 +100,18 @@ absl::StatusOr<ResolvedParams> ResolveParams(const pb::JobParams& in) {
   }
   if (in.workers_hint() < 0) return absl::InvalidArgumentError("workers_hint must be >= 0");
   p.workers_hint = in.workers_hint();
+  const int finest = kMaxJobChunkDepth;
+  if (in.object_resolution_m() == 0) {
+    p.object_resolution_m = OctreeGrid{std::min(grid->chunk_depth + 2, finest)}.resolution_m();
+  } else {
+    absl::StatusOr<OctreeGrid> fine = OctreeGrid::FromResolution(in.object_resolution_m());
+    if (!fine.ok() || fine->chunk_depth < grid->chunk_depth || fine->chunk_depth > finest) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "object_resolution_m ", in.object_resolution_m(), ": must be 2 m / 2^k, not coarser "
+          "than resolution_m (", p.resolution_m, ") and not finer than 0.0078125"));
+    }
+    p.object_resolution_m = fine->resolution_m();
+  }
   return p;
 }
 
@@ -107,6 +125,7 @@ void ToProto(const JobRecord& r, pb::Job& out) {
   out.mutable_params()->set_resolution_m(p.resolution_m);
   out.mutable_params()->set_method(static_cast<pb::CarveMethod>(p.method));
   out.mutable_params()->set_workers_hint(p.workers_hint);
+  out.mutable_params()->set_object_resolution_m(p.object_resolution_m);
   out.set_error(r.error);
   out.set_created_unix_ms(r.created_unix_ms);
   out.set_updated_unix_ms(r.updated_unix_ms);
@@ -246,6 +265,8 @@ class CoordinatorServer::Impl {
     // What the ingest measured (job.json "ingest"; absent for a job resumed by a restarted
     // coordinator after its ingest): rays, returns, wedges, wedge-chunk pairs, spill bytes.
     std::optional<nlohmann::json> ingest_counts;
+    // During RecarveStage: the part of each chunk to carve (its depth, ChunkRegion::Encode).
+    std::map<ChunkCoord, std::pair<int, std::string>> regions;
     std::map<std::string, std::pair<std::chrono::steady_clock::time_point, double>> stages;
     std::vector<std::string> stage_order;
     std::optional<std::chrono::steady_clock::time_point> stage_start;
@@ -272,6 +293,17 @@ class CoordinatorServer::Impl {
   // Waits until every chunk is committed. OK: go on to merge; CANCELLED: the job is already
   // terminal (cancelled or failed by the lease table) or the coordinator stops.
   absl::Status CarveStage(const std::string& job_id);
+  // Polls until every chunk of a job loaded in the lease table is committed (then drops it
+  // from the table). Cancelled as CarveStage.
+  absl::Status WaitForChunks(const std::string& job_id);
+  // §5.6.1, called by the merge: `chunks` leased to the workers once more, at `resolution_m`,
+  // into <job dir>/object_tiles; returns that directory once every one is committed.
+  absl::StatusOr<std::string> RecarveStage(const std::string& job_id,
+                                           const std::vector<RecarveChunk>& chunks,
+                                           double resolution_m);
+  std::string ObjectTilesDir(const std::string& tiles_dir) const {
+    return (fs::path(tiles_dir).parent_path() / "object_tiles").string();
+  }
   void FailJob(const std::string& job_id, const std::string& why);
   void CleanUp(const std::string& job_id, bool succeeded);
   void EnterStage(const std::string& job_id, const std::string& stage);
@@ -516,7 +548,10 @@ void CoordinatorServer::Impl::CleanUp(const std::string& job_id, bool succeeded)
   std::error_code ec;
   if (!spec_.keep_spill && !spill.empty()) fs::remove_all(fs::path(spill).parent_path(), ec);
   // A failed or cancelled job leaves no tiles that could pass for a complete set.
-  if (!succeeded && !tiles.empty()) fs::remove_all(tiles, ec);
+  if (!succeeded && !tiles.empty()) {
+    fs::remove_all(tiles, ec);
+    fs::remove_all(ObjectTilesDir(tiles), ec);
+  }
   EnterStage(job_id, "");
 }
 
@@ -594,6 +629,10 @@ absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
     }
     runtime_[job_id].rays_to_carve = pairs;
   }
+  return WaitForChunks(job_id);
+}
+
+absl::Status CoordinatorServer::Impl::WaitForChunks(const std::string& job_id) {
   while (!stopping_) {
     {
       absl::MutexLock lock(&mu_);
@@ -607,6 +646,68 @@ absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   return absl::CancelledError("coordinator stopping");
+}
+
+absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
+    const std::string& job_id, const std::vector<RecarveChunk>& chunks, double resolution_m) {
+  absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(resolution_m);
+  if (!grid.ok()) return grid.status();
+  JobRuntime saved;
+  {
+    absl::MutexLock lock(&mu_);
+    saved = runtime_[job_id];
+  }
+  const std::string dir = ObjectTilesDir(saved.tiles_dir);
+  std::error_code ec;
+  fs::remove_all(dir, ec);  // an earlier (interrupted) merge's: not this pass's
+  fs::create_directories(dir, ec);
+  if (ec) {
+    return absl::FailedPreconditionError(absl::StrCat(dir, ": cannot create: ", ec.message()));
+  }
+  std::vector<ChunkCoord> keys;
+  keys.reserve(chunks.size());
+  int64_t pairs = 0;
+  {
+    absl::MutexLock lock(&mu_);
+    if (absl::Status s = table_->LoadJob(job_id); !s.ok() && !absl::IsAlreadyExists(s)) return s;
+    std::map<ChunkCoord, int64_t> wedges;
+    if (absl::StatusOr<std::vector<ChunkRecord>> all = store_->ListChunks(job_id); all.ok()) {
+      for (const ChunkRecord& c : *all) wedges[c.key] = c.wedge_count;
+    }
+    JobRuntime& rt = runtime_[job_id];
+    rt.regions.clear();
+    for (const RecarveChunk& c : chunks) {
+      keys.push_back({c.chunk.x(), c.chunk.y(), c.chunk.z()});
+      pairs += wedges[keys.back()];
+      rt.regions[keys.back()] = {c.region.depth(), c.region.Encode()};
+    }
+    if (absl::Status s = table_->Requeue(
+            job_id, keys, absl::StrCat("queued again: objects at ", resolution_m, " m (§5.6.1)"));
+        !s.ok()) {
+      table_->DropJob(job_id);
+      rt.regions.clear();
+      return s;
+    }
+    // Leases of this pass carry the finer grid and write into `dir` (LeaseChunk reads these).
+    rt.params.resolution_m = grid->resolution_m();
+    rt.tiles_dir = dir;
+    rt.rays_carved = 0;
+    rt.rays_to_carve = pairs;
+  }
+  spdlog::info("coordinator: job {}: carving {} object chunks again at {} m", job_id,
+               chunks.size(), resolution_m);
+  absl::Status s = WaitForChunks(job_id);
+  {
+    absl::MutexLock lock(&mu_);
+    JobRuntime& rt = runtime_[job_id];
+    rt.params = saved.params;
+    rt.tiles_dir = saved.tiles_dir;
+    rt.rays_carved = saved.rays_carved;
+    rt.rays_to_carve = saved.rays_to_carve;
+    rt.regions.clear();
+  }
+  if (!s.ok()) return s;
+  return dir;
 }
 
 void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
@@ -686,6 +787,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       req.output_dir = rt.output_dir;
       req.scan_path = (fs::path(spec_.data_root) / job->input_path).string();
       req.resolution_m = rt.params.resolution_m;
+      req.object_resolution_m = rt.params.object_resolution_m;
       nlohmann::json doc = {{"job_id", job_id},
                             {"input_path", job->input_path},
                             {"output_name", job->output_name},
@@ -719,6 +821,9 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
         keep_going = !(j.ok() && IsTerminal(j->state));
       }
       return keep_going;
+    };
+    req.recarve = [this, &job_id](const std::vector<RecarveChunk>& chunks, double resolution_m) {
+      return RecarveStage(job_id, chunks, resolution_m);
     };
     if (spec_.merge) {
       absl::Status merged;
@@ -1107,7 +1212,9 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
   while (true) {
     if (stopping_) return absl::UnavailableError("coordinator shutting down");
     std::optional<LeaseTable::Grant> grant;
-    JobRuntime rt;
+    ResolvedParams job_params;
+    std::string tiles_dir, spill_dir, region;
+    int region_depth = 0;
     {
       absl::MutexLock lock(&mu_);
       if (!workers_.count(req.worker_id())) {
@@ -1118,7 +1225,15 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
       absl::StatusOr<std::optional<LeaseTable::Grant>> g = table_->Lease(req.worker_id());
       if (!g.ok()) return g.status();
       grant = *g;
-      if (grant) rt = runtime_[grant->job_id];
+      if (grant) {
+        const JobRuntime& rt = runtime_[grant->job_id];
+        job_params = rt.params;
+        tiles_dir = rt.tiles_dir;
+        spill_dir = rt.spill_dir;
+        if (auto r = rt.regions.find(grant->chunk); r != rt.regions.end()) {
+          std::tie(region_depth, region) = r->second;
+        }
+      }
     }
     if (grant) {
       pb::Lease& lease = *resp.mutable_lease();
@@ -1131,15 +1246,19 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
       lease.set_deadline_unix_ms(grant->deadline_unix_ms);
       lease.set_attempt(grant->attempt);
       pb::CarveParams& params = *lease.mutable_params();
-      params.set_resolution_m(rt.params.resolution_m);
-      params.set_method(static_cast<pb::CarveMethod>(rt.params.method));
-      absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(rt.params.resolution_m);
+      params.set_resolution_m(job_params.resolution_m);
+      params.set_method(static_cast<pb::CarveMethod>(job_params.method));
+      absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(job_params.resolution_m);
       params.set_leaf_depth(grid.ok() ? grid->chunk_depth : 0);
-      params.set_tile_dir(rt.tiles_dir);
+      params.set_tile_dir(tiles_dir);
+      if (!region.empty()) {
+        params.set_region(std::move(region));
+        params.set_region_depth(region_depth);
+      }
       pb::WedgePayload& wedges = *lease.mutable_wedges();
       wedges.set_wedge_count(grant->wedge_count);
       const std::string path = ChunkSpillPath(
-          rt.spill_dir, ChunkKey(grant->chunk.x, grant->chunk.y, grant->chunk.z));
+          spill_dir, ChunkKey(grant->chunk.x, grant->chunk.y, grant->chunk.z));
       std::error_code ec;
       const auto size = fs::file_size(path, ec);
       if (!ec && spec_.max_inline_wedge_bytes > 0 &&

@@ -12,9 +12,11 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "services/geometry/chunk_region.h"
 
 namespace carvemap {
 
@@ -25,6 +27,13 @@ struct MergeJobRequest {
   std::string output_dir;  // octree.bt, level_0/, job.json go here
   std::string scan_path;   // the job's input scan.h5 (the merge reads its /path)
   double resolution_m = 0.0625;
+  // §5.6.1: the object chunks are carved again at this resolution by `recarve` (the
+  // coordinator leases them to its workers once more, each limited to its region, and returns
+  // the directory of their tiles). Equal to resolution_m, or no `recarve`: no re-carving.
+  double object_resolution_m = 0.0625;
+  std::function<absl::StatusOr<std::string>(const std::vector<RecarveChunk>& chunks,
+                                            double resolution_m)>
+      recarve;
   std::string job_json;  // the job document (id, input, parameters, counts) as JSON text
   // Called by the merge as it goes (stage name, done, total); false = stop (job cancelled or
   // coordinator stopping): the merge then returns Cancelled. May be empty.

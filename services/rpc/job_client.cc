@@ -85,6 +85,7 @@ absl::StatusOr<JobInfo> JobClient::Submit(const SubmitParams& params) {
   req.set_input_path(params.input_path);
   req.set_output_name(params.output_name);
   req.mutable_params()->set_resolution_m(params.resolution_m);
+  req.mutable_params()->set_object_resolution_m(params.object_resolution_m);
   req.set_idempotency_key(params.idempotency_key);
   pb::SubmitJobResponse resp;
   auto ctx = Context();

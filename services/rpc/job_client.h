@@ -41,6 +41,7 @@ struct SubmitParams {
   std::string input_path;  // relative to the coordinator's data root
   std::string output_name;  // "" = the job id
   double resolution_m = 0;  // 0 = default
+  double object_resolution_m = 0;  // §5.6.1 re-carving of the object chunks; 0 = default
   std::string idempotency_key;
 };
 

@@ -15,6 +15,8 @@ MergeFunction FirstOutputsMerge() {
     options.output_dir = req.output_dir;
     options.scan_path = req.scan_path;
     options.resolution_m = req.resolution_m;
+    options.object_resolution_m = req.object_resolution_m;
+    options.recarve = req.recarve;
     nlohmann::json job = nlohmann::json::parse(req.job_json, nullptr, /*allow_exceptions=*/false);
     options.job = job.is_object() ? job : nlohmann::json::object({{"job_id", req.job_id}});
     MergeProgressCallback progress;

@@ -294,6 +294,14 @@ absl::Status WorkerServer::Impl::Carve(const pb::Lease& lease, pb::TileInfo& til
   req.grid = *grid;
   req.wedge_payload = payload;
   req.tiles_dir = lease.params().tile_dir();
+  std::optional<ChunkRegion> region;
+  if (!lease.params().region().empty()) {
+    absl::StatusOr<ChunkRegion> decoded =
+        ChunkRegion::Decode(lease.params().region_depth(), lease.params().region());
+    if (!decoded.ok()) return decoded.status();  // not retryable: the lease itself is bad
+    region = std::move(*decoded);
+    req.region = &*region;
+  }
   absl::StatusOr<CarveChunkResult> result = CarveChunkToTile(req);
   if (!result.ok()) return result.status();
   absl::StatusOr<std::string> sha = Sha256HexOfFile(result->tile_path);

@@ -1,5 +1,6 @@
 #include "services/segment/segment_chunk.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <optional>
@@ -69,7 +70,7 @@ bool HiddenBehindSolid(const NeighbourhoodIndex& index, const PlanVolume& plan,
 class ChunkSegmenter {
  public:
   ChunkSegmenter(const NeighbourhoodIndex& index, const PlanVolume& plan,
-                 const SegmentOptions& options)
+                 const SegmentOptions& options, const ChunkRegion* only_in)
       : tile_(index.hood().tiles[ChunkNeighbourhood::Index(0, 0, 0)]),
         k_(index.hood().grid.chunk_depth),
         n_(index.hood().grid.leaves_per_side()) {
@@ -97,6 +98,11 @@ class ChunkSegmenter {
       for (int y = 0; y < n_; ++y) {
         for (int x = 0; x < n_; ++x) {
           CellKey& c = cells_[Index(x, y, z)];
+          if (only_in != nullptr &&
+              !only_in->Intersects(ChunkNode{Eigen::Vector3i(x, y, z), k_})) {
+            c.segment = CellSegment::kBuilding;
+            continue;
+          }
           const LeafStats* s = c.leaf >= 0 ? &tile->leaves[c.leaf].stats : nullptr;
           const bool observed = s != nullptr && s->observed();
           const Eigen::Vector3d centre = LeafCenter(grid, base + Eigen::Vector3i(x, y, z));
@@ -216,7 +222,8 @@ CellSegment ClassifyCell(const PlanVolume& plan, const Eigen::Vector3d& centre, 
 
 absl::StatusOr<SegmentedChunk> SegmentChunk(const ChunkNeighbourhood& hood,
                                             const PlanVolume& plan,
-                                            const SegmentOptions& options) {
+                                            const SegmentOptions& options,
+                                            const ChunkRegion* only_in) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   absl::StatusOr<NeighbourhoodIndex> index = NeighbourhoodIndex::Build(hood);
   if (!index.ok()) return index.status();
@@ -229,9 +236,56 @@ absl::StatusOr<SegmentedChunk> SegmentChunk(const ChunkNeighbourhood& hood,
     t->grid = grid;
     if (tile != nullptr) t->params = tile->params;
   }
-  ChunkSegmenter segmenter(*index, plan, options);
+  ChunkSegmenter segmenter(*index, plan, options, only_in);
   segmenter.Emit(out);
   return out;
+}
+
+ChunkRegion ObjectRecarveRegion(const TileData& objects, const PlanVolume& plan,
+                                int margin_cells) {
+  const int depth = std::min(objects.grid.chunk_depth, ChunkRegion::kMaxDepth);
+  const int n = 1 << depth;
+  const double res = kChunkSizeM / n;
+  const Eigen::Vector3d origin = objects.chunk.cast<double>() * kChunkSizeM;
+  std::vector<bool> object(size_t(n) * n * n, false);
+  auto at = [n](int x, int y, int z) {
+    return size_t(x) + size_t(n) * (size_t(y) + size_t(n) * size_t(z));
+  };
+  for (const TileLeaf& leaf : objects.leaves) {
+    if (!leaf.stats.interior()) continue;
+    // The leaf's cells at `depth` (a leaf finer than that marks its one cell).
+    const int sh = depth - leaf.node.depth;
+    const Eigen::Vector3i lo = sh >= 0 ? Eigen::Vector3i(leaf.node.local * (1 << sh))
+                                       : Eigen::Vector3i(leaf.node.local.x() >> -sh,
+                                                         leaf.node.local.y() >> -sh,
+                                                         leaf.node.local.z() >> -sh);
+    const int s = sh >= 0 ? 1 << sh : 1;
+    for (int z = lo.z(); z < lo.z() + s; ++z)
+      for (int y = lo.y(); y < lo.y() + s; ++y)
+        for (int x = lo.x(); x < lo.x() + s; ++x) object[at(x, y, z)] = true;
+  }
+  std::vector<Eigen::Vector3i> cells;
+  std::vector<bool> taken(object.size(), false);
+  auto take = [&](int x, int y, int z) {
+    if (x < 0 || y < 0 || z < 0 || x >= n || y >= n || z >= n || taken[at(x, y, z)]) return;
+    taken[at(x, y, z)] = true;
+    cells.emplace_back(x, y, z);
+  };
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        if (!object[at(x, y, z)]) continue;
+        const Eigen::Vector3d centre =
+            origin + (Eigen::Vector3d(x, y, z).array() + 0.5).matrix() * res;
+        const PlanColumn col = LookupPlan(plan, centre);
+        const int floor_cell =
+            col.room >= 0 ? int(std::floor((col.floor_z - origin.z()) / res)) : z;
+        const int z0 = std::max(std::min(floor_cell, z), 0) - margin_cells;
+        for (int zz = z0; zz <= z + margin_cells; ++zz)
+          for (int dy = -margin_cells; dy <= margin_cells; ++dy)
+            for (int dx = -margin_cells; dx <= margin_cells; ++dx) take(x + dx, y + dy, zz);
+      }
+  return ChunkRegion(depth, cells);
 }
 
 }  // namespace carvemap

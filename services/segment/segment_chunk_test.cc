@@ -46,12 +46,13 @@ std::vector<LeafStats> Cells(const TileData& t, int* covered_twice = nullptr) {
 // A chunk alone: its tile (may be null) and no neighbours.
 absl::StatusOr<SegmentedChunk> SegmentAlone(const TileData* tile, const ChunkKey& chunk,
                                             const OctreeGrid& grid, const PlanVolume& volume,
-                                            const SegmentOptions& options) {
+                                            const SegmentOptions& options,
+                                            const ChunkRegion* only_in = nullptr) {
   ChunkNeighbourhood hood;
   hood.grid = grid;
   hood.chunk = chunk;
   hood.tiles[ChunkNeighbourhood::Index(0, 0, 0)] = tile;
-  return SegmentChunk(hood, volume, options);
+  return SegmentChunk(hood, volume, options, only_in);
 }
 
 class SegmentChunkTest : public ::testing::Test {
@@ -151,6 +152,57 @@ TEST_F(SegmentChunkTest, BoxOnTheFloorBecomesObjectAndFreeSpaceForTheBuilding) {
       }
   EXPECT_EQ(object_interior, 8 * 8 * 7);
   EXPECT_EQ(building_changed, 8 * 8 * 7);
+}
+
+// §5.6.1: the region to carve again holds the object, a cell around it, and the column down
+// to the floor; segmenting inside a region finds objects only there.
+TEST_F(SegmentChunkTest, RecarveRegionCoversTheObjectDownToTheFloor) {
+  // A table top [0.75, 1.25]² × [0.75, 0.8125] on legs too thin for the grid: the coarse octree
+  // saw only the top, which floats 0.5 m above the floor.
+  const TileData tile = FinestTile(grid_, [](const Eigen::Vector3d& c) {
+    const bool in_room = Inside(c, Eigen::Vector3d::Constant(0.25), Eigen::Vector3d::Constant(1.75));
+    const bool in_top = Inside(c, {0.75, 0.75, 0.75}, {1.25, 1.25, 0.8125});
+    return in_room && !in_top ? 0.9 : 0.2;
+  });
+  absl::StatusOr<SegmentedChunk> seg =
+      SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, SegmentOptions{});
+  ASSERT_TRUE(seg.ok()) << seg.status();
+  ASSERT_EQ(seg->object_cells, 8u * 8u);
+  const ChunkRegion region = ObjectRecarveRegion(seg->objects, volume_, 1);
+  EXPECT_EQ(region.depth(), grid_.chunk_depth);
+  const double r = grid_.resolution_m();
+  auto cell = [&](double x, double y, double z) {
+    return ChunkNode{Eigen::Vector3i(int(x / r), int(y / r), int(z / r)), grid_.chunk_depth};
+  };
+  EXPECT_TRUE(region.Intersects(cell(1.0, 1.0, 0.78)));   // the top
+  EXPECT_TRUE(region.Intersects(cell(0.72, 1.0, 0.78)));  // a cell beside it
+  EXPECT_TRUE(region.Intersects(cell(0.77, 0.77, 0.3)));  // under it, where legs would be
+  EXPECT_TRUE(region.Intersects(cell(1.0, 1.0, 0.22)));   // down to the floor (and a cell)
+  EXPECT_FALSE(region.Intersects(cell(1.0, 1.0, 0.9)));   // two cells above
+  EXPECT_FALSE(region.Intersects(cell(0.6, 1.0, 0.5)));   // two cells beside
+  EXPECT_FALSE(region.Intersects(cell(1.5, 1.5, 0.5)));
+  // (8 + 2)² columns from the floor cell below (z index 3) to one cell above the top (13).
+  EXPECT_EQ(region.count(), 10u * 10u * 11u);
+  // No object cells, no region.
+  TileData empty = seg->objects;
+  empty.leaves.clear();
+  EXPECT_TRUE(ObjectRecarveRegion(empty, volume_, 1).empty());
+
+  // Only inside a region: the box of RoomWithBox with a region holding its lower half.
+  const TileData box = RoomWithBox();
+  std::vector<Eigen::Vector3i> lower;
+  for (int z = 0; z < 8; ++z)
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 32; ++x) lower.emplace_back(x, y, z);  // z < 0.5 m
+  const ChunkRegion half(5, lower);
+  absl::StatusOr<SegmentedChunk> limited =
+      SegmentAlone(&box, ChunkKey::Zero(), grid_, volume_, SegmentOptions{}, &half);
+  ASSERT_TRUE(limited.ok()) << limited.status();
+  EXPECT_EQ(limited->object_cells, 8u * 8u * 3u);  // z cells 5, 6, 7 of the box's 5..11
+  const ChunkRegion nothing;
+  limited = SegmentAlone(&box, ChunkKey::Zero(), grid_, volume_, SegmentOptions{}, &nothing);
+  ASSERT_TRUE(limited.ok()) << limited.status();
+  EXPECT_EQ(limited->object_cells, 0u);
 }
 
 TEST_F(SegmentChunkTest, LeavesSplitOnlyWhereTheClassChanges) {

@@ -24,12 +24,15 @@ struct CarvedPresetOptions {
   bool drift = false;          // localization drift (§2.2) on /path; range noise + jitter stay on
   double resolution_m = 0.0625;
   int threads = 2;
+  // Keep the ingest's spill (<root>/spill) so the chunks can be carved again (§5.6.1).
+  bool keep_spill = false;
 };
 
 struct CarvedPreset {
   std::string scan_path;   // <root>/sim/scan.h5
   std::string gt_dir;      // <root>/sim/gt (building.json, surfaces.ply, objects.ply)
   std::string tiles_dir;   // <root>/tiles
+  std::string spill_dir;   // <root>/spill, when kept
   OctreeGrid grid;
   SimulationSummary simulation;
   std::vector<std::string> tile_paths;
@@ -74,8 +77,37 @@ inline absl::StatusOr<CarvedPreset> CarvePreset(const CarvedPresetOptions& optio
   absl::StatusOr<SpilledChunkCarveTotals> carved = CarveSpilledChunks(spilled->chunks, carve);
   if (!carved.ok()) return carved.status();
   out.tile_paths = std::move(carved->tile_paths);
-  fs::remove_all(root + "/spill");
+  if (options.keep_spill) {
+    out.spill_dir = root + "/spill";
+  } else {
+    fs::remove_all(root + "/spill");
+  }
   return out;
+}
+
+// MergeOptions::recarve done in this process, as the coordinator's workers would: the chunks
+// from the spill in `spill_dir`, carved into `tiles_dir` (replaced).
+inline auto InProcessRecarve(std::string spill_dir, std::string tiles_dir, int threads) {
+  return [=](const std::vector<RecarveChunk>& chunks,
+             double resolution_m) -> absl::StatusOr<std::string> {
+    absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(resolution_m);
+    if (!grid.ok()) return grid.status();
+    std::vector<ChunkKey> keys;
+    for (const RecarveChunk& c : chunks) keys.push_back(c.chunk);
+    absl::StatusOr<std::vector<SpilledChunk>> spilled = FindSpilledChunks(spill_dir, keys);
+    if (!spilled.ok()) return spilled.status();
+    std::filesystem::remove_all(tiles_dir);
+    std::filesystem::create_directories(tiles_dir);
+    SpilledChunkCarveOptions carve;
+    carve.grid = *grid;
+    carve.job_id = "carved_preset";
+    carve.tiles_dir = tiles_dir;
+    carve.threads = threads;
+    for (const RecarveChunk& c : chunks) carve.regions.emplace(c.chunk, c.region);
+    absl::StatusOr<SpilledChunkCarveTotals> carved = CarveSpilledChunks(*spilled, carve);
+    if (!carved.ok()) return carved.status();
+    return tiles_dir;
+  };
 }
 
 }  // namespace carvemap::testing

@@ -157,6 +157,19 @@ def main():
                             f"{counts[0]} + {counts[1]}")
         print(f"objects: {len(job.get('objects', []))}; combined = building + objects "
               f"({counts[2]} = {counts[0]} + {counts[1]})")
+    # §5.6.1: the objects were meshed from chunks carved again finer, one tile each.
+    job_counts = job.get("counts", {})
+    if job_counts.get("recarved_chunks", 0) > 0:
+        finer = job_counts.get("object_resolution_m", 0)
+        coarse = job.get("params", {}).get("resolution_m", 0)
+        tiles_dir = os.path.join(args.out, "object_tiles")
+        tiles = [n for n in os.listdir(tiles_dir)] if os.path.isdir(tiles_dir) else []
+        if not 0 < finer < coarse:
+            problems.append(f"job.json: object_resolution_m {finer} not finer than {coarse}")
+        if len(tiles) != job_counts["recarved_chunks"]:
+            problems.append(f"object_tiles/ holds {len(tiles)} files, job.json says "
+                            f"{job_counts['recarved_chunks']} chunks were carved again")
+        print(f"objects re-carved at {finer} m: {len(tiles)} chunks")
 
     if args.selftest:
         xyz, tri = read_ply(os.path.join(args.out, "mesh", "dense.ply"))
