@@ -55,10 +55,10 @@ class ChunkOctree {
   // Errors (nothing changed): InvalidArgument for num_rays outside [1, 4] or a non-finite
   // mean/covariance (naming the wedge); FailedPrecondition after Simplify().
   absl::Status CarveWedges(std::span<const Wedge> wedges);
+  absl::Status CarveWedge(const Wedge& wedge) { return CarveWedges({&wedge, 1}); }
   // Later carving touches only the leaves inside `region` (§5.6.1: a second, finer pass over
   // the nodes that hold objects); the rest of the chunk stays unobserved.
   void RestrictTo(ChunkRegion region) { region_ = std::move(region); }
-  absl::Status CarveWedge(const Wedge& wedge) { return CarveWedges({&wedge, 1}); }
 
   // §4.3.2, bottom-up: 8 sibling leaves merge into their parent (LeafStats::Merge, exact sums)
   // when all 8 are observed leaves with the same label (interior iff p > 0.5). A node with an
