@@ -35,7 +35,9 @@ void ChunkRegion::Build(std::vector<bool> cells) {
     for (int z = 0; z < 2 * n; ++z)
       for (int y = 0; y < 2 * n; ++y)
         for (int x = 0; x < 2 * n; ++x) {
-          if (any_[d + 1][CellIndex({x, y, z}, d + 1)]) any_[d][CellIndex({x / 2, y / 2, z / 2}, d)] = true;
+          if (any_[d + 1][CellIndex({x, y, z}, d + 1)]) {
+            any_[d][CellIndex({x / 2, y / 2, z / 2}, d)] = true;
+          }
         }
   }
 }

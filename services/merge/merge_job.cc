@@ -215,7 +215,6 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
     return s;
   }
   std::vector<RecarveChunk> again;
-  ChunkRegionMap regions;
   double region_volume = 0;  // in chunks
   {
     absl::StatusOr<std::unique_ptr<TileSet>> objects =
@@ -227,7 +226,6 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
       ChunkRegion region = ObjectRecarveRegion(**tile, coarse_volume, /*margin_cells=*/1);
       if (region.empty()) continue;
       region_volume += std::ldexp(double(region.count()), -3 * region.depth());
-      regions.emplace(chunk, region);
       again.push_back(RecarveChunk{chunk, std::move(region)});
     }
   }
@@ -242,6 +240,8 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
                                                           dir.status().message()));
   }
   timings["merge.recarve"] = SecondsSince(t0);
+  ChunkRegionMap regions;  // the same regions, now by chunk, for the second segmentation
+  for (RecarveChunk& c : again) regions.emplace(c.chunk, std::move(c.region));
 
   t0 = Clock::now();
   absl::StatusOr<std::unique_ptr<TileSet>> tiles =
