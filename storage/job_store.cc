@@ -61,10 +61,19 @@ CREATE INDEX chunks_by_state ON chunks (job_id, state);
 INSERT INTO schema_version (version) VALUES (1);
 )sql";
 
+// Version 2 (tenants, DESIGN §8): every job has a tenant, and the folder of its files.
+// Jobs from before tenants existed belong to the default tenant and keep their files at the
+// roots (tenant_dir '').
+constexpr char kMigrateV1ToV2[] = R"sql(
+ALTER TABLE jobs ADD COLUMN tenant_dir TEXT NOT NULL DEFAULT '';
+UPDATE jobs SET tenant = 'default' WHERE tenant = '';
+UPDATE schema_version SET version = 2;
+)sql";
+
 constexpr char kJobColumns[] =
     "id, tenant, state, input_path, output_name, params_json, error, idempotency_key, "
     "created_unix_ms, updated_unix_ms, finished_unix_ms, chunks_total, chunks_done, "
-    "chunks_leased, chunk_retries";
+    "chunks_leased, chunk_retries, tenant_dir";
 constexpr char kChunkColumns[] =
     "job_id, x, y, z, state, lease_id, generation, worker_id, deadline_unix_ms, attempts, "
     "last_error, tile_path, tile_size_bytes, tile_sha256_hex, wedge_count";
@@ -210,6 +219,7 @@ JobRecord ReadJob(const Stmt& s) {
   j.counters.chunks_done = s.ColInt(12);
   j.counters.chunks_leased = s.ColInt(13);
   j.counters.chunk_retries = s.ColInt(14);
+  j.tenant_dir = s.ColText(15);
   return j;
 }
 
@@ -351,7 +361,7 @@ absl::Status JobStore::InitSchema() {
     app_id = s.ColInt(0);
     tables = s.ColInt(1);
   }
-  if (tables == 0) {  // a new (empty) file: create schema version kSchemaVersion
+  if (tables == 0) {  // a new (empty) file: version 1, then the migrations below
     Transaction tx(path_, db_);
     if (absl::Status st = tx.Begin(); !st.ok()) return st;
     if (absl::Status st = Exec(path_, db_, kSchemaV1, "create schema"); !st.ok()) return st;
@@ -361,7 +371,8 @@ absl::Status JobStore::InitSchema() {
         !st.ok()) {
       return st;
     }
-    return tx.Commit();
+    if (absl::Status st = tx.Commit(); !st.ok()) return st;
+    app_id = kApplicationId;
   }
   if (app_id != kApplicationId) {
     return absl::FailedPreconditionError(absl::StrCat(
@@ -389,25 +400,59 @@ absl::Status JobStore::InitSchema() {
     return absl::DataLossError(
         absl::StrCat("job store ", path_, ": invalid schema version ", version));
   }
-  // Migrations from version v to v+1 go here, each in its own transaction, when
-  // kSchemaVersion grows. Version 1 is the first, so there is nothing to migrate yet.
+  // Migrations from version v to v+1, each in its own transaction (a crash between two
+  // leaves a file of the earlier version, migrated on the next open).
+  if (version == 1) {
+    Transaction tx(path_, db_);
+    if (absl::Status st = tx.Begin(); !st.ok()) return st;
+    if (absl::Status st = Exec(path_, db_, kMigrateV1ToV2, "migrate schema 1 -> 2");
+        !st.ok()) {
+      return st;
+    }
+    if (absl::Status st = tx.Commit(); !st.ok()) return st;
+    version = 2;
+  }
   return absl::OkStatus();
 }
 
 // ---- jobs
 
-absl::Status JobStore::CreateJob(const JobRecord& job) {
+absl::Status JobStore::CreateJob(const JobRecord& job, int max_unfinished_of_tenant) {
   absl::MutexLock lock(&mu_);
-  Stmt s(path_, db_);
-  if (absl::Status st = s.Prepare(absl::StrCat("INSERT INTO jobs (", kJobColumns,
-                                               ") VALUES (?,?,?,?,?,?,?,?,?,?,?,0,0,0,0)"));
-      !st.ok()) {
-    return st;
+  Transaction tx(path_, db_);
+  if (absl::Status st = tx.Begin(); !st.ok()) return st;
+  if (max_unfinished_of_tenant > 0) {
+    Stmt count(path_, db_);
+    if (absl::Status st = count.Prepare(
+            "SELECT count(*) FROM jobs WHERE tenant=? AND state NOT IN (5, 6, 7)");
+        !st.ok()) {
+      return st;
+    }
+    count.Text(job.tenant);
+    absl::StatusOr<bool> row = count.Step("count unfinished jobs");
+    if (!row.ok()) return row.status();
+    const int64_t unfinished = count.ColInt(0);
+    if (unfinished >= max_unfinished_of_tenant) {
+      return absl::ResourceExhaustedError(
+          absl::StrCat("tenant ", job.tenant, " has ", unfinished,
+                       " unfinished job(s), the limit is ", max_unfinished_of_tenant,
+                       ": wait for one to finish or cancel one"));
+    }
   }
-  s.Text(job.id).Text(job.tenant).Int(static_cast<int>(job.state)).Text(job.input_path);
-  s.Text(job.output_name).Text(job.params_json).Text(job.error).Text(job.idempotency_key);
-  s.Int(job.created_unix_ms).Int(job.updated_unix_ms).Int(job.finished_unix_ms);
-  return s.Run(absl::StrCat("insert job ", job.id));
+  {
+    Stmt s(path_, db_);
+    if (absl::Status st = s.Prepare(absl::StrCat("INSERT INTO jobs (", kJobColumns,
+                                                 ") VALUES (?,?,?,?,?,?,?,?,?,?,?,0,0,0,0,?)"));
+        !st.ok()) {
+      return st;
+    }
+    s.Text(job.id).Text(job.tenant).Int(static_cast<int>(job.state)).Text(job.input_path);
+    s.Text(job.output_name).Text(job.params_json).Text(job.error).Text(job.idempotency_key);
+    s.Int(job.created_unix_ms).Int(job.updated_unix_ms).Int(job.finished_unix_ms);
+    s.Text(job.tenant_dir);
+    if (absl::Status st = s.Run(absl::StrCat("insert job ", job.id)); !st.ok()) return st;
+  }
+  return tx.Commit();
 }
 
 absl::StatusOr<JobRecord> JobStore::GetJobLocked(absl::string_view job_id) {

@@ -72,10 +72,14 @@ struct JobCounters {
 
 struct JobRecord {
   std::string id;      // primary key; chosen by the caller
-  std::string tenant;  // "" while authentication is off
+  std::string tenant;  // from the caller's bearer token; "default" without tokens
   JobState state = JobState::kQueued;
   std::string input_path;   // relative to the data root
   std::string output_name;  // unique per tenant
+  // The folder under the coordinator's data root and output root that holds this job's input
+  // and output ("" = the roots themselves; the tenant's name when tenants have their own
+  // folders). Kept with the job so a restart with other flags still finds its files.
+  std::string tenant_dir;
   std::string params_json;  // the resolved JobParams as JSON text; the store does not parse it
   std::string error;        // set with FAILED/CANCELLED
   std::string idempotency_key;  // "" = none; unique per tenant otherwise
@@ -136,7 +140,7 @@ class JobStore {
 
   // The schema version this build writes (docs/JOB_STORE.md). Opening a file of a newer
   // version is FAILED_PRECONDITION; an older one is migrated in place.
-  static constexpr int kSchemaVersion = 1;
+  static constexpr int kSchemaVersion = 2;
 
   // Opens (or creates) the store at `path`. A file that is not a SQLite database, or whose
   // schema is damaged, is DATA_LOSS with `path` in the message.
@@ -155,8 +159,11 @@ class JobStore {
   // ---- jobs. All methods are thread-safe (one connection behind a mutex).
 
   // Inserts a new job. ALREADY_EXISTS if the id, the (tenant, output_name) or the non-empty
-  // (tenant, idempotency_key) is taken. `job.counters` is ignored.
-  absl::Status CreateJob(const JobRecord& job);
+  // (tenant, idempotency_key) is taken. `job.counters` is ignored. With
+  // `max_unfinished_of_tenant` > 0: RESOURCE_EXHAUSTED (nothing written) when the tenant
+  // already has that many jobs not in a terminal state; counted and inserted in one
+  // transaction, so concurrent submits cannot both slip under the limit.
+  absl::Status CreateJob(const JobRecord& job, int max_unfinished_of_tenant = 0);
   // NOT_FOUND if unknown.
   absl::StatusOr<JobRecord> GetJob(absl::string_view job_id);
   // The tenant's job with this idempotency key, or nullopt.

@@ -8,6 +8,8 @@
 #include <fstream>
 #include <thread>
 
+#include <sqlite3.h>
+
 #include "absl/strings/str_cat.h"
 
 namespace carvemap {
@@ -364,6 +366,106 @@ TEST(JobStoreTest, ForeignSqliteDatabaseIsRefused) {
   ASSERT_FALSE(store.ok());
   EXPECT_EQ(store.status().code(), absl::StatusCode::kFailedPrecondition);
   EXPECT_THAT(store.status().message(), HasSubstr("not a carvemap job store"));
+}
+
+// A version-1 file, as carvemap wrote it before tenants (docs/JOB_STORE.md): its jobs belong
+// to the default tenant after the migration and keep their files at the roots.
+TEST(JobStoreTest, MigratesVersion1ToTenants) {
+  const std::string path = TempPath("v1.db");
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+    const char* v1 = R"sql(
+      PRAGMA application_id = 1129728595;
+      CREATE TABLE schema_version (version INTEGER NOT NULL);
+      CREATE TABLE jobs (
+        id TEXT PRIMARY KEY NOT NULL, tenant TEXT NOT NULL,
+        state INTEGER NOT NULL CHECK (state BETWEEN 1 AND 7), input_path TEXT NOT NULL,
+        output_name TEXT NOT NULL, params_json TEXT NOT NULL, error TEXT NOT NULL DEFAULT '',
+        idempotency_key TEXT NOT NULL DEFAULT '', created_unix_ms INTEGER NOT NULL,
+        updated_unix_ms INTEGER NOT NULL, finished_unix_ms INTEGER NOT NULL DEFAULT 0,
+        chunks_total INTEGER NOT NULL DEFAULT 0, chunks_done INTEGER NOT NULL DEFAULT 0,
+        chunks_leased INTEGER NOT NULL DEFAULT 0, chunk_retries INTEGER NOT NULL DEFAULT 0);
+      CREATE UNIQUE INDEX jobs_by_output ON jobs (tenant, output_name);
+      CREATE UNIQUE INDEX jobs_by_idempotency_key ON jobs (tenant, idempotency_key)
+        WHERE idempotency_key <> '';
+      CREATE INDEX jobs_by_created ON jobs (created_unix_ms DESC, id DESC);
+      CREATE TABLE chunks (
+        job_id TEXT NOT NULL REFERENCES jobs (id) ON DELETE CASCADE, x INTEGER NOT NULL,
+        y INTEGER NOT NULL, z INTEGER NOT NULL,
+        state INTEGER NOT NULL CHECK (state BETWEEN 1 AND 3), lease_id TEXT NOT NULL DEFAULT '',
+        generation INTEGER NOT NULL DEFAULT 0, worker_id TEXT NOT NULL DEFAULT '',
+        deadline_unix_ms INTEGER NOT NULL DEFAULT 0, attempts INTEGER NOT NULL DEFAULT 0,
+        last_error TEXT NOT NULL DEFAULT '', tile_path TEXT NOT NULL DEFAULT '',
+        tile_size_bytes INTEGER NOT NULL DEFAULT 0, tile_sha256_hex TEXT NOT NULL DEFAULT '',
+        wedge_count INTEGER NOT NULL DEFAULT 0, PRIMARY KEY (job_id, x, y, z)) WITHOUT ROWID;
+      CREATE INDEX chunks_by_state ON chunks (job_id, state);
+      INSERT INTO schema_version (version) VALUES (1);
+      INSERT INTO jobs (id, tenant, state, input_path, output_name, params_json,
+                        idempotency_key, created_unix_ms, updated_unix_ms)
+        VALUES ('j-old', '', 3, 'scans/a.h5', 'a', '{}', 'key-1', 100, 100);
+      INSERT INTO chunks (job_id, x, y, z, state) VALUES ('j-old', 0, 0, 0, 1);
+    )sql";
+    char* err = nullptr;
+    ASSERT_EQ(sqlite3_exec(db, v1, nullptr, nullptr, &err), SQLITE_OK) << (err ? err : "");
+    sqlite3_close(db);
+  }
+  {
+    auto store = JobStore::Open(path);
+    ASSERT_TRUE(store.ok()) << store.status();
+    auto old = (*store)->GetJob("j-old");
+    ASSERT_TRUE(old.ok()) << old.status();
+    EXPECT_EQ(old->tenant, "default");
+    EXPECT_EQ(old->tenant_dir, "");
+    EXPECT_EQ(old->state, JobState::kCarving);
+    EXPECT_EQ(old->counters.chunks_total, 0);  // counters are as they were stored
+    auto chunks = (*store)->ListChunks("j-old");
+    ASSERT_TRUE(chunks.ok());
+    EXPECT_EQ(chunks->size(), 1u);
+    // The idempotency key is now the default tenant's.
+    auto found = (*store)->FindJobByIdempotencyKey("default", "key-1");
+    ASSERT_TRUE(found.ok());
+    ASSERT_TRUE(found->has_value());
+    EXPECT_EQ((*found)->id, "j-old");
+    // New jobs carry their folder.
+    JobRecord fresh = MakeJob("j-new", 200, "acme");
+    fresh.tenant_dir = "acme";
+    ASSERT_TRUE((*store)->CreateJob(fresh).ok());
+  }
+  // Reopened: version 2 now, nothing migrated twice.
+  auto store = JobStore::Open(path);
+  ASSERT_TRUE(store.ok()) << store.status();
+  EXPECT_EQ((*store)->GetJob("j-new")->tenant_dir, "acme");
+  EXPECT_EQ((*store)->GetJob("j-old")->tenant, "default");
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  sqlite3_stmt* st = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db, "SELECT max(version), count(*) FROM schema_version", -1, &st,
+                               nullptr),
+            SQLITE_OK);
+  ASSERT_EQ(sqlite3_step(st), SQLITE_ROW);
+  EXPECT_EQ(sqlite3_column_int(st, 0), 2);
+  EXPECT_EQ(sqlite3_column_int(st, 1), 1);
+  sqlite3_finalize(st);
+  sqlite3_close(db);
+}
+
+TEST(JobStoreTest, UnfinishedJobsPerTenantAreLimited) {
+  auto store = JobStore::Open(TempPath("jobs.db"));
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE((*store)->CreateJob(MakeJob("a-1", 1, "acme"), 2).ok());
+  ASSERT_TRUE((*store)->CreateJob(MakeJob("a-2", 2, "acme"), 2).ok());
+  absl::Status third = (*store)->CreateJob(MakeJob("a-3", 3, "acme"), 2);
+  EXPECT_EQ(third.code(), absl::StatusCode::kResourceExhausted) << third;
+  EXPECT_THAT(third.message(), HasSubstr("limit is 2"));
+  EXPECT_EQ((*store)->GetJob("a-3").status().code(), absl::StatusCode::kNotFound);
+  // Another tenant is not affected; no limit: no count.
+  EXPECT_TRUE((*store)->CreateJob(MakeJob("b-1", 4, "beta"), 2).ok());
+  EXPECT_TRUE((*store)->CreateJob(MakeJob("a-4", 5, "acme")).ok());
+  // A finished job no longer counts.
+  ASSERT_TRUE((*store)->TransitionJob("a-1", {JobState::kCancelled, "x", 6}).ok());
+  ASSERT_TRUE((*store)->TransitionJob("a-2", {JobState::kFailed, "x", 6}).ok());
+  EXPECT_TRUE((*store)->CreateJob(MakeJob("a-5", 7, "acme"), 2).ok());
 }
 
 }  // namespace
