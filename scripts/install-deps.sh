@@ -10,6 +10,7 @@ PACKAGES=(
   libhdf5-dev hdf5-tools libspdlog-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libpng-dev libembree-dev libtbb-dev libssl-dev
+  openssl  # the CLI: tests/tools/make_test_pki.sh (TLS tests)
   python3 python3-h5py python3-numpy
   yamllint python3-yaml kubernetes-client
 )

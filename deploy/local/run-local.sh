@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The two-worker harness (DESIGN §9) by hand: a coordinator and two workers on loopback, the
 # job submitted with `carvemap submit --watch`, everything stopped at the end. What
-# `carvemap run` does in one command, spelled out as separate servers (as in a cluster).
+# `carvemap run` does in one command, spelled out as separate servers (as in a cluster),
+# including their secrets: a fresh bearer token for the job API and a cluster secret for the
+# workers, in files only this user can read (docs/RPC.md, "Authentication").
 # Usage: deploy/local/run-local.sh SCAN.h5 OUT [CARVEMAP]
 set -euo pipefail
 SCAN=$(realpath "$1")
@@ -11,6 +13,16 @@ WORK=$OUT/.carvemap
 mkdir -p "$WORK"
 rm -f "$WORK/port" "$WORK/jobs.db"*
 
+# 32 random bytes as hex, from the kernel's CSPRNG.
+random_secret() { od -An -tx1 -N32 /dev/urandom | tr -d ' \n'; }
+(
+  umask 077
+  TOKEN=$(random_secret)
+  echo "$TOKEN local" > "$WORK/tokens"
+  echo "$TOKEN" > "$WORK/token"
+  random_secret > "$WORK/cluster-secret"
+)
+
 pids=()
 cleanup() {
   for pid in "${pids[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
@@ -19,6 +31,7 @@ cleanup() {
 trap cleanup EXIT
 
 "$CARVEMAP" coordinator --listen 127.0.0.1:0 --port-file "$WORK/port" \
+    --tokens "$WORK/tokens" --cluster-secret-file "$WORK/cluster-secret" --shared-dirs \
     --data-root "$(dirname "$SCAN")" --output-root "$(dirname "$OUT")" --work-dir "$WORK" \
     --heartbeat-interval-s 1 --worker-timeout-s 5 > "$WORK/coordinator.log" 2>&1 &
 pids+=($!)
@@ -27,8 +40,10 @@ ADDR=$(cat "$WORK/port")
 echo "coordinator on $ADDR (logs in $WORK)"
 
 for i in 1 2; do
-  "$CARVEMAP" worker --coordinator "$ADDR" > "$WORK/worker-$i.log" 2>&1 &
+  "$CARVEMAP" worker --coordinator "$ADDR" --cluster-secret-file "$WORK/cluster-secret" \
+      > "$WORK/worker-$i.log" 2>&1 &
   pids+=($!)
 done
 
-"$CARVEMAP" submit --server "$ADDR" --watch -o "$(basename "$OUT")" "$(basename "$SCAN")"
+"$CARVEMAP" submit --server "$ADDR" --token-file "$WORK/token" --watch \
+    -o "$(basename "$OUT")" "$(basename "$SCAN")"

@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
+#include "services/cli/security_flags.h"
 #include "services/rpc/job_client.h"
 #include "services/rpc/process_util.h"
 
@@ -29,11 +30,26 @@ struct ClientFlags {
   std::string reason;
   std::string artifact;
   std::string dest;
+  SecurityFlags security;
 };
 
 void AddServer(CLI::App* cmd, ClientFlags& flags) {
   cmd->add_option("--server", flags.server, "host:port of the coordinator")
+      ->envname("CARVEMAP_SERVER")
       ->capture_default_str();
+  AddSecurityFlags(cmd, flags.security, /*worker=*/false);
+}
+
+// The client of the command, or null after reporting why not (a token file that cannot be
+// read, a bad TLS file).
+std::unique_ptr<JobClient> Connect(const ClientFlags& flags, const char* command,
+                                   int& exit_code) {
+  absl::StatusOr<ChannelSecurity> security = ResolveSecurity(flags.security, /*worker=*/false);
+  if (!security.ok()) {
+    exit_code = ReportStatus(command, security.status());
+    return nullptr;
+  }
+  return std::make_unique<JobClient>(flags.server, *security);
 }
 
 // Exit status of a finished job: its error, if any, as the command's error.
@@ -78,7 +94,9 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
   submit->add_flag("--watch", flags->watch, "Watch the job until it ends");
   submit->add_flag("-q,--quiet", flags->quiet, "No progress line");
   submit->callback([flags, &exit_code] {
-    JobClient client(flags->server);
+    std::unique_ptr<JobClient> connected = Connect(*flags, "submit", exit_code);
+    if (connected == nullptr) return;
+    JobClient& client = *connected;
     absl::StatusOr<JobInfo> job = client.Submit(flags->submit);
     if (!job.ok()) {
       exit_code = ReportStatus("submit", job.status());
@@ -95,7 +113,9 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
   watch->add_option("job", flags->job_id, "Job id")->required();
   watch->add_flag("-q,--quiet", flags->quiet, "No progress line");
   watch->callback([flags, &exit_code] {
-    JobClient client(flags->server);
+    std::unique_ptr<JobClient> connected = Connect(*flags, "watch", exit_code);
+    if (connected == nullptr) return;
+    JobClient& client = *connected;
     exit_code = ReportStatus("watch", WatchWithProgress(client, flags->job_id, flags->quiet));
   });
 
@@ -103,7 +123,9 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
   AddServer(status, *flags);
   status->add_option("job", flags->job_id, "Job id")->required();
   status->callback([flags, &exit_code] {
-    JobClient client(flags->server);
+    std::unique_ptr<JobClient> connected = Connect(*flags, "status", exit_code);
+    if (connected == nullptr) return;
+    JobClient& client = *connected;
     absl::StatusOr<JobInfo> job = client.Get(flags->job_id);
     if (!job.ok()) {
       exit_code = ReportStatus("status", job.status());
@@ -122,7 +144,9 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
                    "FAILED, CANCELLED)");
   list->add_option("--limit", flags->limit, "At most this many jobs")->capture_default_str();
   list->callback([flags, &exit_code] {
-    JobClient client(flags->server);
+    std::unique_ptr<JobClient> connected = Connect(*flags, "list", exit_code);
+    if (connected == nullptr) return;
+    JobClient& client = *connected;
     absl::StatusOr<std::vector<JobInfo>> jobs = client.List(flags->state, flags->limit);
     if (!jobs.ok()) {
       exit_code = ReportStatus("list", jobs.status());
@@ -136,7 +160,9 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
   cancel->add_option("job", flags->job_id, "Job id")->required();
   cancel->add_option("--reason", flags->reason, "Stored with the job's error");
   cancel->callback([flags, &exit_code] {
-    JobClient client(flags->server);
+    std::unique_ptr<JobClient> connected = Connect(*flags, "cancel", exit_code);
+    if (connected == nullptr) return;
+    JobClient& client = *connected;
     absl::StatusOr<JobInfo> job = client.Cancel(flags->job_id, flags->reason);
     if (!job.ok()) {
       exit_code = ReportStatus("cancel", job.status());
@@ -152,7 +178,9 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
       ->required();
   fetch->add_option("-o,--output", flags->dest, "Destination file (default: the name's basename)");
   fetch->callback([flags, &exit_code] {
-    JobClient client(flags->server);
+    std::unique_ptr<JobClient> connected = Connect(*flags, "fetch", exit_code);
+    if (connected == nullptr) return;
+    JobClient& client = *connected;
     std::string dest = flags->dest;
     if (dest.empty()) dest = flags->artifact.substr(flags->artifact.rfind('/') + 1);
     absl::Status s = client.Fetch(flags->job_id, flags->artifact, dest);

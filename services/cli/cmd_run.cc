@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cstdlib>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -25,6 +26,8 @@
 #include "absl/synchronization/mutex.h"
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
+#include "services/cli/security_flags.h"
+#include "services/rpc/bearer_tokens.h"
 #include "services/rpc/job_client.h"
 #include "services/rpc/process_util.h"
 
@@ -117,8 +120,32 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   fs::create_directories(work, ec);
   if (ec) return absl::FailedPreconditionError(absl::StrCat(work.string(), ": ", ec.message()));
 
+  // The security variables a user may have set for a remote coordinator (docs/RPC.md) are
+  // not for these servers: the children would pick them up.
+  for (const char* name :
+       {"CARVEMAP_SERVER", "CARVEMAP_TOKEN", "CARVEMAP_TOKEN_FILE", "CARVEMAP_TOKENS",
+        "CARVEMAP_TOKENS_FILE", "CARVEMAP_CLUSTER_SECRET", "CARVEMAP_CLUSTER_SECRET_FILE",
+        "CARVEMAP_TLS_CA", "CARVEMAP_TLS_CERT", "CARVEMAP_TLS_KEY", "CARVEMAP_TLS_SERVER_NAME"}) {
+    ::unsetenv(name);
+  }
+  // Our own servers get our own secrets, made fresh for this run: a tenant token for the job
+  // API and the cluster secret for the workers. Other users of this machine cannot talk to
+  // them (the files are 0600), and nobody has to set anything up.
+  absl::StatusOr<std::string> token = RandomSecret();
+  if (!token.ok()) return token.status();
+  absl::StatusOr<std::string> secret = RandomSecret();
+  if (!secret.ok()) return secret.status();
+  const fs::path tokens_file = work / "tokens";
+  const fs::path secret_file = work / "cluster-secret";
+  if (absl::Status s = WritePrivateFile(tokens_file.string(), *token + " local\n"); !s.ok()) {
+    return s;
+  }
+  if (absl::Status s = WritePrivateFile(secret_file.string(), *secret + "\n"); !s.ok()) return s;
+
   std::vector<std::string> args = {
       "coordinator", "--listen", "127.0.0.1:0", "--port-file", (work / "port").string(),
+      "--tokens", tokens_file.string(), "--cluster-secret-file", secret_file.string(),
+      "--shared-dirs",
       "--data-root", scan.parent_path().string(), "--output-root", out.parent_path().string(),
       "--work-dir", work.string(),
       "--heartbeat-interval-s", absl::StrCat(flags.heartbeat_interval_s),
@@ -143,7 +170,9 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   for (int i = 0; i < flags.workers; ++i) {
     const fs::path log = work / absl::StrCat("worker-", i + 1, ".log");
     absl::StatusOr<pid_t> pid =
-        SpawnSelf({"worker", "--coordinator", *address, "--listen", "127.0.0.1:0"}, log.string());
+        SpawnSelf({"worker", "--coordinator", *address, "--listen", "127.0.0.1:0",
+                   "--cluster-secret-file", secret_file.string()},
+                  log.string());
     if (!pid.ok()) return pid.status();
     WriteText(work / absl::StrCat("worker-", i + 1, ".pid"), absl::StrCat(*pid));
     absl::MutexLock lock(&state.mu);
@@ -154,7 +183,9 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
                  address->c_str(), flags.workers, work.c_str());
   }
 
-  state.client = std::make_unique<JobClient>(*address);
+  ChannelSecurity security;
+  security.bearer = *token;
+  state.client = std::make_unique<JobClient>(*address, security);
   if (absl::Status s = state.client->WaitForReady(10.0); !s.ok()) return s;
   if (state.interrupted) return absl::CancelledError("interrupted");
   SubmitParams submit;

@@ -3,6 +3,7 @@
 #include <sys/resource.h>
 
 #include <atomic>
+#include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -15,6 +16,8 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "services/cli/commands.h"
+#include "services/cli/security_flags.h"
+#include "services/rpc/bearer_tokens.h"
 #include "services/rpc/coordinator_service.h"
 #include "services/rpc/process_util.h"
 #include "services/rpc/worker_service.h"
@@ -60,12 +63,38 @@ void LogResourceUsage(const char* who) {
 struct CoordinatorFlags {
   CoordinatorSpec spec;
   std::string port_file;
+  std::string tokens_file;
+  std::string secret_file;
   bool no_merge = false;
   bool verbose = false;
 };
 
+// Tokens and the cluster secret from their files, or else from the variables holding them
+// (CARVEMAP_TOKENS: the tokens file's text; CARVEMAP_CLUSTER_SECRET: the secret).
+absl::Status LoadSecrets(CoordinatorFlags& flags) {
+  if (!flags.tokens_file.empty()) {
+    absl::StatusOr<std::vector<TenantToken>> tokens = ReadTokensFile(flags.tokens_file);
+    if (!tokens.ok()) return tokens.status();
+    flags.spec.tokens = *std::move(tokens);
+  } else if (const char* env = std::getenv("CARVEMAP_TOKENS"); env && *env) {
+    absl::StatusOr<std::vector<TenantToken>> tokens = ParseTokens(env, "CARVEMAP_TOKENS");
+    if (!tokens.ok()) return tokens.status();
+    flags.spec.tokens = *std::move(tokens);
+  }
+  if (!flags.secret_file.empty()) {
+    absl::StatusOr<std::string> secret = ReadSecretFile(flags.secret_file, "cluster secret file");
+    if (!secret.ok()) return secret.status();
+    flags.spec.cluster_secret = *secret;
+  } else if (const char* env = std::getenv("CARVEMAP_CLUSTER_SECRET"); env && *env) {
+    flags.spec.cluster_secret = env;
+    if (absl::Status s = ValidateSecret(env, "CARVEMAP_CLUSTER_SECRET"); !s.ok()) return s;
+  }
+  return absl::OkStatus();
+}
+
 absl::Status RunCoordinator(CoordinatorFlags flags) {
   SetUpLogging(flags.verbose);
+  if (absl::Status s = LoadSecrets(flags); !s.ok()) return s;
   // Set up before any thread exists (gRPC starts threads).
   auto stop = std::make_shared<std::atomic<CoordinatorServer*>>(nullptr);
   auto stop_requested = std::make_shared<std::atomic<bool>>(false);
@@ -96,7 +125,10 @@ absl::Status RunCoordinator(CoordinatorFlags flags) {
 
 void RegisterCoordinator(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
-      "coordinator", "Run the coordinator server: job service and carve-task service (gRPC)");
+      "coordinator",
+      "Run the coordinator server: job service and carve-task service (gRPC). On a "
+      "non-loopback address it needs --tokens (tenants' bearer tokens) and "
+      "--cluster-secret-file or --tls-client-ca (workers), or --insecure");
   auto flags = std::make_shared<CoordinatorFlags>();
   flags->spec.listen_address = "127.0.0.1:7600";
   CoordinatorSpec& s = flags->spec;
@@ -126,6 +158,44 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_flag("--keep-spill", s.keep_spill, "Keep the spill files after a job ends");
   cmd->add_flag("--no-merge", flags->no_merge, "Skip the merge step (tiles only)");
+  // Security (docs/RPC.md "Authentication", docs/CLUSTER.md).
+  cmd->add_option("--tokens", flags->tokens_file,
+                  "Bearer tokens of the job API: lines 'TOKEN TENANT' or JSON {\"tokens\": "
+                  "[{\"token\", \"tenant\"}]}; else the CARVEMAP_TOKENS variable (same text). "
+                  "Without tokens the job API is open (every caller is tenant 'default'): "
+                  "allowed on a loopback address, elsewhere only with --insecure")
+      ->envname("CARVEMAP_TOKENS_FILE");
+  cmd->add_option("--cluster-secret-file", flags->secret_file,
+                  "Secret that workers must present on the carve-task API (else the "
+                  "CARVEMAP_CLUSTER_SECRET variable); required off loopback unless "
+                  "--tls-client-ca or --insecure")
+      ->envname("CARVEMAP_CLUSTER_SECRET_FILE");
+  cmd->add_option("--tls-cert", s.tls_cert_file, "Serve TLS with this PEM certificate chain")
+      ->envname("CARVEMAP_TLS_CERT");
+  cmd->add_option("--tls-key", s.tls_key_file, "PEM private key of --tls-cert")
+      ->envname("CARVEMAP_TLS_KEY");
+  cmd->add_option("--tls-client-ca", s.tls_client_ca_file,
+                  "Mutual TLS: a client certificate signed by this CA authenticates a worker "
+                  "(as the cluster secret does)");
+  cmd->add_flag("--insecure", s.insecure,
+                "Allow serving a non-loopback address without --tokens, or with an open "
+                "carve-task API (anyone reaching the port can submit, fetch every output or "
+                "act as a worker)");
+  cmd->add_flag("--shared-dirs", s.shared_dirs,
+                "All tenants share the data and output roots (only with a single tenant); "
+                "default: each tenant's inputs in <data-root>/<tenant>/, outputs in "
+                "<output-root>/<tenant>/");
+  s.max_jobs_per_tenant = 16;
+  cmd->add_option("--max-jobs-per-tenant", s.max_jobs_per_tenant,
+                  "Unfinished jobs a tenant may have; one more is refused (RESOURCE_EXHAUSTED). "
+                  "0: no limit")
+      ->capture_default_str();
+  cmd->add_option("--max-request-bytes", s.max_request_bytes,
+                  "Largest request message accepted (larger: RESOURCE_EXHAUSTED)")
+      ->capture_default_str();
+  cmd->add_option("--health-listen", s.health_listen_address,
+                  "Also serve grpc.health.v1 alone, in plaintext, on this host:port (for "
+                  "Kubernetes probes, which cannot speak TLS)");
   cmd->add_flag("-v,--verbose", flags->verbose, "Debug logging");
   cmd->callback([flags, &exit_code] {
     exit_code = ReportStatus("coordinator", RunCoordinator(*flags));
@@ -134,11 +204,15 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
 
 struct WorkerFlags {
   WorkerSpec spec;
+  SecurityFlags security;
   bool verbose = false;
 };
 
-absl::Status RunWorker(const WorkerFlags& flags) {
+absl::Status RunWorker(WorkerFlags flags) {
   SetUpLogging(flags.verbose);
+  absl::StatusOr<ChannelSecurity> security = ResolveSecurity(flags.security, /*worker=*/true);
+  if (!security.ok()) return security.status();
+  flags.spec.security = *std::move(security);
   auto stop = std::make_shared<std::atomic<WorkerServer*>>(nullptr);
   auto stop_requested = std::make_shared<std::atomic<bool>>(false);
   HandleTerminationSignals([stop, stop_requested](int signo) {
@@ -172,6 +246,7 @@ void RegisterWorker(CLI::App& app, int& exit_code) {
   cmd->add_option("--coordinator-lost-s", s.coordinator_lost_s,
                   "Exit when the coordinator has been unreachable this long")
       ->capture_default_str();
+  AddSecurityFlags(cmd, flags->security, /*worker=*/true);
   cmd->add_flag("-v,--verbose", flags->verbose, "Debug logging");
   cmd->callback([flags, &exit_code] { exit_code = ReportStatus("worker", RunWorker(*flags)); });
 }

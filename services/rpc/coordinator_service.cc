@@ -33,7 +33,10 @@
 #include "services/geometry/octree_keys.h"
 #include "services/grpc_server_common.h"
 #include "services/grpc_status.h"
+#include "services/rpc/bearer_tokens.h"
 #include "services/rpc/file_hash.h"
+#include "services/rpc/grpc_security.h"
+#include "storage/confined_path.h"
 #include "storage/job_store.h"
 
 namespace carvemap {
@@ -211,6 +214,46 @@ absl::Status CoordinatorSpec::Validate() const {
   if (max_inline_wedge_bytes < 0 || max_inline_wedge_bytes > (3 << 20)) {
     return absl::InvalidArgumentError("max_inline_wedge_bytes must be in [0, 3 MiB]");
   }
+  // ---- security
+  if (tls_cert_file.empty() != tls_key_file.empty()) {
+    return absl::InvalidArgumentError("TLS needs both --tls-cert and --tls-key");
+  }
+  if (!tls_client_ca_file.empty() && tls_cert_file.empty()) {
+    return absl::InvalidArgumentError(
+        "--tls-client-ca (mutual TLS) needs the server's own --tls-cert and --tls-key");
+  }
+  absl::StatusOr<TokenTable> table = TokenTable::Build(tokens);
+  if (!table.ok()) return table.status();
+  if (!cluster_secret.empty()) {
+    if (absl::Status s = ValidateSecret(cluster_secret, "cluster secret"); !s.ok()) return s;
+    // A tenant holding it could act as a worker: commit tiles into any job.
+    if (table->Lookup(cluster_secret).has_value()) {
+      return absl::InvalidArgumentError("the cluster secret is also a tenant's token");
+    }
+  }
+  if (shared_dirs && table->tenants().size() > 1) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--shared-dirs: the tokens belong to ", table->tenants().size(),
+        " tenants, whose inputs and outputs would mix; shared folders need a single tenant"));
+  }
+  if (max_jobs_per_tenant < 0) return absl::InvalidArgumentError("max_jobs_per_tenant < 0");
+  if (max_request_bytes < 4096) {
+    return absl::InvalidArgumentError("max_request_bytes must be >= 4096");
+  }
+  if (!IsLoopbackAddress(listen_address) && !insecure) {
+    if (tokens.empty()) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "listening on ", listen_address, " (not loopback) without bearer tokens: anyone who "
+          "reaches it could submit jobs and fetch every output. Give --tokens FILE (or "
+          "CARVEMAP_TOKENS), or --insecure to serve it open anyway"));
+    }
+    if (cluster_secret.empty() && tls_client_ca_file.empty()) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "listening on ", listen_address, " (not loopback) with an open carve-task API: "
+          "anyone who reaches it could act as a worker. Give --cluster-secret-file FILE (or "
+          "CARVEMAP_CLUSTER_SECRET), or --tls-client-ca for mutual TLS, or --insecure"));
+    }
+  }
   return absl::OkStatus();
 }
 
@@ -225,20 +268,37 @@ class CoordinatorServer::Impl {
   void Shutdown();
   void Wait() { shutdown_done_.WaitForNotification(); }
   int port() const { return port_; }
+  int health_port() const { return health_port_; }
+
+  // Who is calling the job API: the tenant of the bearer token, and the folder under the
+  // roots that holds its files ("" = the roots).
+  struct Caller {
+    std::string tenant;
+    std::string tenant_dir;
+  };
+  // UNAUTHENTICATED without a known bearer token (when the coordinator has tokens).
+  absl::StatusOr<Caller> AuthenticateTenant(const grpc::ServerContext& ctx);
+  // The carve-task API: the cluster secret or a verified client certificate, if either is
+  // configured; UNAUTHENTICATED otherwise.
+  absl::Status AuthenticatePeer(const grpc::ServerContext& ctx);
 
   // ---- JobService
-  absl::Status SubmitJob(const pb::SubmitJobRequest& req, pb::SubmitJobResponse& resp);
-  absl::Status GetJob(const pb::GetJobRequest& req, pb::Job& resp);
-  absl::Status WatchJob(grpc::ServerContext& ctx, const pb::WatchJobRequest& req,
-                        grpc::ServerWriter<pb::JobEvent>& writer);
+  absl::Status SubmitJob(const Caller& caller, const pb::SubmitJobRequest& req,
+                         pb::SubmitJobResponse& resp);
+  absl::Status GetJob(const Caller& caller, const pb::GetJobRequest& req, pb::Job& resp);
+  absl::Status WatchJob(const Caller& caller, grpc::ServerContext& ctx,
+                        const pb::WatchJobRequest& req, grpc::ServerWriter<pb::JobEvent>& writer);
   // One Progress event of WatchJob; false when the client is gone.
   bool WriteProgress(grpc::ServerWriter<pb::JobEvent>& writer, pb::JobEvent e,
                      const JobRecord& job, JobState state,
                      std::chrono::steady_clock::time_point now, int64_t& last_rays,
                      std::chrono::steady_clock::time_point& last_rays_time);
-  absl::Status CancelJob(const pb::CancelJobRequest& req, pb::CancelJobResponse& resp);
-  absl::Status ListJobs(const pb::ListJobsRequest& req, pb::ListJobsResponse& resp);
-  absl::Status FetchArtifact(grpc::ServerContext& ctx, const pb::FetchArtifactRequest& req,
+  absl::Status CancelJob(const Caller& caller, const pb::CancelJobRequest& req,
+                         pb::CancelJobResponse& resp);
+  absl::Status ListJobs(const Caller& caller, const pb::ListJobsRequest& req,
+                        pb::ListJobsResponse& resp);
+  absl::Status FetchArtifact(const Caller& caller, grpc::ServerContext& ctx,
+                             const pb::FetchArtifactRequest& req,
                              grpc::ServerWriter<pb::ArtifactChunk>& writer);
 
   // ---- CarveTaskService
@@ -273,9 +333,19 @@ class CoordinatorServer::Impl {
     std::string current_stage;
   };
 
-  std::string OutputDir(const JobRecord& job) const {
-    return (fs::path(spec_.output_root) / job.output_name).string();
+  // Where a tenant's inputs (and outputs) are: the roots, or their <tenant_dir> folders.
+  std::string DataDir(const std::string& tenant_dir) const {
+    return (fs::path(spec_.data_root) / tenant_dir).lexically_normal().string();
   }
+  std::string OutputRoot(const std::string& tenant_dir) const {
+    return (fs::path(spec_.output_root) / tenant_dir).lexically_normal().string();
+  }
+  std::string OutputDir(const JobRecord& job) const {
+    return (fs::path(OutputRoot(job.tenant_dir)) / job.output_name).string();
+  }
+  // The caller's job, or NOT_FOUND with the same message whether the id is unknown or
+  // another tenant's: ids of others do not leak.
+  absl::StatusOr<JobRecord> OwnJob(const Caller& caller, const std::string& job_id);
   std::string TilesDir(const JobRecord& job) const {
     if (spec_.storage_root.empty()) return (fs::path(OutputDir(job)) / "tiles").string();
     return (fs::path(spec_.storage_root) / job.id / "tiles").string();
@@ -320,9 +390,12 @@ class CoordinatorServer::Impl {
   std::string work_dir_;
   std::unique_ptr<JobStore> store_;
   std::unique_ptr<grpc::Server> server_;
+  std::unique_ptr<grpc::Server> health_server_;  // spec_.health_listen_address
+  TokenTable tokens_;
   std::unique_ptr<grpc::Service> job_service_;
   std::unique_ptr<grpc::Service> carve_service_;
   int port_ = 0;
+  int health_port_ = 0;
   std::atomic<bool> stopping_{false};
   absl::Notification shutdown_done_;
   std::thread sweeper_;
@@ -347,29 +420,41 @@ namespace {
 class JobServiceAdapter final : public pb::JobService::Service {
  public:
   explicit JobServiceAdapter(CoordinatorServer::Impl& impl) : impl_(impl) {}
-  grpc::Status SubmitJob(grpc::ServerContext*, const pb::SubmitJobRequest* req,
+  grpc::Status SubmitJob(grpc::ServerContext* ctx, const pb::SubmitJobRequest* req,
                          pb::SubmitJobResponse* resp) override {
-    return ToGrpcStatus(impl_.SubmitJob(*req, *resp));
+    auto caller = impl_.AuthenticateTenant(*ctx);
+    if (!caller.ok()) return ToGrpcStatus(caller.status());
+    return ToGrpcStatus(impl_.SubmitJob(*caller, *req, *resp));
   }
-  grpc::Status GetJob(grpc::ServerContext*, const pb::GetJobRequest* req,
+  grpc::Status GetJob(grpc::ServerContext* ctx, const pb::GetJobRequest* req,
                       pb::Job* resp) override {
-    return ToGrpcStatus(impl_.GetJob(*req, *resp));
+    auto caller = impl_.AuthenticateTenant(*ctx);
+    if (!caller.ok()) return ToGrpcStatus(caller.status());
+    return ToGrpcStatus(impl_.GetJob(*caller, *req, *resp));
   }
   grpc::Status WatchJob(grpc::ServerContext* ctx, const pb::WatchJobRequest* req,
                         grpc::ServerWriter<pb::JobEvent>* writer) override {
-    return ToGrpcStatus(impl_.WatchJob(*ctx, *req, *writer));
+    auto caller = impl_.AuthenticateTenant(*ctx);
+    if (!caller.ok()) return ToGrpcStatus(caller.status());
+    return ToGrpcStatus(impl_.WatchJob(*caller, *ctx, *req, *writer));
   }
-  grpc::Status CancelJob(grpc::ServerContext*, const pb::CancelJobRequest* req,
+  grpc::Status CancelJob(grpc::ServerContext* ctx, const pb::CancelJobRequest* req,
                          pb::CancelJobResponse* resp) override {
-    return ToGrpcStatus(impl_.CancelJob(*req, *resp));
+    auto caller = impl_.AuthenticateTenant(*ctx);
+    if (!caller.ok()) return ToGrpcStatus(caller.status());
+    return ToGrpcStatus(impl_.CancelJob(*caller, *req, *resp));
   }
-  grpc::Status ListJobs(grpc::ServerContext*, const pb::ListJobsRequest* req,
+  grpc::Status ListJobs(grpc::ServerContext* ctx, const pb::ListJobsRequest* req,
                         pb::ListJobsResponse* resp) override {
-    return ToGrpcStatus(impl_.ListJobs(*req, *resp));
+    auto caller = impl_.AuthenticateTenant(*ctx);
+    if (!caller.ok()) return ToGrpcStatus(caller.status());
+    return ToGrpcStatus(impl_.ListJobs(*caller, *req, *resp));
   }
   grpc::Status FetchArtifact(grpc::ServerContext* ctx, const pb::FetchArtifactRequest* req,
                              grpc::ServerWriter<pb::ArtifactChunk>* writer) override {
-    return ToGrpcStatus(impl_.FetchArtifact(*ctx, *req, *writer));
+    auto caller = impl_.AuthenticateTenant(*ctx);
+    if (!caller.ok()) return ToGrpcStatus(caller.status());
+    return ToGrpcStatus(impl_.FetchArtifact(*caller, *ctx, *req, *writer));
   }
 
  private:
@@ -381,22 +466,27 @@ class CarveServiceAdapter final : public pb::CarveTaskService::Service {
   explicit CarveServiceAdapter(CoordinatorServer::Impl& impl) : impl_(impl) {}
   grpc::Status RegisterWorker(grpc::ServerContext* ctx, const pb::RegisterWorkerRequest* req,
                               pb::RegisterWorkerResponse* resp) override {
+    if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
     return ToGrpcStatus(impl_.RegisterWorker(*ctx, *req, *resp));
   }
-  grpc::Status Heartbeat(grpc::ServerContext*, const pb::HeartbeatRequest* req,
+  grpc::Status Heartbeat(grpc::ServerContext* ctx, const pb::HeartbeatRequest* req,
                          pb::HeartbeatResponse* resp) override {
+    if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
     return ToGrpcStatus(impl_.Heartbeat(*req, *resp));
   }
   grpc::Status LeaseChunk(grpc::ServerContext* ctx, const pb::LeaseChunkRequest* req,
                           pb::LeaseChunkResponse* resp) override {
+    if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
     return ToGrpcStatus(impl_.LeaseChunk(*ctx, *req, *resp));
   }
-  grpc::Status CompleteChunk(grpc::ServerContext*, const pb::CompleteChunkRequest* req,
+  grpc::Status CompleteChunk(grpc::ServerContext* ctx, const pb::CompleteChunkRequest* req,
                              pb::CompleteChunkResponse* resp) override {
+    if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
     return ToGrpcStatus(impl_.CompleteChunk(*req, *resp));
   }
-  grpc::Status FailChunk(grpc::ServerContext*, const pb::FailChunkRequest* req,
+  grpc::Status FailChunk(grpc::ServerContext* ctx, const pb::FailChunkRequest* req,
                          pb::FailChunkResponse* resp) override {
+    if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
     return ToGrpcStatus(impl_.FailChunk(*req, *resp));
   }
 
@@ -410,6 +500,16 @@ class CarveServiceAdapter final : public pb::CarveTaskService::Service {
 
 absl::Status CoordinatorServer::Impl::Start() {
   if (absl::Status s = spec_.Validate(); !s.ok()) return s;
+  absl::StatusOr<TokenTable> tokens = TokenTable::Build(spec_.tokens);
+  if (!tokens.ok()) return tokens.status();
+  tokens_ = *std::move(tokens);
+  std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
+  if (!spec_.tls_cert_file.empty()) {
+    absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> tls = MakeServerCredentials(
+        spec_.tls_cert_file, spec_.tls_key_file, spec_.tls_client_ca_file);
+    if (!tls.ok()) return tls.status();
+    credentials = *std::move(tls);
+  }
   work_dir_ = spec_.work_dir.empty()
                   ? (fs::path(spec_.storage_root.empty() ? spec_.output_root : spec_.storage_root) /
                      ".carvemap")
@@ -433,7 +533,9 @@ absl::Status CoordinatorServer::Impl::Start() {
   job_service_ = std::make_unique<JobServiceAdapter>(*this);
   carve_service_ = std::make_unique<CarveServiceAdapter>(*this);
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(spec_.listen_address, grpc::InsecureServerCredentials(), &port_);
+  builder.AddListeningPort(spec_.listen_address, credentials, &port_);
+  // Oversize requests are refused by gRPC itself (RESOURCE_EXHAUSTED) before any handler.
+  builder.SetMaxReceiveMessageSize(spec_.max_request_bytes);
   builder.RegisterService(job_service_.get());
   builder.RegisterService(carve_service_.get());
   server_ = builder.BuildAndStart();
@@ -441,9 +543,48 @@ absl::Status CoordinatorServer::Impl::Start() {
     return absl::UnavailableError(
         absl::StrCat("coordinator: cannot listen on ", spec_.listen_address));
   }
-  SetServing(*server_, "", true);
-  SetServing(*server_, "carvemap.v1.JobService", true);
-  SetServing(*server_, "carvemap.v1.CarveTaskService", true);
+  if (!spec_.health_listen_address.empty()) {
+    // Health (and reflection) only: the default health service comes with every server.
+    grpc::ServerBuilder health;
+    health.AddListeningPort(spec_.health_listen_address, grpc::InsecureServerCredentials(),
+                            &health_port_);
+    health.SetMaxReceiveMessageSize(4096);
+    health_server_ = health.BuildAndStart();
+    if (health_server_ == nullptr || health_port_ == 0) {
+      return absl::UnavailableError(absl::StrCat("coordinator: cannot listen on ",
+                                                 spec_.health_listen_address, " (health)"));
+    }
+  }
+  for (grpc::Server* server : {server_.get(), health_server_.get()}) {
+    if (server == nullptr) continue;
+    SetServing(*server, "", true);
+    SetServing(*server, "carvemap.v1.JobService", true);
+    SetServing(*server, "carvemap.v1.CarveTaskService", true);
+  }
+  const bool loopback = IsLoopbackAddress(spec_.listen_address);
+  if (tokens_.empty()) {
+    spdlog::warn("coordinator: no bearer tokens: the job API is open, every caller is tenant "
+                 "'{}'{}", kDefaultTenant,
+                 loopback ? " (loopback only)" : " (--insecure, NOT loopback)");
+  } else {
+    spdlog::info("coordinator: {} bearer token(s) for {} tenant(s), {}", tokens_.size(),
+                 tokens_.tenants().size(),
+                 spec_.shared_dirs ? "sharing the data and output roots"
+                                   : "each in its own folder under the data and output roots");
+  }
+  if (!spec_.cluster_secret.empty() || !spec_.tls_client_ca_file.empty()) {
+    spdlog::info("coordinator: carve-task API needs {}",
+                 spec_.cluster_secret.empty()       ? "a client certificate"
+                 : spec_.tls_client_ca_file.empty() ? "the cluster secret"
+                                                    : "the cluster secret or a client certificate");
+  } else {
+    spdlog::warn("coordinator: carve-task API open to any caller{}",
+                 loopback ? " (loopback only)" : " (--insecure, NOT loopback)");
+  }
+  if (spec_.tls_cert_file.empty() && !loopback) {
+    spdlog::warn("coordinator: plaintext on {}: tokens and data cross the network unencrypted "
+                 "(give --tls-cert/--tls-key)", spec_.listen_address);
+  }
   sweeper_ = std::thread([this] { Sweep(); });
 
   // Resume what a previous coordinator left unfinished: the store is the truth.
@@ -469,6 +610,10 @@ void CoordinatorServer::Impl::Shutdown() {
   absl::MutexLock shutdown_lock(&shutdown_mu_);
   if (shutdown_done_.HasBeenNotified()) return;
   stopping_ = true;
+  if (health_server_ != nullptr) {
+    SetServing(*health_server_, "", false);
+    health_server_->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(100));
+  }
   if (server_ != nullptr) {
     SetServing(*server_, "", false);
     // Streams and long polls see stopping_ within a poll interval; the deadline bounds the wait.
@@ -508,6 +653,65 @@ void CoordinatorServer::Impl::Sweep() {
       it = workers_.erase(it);
     }
   }
+}
+
+// ---- authentication
+
+absl::StatusOr<CoordinatorServer::Impl::Caller> CoordinatorServer::Impl::AuthenticateTenant(
+    const grpc::ServerContext& ctx) {
+  if (tokens_.empty()) return Caller{kDefaultTenant, ""};
+  const CallerBearer bearer = BearerOf(ctx);
+  std::optional<std::string> tenant;
+  if (bearer.token) tenant = tokens_.Lookup(*bearer.token);
+  if (!tenant) {
+    // The reason goes to the log (with the peer, never the token); the caller learns only
+    // what to send.
+    spdlog::warn("coordinator: job API call from {} refused: {}", ctx.peer(),
+                 !bearer.present ? "no authorization metadata"
+                 : !bearer.token ? "authorization is not a bearer token"
+                                 : "unknown bearer token");
+    return absl::UnauthenticatedError(
+        !bearer.present
+            ? "missing bearer token: send metadata 'authorization: Bearer <token>' (carvemap: "
+              "--token-file FILE or CARVEMAP_TOKEN)"
+            : "invalid bearer token");
+  }
+  return Caller{*tenant, spec_.shared_dirs ? "" : *tenant};
+}
+
+absl::Status CoordinatorServer::Impl::AuthenticatePeer(const grpc::ServerContext& ctx) {
+  if (spec_.cluster_secret.empty() && spec_.tls_client_ca_file.empty()) {
+    return absl::OkStatus();  // open: loopback only, or --insecure (Validate)
+  }
+  if (!spec_.tls_client_ca_file.empty() && HasVerifiedClientCertificate(ctx)) {
+    return absl::OkStatus();
+  }
+  if (!spec_.cluster_secret.empty()) {
+    const CallerBearer bearer = BearerOf(ctx);
+    if (bearer.token && SecretEquals(*bearer.token, spec_.cluster_secret)) {
+      return absl::OkStatus();
+    }
+  }
+  spdlog::warn("coordinator: carve-task call from {} refused: no cluster secret or client "
+               "certificate", ctx.peer());
+  return absl::UnauthenticatedError(
+      "internal carve-task API: present the cluster secret ('authorization: Bearer <secret>', "
+      "carvemap worker --cluster-secret-file) or a client certificate");
+}
+
+absl::StatusOr<JobRecord> CoordinatorServer::Impl::OwnJob(const Caller& caller,
+                                                          const std::string& job_id) {
+  // One message for "no such job" and "another tenant's job", built here (not the store's).
+  auto not_found = [&] {
+    return absl::NotFoundError(absl::StrCat("job ", job_id, " not found"));
+  };
+  if (job_id.empty()) return absl::InvalidArgumentError("job_id is empty");
+  if (job_id.size() > 128) return absl::InvalidArgumentError("job_id longer than 128 bytes");
+  absl::StatusOr<JobRecord> job = store_->GetJob(job_id);
+  if (absl::IsNotFound(job.status())) return not_found();
+  if (!job.ok()) return job.status();
+  if (job->tenant != caller.tenant) return not_found();
+  return job;
 }
 
 // ---- the job pipeline
@@ -570,8 +774,14 @@ absl::Status CoordinatorServer::Impl::IngestStage(const JobRecord& job) {
   fs::create_directories(tiles, ec);
   if (ec) return absl::FailedPreconditionError(absl::StrCat("tiles dir ", tiles, ": ", ec.message()));
 
+  // Checked again (the submit's check was then): the scan is read through the descriptor
+  // opened here, so a symlink swapped meanwhile cannot point the ingest elsewhere, and errors
+  // name the path as the tenant gave it.
+  absl::StatusOr<ConfinedFile> scan =
+      ConfinedFile::Open(DataDir(job.tenant_dir), job.input_path, "input_path");
+  if (!scan.ok()) return scan.status();
   IngestOptions options;
-  options.scan_path = (fs::path(spec_.data_root) / job.input_path).string();
+  options.scan_path = scan->path();
   options.spill_dir = spill;
   const std::string id = job.id;
   absl::MutexLock hdf5_lock(&hdf5_mu_);
@@ -580,7 +790,7 @@ absl::Status CoordinatorServer::Impl::IngestStage(const JobRecord& job) {
         absl::MutexLock lock(&mu_);
         runtime_[id].rays_ingested = static_cast<int64_t>(p.rays);
       });
-  if (!result.ok()) return result.status();
+  if (!result.ok()) return scan->Rename(result.status());
   spdlog::info("coordinator: job {}: ingested {} frames, {} rays, {} wedges into {} chunks in {:.1f} s",
                job.id, result->frames, result->rays, result->wedges, result->chunks.size(),
                result->elapsed_s);
@@ -785,7 +995,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       req.job_id = job_id;
       req.tiles_dir = rt.tiles_dir;
       req.output_dir = rt.output_dir;
-      req.scan_path = (fs::path(spec_.data_root) / job->input_path).string();
+      // Filled in below, through a confined descriptor as in the ingest.
       req.resolution_m = rt.params.resolution_m;
       req.object_resolution_m = rt.params.object_resolution_m;
       nlohmann::json doc = {{"job_id", job_id},
@@ -827,9 +1037,14 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
     };
     if (spec_.merge) {
       absl::Status merged;
-      {
+      absl::StatusOr<ConfinedFile> scan =
+          ConfinedFile::Open(DataDir(job->tenant_dir), job->input_path, "input_path");
+      if (!scan.ok()) {
+        merged = scan.status();
+      } else {
+        req.scan_path = scan->path();
         absl::MutexLock lock(&hdf5_mu_);
-        merged = spec_.merge(req);
+        merged = scan->Rename(spec_.merge(req));
       }
       if (absl::Status s = merged; !s.ok()) {
         if (stopping_) return;  // resumed by the next coordinator
@@ -850,16 +1065,18 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
 
 // ---- JobService
 
-absl::Status CoordinatorServer::Impl::SubmitJob(const pb::SubmitJobRequest& req,
+absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
+                                                const pb::SubmitJobRequest& req,
                                                 pb::SubmitJobResponse& resp) {
   if (stopping_) return absl::UnavailableError("coordinator shutting down");
   if (req.input_case() == pb::SubmitJobRequest::kUploadId) {
     return absl::UnimplementedError("upload_id input: streamed upload is not implemented yet");
   }
   const std::string& input = req.input_path();
-  if (!ValidRelativePath(input)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "input_path '", input, "': must be relative to the data root, without '..'"));
+  // Text first (INVALID_ARGUMENT, nothing on disk looked at), the file after the parameters.
+  if (absl::Status s = CheckConfinedPathText(input, "input_path"); !s.ok()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(s.message(), " (input paths are relative to the data root)"));
   }
   absl::StatusOr<ResolvedParams> params = ResolveParams(req.params());
   if (!params.ok()) return params.status();
@@ -872,7 +1089,7 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const pb::SubmitJobRequest& req,
   }
   if (!req.idempotency_key().empty()) {
     absl::StatusOr<std::optional<JobRecord>> found =
-        store_->FindJobByIdempotencyKey("", req.idempotency_key());
+        store_->FindJobByIdempotencyKey(caller.tenant, req.idempotency_key());
     if (!found.ok()) return found.status();
     if (found->has_value()) {
       const JobRecord& j = **found;
@@ -888,34 +1105,68 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const pb::SubmitJobRequest& req,
     }
   }
 
-  const fs::path scan = fs::path(spec_.data_root) / input;
-  std::error_code ec;
-  if (!fs::is_regular_file(scan, ec)) {
-    return absl::NotFoundError(absl::StrCat("input scan ", scan.string(), ": no such file"));
-  }
-  if (::access(scan.c_str(), R_OK) != 0) {
-    return absl::NotFoundError(
-        absl::StrCat("input scan ", scan.string(), ": not readable: ", std::strerror(errno)));
+  // The scan, resolved under the tenant's folder: PERMISSION_DENIED if a symlink leads out,
+  // NOT_FOUND if missing or unreadable (storage/confined_path.h); the same answers whatever
+  // lies outside.
+  if (absl::StatusOr<ConfinedFile> scan =
+          ConfinedFile::Open(DataDir(caller.tenant_dir), input, "input_path");
+      !scan.ok()) {
+    return scan.status();
   }
 
   JobRecord job;
-  // A keyed submit gets an id derived from its key (unique per tenant, like the key): tiles
-  // record their job id, so two runs submitted with the same key (`carvemap run` with 1 and
-  // with 2 workers) give byte-identical tiles.
+  // A keyed submit gets an id derived from its tenant and key (unique per tenant, like the
+  // key): tiles record their job id, so two runs submitted with the same key (`carvemap run`
+  // with 1 and with 2 workers) give byte-identical tiles, and two tenants using the same key
+  // get different jobs.
   job.id = req.idempotency_key().empty()
                ? NewJobId()
-               : absl::StrCat("j-", Sha256Hex(req.idempotency_key())
+               : absl::StrCat("j-", Sha256Hex(absl::StrCat(caller.tenant, "\n",
+                                                           req.idempotency_key()))
                                         .substr(0, 16));
+  job.tenant = caller.tenant;
+  job.tenant_dir = caller.tenant_dir;
   job.input_path = input;
   job.output_name = req.output_name().empty() ? job.id : req.output_name();
   job.params_json = ParamsToJson(*params);
   job.idempotency_key = req.idempotency_key();
   job.created_unix_ms = job.updated_unix_ms = NowMs();
-  if (absl::Status s = CheckWritableDir(OutputDir(job), "output"); !s.ok()) return s;
+  // The output folder must not already be a link out of the tenant's output folder (one
+  // planted there would have the merge write elsewhere).
+  const std::string output_root = OutputRoot(job.tenant_dir);
+  if (absl::Status s = CheckWritableDir(output_root, "output root"); !s.ok()) {
+    spdlog::error("coordinator: {}", s.ToString());
+    return absl::FailedPreconditionError("the output root is not writable");
+  }
+  if (absl::StatusOr<std::string> out = ResolveConfinedPath(output_root, job.output_name,
+                                                            "output_name");
+      !out.ok() && !absl::IsNotFound(out.status())) {
+    return out.status();
+  }
+  std::error_code ec;
+  const bool output_existed = fs::exists(OutputDir(job), ec);
+  if (absl::Status s = CheckWritableDir(OutputDir(job), "output"); !s.ok()) {
+    spdlog::error("coordinator: job {}: {}", job.id, s.ToString());
+    return absl::FailedPreconditionError(
+        absl::StrCat("output_name '", job.output_name, "': the output folder cannot be written"));
+  }
   if (absl::Status s = CheckWritableDir(TilesDir(job), "tiles dir"); !s.ok()) return s;
-  if (absl::Status s = store_->CreateJob(job); !s.ok()) return s;
-  spdlog::info("coordinator: job {} submitted: {} -> {} (resolution {} m)", job.id, scan.string(),
-               OutputDir(job), params->resolution_m);
+  if (absl::Status s = store_->CreateJob(job, spec_.max_jobs_per_tenant); !s.ok()) {
+    if (!output_existed) {
+      // A refused submit leaves nothing behind: the folders made above, if still empty
+      // (fs::remove does not remove a folder with anything in it).
+      fs::remove(TilesDir(job), ec);
+      fs::remove(OutputDir(job), ec);
+    }
+    if (absl::IsAlreadyExists(s)) {
+      return absl::AlreadyExistsError(
+          absl::StrCat("output_name '", job.output_name, "' is used by another job"));
+    }
+    return s;
+  }
+  spdlog::info("coordinator: job {} of tenant {} submitted: {} -> {} (resolution {} m)", job.id,
+               job.tenant, (fs::path(DataDir(job.tenant_dir)) / input).string(), OutputDir(job),
+               params->resolution_m);
   absl::StatusOr<JobRecord> stored = store_->GetJob(job.id);
   if (!stored.ok()) return stored.status();
   ToProto(*stored, *resp.mutable_job());
@@ -923,17 +1174,22 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const pb::SubmitJobRequest& req,
   return absl::OkStatus();
 }
 
-absl::Status CoordinatorServer::Impl::GetJob(const pb::GetJobRequest& req, pb::Job& resp) {
-  absl::StatusOr<JobRecord> job = store_->GetJob(req.job_id());
+absl::Status CoordinatorServer::Impl::GetJob(const Caller& caller, const pb::GetJobRequest& req,
+                                             pb::Job& resp) {
+  absl::StatusOr<JobRecord> job = OwnJob(caller, req.job_id());
   if (!job.ok()) return job.status();
   ToProto(*job, resp);
   return absl::OkStatus();
 }
 
-absl::Status CoordinatorServer::Impl::CancelJob(const pb::CancelJobRequest& req,
+absl::Status CoordinatorServer::Impl::CancelJob(const Caller& caller,
+                                                const pb::CancelJobRequest& req,
                                                 pb::CancelJobResponse& resp) {
-  absl::StatusOr<JobRecord> job = store_->GetJob(req.job_id());
+  absl::StatusOr<JobRecord> job = OwnJob(caller, req.job_id());
   if (!job.ok()) return job.status();
+  if (req.reason().size() > 1024) {
+    return absl::InvalidArgumentError("reason longer than 1024 bytes");
+  }
   if (job->state == JobState::kSucceeded || job->state == JobState::kFailed) {
     return absl::FailedPreconditionError(
         absl::StrCat("job ", job->id, " is ", JobStateName(job->state), ": cannot cancel"));
@@ -954,9 +1210,11 @@ absl::Status CoordinatorServer::Impl::CancelJob(const pb::CancelJobRequest& req,
   return absl::OkStatus();
 }
 
-absl::Status CoordinatorServer::Impl::ListJobs(const pb::ListJobsRequest& req,
+absl::Status CoordinatorServer::Impl::ListJobs(const Caller& caller,
+                                               const pb::ListJobsRequest& req,
                                                pb::ListJobsResponse& resp) {
   ListJobsQuery q;
+  q.tenant = caller.tenant;
   const int page = req.page_size() <= 0 ? 50 : std::min(req.page_size(), 500);
   q.limit = page + 1;  // one more tells whether there is a next page
   if (req.state_filter() != pb::JOB_STATE_UNSPECIFIED) {
@@ -984,10 +1242,10 @@ absl::Status CoordinatorServer::Impl::ListJobs(const pb::ListJobsRequest& req,
   return absl::OkStatus();
 }
 
-absl::Status CoordinatorServer::Impl::WatchJob(grpc::ServerContext& ctx,
+absl::Status CoordinatorServer::Impl::WatchJob(const Caller& caller, grpc::ServerContext& ctx,
                                                const pb::WatchJobRequest& req,
                                                grpc::ServerWriter<pb::JobEvent>& writer) {
-  absl::StatusOr<JobRecord> job = store_->GetJob(req.job_id());
+  absl::StatusOr<JobRecord> job = OwnJob(caller, req.job_id());
   if (!job.ok()) return job.status();
   int64_t sequence = 0;
   auto event = [&]() {
@@ -1089,18 +1347,24 @@ bool CoordinatorServer::Impl::WriteProgress(grpc::ServerWriter<pb::JobEvent>& wr
   }
 }
 
-absl::Status CoordinatorServer::Impl::FetchArtifact(grpc::ServerContext& ctx,
+absl::Status CoordinatorServer::Impl::FetchArtifact(const Caller& caller,
+                                                    grpc::ServerContext& ctx,
                                                     const pb::FetchArtifactRequest& req,
                                                     grpc::ServerWriter<pb::ArtifactChunk>& writer) {
-  if (!ValidRelativePath(req.name())) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("artifact '", req.name(), "': must be relative, without '..'"));
-  }
-  absl::StatusOr<JobRecord> job = store_->GetJob(req.job_id());
+  absl::StatusOr<JobRecord> job = OwnJob(caller, req.job_id());
   if (!job.ok()) return job.status();
-  const fs::path path = fs::path(OutputDir(*job)) / req.name();
-  std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) {
+  if (absl::Status s = CheckConfinedPathText(req.name(), "artifact"); !s.ok()) return s;
+  // Outputs never start with '.'; hidden names are the servers' own (a `carvemap run`
+  // output folder holds .carvemap/ with the job store and its secrets).
+  for (absl::string_view part : absl::StrSplit(req.name(), '/', absl::SkipEmpty())) {
+    if (absl::StartsWith(part, ".")) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("artifact '", req.name(), "': no part of an output name starts with '.'"));
+    }
+  }
+  // Resolved under the job's output folder like an input under the data root.
+  absl::StatusOr<ConfinedFile> file = ConfinedFile::Open(OutputDir(*job), req.name(), "artifact");
+  if (absl::IsNotFound(file.status())) {
     if (job->state != JobState::kSucceeded) {
       return absl::FailedPreconditionError(absl::StrCat("job ", job->id, " is ",
                                                         JobStateName(job->state), ": artifact '",
@@ -1108,28 +1372,29 @@ absl::Status CoordinatorServer::Impl::FetchArtifact(grpc::ServerContext& ctx,
     }
     return absl::NotFoundError(absl::StrCat("job ", job->id, ": no artifact '", req.name(), "'"));
   }
-  const int64_t size = static_cast<int64_t>(fs::file_size(path, ec));
+  if (!file.ok()) return file.status();
+  const int64_t size = file->size_bytes();
   if (req.offset() < 0 || req.offset() > size) {
     return absl::OutOfRangeError(absl::StrCat("offset ", req.offset(), " past the end (", size,
                                               " bytes)"));
   }
-  const int64_t chunk =
-      req.chunk_size_bytes() <= 0 ? (1 << 20)
-                                  : std::clamp<int64_t>(req.chunk_size_bytes(), 4096, 4 << 20);
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (f == nullptr) return absl::InternalError(absl::StrCat("open ", path.string()));
-  std::string buf(static_cast<size_t>(chunk), '\0');
+  // 4 MiB of data plus the message's own fields must fit a client's default 4 MiB limit.
+  const int64_t chunk = req.chunk_size_bytes() <= 0
+                            ? (1 << 20)
+                            : std::clamp<int64_t>(req.chunk_size_bytes(), 4096, (4 << 20) - 1024);
   // The hash covers the whole artifact, also the bytes before `offset`.
-  absl::StatusOr<std::string> sha = Sha256HexOfFile(path.string());
-  if (!sha.ok()) {
-    std::fclose(f);
-    return sha.status();
-  }
-  std::fseek(f, static_cast<long>(req.offset()), SEEK_SET);
+  absl::StatusOr<std::string> sha = Sha256HexOfFile(file->path());
+  if (!sha.ok()) return file->Rename(sha.status());
+  std::string buf(static_cast<size_t>(chunk), '\0');
   int64_t offset = req.offset();
   do {
     if (ctx.IsCancelled()) break;
-    const size_t n = std::fread(buf.data(), 1, buf.size(), f);
+    const ssize_t got = ::pread(file->fd(), buf.data(), buf.size(), static_cast<off_t>(offset));
+    if (got < 0) {
+      return absl::InternalError(absl::StrCat("job ", job->id, ": artifact '", req.name(),
+                                              "': read error: ", std::strerror(errno)));
+    }
+    const size_t n = static_cast<size_t>(got);
     pb::ArtifactChunk out;
     out.set_offset(offset);
     out.set_data(buf.data(), n);
@@ -1142,7 +1407,6 @@ absl::Status CoordinatorServer::Impl::FetchArtifact(grpc::ServerContext& ctx,
     if (!writer.Write(out)) break;
     if (n == 0) break;
   } while (offset < size);
-  std::fclose(f);
   return absl::OkStatus();
 }
 
@@ -1354,6 +1618,7 @@ absl::StatusOr<std::unique_ptr<CoordinatorServer>> CoordinatorServer::Start(Coor
 }
 
 int CoordinatorServer::port() const { return impl_->port(); }
+int CoordinatorServer::health_port() const { return impl_->health_port(); }
 void CoordinatorServer::Shutdown() { impl_->Shutdown(); }
 void CoordinatorServer::Wait() { impl_->Wait(); }
 

@@ -17,6 +17,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "services/geometry/chunk_region.h"
+#include "services/rpc/bearer_tokens.h"
 
 namespace carvemap {
 
@@ -44,9 +45,11 @@ using MergeFunction = std::function<absl::Status(const MergeJobRequest&)>;
 struct CoordinatorSpec {
   // "host:port"; port 0 picks a free port (see CoordinatorServer::port()).
   std::string listen_address = "127.0.0.1:0";
-  // Input paths of SubmitJob are relative to this directory.
+  // Input paths of SubmitJob are relative to this directory (with tenant folders: to
+  // <data_root>/<tenant>/), and cannot leave it (storage/confined_path.h).
   std::string data_root = ".";
-  // A job's outputs go to <output_root>/<output_name>/.
+  // A job's outputs go to <output_root>/<output_name>/ (with tenant folders:
+  // <output_root>/<tenant>/<output_name>/).
   std::string output_root = "out";
   // Empty: tiles go to <output_root>/<output_name>/tiles. Set: <storage_root>/<job_id>/tiles
   // (a shared volume for a cluster).
@@ -68,6 +71,38 @@ struct CoordinatorSpec {
   // The merge step; empty: MERGING is skipped with a warning (tiles only).
   MergeFunction merge;
 
+  // ---- security (docs/RPC.md "Authentication", docs/CLUSTER.md)
+  // Bearer tokens of the job API, each mapped to a tenant; a call sees only its tenant's jobs
+  // and paths. Empty: no authentication, every caller is tenant "default" (refused on a
+  // non-loopback address unless `insecure`).
+  std::vector<TenantToken> tokens;
+  // The shared secret that internal peers (workers) present on the carve-task API as
+  // "authorization: Bearer <secret>". Empty and no tls_client_ca_file: that API is open
+  // (refused on a non-loopback address unless `insecure`).
+  std::string cluster_secret;
+  // TLS from PEM files (certificate chain and key: both or neither). tls_client_ca_file: a
+  // client certificate verified against it authenticates an internal peer (mutual TLS) as
+  // the cluster secret does; requires TLS.
+  std::string tls_cert_file;
+  std::string tls_key_file;
+  std::string tls_client_ca_file;
+  // Serve without tokens, or with an open carve-task API, on a non-loopback address.
+  bool insecure = false;
+  // With tokens: false = each tenant's inputs are under <data_root>/<tenant>/ and its outputs
+  // under <output_root>/<tenant>/; true = all tenants share the roots, which is allowed only
+  // when the tokens belong to one tenant (two would overwrite each other's outputs).
+  // Without tokens the roots are always shared.
+  bool shared_dirs = false;
+  // Jobs of one tenant not yet SUCCEEDED/FAILED/CANCELLED; one more is RESOURCE_EXHAUSTED.
+  // 0 = no limit.
+  int max_jobs_per_tenant = 0;
+  // Largest request message the server accepts (gRPC's max receive message size); larger is
+  // RESOURCE_EXHAUSTED before any handler runs.
+  int max_request_bytes = 1 << 20;
+  // A second, plaintext listener serving only grpc.health.v1 (Kubernetes' gRPC probes cannot
+  // speak TLS). "" = none.
+  std::string health_listen_address;
+
   absl::Status Validate() const;
 };
 
@@ -86,6 +121,8 @@ class CoordinatorServer {
 
   // The bound port (useful with port 0).
   [[nodiscard]] int port() const;
+  // The bound port of health_listen_address; 0 without one.
+  [[nodiscard]] int health_port() const;
   // Stops accepting calls, ends streams, joins the job threads. Idempotent.
   void Shutdown();
   // Blocks until Shutdown() has been called (from another thread or a signal handler thread).

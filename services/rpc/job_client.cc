@@ -12,6 +12,7 @@
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
 #include "services/grpc_status.h"
 #include "services/rpc/file_hash.h"
+#include "services/rpc/grpc_security.h"
 
 namespace carvemap {
 namespace pb = ::carvemap::v1;
@@ -47,20 +48,29 @@ JobInfo FromProto(const pb::Job& j) {
   return info;
 }
 
-std::unique_ptr<grpc::ClientContext> Context(double timeout_s = 30) {
-  auto ctx = std::make_unique<grpc::ClientContext>();
-  ctx->set_deadline(std::chrono::system_clock::now() +
-                    std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
-  return ctx;
-}
-
 }  // namespace
 
 class JobClient::Impl {
  public:
-  explicit Impl(const std::string& address)
-      : channel(grpc::CreateChannel(address, grpc::InsecureChannelCredentials())),
-        stub(pb::JobService::NewStub(channel)) {}
+  Impl(const std::string& address, const ChannelSecurity& security) : bearer(security.bearer) {
+    absl::StatusOr<std::shared_ptr<grpc::Channel>> made = MakeChannel(address, security);
+    if (!made.ok()) {
+      init = made.status();
+      // A channel that never connects, so the stub is always usable; calls return `init`.
+      made = grpc::CreateChannel("unix:/nonexistent", grpc::InsecureChannelCredentials());
+    }
+    channel = *made;
+    stub = pb::JobService::NewStub(channel);
+  }
+  std::unique_ptr<grpc::ClientContext> Context(double timeout_s = 30) const {
+    auto ctx = std::make_unique<grpc::ClientContext>();
+    ctx->set_deadline(std::chrono::system_clock::now() +
+                      std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
+    AttachBearer(*ctx, bearer);
+    return ctx;
+  }
+  absl::Status init;
+  std::string bearer;
   std::shared_ptr<grpc::Channel> channel;
   std::unique_ptr<pb::JobService::Stub> stub;
   absl::Mutex mu;
@@ -68,10 +78,12 @@ class JobClient::Impl {
   bool watch_cancelled ABSL_GUARDED_BY(mu) = false;
 };
 
-JobClient::JobClient(const std::string& address) : impl_(std::make_unique<Impl>(address)) {}
+JobClient::JobClient(const std::string& address, const ChannelSecurity& security)
+    : impl_(std::make_unique<Impl>(address, security)) {}
 JobClient::~JobClient() = default;
 
 absl::Status JobClient::WaitForReady(double timeout_s) {
+  if (!impl_->init.ok()) return impl_->init;
   const auto deadline = std::chrono::system_clock::now() +
                         std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000));
   if (!impl_->channel->WaitForConnected(deadline)) {
@@ -88,7 +100,8 @@ absl::StatusOr<JobInfo> JobClient::Submit(const SubmitParams& params) {
   req.mutable_params()->set_object_resolution_m(params.object_resolution_m);
   req.set_idempotency_key(params.idempotency_key);
   pb::SubmitJobResponse resp;
-  auto ctx = Context();
+  if (!impl_->init.ok()) return impl_->init;
+  auto ctx = impl_->Context();
   if (absl::Status s = FromGrpcStatus(impl_->stub->SubmitJob(ctx.get(), req, &resp)); !s.ok()) {
     return s;
   }
@@ -99,7 +112,8 @@ absl::StatusOr<JobInfo> JobClient::Get(const std::string& job_id) {
   pb::GetJobRequest req;
   req.set_job_id(job_id);
   pb::Job resp;
-  auto ctx = Context();
+  if (!impl_->init.ok()) return impl_->init;
+  auto ctx = impl_->Context();
   if (absl::Status s = FromGrpcStatus(impl_->stub->GetJob(ctx.get(), req, &resp)); !s.ok()) {
     return s;
   }
@@ -120,7 +134,8 @@ absl::StatusOr<std::vector<JobInfo>> JobClient::List(const std::string& state_fi
   do {
     req.set_page_size(std::min(limit - static_cast<int>(jobs.size()), 500));
     pb::ListJobsResponse resp;
-    auto ctx = Context();
+    if (!impl_->init.ok()) return impl_->init;
+  auto ctx = impl_->Context();
     if (absl::Status s = FromGrpcStatus(impl_->stub->ListJobs(ctx.get(), req, &resp)); !s.ok()) {
       return s;
     }
@@ -135,7 +150,8 @@ absl::StatusOr<JobInfo> JobClient::Cancel(const std::string& job_id, const std::
   req.set_job_id(job_id);
   req.set_reason(reason);
   pb::CancelJobResponse resp;
-  auto ctx = Context();
+  if (!impl_->init.ok()) return impl_->init;
+  auto ctx = impl_->Context();
   if (absl::Status s = FromGrpcStatus(impl_->stub->CancelJob(ctx.get(), req, &resp)); !s.ok()) {
     return s;
   }
@@ -148,7 +164,9 @@ absl::StatusOr<JobInfo> JobClient::Watch(
   pb::WatchJobRequest req;
   req.set_job_id(job_id);
   req.set_min_interval_s(min_interval_s);
+  if (!impl_->init.ok()) return impl_->init;
   grpc::ClientContext ctx;
+  AttachBearer(ctx, impl_->bearer);
   {
     absl::MutexLock lock(&impl_->mu);
     if (impl_->watch_cancelled) return absl::CancelledError("watch cancelled");
@@ -207,7 +225,9 @@ absl::Status JobClient::Fetch(const std::string& job_id, const std::string& name
   pb::FetchArtifactRequest req;
   req.set_job_id(job_id);
   req.set_name(name);
+  if (!impl_->init.ok()) return impl_->init;
   grpc::ClientContext ctx;
+  AttachBearer(ctx, impl_->bearer);
   std::unique_ptr<grpc::ClientReader<pb::ArtifactChunk>> reader =
       impl_->stub->FetchArtifact(&ctx, req);
   const std::string partial = dest_path + ".partial";

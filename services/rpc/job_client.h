@@ -12,6 +12,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "services/rpc/channel_security.h"
 
 namespace carvemap {
 
@@ -47,8 +48,9 @@ struct SubmitParams {
 
 class JobClient {
  public:
-  // Does not connect yet; calls fail UNAVAILABLE if nothing listens.
-  explicit JobClient(const std::string& address);
+  // Does not connect yet; calls fail UNAVAILABLE if nothing listens. `security.bearer` is the
+  // tenant's token; a bad TLS file makes every call fail with the reason.
+  explicit JobClient(const std::string& address, const ChannelSecurity& security = {});
   ~JobClient();
   JobClient(const JobClient&) = delete;
   JobClient& operator=(const JobClient&) = delete;

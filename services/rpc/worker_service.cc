@@ -24,6 +24,7 @@
 #include "services/grpc_server_common.h"
 #include "services/grpc_status.h"
 #include "services/rpc/file_hash.h"
+#include "services/rpc/grpc_security.h"
 #include "worker/chunk_carver.h"
 
 namespace carvemap {
@@ -56,6 +57,9 @@ absl::Status WorkerSpec::Validate() const {
   if (threads < 1) return absl::InvalidArgumentError("worker: threads must be >= 1");
   if (!(coordinator_lost_s > 0)) {
     return absl::InvalidArgumentError("worker: coordinator_lost_s must be > 0");
+  }
+  if (absl::Status s = security.Validate(); !s.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("worker: ", s.message()));
   }
   return absl::OkStatus();
 }
@@ -96,6 +100,7 @@ class WorkerServer::Impl {
     auto ctx = std::make_unique<grpc::ClientContext>();
     ctx->set_deadline(std::chrono::system_clock::now() +
                       std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
+    AttachBearer(*ctx, spec_.security.bearer);
     return ctx;
   }
 
@@ -129,8 +134,10 @@ int64_t SteadyMs() {
 
 absl::Status WorkerServer::Impl::Start() {
   if (absl::Status s = spec_.Validate(); !s.ok()) return s;
-  stub_ = pb::CarveTaskService::NewStub(
-      grpc::CreateChannel(spec_.coordinator_address, grpc::InsecureChannelCredentials()));
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel =
+      MakeChannel(spec_.coordinator_address, spec_.security);
+  if (!channel.ok()) return channel.status();
+  stub_ = pb::CarveTaskService::NewStub(*channel);
   if (!spec_.listen_address.empty()) {
     EnableHealthAndReflection();
     grpc::ServerBuilder builder;
@@ -144,8 +151,10 @@ absl::Status WorkerServer::Impl::Start() {
   }
   heartbeat_thread_ = std::thread([this] { HeartbeatLoop(); });
   for (int i = 0; i < spec_.threads; ++i) threads_.emplace_back([this] { CarveLoop(); });
-  spdlog::info("worker: started ({} thread(s)), coordinator {}, health port {}", spec_.threads,
-               spec_.coordinator_address, port_);
+  spdlog::info("worker: started ({} thread(s)), coordinator {} ({}{}), health port {}",
+               spec_.threads, spec_.coordinator_address,
+               spec_.security.UsesTls() ? "TLS" : "plaintext",
+               spec_.security.bearer.empty() ? "" : ", cluster secret", port_);
   return absl::OkStatus();
 }
 
@@ -252,6 +261,10 @@ void WorkerServer::Impl::HeartbeatLoop() {
       absl::MutexLock lock(&mu_);
       if (worker_id_ == id) worker_id_.clear();
       continue;
+    }
+    if (absl::IsUnauthenticated(s)) {
+      End(s);  // the coordinator no longer takes our secret: nothing to wait for
+      return;
     }
     if (!s.ok()) {
       spdlog::warn("worker {}: heartbeat: {}", id, s.ToString());
@@ -375,6 +388,10 @@ void WorkerServer::Impl::CarveLoop() {
       absl::MutexLock lock(&mu_);
       if (worker_id_ == *id) worker_id_.clear();
       continue;
+    }
+    if (absl::IsUnauthenticated(s)) {
+      End(s);
+      return;
     }
     if (!s.ok()) {
       if (!IsTransient(s)) spdlog::warn("worker {}: lease: {}", *id, s.ToString());

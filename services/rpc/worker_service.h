@@ -10,6 +10,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "services/rpc/channel_security.h"
 
 namespace carvemap {
 
@@ -19,6 +20,10 @@ struct WorkerSpec {
   int threads = 1;                          // chunks carved in parallel
   // Give up (Wait returns UNAVAILABLE) after the coordinator has been unreachable this long.
   double coordinator_lost_s = 20.0;
+  // How to reach the coordinator: `security.bearer` is the cluster secret (sent on every
+  // carve-task call), TLS settings as for any client, a client certificate for mutual TLS.
+  // The coordinator refusing it (UNAUTHENTICATED) ends the worker: Wait returns that status.
+  ChannelSecurity security;
   absl::Status Validate() const;
 };
 
