@@ -24,8 +24,19 @@ WORKER = "carvemap-worker"
 SHARED_PVC = "carvemap-shared"
 STATE_PVC = "carvemap-coordinator-state"
 # Secrets the base references but does not contain: created by hand on a real cluster
-# (docs/CLUSTER.md), shipped as placeholders by overlays/local.
-EXTERNAL_SECRETS = {"carvemap-tokens", "carvemap-tls"}
+# (docs/CLUSTER.md), shipped with development values by overlays/local.
+TOKENS_SECRET = "carvemap-tokens"
+CLUSTER_SECRET = "carvemap-cluster-secret"
+TLS_SECRET = "carvemap-tls"
+EXTERNAL_SECRETS = {TOKENS_SECRET, CLUSTER_SECRET, TLS_SECRET}
+# Which Secret each file flag must read from (docs/RPC.md, "Authentication").
+SECRET_OF_FLAG = {
+    "coordinator": {"--tokens": TOKENS_SECRET, "--cluster-secret-file": CLUSTER_SECRET,
+                    "--tls-cert": TLS_SECRET, "--tls-key": TLS_SECRET,
+                    "--tls-client-ca": TLS_SECRET},
+    "worker": {"--cluster-secret-file": CLUSTER_SECRET, "--tls-ca": TLS_SECRET,
+               "--tls-cert": TLS_SECRET, "--tls-key": TLS_SECRET},
+}
 
 errors = []
 
@@ -138,6 +149,24 @@ def referenced_secrets(spec):
     return refs
 
 
+def secret_file_of(spec, container, path):
+    """(secret name, key) that a file path inside `container` comes from, or None."""
+    volumes = {v["name"]: v for v in spec.get("volumes", [])}
+    for m in container.get("volumeMounts", []):
+        v = volumes.get(m["name"])
+        if v is None or "secret" not in v or not under(path, m["mountPath"]):
+            continue
+        rel = path[len(m["mountPath"].rstrip("/")) + 1:]
+        items = v["secret"].get("items")
+        if items is None:
+            return v["secret"]["secretName"], rel
+        for it in items:
+            if it["path"] == rel:
+                return v["secret"]["secretName"], it["key"]
+        return v["secret"]["secretName"], None  # mounted, but that file is not projected
+    return None
+
+
 def help_flags(carvemap, sub):
     out = subprocess.run([carvemap, sub, "--help"], capture_output=True, text=True).stdout
     return set(re.findall(r"(--[a-z0-9][a-z0-9-]*)", out))
@@ -241,7 +270,8 @@ def check(label, objs, carvemap):
         if not linked:
             where(f"no init container links {link} to the job store volume ({c_state})")
 
-    # Secrets.
+    # Secrets: the coordinator reads all three; workers the cluster secret and the CA, never
+    # the tenants' tokens.
     secrets = {n for (k, n) in by if k == "Secret"}
     for name, spec in ((COORDINATOR, cspec), (WORKER, wspec)):
         refs = referenced_secrets(spec)
@@ -249,8 +279,45 @@ def check(label, objs, carvemap):
             if label == "base" and s in EXTERNAL_SECRETS:
                 continue
             where(f"{name} references Secret {s}, which does not exist")
-        if not EXTERNAL_SECRETS <= refs:
-            where(f"{name} should mount the token and TLS Secrets {sorted(EXTERNAL_SECRETS)}")
+    if not EXTERNAL_SECRETS <= referenced_secrets(cspec):
+        where(f"coordinator should mount the Secrets {sorted(EXTERNAL_SECRETS)}")
+    if not {CLUSTER_SECRET, TLS_SECRET} <= referenced_secrets(wspec):
+        where(f"worker should mount the Secrets {CLUSTER_SECRET} and {TLS_SECRET}")
+    if TOKENS_SECRET in referenced_secrets(wspec):
+        where(f"worker mounts {TOKENS_SECRET}: workers have no business with tenants' tokens")
+    # Each security flag names a file of the right Secret, and that Secret has the key.
+    for role, spec, c, args in (("coordinator", cspec, cc, cargs), ("worker", wspec, wc, wargs)):
+        for f, secret in SECRET_OF_FLAG[role].items():
+            path = flag(args, f)
+            if path is None:
+                continue
+            found = secret_file_of(spec, c, path)
+            if found is None or found[0] != secret:
+                where(f"{role} {f}={path} is not a file of the mounted Secret {secret}")
+                continue
+            data = by.get(("Secret", secret))
+            if found[1] is None:
+                where(f"{role} {f}={path}: the {secret} volume does not project that file")
+            elif data is not None and found[1] not in {**data.get("data", {}),
+                                                       **data.get("stringData", {})}:
+                where(f"{role} {f}={path}: Secret {secret} has no key {found[1]}")
+    # Off loopback the binary refuses to start open; the manifests must not ask it to.
+    if "--insecure" in cargs:
+        where("coordinator runs with --insecure")
+    if flag(cargs, "--tokens") is None:
+        where("coordinator has no --tokens: the job API would be open")
+    needs_secret = flag(cargs, "--cluster-secret-file") is not None
+    if not needs_secret and flag(cargs, "--tls-client-ca") is None:
+        where("coordinator has neither --cluster-secret-file nor --tls-client-ca")
+    if needs_secret and flag(wargs, "--cluster-secret-file") is None and \
+            flag(wargs, "--tls-cert") is None:
+        where("the coordinator requires the cluster secret but workers do not present it")
+    c_tls = flag(cargs, "--tls-cert") is not None
+    w_tls = flag(wargs, "--tls-ca") is not None or "--tls" in wargs
+    if c_tls != w_tls:
+        where(f"coordinator TLS {c_tls} but worker TLS {w_tls}: they cannot talk")
+    if label == "base" and not c_tls:
+        where("the base must serve TLS (--tls-cert/--tls-key)")
 
     # Service ➜ coordinator.
     clabels = coord["spec"]["template"]["metadata"]["labels"]
@@ -339,17 +406,28 @@ def check(label, objs, carvemap):
                 where(f"{cname}: image {c.get('image')} is not the carvemap image")
         for c in spec["containers"]:
             cname = f"{dep['metadata']['name']}/{c['name']}"
-            _, port = split_hostport(flag(c.get("args", []), "--listen") or "")
+            args = c.get("args", [])
+            _, port = split_hostport(flag(args, "--listen") or "")
             declared = {p["containerPort"] for p in c.get("ports", [])}
             if port is None or port not in declared:
                 where(f"{cname}: --listen port {port} is not a declared containerPort")
+            # Kubelet gRPC probes speak plaintext: with TLS they need the health-only port.
+            probe_port = port
+            if flag(args, "--health-listen") is not None:
+                _, probe_port = split_hostport(flag(args, "--health-listen"))
+                if probe_port not in declared:
+                    where(f"{cname}: --health-listen port {probe_port} is not a declared "
+                          "containerPort")
+            elif flag(args, "--tls-cert") is not None:
+                where(f"{cname}: serves TLS without a plaintext --health-listen port for the "
+                      "probes")
             for probe in ("readinessProbe", "livenessProbe"):
                 p = c.get(probe)
                 if not p or "grpc" not in p:
                     where(f"{cname}: needs a native gRPC {probe}")
-                elif p["grpc"].get("port") != port:
+                elif p["grpc"].get("port") != probe_port:
                     where(f"{cname}: {probe} on port {p['grpc'].get('port')}, "
-                          f"but it listens on {port}")
+                          f"but health is served on {probe_port}")
 
     # Only flags the binary has.
     if carvemap:
