@@ -99,7 +99,7 @@ absl::StatusOr<PlyMesh> ReadPly(const std::string& path) {
       binary_le = fmt == "binary_little_endian";
     } else if (word == "element") {
       size_t count = 0;
-      ls >> element >> count;
+      if (!(ls >> element >> count)) return bad("bad element line '" + line + "'");
       if (element == "vertex") num_vertices = count;
       else if (element == "face") num_faces = count;
       else return bad("unsupported element '" + element + "'");
@@ -138,10 +138,19 @@ absl::StatusOr<PlyMesh> ReadPly(const std::string& path) {
   }
   if (num_faces > 0 && !have_list) return bad("faces without vertex_indices");
 
-  PlyMesh out;
-  out.mesh.vertices.resize(num_vertices);
   size_t vertex_bytes = 0;
   for (const std::string& t : vertex_props) vertex_bytes += ScalarBytes(t);
+  // The count comes from the file: bound it by the bytes that follow before allocating.
+  const std::streampos body = in.tellg();
+  in.seekg(0, std::ios::end);
+  const std::streamoff body_bytes = in.tellg() - body;
+  in.seekg(body);
+  if (!in || num_vertices > static_cast<size_t>(body_bytes) / vertex_bytes) {
+    return bad(absl::StrCat("header declares ", num_vertices, " vertices of ", vertex_bytes,
+                            " bytes but only ", body_bytes, " bytes follow (truncated?)"));
+  }
+  PlyMesh out;
+  out.mesh.vertices.resize(num_vertices);
   std::vector<char> buf(std::max<size_t>(vertex_bytes, 8));
   for (size_t i = 0; i < num_vertices; ++i) {
     if (!in.read(buf.data(), static_cast<std::streamsize>(vertex_bytes))) {

@@ -134,5 +134,26 @@ TEST(PlyIoTest, ReadErrorsNameTheFile) {
   EXPECT_EQ(ReadPly(path).status().code(), absl::StatusCode::kDataLoss);
 }
 
+// Found by tests/fuzz (ply_mesh): a vertex count too large for size_t, or larger than the
+// file could hold, threw std::length_error / bad_alloc from the vertex buffer's resize.
+TEST(PlyIoTest, AbsurdVertexCountIsAnErrorNotAnAllocation) {
+  const std::string path = testing::TempDir() + "/huge.ply";
+  const std::string header_start =
+      "ply\nformat binary_little_endian 1.0\nelement vertex ";
+  const std::string header_end =
+      "\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+  for (const std::string count : {"88888888888888888888888", "1000000000000", "2"}) {
+    std::ofstream(path, std::ios::binary | std::ios::trunc)
+        << header_start << count << header_end << std::string(12, '\0');
+    absl::Status s = ReadPly(path).status();
+    EXPECT_EQ(s.code(), absl::StatusCode::kDataLoss) << count;
+    EXPECT_NE(std::string(s.message()).find(path), std::string::npos) << s;
+  }
+  std::ofstream(path, std::ios::binary | std::ios::trunc)
+      << header_start << "1000000000000" << header_end << std::string(12, '\0');
+  EXPECT_NE(std::string(ReadPly(path).status().message()).find("only 12 bytes follow"),
+            std::string::npos);
+}
+
 }  // namespace
 }  // namespace carvemap
