@@ -11,6 +11,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libpng-dev libembree-dev libtbb-dev libssl-dev
   openssl  # the CLI: tests/tools/make_test_pki.sh (TLS tests)
+  prometheus-cpp-dev libcurl4-openssl-dev  # the coordinator's /metrics; `watch --metrics`
   python3 python3-h5py python3-numpy
   yamllint python3-yaml kubernetes-client
 )

@@ -1,8 +1,11 @@
 // `carvemap submit|watch|status|list|cancel|fetch --server HOST:PORT`: talk to a running
 // coordinator's JobService (docs/RPC.md). Thin shells over services/rpc/job_client.h.
+#include <atomic>
+#include <chrono>
 #include <cstdio>
 #include <memory>
 #include <string>
+#include <thread>
 
 #include <CLI/CLI.hpp>
 
@@ -11,7 +14,9 @@
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
 #include "services/cli/security_flags.h"
+#include "services/rpc/http_get.h"
 #include "services/rpc/job_client.h"
+#include "services/rpc/metrics_text.h"
 #include "services/rpc/process_util.h"
 
 namespace carvemap {
@@ -31,7 +36,19 @@ struct ClientFlags {
   std::string artifact;
   std::string dest;
   SecurityFlags security;
+  std::string metrics;  // host:port or URL of the coordinator's /metrics
+  double interval_s = 2;
+  int count = 0;
 };
+
+// The coordinator's metrics as one line (services/rpc/metrics_text.h), or why not.
+std::string MetricsLine(const std::string& where) {
+  absl::StatusOr<std::string> text = HttpGet(where, 5.0);
+  if (!text.ok()) return absl::StrCat("metrics: ", text.status().message());
+  absl::StatusOr<std::vector<MetricSample>> samples = ParsePrometheusText(*text);
+  if (!samples.ok()) return absl::StrCat("metrics: ", samples.status().message());
+  return FormatCoordinatorMetrics(*samples);
+}
 
 void AddServer(CLI::App* cmd, ClientFlags& flags) {
   cmd->add_option("--server", flags.server, "host:port of the coordinator")
@@ -59,14 +76,24 @@ absl::Status JobOutcome(const JobInfo& job) {
   return absl::AbortedError(absl::StrCat("job ", job.job_id, " ", job.state, ": ", job.error));
 }
 
-absl::Status WatchWithProgress(JobClient& client, const std::string& job_id, bool quiet) {
+// `metrics` (optional): also show the coordinator's metrics every `interval_s`.
+absl::Status WatchWithProgress(JobClient& client, const std::string& job_id, bool quiet,
+                               const std::string& metrics = "", double interval_s = 2) {
   HandleTerminationSignals([&client](int) { client.CancelWatch(); });
   ProgressLine line(!quiet);
   std::string last_state;
+  std::chrono::steady_clock::time_point last_metrics{};
   absl::StatusOr<JobInfo> job = client.Watch(job_id, 0.5, [&](const WatchUpdate& u) {
     if (u.state != last_state && !last_state.empty()) line.Finish();
     last_state = u.state;
     line.Update("%s", FormatProgress(u).c_str());
+    const auto now = std::chrono::steady_clock::now();
+    if (!metrics.empty() && !quiet &&
+        now - last_metrics >= std::chrono::duration<double>(interval_s)) {
+      last_metrics = now;
+      line.Finish();
+      std::fprintf(stderr, "  coordinator: %s\n", MetricsLine(metrics).c_str());
+    }
   });
   line.Finish();
   if (!job.ok()) return job.status();
@@ -108,15 +135,55 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
     }
   });
 
-  CLI::App* watch = app.add_subcommand("watch", "Follow a job's progress until it ends");
+  CLI::App* watch = app.add_subcommand(
+      "watch",
+      "Follow a job's progress until it ends; with --metrics also (or, without a job id, "
+      "only) the coordinator's metrics: workers, chunks queued/leased/done, rays/s, lease "
+      "expiries, refused calls, RPC latencies");
   AddServer(watch, *flags);
-  watch->add_option("job", flags->job_id, "Job id")->required();
+  watch->add_option("job", flags->job_id, "Job id");
   watch->add_flag("-q,--quiet", flags->quiet, "No progress line");
+  watch->add_option("--metrics", flags->metrics,
+                    "The coordinator's metrics endpoint, host:port or URL (its --metrics-listen)")
+      ->envname("CARVEMAP_METRICS");
+  watch->add_option("--interval", flags->interval_s, "Seconds between metrics lines")
+      ->capture_default_str();
+  watch->add_option("--count", flags->count,
+                    "Without a job id: stop after this many metrics lines (0: until Ctrl-C)");
   watch->callback([flags, &exit_code] {
+    if (flags->job_id.empty()) {
+      if (flags->metrics.empty()) {
+        exit_code = ReportStatus(
+            "watch", absl::InvalidArgumentError("give a job id, or --metrics HOST:PORT"));
+        return;
+      }
+      auto stop = std::make_shared<std::atomic<bool>>(false);
+      HandleTerminationSignals([stop](int) { stop->store(true); });
+      for (int n = 0; !stop->load() && (flags->count <= 0 || n < flags->count); ++n) {
+        if (n > 0) {
+          for (double slept = 0; slept < flags->interval_s && !stop->load(); slept += 0.1) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(100));
+          }
+          if (stop->load()) break;
+        }
+        absl::StatusOr<std::string> text = HttpGet(flags->metrics, 5.0);
+        absl::StatusOr<std::vector<MetricSample>> samples =
+            text.ok() ? ParsePrometheusText(*text)
+                      : absl::StatusOr<std::vector<MetricSample>>(text.status());
+        if (!samples.ok()) {
+          exit_code = ReportStatus("watch", samples.status());
+          return;
+        }
+        std::printf("%s\n", FormatCoordinatorMetrics(*samples).c_str());
+        std::fflush(stdout);
+      }
+      return;
+    }
     std::unique_ptr<JobClient> connected = Connect(*flags, "watch", exit_code);
     if (connected == nullptr) return;
     JobClient& client = *connected;
-    exit_code = ReportStatus("watch", WatchWithProgress(client, flags->job_id, flags->quiet));
+    exit_code = ReportStatus("watch", WatchWithProgress(client, flags->job_id, flags->quiet,
+                                                        flags->metrics, flags->interval_s));
   });
 
   CLI::App* status = app.add_subcommand("status", "Show a job");

@@ -193,6 +193,9 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
   cmd->add_option("--max-request-bytes", s.max_request_bytes,
                   "Largest request message accepted (larger: RESOURCE_EXHAUSTED)")
       ->capture_default_str();
+  cmd->add_option("--metrics-listen", s.metrics_listen_address,
+                  "Serve Prometheus metrics over HTTP at http://HOST:PORT/metrics (chunks, "
+                  "workers, rays/s, lease expiries, RPC latencies; no job ids or tenants)");
   cmd->add_option("--health-listen", s.health_listen_address,
                   "Also serve grpc.health.v1 alone, in plaintext, on this host:port (for "
                   "Kubernetes probes, which cannot speak TLS)");

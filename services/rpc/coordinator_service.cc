@@ -16,6 +16,7 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#include <prometheus/exposer.h>
 #include <spdlog/spdlog.h>
 
 #include "absl/base/thread_annotations.h"
@@ -34,6 +35,7 @@
 #include "services/grpc_server_common.h"
 #include "services/grpc_status.h"
 #include "services/rpc/bearer_tokens.h"
+#include "services/rpc/coordinator_metrics.h"
 #include "services/rpc/file_hash.h"
 #include "services/rpc/grpc_security.h"
 #include "storage/confined_path.h"
@@ -269,6 +271,8 @@ class CoordinatorServer::Impl {
   void Wait() { shutdown_done_.WaitForNotification(); }
   int port() const { return port_; }
   int health_port() const { return health_port_; }
+  int metrics_port() const { return metrics_port_; }
+  CoordinatorMetrics& metrics() { return metrics_; }
 
   // Who is calling the job API: the tenant of the bearer token, and the folder under the
   // roots that holds its files ("" = the roots).
@@ -396,6 +400,9 @@ class CoordinatorServer::Impl {
   std::unique_ptr<grpc::Service> carve_service_;
   int port_ = 0;
   int health_port_ = 0;
+  int metrics_port_ = 0;
+  CoordinatorMetrics metrics_;
+  std::unique_ptr<prometheus::Exposer> exposer_;  // spec_.metrics_listen_address
   std::atomic<bool> stopping_{false};
   absl::Notification shutdown_done_;
   std::thread sweeper_;
@@ -413,48 +420,71 @@ class CoordinatorServer::Impl {
   absl::Mutex hdf5_mu_;
 };
 
-// ---- gRPC adapters: one conversion each way, nothing else.
+// ---- gRPC adapters: one conversion each way, nothing else (and the RPC's time).
 
 namespace {
+
+// Runs one handler and records its duration and status code (carvemap_rpc_duration_seconds).
+template <typename Handler>
+grpc::Status Timed(CoordinatorMetrics& metrics, const char* method, Handler&& handler) {
+  const auto start = std::chrono::steady_clock::now();
+  grpc::Status status = handler();
+  metrics.ObserveRpc(
+      method, absl::StatusCodeToString(static_cast<absl::StatusCode>(status.error_code())),
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  return status;
+}
 
 class JobServiceAdapter final : public pb::JobService::Service {
  public:
   explicit JobServiceAdapter(CoordinatorServer::Impl& impl) : impl_(impl) {}
   grpc::Status SubmitJob(grpc::ServerContext* ctx, const pb::SubmitJobRequest* req,
                          pb::SubmitJobResponse* resp) override {
-    auto caller = impl_.AuthenticateTenant(*ctx);
-    if (!caller.ok()) return ToGrpcStatus(caller.status());
-    return ToGrpcStatus(impl_.SubmitJob(*caller, *req, *resp));
+    return Timed(impl_.metrics(), "SubmitJob", [&] {
+      auto caller = impl_.AuthenticateTenant(*ctx);
+      if (!caller.ok()) return ToGrpcStatus(caller.status());
+      return ToGrpcStatus(impl_.SubmitJob(*caller, *req, *resp));
+    });
   }
   grpc::Status GetJob(grpc::ServerContext* ctx, const pb::GetJobRequest* req,
                       pb::Job* resp) override {
-    auto caller = impl_.AuthenticateTenant(*ctx);
-    if (!caller.ok()) return ToGrpcStatus(caller.status());
-    return ToGrpcStatus(impl_.GetJob(*caller, *req, *resp));
+    return Timed(impl_.metrics(), "GetJob", [&] {
+      auto caller = impl_.AuthenticateTenant(*ctx);
+      if (!caller.ok()) return ToGrpcStatus(caller.status());
+      return ToGrpcStatus(impl_.GetJob(*caller, *req, *resp));
+    });
   }
   grpc::Status WatchJob(grpc::ServerContext* ctx, const pb::WatchJobRequest* req,
                         grpc::ServerWriter<pb::JobEvent>* writer) override {
-    auto caller = impl_.AuthenticateTenant(*ctx);
-    if (!caller.ok()) return ToGrpcStatus(caller.status());
-    return ToGrpcStatus(impl_.WatchJob(*caller, *ctx, *req, *writer));
+    return Timed(impl_.metrics(), "WatchJob", [&] {
+      auto caller = impl_.AuthenticateTenant(*ctx);
+      if (!caller.ok()) return ToGrpcStatus(caller.status());
+      return ToGrpcStatus(impl_.WatchJob(*caller, *ctx, *req, *writer));
+    });
   }
   grpc::Status CancelJob(grpc::ServerContext* ctx, const pb::CancelJobRequest* req,
                          pb::CancelJobResponse* resp) override {
-    auto caller = impl_.AuthenticateTenant(*ctx);
-    if (!caller.ok()) return ToGrpcStatus(caller.status());
-    return ToGrpcStatus(impl_.CancelJob(*caller, *req, *resp));
+    return Timed(impl_.metrics(), "CancelJob", [&] {
+      auto caller = impl_.AuthenticateTenant(*ctx);
+      if (!caller.ok()) return ToGrpcStatus(caller.status());
+      return ToGrpcStatus(impl_.CancelJob(*caller, *req, *resp));
+    });
   }
   grpc::Status ListJobs(grpc::ServerContext* ctx, const pb::ListJobsRequest* req,
                         pb::ListJobsResponse* resp) override {
-    auto caller = impl_.AuthenticateTenant(*ctx);
-    if (!caller.ok()) return ToGrpcStatus(caller.status());
-    return ToGrpcStatus(impl_.ListJobs(*caller, *req, *resp));
+    return Timed(impl_.metrics(), "ListJobs", [&] {
+      auto caller = impl_.AuthenticateTenant(*ctx);
+      if (!caller.ok()) return ToGrpcStatus(caller.status());
+      return ToGrpcStatus(impl_.ListJobs(*caller, *req, *resp));
+    });
   }
   grpc::Status FetchArtifact(grpc::ServerContext* ctx, const pb::FetchArtifactRequest* req,
                              grpc::ServerWriter<pb::ArtifactChunk>* writer) override {
-    auto caller = impl_.AuthenticateTenant(*ctx);
-    if (!caller.ok()) return ToGrpcStatus(caller.status());
-    return ToGrpcStatus(impl_.FetchArtifact(*caller, *ctx, *req, *writer));
+    return Timed(impl_.metrics(), "FetchArtifact", [&] {
+      auto caller = impl_.AuthenticateTenant(*ctx);
+      if (!caller.ok()) return ToGrpcStatus(caller.status());
+      return ToGrpcStatus(impl_.FetchArtifact(*caller, *ctx, *req, *writer));
+    });
   }
 
  private:
@@ -466,28 +496,38 @@ class CarveServiceAdapter final : public pb::CarveTaskService::Service {
   explicit CarveServiceAdapter(CoordinatorServer::Impl& impl) : impl_(impl) {}
   grpc::Status RegisterWorker(grpc::ServerContext* ctx, const pb::RegisterWorkerRequest* req,
                               pb::RegisterWorkerResponse* resp) override {
-    if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
-    return ToGrpcStatus(impl_.RegisterWorker(*ctx, *req, *resp));
+    return Timed(impl_.metrics(), "RegisterWorker", [&] {
+      if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
+      return ToGrpcStatus(impl_.RegisterWorker(*ctx, *req, *resp));
+    });
   }
   grpc::Status Heartbeat(grpc::ServerContext* ctx, const pb::HeartbeatRequest* req,
                          pb::HeartbeatResponse* resp) override {
-    if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
-    return ToGrpcStatus(impl_.Heartbeat(*req, *resp));
+    return Timed(impl_.metrics(), "Heartbeat", [&] {
+      if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
+      return ToGrpcStatus(impl_.Heartbeat(*req, *resp));
+    });
   }
   grpc::Status LeaseChunk(grpc::ServerContext* ctx, const pb::LeaseChunkRequest* req,
                           pb::LeaseChunkResponse* resp) override {
-    if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
-    return ToGrpcStatus(impl_.LeaseChunk(*ctx, *req, *resp));
+    return Timed(impl_.metrics(), "LeaseChunk", [&] {
+      if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
+      return ToGrpcStatus(impl_.LeaseChunk(*ctx, *req, *resp));
+    });
   }
   grpc::Status CompleteChunk(grpc::ServerContext* ctx, const pb::CompleteChunkRequest* req,
                              pb::CompleteChunkResponse* resp) override {
-    if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
-    return ToGrpcStatus(impl_.CompleteChunk(*req, *resp));
+    return Timed(impl_.metrics(), "CompleteChunk", [&] {
+      if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
+      return ToGrpcStatus(impl_.CompleteChunk(*req, *resp));
+    });
   }
   grpc::Status FailChunk(grpc::ServerContext* ctx, const pb::FailChunkRequest* req,
                          pb::FailChunkResponse* resp) override {
-    if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
-    return ToGrpcStatus(impl_.FailChunk(*req, *resp));
+    return Timed(impl_.metrics(), "FailChunk", [&] {
+      if (absl::Status s = impl_.AuthenticatePeer(*ctx); !s.ok()) return ToGrpcStatus(s);
+      return ToGrpcStatus(impl_.FailChunk(*req, *resp));
+    });
   }
 
  private:
@@ -554,6 +594,20 @@ absl::Status CoordinatorServer::Impl::Start() {
       return absl::UnavailableError(absl::StrCat("coordinator: cannot listen on ",
                                                  spec_.health_listen_address, " (health)"));
     }
+  }
+  if (!spec_.metrics_listen_address.empty()) {
+    try {
+      exposer_ = std::make_unique<prometheus::Exposer>(spec_.metrics_listen_address, 1);
+      exposer_->RegisterCollectable(metrics_.registry());
+      const std::vector<int> ports = exposer_->GetListeningPorts();
+      metrics_port_ = ports.empty() ? 0 : ports.front();
+    } catch (const std::exception& e) {
+      return absl::UnavailableError(absl::StrCat("coordinator: cannot serve metrics on ",
+                                                 spec_.metrics_listen_address, ": ", e.what()));
+    }
+    spdlog::info("coordinator: metrics on http://{}:{}/metrics",
+                 spec_.metrics_listen_address.substr(0, spec_.metrics_listen_address.rfind(':')),
+                 metrics_port_);
   }
   for (grpc::Server* server : {server_.get(), health_server_.get()}) {
     if (server == nullptr) continue;
@@ -626,6 +680,7 @@ void CoordinatorServer::Impl::Shutdown() {
     threads.swap(job_threads_);
   }
   for (std::thread& t : threads) t.join();
+  exposer_.reset();
   spdlog::info("coordinator: stopped");
   shutdown_done_.Notify();
 }
@@ -639,6 +694,7 @@ void CoordinatorServer::Impl::Sweep() {
       spdlog::error("coordinator: expiring leases: {}", expired.status().ToString());
     } else if (*expired > 0) {
       spdlog::warn("coordinator: {} lease(s) expired and were requeued", *expired);
+      metrics_.LeasesExpired(*expired);
     }
     const int64_t now = NowMs();
     const int64_t timeout_ms = static_cast<int64_t>(spec_.worker_timeout_s * 1000);
@@ -650,8 +706,23 @@ void CoordinatorServer::Impl::Sweep() {
       absl::StatusOr<int> lost = table_->WorkerLost(it->first);
       spdlog::warn("coordinator: worker {} lost (no heartbeat for {:.1f} s); {} lease(s) requeued",
                    it->first, (now - it->second) / 1000.0, lost.ok() ? *lost : -1);
+      metrics_.WorkerLost(lost.ok() ? *lost : 0);
       it = workers_.erase(it);
     }
+    // Gauges: the chunks of every job in the lease table, workers, running jobs.
+    int64_t queued = 0, leased = 0, done = 0, active = 0;
+    for (const auto& [job_id, rt] : runtime_) {
+      if (!rt.current_stage.empty()) ++active;
+      absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
+      if (!p.ok()) continue;
+      queued += p->chunks_queued;
+      leased += p->chunks_leased;
+      done += p->chunks_done;
+    }
+    metrics_.SetChunks(queued, leased, done);
+    metrics_.SetWorkers(static_cast<int64_t>(workers_.size()));
+    metrics_.SetActiveJobs(active);
+    metrics_.UpdateRate(std::chrono::steady_clock::now());
   }
 }
 
@@ -666,6 +737,7 @@ absl::StatusOr<CoordinatorServer::Impl::Caller> CoordinatorServer::Impl::Authent
   if (!tenant) {
     // The reason goes to the log (with the peer, never the token); the caller learns only
     // what to send.
+    metrics_.CallRefused("job");
     spdlog::warn("coordinator: job API call from {} refused: {}", ctx.peer(),
                  !bearer.present ? "no authorization metadata"
                  : !bearer.token ? "authorization is not a bearer token"
@@ -692,6 +764,7 @@ absl::Status CoordinatorServer::Impl::AuthenticatePeer(const grpc::ServerContext
       return absl::OkStatus();
     }
   }
+  metrics_.CallRefused("carve");
   spdlog::warn("coordinator: carve-task call from {} refused: no cluster secret or client "
                "certificate", ctx.peer());
   return absl::UnauthenticatedError(
@@ -742,6 +815,10 @@ void CoordinatorServer::Impl::FailJob(const std::string& job_id, const std::stri
 }
 
 void CoordinatorServer::Impl::CleanUp(const std::string& job_id, bool succeeded) {
+  // Called once when a job's thread ends it (not when the coordinator stops: then it resumes).
+  if (absl::StatusOr<JobRecord> job = store_->GetJob(job_id); job.ok() && IsTerminal(job->state)) {
+    metrics_.JobFinished(JobStateName(job->state));
+  }
   std::string tiles, spill;
   {
     absl::MutexLock lock(&mu_);
@@ -1170,6 +1247,7 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
   absl::StatusOr<JobRecord> stored = store_->GetJob(job.id);
   if (!stored.ok()) return stored.status();
   ToProto(*stored, *resp.mutable_job());
+  metrics_.JobSubmitted();
   StartJobThread(job.id);
   return absl::OkStatus();
 }
@@ -1581,6 +1659,7 @@ absl::Status CoordinatorServer::Impl::CompleteChunk(const pb::CompleteChunkReque
     return s;
   }
   runtime_[job_id].rays_carved += req.stats().rays();
+  metrics_.ChunkCompleted(req.stats().rays());
   absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
   if (p.ok()) {
     resp.mutable_progress()->set_chunks_total(p->chunks_total);
@@ -1600,6 +1679,7 @@ absl::Status CoordinatorServer::Impl::FailChunk(const pb::FailChunkRequest& req,
       table_->Fail(req.lease_id(), req.generation(),
                    absl::StrCat("worker ", req.worker_id(), ": ", req.reason()), req.retryable());
   if (!requeued.ok()) return requeued.status();
+  metrics_.ChunkFailed();
   spdlog::warn("coordinator: worker {} failed {}: {} ({})", req.worker_id(), req.lease_id(),
                req.reason(), *requeued ? "requeued" : "job failed");
   resp.set_requeued(*requeued);
@@ -1619,6 +1699,8 @@ absl::StatusOr<std::unique_ptr<CoordinatorServer>> CoordinatorServer::Start(Coor
 
 int CoordinatorServer::port() const { return impl_->port(); }
 int CoordinatorServer::health_port() const { return impl_->health_port(); }
+int CoordinatorServer::metrics_port() const { return impl_->metrics_port(); }
+std::string CoordinatorServer::MetricsText() const { return impl_->metrics().Text(); }
 void CoordinatorServer::Shutdown() { impl_->Shutdown(); }
 void CoordinatorServer::Wait() { impl_->Wait(); }
 

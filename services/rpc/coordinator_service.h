@@ -102,6 +102,9 @@ struct CoordinatorSpec {
   // A second, plaintext listener serving only grpc.health.v1 (Kubernetes' gRPC probes cannot
   // speak TLS). "" = none.
   std::string health_listen_address;
+  // HTTP "host:port" serving Prometheus metrics at /metrics (services/rpc/
+  // coordinator_metrics.h; aggregates only, no job ids or tenants). "" = none.
+  std::string metrics_listen_address;
 
   absl::Status Validate() const;
 };
@@ -123,6 +126,10 @@ class CoordinatorServer {
   [[nodiscard]] int port() const;
   // The bound port of health_listen_address; 0 without one.
   [[nodiscard]] int health_port() const;
+  // The bound port of metrics_listen_address; 0 without one.
+  [[nodiscard]] int metrics_port() const;
+  // What /metrics serves (Prometheus text format), also without a metrics listener.
+  [[nodiscard]] std::string MetricsText() const;
   // Stops accepting calls, ends streams, joins the job threads. Idempotent.
   void Shutdown();
   // Blocks until Shutdown() has been called (from another thread or a signal handler thread).

@@ -2,7 +2,8 @@
 # The security flags of the `carvemap` binary end to end (docs/RPC.md, "Authentication"):
 # a coordinator off loopback refuses to start open; with tokens, the job commands need a
 # token (flag, file or variable) and see only their tenant's jobs; a worker without the
-# cluster secret exits with the reason; bad token files are named at start.
+# cluster secret exits with the reason; bad token files are named at start. Last, the
+# refusals as `carvemap watch --metrics` shows them from the coordinator's /metrics.
 # Usage: cli_security_test.sh CARVEMAP WORKDIR
 set -u
 CARVEMAP=$1
@@ -43,7 +44,7 @@ expect "short token named by file and line" 2 "bad_tokens: entry 1: token: 5 cha
 echo junk > "$WORK/data/acme/junk.h5"
 "$CARVEMAP" coordinator --listen 127.0.0.1:0 --port-file "$WORK/port" --tokens "$WORK/tokens" \
     --cluster-secret-file "$WORK/secret" --data-root "$WORK/data" --output-root "$WORK/out" \
-    --work-dir "$WORK/w2" > "$WORK/coordinator.log" 2>&1 &
+    --work-dir "$WORK/w2" --metrics-listen 127.0.0.1:0 > "$WORK/coordinator.log" 2>&1 &
 pids+=($!)
 for _ in $(seq 1 300); do [ -s "$WORK/port" ] && break; sleep 0.1; done
 ADDR=$(cat "$WORK/port" 2>/dev/null)
@@ -70,6 +71,12 @@ if grep -q "acme-token-0123456789abcdef\|wrong-token" "$WORK/coordinator.log"; t
 else
   pass "no token in the coordinator's log"
 fi
+
+# Three calls were refused above: two on the job API (no token, wrong token), one on the
+# carve-task API (the worker without the secret).
+METRICS=$(grep -o "metrics on http://[0-9.:]*/metrics" "$WORK/coordinator.log" | sed 's|metrics on ||')
+expect "watch --metrics shows the refusals" 0 "workers 0 .*refused calls 3" -- \
+    "$CARVEMAP" watch --metrics "$METRICS" --count 2 --interval 0.2
 
 if [ $failures != 0 ]; then echo "$failures failure(s)"; exit 1; fi
 echo "all CLI security tests passed"
