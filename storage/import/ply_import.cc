@@ -323,7 +323,13 @@ absl::StatusOr<ImportedScan> ImportPly(const std::string& file, const PlyImportO
       origin = o;
       frame_t = next_t;
     }
-    points.push_back((world - origin).cast<float>());
+    const Eigen::Vector3f point = (world - origin).cast<float>();
+    // scan.h5 stores points as f32: a finite double can still overflow it.
+    if (!point.allFinite()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          file, ": vertex row ", v, ": point minus sensor origin is beyond float range"));
+    }
+    points.push_back(point);
   }
   if (absl::Status s = flush(); !s.ok()) return s;
   return scan;

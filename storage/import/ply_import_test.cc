@@ -199,6 +199,22 @@ TEST(PlyImportTest, NonFiniteValueIsNamed) {
   EXPECT_THAT(scan.status().message(), HasSubstr("vertex row 3: non-finite"));
 }
 
+// Found by tests/fuzz (ply_import): a finite double beyond float range became ±inf in the f32
+// points, so the import "succeeded" with a scan that fails validation.
+TEST(PlyImportTest, PointBeyondFloatRangeIsNamed) {
+  std::vector<Row> rows = kRows;
+  rows[2].z = 1e39;  // finite as double, not as float (the binary file keeps x y z as float)
+  auto scan = ImportPly(WriteTemp("far.ply", AsciiPly(rows, "sensor_", true, false)));
+  ASSERT_FALSE(scan.ok());
+  EXPECT_THAT(scan.status().message(), HasSubstr("vertex row 2: point minus sensor origin"));
+  rows = kRows;
+  rows[4].ox = -4e38;  // the origin far out: the point relative to it overflows
+  rows[3].ox = -4e38;
+  scan = ImportPly(WriteTemp("far_origin.ply", AsciiPly(rows, "sensor_", true, false)));
+  ASSERT_FALSE(scan.ok());
+  EXPECT_THAT(scan.status().message(), HasSubstr("vertex row 3: point minus sensor origin"));
+}
+
 TEST(PlyImportTest, TimeGoingBackIsAnError) {
   std::vector<Row> rows = kRows;
   rows[3].t = rows[4].t = 0.5;  // a different origin at the same time
