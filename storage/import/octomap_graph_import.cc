@@ -136,6 +136,10 @@ absl::StatusOr<ImportedScan> ImportOctomapGraph(const std::string& file,
         return p.Error(absl::StrCat(where, " point ", i), "non-finite coordinate", at);
       }
       points[i] = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]).cast<float>();
+      // scan.h5 stores points as f32: a finite double can still overflow it.
+      if (!all_nan && !points[i].allFinite()) {
+        return p.Error(absl::StrCat(where, " point ", i), "coordinate beyond float range", at);
+      }
     }
     GraphPose pose;
     if (absl::Status s = p.ReadPose(where, pose); !s.ok()) return s;

@@ -177,6 +177,29 @@ TEST(OctomapGraphImportTest, AbsurdCountsAreRejectedBeforeAllocating) {
   EXPECT_THAT(scan.status().message(), HasSubstr("node 0 at byte 4: point count 4294967295"));
 }
 
+// Found by tests/fuzz (graph_import): a finite f64 coordinate beyond float range became ±inf
+// in the f32 points, so the import "succeeded" with a scan that fails validation.
+TEST(OctomapGraphImportTest, CoordinateBeyondFloatRangeIsAnError) {
+  std::vector<char> bytes = TwoNodeGraph();
+  const double far = 1e300;
+  std::memcpy(bytes.data() + 8 + 28 + 4 + 8, &far, 8);  // node 0, point 1, y
+  auto scan = ImportOctomapGraph(WriteTemp("far.graph", bytes));
+  ASSERT_FALSE(scan.ok());
+  EXPECT_THAT(scan.status().message(),
+              HasSubstr("node 0 point 1 at byte 36: coordinate beyond float range"));
+}
+
+// Found by tests/fuzz (graph_import): a graph of zero nodes (and zero edges) imported "fine"
+// into a scan with no poses, which fails validation.
+TEST(OctomapGraphImportTest, GraphWithoutNodesIsAnError) {
+  GraphBytes g;
+  g.Put<uint32_t>(0);  // nodes
+  g.Put<uint32_t>(0);  // edges
+  auto scan = ImportOctomapGraph(WriteTemp("empty.graph", g.bytes));
+  ASSERT_FALSE(scan.ok());
+  EXPECT_THAT(scan.status().message(), HasSubstr("header at byte 0: the graph has no nodes"));
+}
+
 TEST(OctomapGraphImportTest, WrongVectorMarkerIsAnError) {
   std::vector<char> bytes = ReadAll(kFixture);
   const int32_t four = 4;
