@@ -335,6 +335,50 @@ absl::StatusOr<Hid> CreateRows(hid_t loc, const char* name, hid_t file_type, hsi
       absl::StrCat("cannot create dataset '", name, "'"));
 }
 
+absl::Status CheckDataStored(hid_t dataset) {
+  auto dims = Dims(dataset);
+  if (!dims.ok()) return dims.status();
+  const uint64_t rows = dims->empty() ? 1 : (*dims)[0];
+  Hid dcpl(H5Dget_create_plist(dataset));
+  switch (H5Pget_layout(dcpl.get())) {
+    case H5D_COMPACT:
+      return absl::OkStatus();
+    case H5D_CONTIGUOUS: {
+      Hid space(H5Dget_space(dataset));
+      const hssize_t points = H5Sget_simple_extent_npoints(space.get());
+      const uint64_t stored = H5Dget_storage_size(dataset);
+      if (points <= 0 || stored > 0) return absl::OkStatus();  // allocated whole, or empty
+      return absl::DataLossError(absl::StrCat("declares ", rows, " rows but stores none",
+                                              ": rows were never written"));
+    }
+    case H5D_CHUNKED: {
+      std::vector<hsize_t> chunk(dims->size());
+      if (H5Pget_chunk(dcpl.get(), static_cast<int>(chunk.size()), chunk.data()) < 0) {
+        return Error(absl::StatusCode::kDataLoss, "cannot read the chunk shape");
+      }
+      // Chunks the extent covers; saturating, as dims may be near 2^64.
+      uint64_t needed = 1;
+      for (size_t i = 0; i < dims->size(); ++i) {
+        const uint64_t d = (*dims)[i];
+        const uint64_t n = chunk[i] == 0 ? 0 : d / chunk[i] + (d % chunk[i] != 0);
+        needed = n != 0 && needed > UINT64_MAX / n ? UINT64_MAX : needed * n;
+      }
+      if (needed == 0) return absl::OkStatus();
+      hsize_t stored = 0;
+      Hid space(H5Dget_space(dataset));  // all of it selected
+      if (H5Dget_num_chunks(dataset, space.get(), &stored) < 0) {
+        return Error(absl::StatusCode::kDataLoss, "cannot count the stored chunks");
+      }
+      if (stored >= needed) return absl::OkStatus();
+      return absl::DataLossError(absl::StrCat("declares ", rows, " rows but stores ", stored,
+                                              " of its ", needed,
+                                              " chunks: rows were never written"));
+    }
+    default:
+      return absl::DataLossError("unsupported storage layout");
+  }
+}
+
 namespace {
 
 // Selects rows [first, first+n) of `dataset`'s file space; returns it and a matching memory

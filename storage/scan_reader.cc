@@ -62,6 +62,8 @@ absl::StatusOr<uint64_t> CheckShape(hid_t dataset, hsize_t cols) {
         cols > 0 ? absl::StrCat("shape ", shape, ", expected [N][", cols, "]")
                  : absl::StrCat("shape ", shape, ", expected a 1-D table"));
   }
+  // Before anything is allocated for the rows or streamed through them.
+  if (absl::Status s = h5::CheckDataStored(dataset); !s.ok()) return s;
   return (*dims)[0];
 }
 
