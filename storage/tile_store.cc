@@ -305,6 +305,9 @@ absl::StatusOr<size_t> ReadColumn(hid_t group, const ColumnSpec& spec, size_t n,
   if (n != SIZE_MAX && rows != n) {
     return Corrupt(absl::StrCat(where, ": ", rows, " rows, but /leaves/key has ", n));
   }
+  if (absl::Status s = h5::CheckDataStored(dataset->get()); !s.ok()) {
+    return Corrupt(absl::StrCat(where, ": ", s.message()));
+  }
   if (index == 0) ResizeColumns(c, rows);
   if (rows > 0) {
     absl::Status s = h5::CheckRc(H5Dread(dataset->get(), spec.mem_type, H5S_ALL, H5S_ALL,

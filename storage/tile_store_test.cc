@@ -220,6 +220,31 @@ TEST_F(TileStoreTest, MissingColumnNamesFileAndDataset) {
   EXPECT_THAT(read.status().message(), HasSubstr("missing"));
 }
 
+// Found by tests/fuzz (tile_reader): a column declaring 2^33 rows that were never written
+// (HDF5 reads them as fill values) made ReadTile allocate 8 × 2^33 bytes per column.
+TEST_F(TileStoreTest, RowsDeclaredButNeverWrittenAreDataLoss) {
+  auto path = WriteTile(Dir(), MakeTile(100, 5));
+  ASSERT_TRUE(path.ok()) << path.status();
+  EditTile(*path, [](hid_t file) {
+    ASSERT_GE(H5Ldelete(file, "/leaves/key", H5P_DEFAULT), 0);
+    const hsize_t dims[1] = {hsize_t{1} << 33}, chunk[1] = {1024};
+    hid_t space = H5Screate_simple(1, dims, nullptr);
+    hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    H5Pset_chunk(dcpl, 1, chunk);
+    hid_t d = H5Dcreate2(file, "/leaves/key", H5T_STD_U64LE, space, H5P_DEFAULT, dcpl,
+                         H5P_DEFAULT);
+    ASSERT_GE(d, 0);
+    H5Dclose(d);
+    H5Pclose(dcpl);
+    H5Sclose(space);
+  });
+  auto read = ReadTile(*path);
+  ASSERT_FALSE(read.ok());
+  EXPECT_EQ(read.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(read.status().message(), HasSubstr("c_-3_7_-1.h5"));
+  EXPECT_THAT(read.status().message(), HasSubstr("/leaves/key: declares 8589934592 rows"));
+}
+
 TEST_F(TileStoreTest, BadValuesNameTheDataset) {
   struct Case {
     const char* dataset;
