@@ -342,14 +342,20 @@ absl::Status CheckDataStored(hid_t dataset) {
   Hid dcpl(H5Dget_create_plist(dataset));
   switch (H5Pget_layout(dcpl.get())) {
     case H5D_COMPACT:
-      return absl::OkStatus();
     case H5D_CONTIGUOUS: {
+      // Stored whole or not at all; a damaged dataspace can still declare more than is there.
+      Hid type(H5Dget_type(dataset));
       Hid space(H5Dget_space(dataset));
       const hssize_t points = H5Sget_simple_extent_npoints(space.get());
+      const uint64_t element_bytes = H5Tget_size(type.get());
       const uint64_t stored = H5Dget_storage_size(dataset);
-      if (points <= 0 || stored > 0) return absl::OkStatus();  // allocated whole, or empty
-      return absl::DataLossError(absl::StrCat("declares ", rows, " rows but stores none",
-                                              ": rows were never written"));
+      if (points <= 0 || element_bytes == 0 ||
+          static_cast<uint64_t>(points) <= stored / element_bytes) {
+        return absl::OkStatus();
+      }
+      return absl::DataLossError(absl::StrCat("declares ", rows, " rows but stores ", stored,
+                                              " bytes, room for ", stored / element_bytes,
+                                              " elements: rows were never written"));
     }
     case H5D_CHUNKED: {
       std::vector<hsize_t> chunk(dims->size());

@@ -118,8 +118,9 @@ absl::StatusOr<Hid> CreateRows(hid_t loc, const char* name, hid_t file_type, hsi
 // OK when `dataset` stores all the elements its dataspace declares. HDF5 reads what was never
 // written (unallocated chunks, an unallocated contiguous dataset) as fill values, so a file of
 // a few KiB can declare 2^40 rows; readers check this before allocating for a dataset or
-// streaming through it. Chunked: every chunk the extent needs is allocated; contiguous: its
-// storage is allocated; compact data is always stored. DataLoss otherwise, e.g.
+// streaming through it. Chunked: every chunk the extent needs is allocated; contiguous and
+// compact: the storage holds every element (a damaged dataspace may declare more). DataLoss
+// otherwise, e.g.
 // "declares 1099511627776 rows but stores 1 of its 536870912 chunks: rows were never written".
 absl::Status CheckDataStored(hid_t dataset);
 // Rows [first, first+n) into `out` (n rows of `mem_type`, times `cols` when rank 2).

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iterator>
 #include <limits>
 #include <string>
 #include <vector>
@@ -508,6 +509,46 @@ std::string WriteForeignScan() {
   WriteForeignSensor(sensors.get(), "a_points", "points", /*vlen_kind=*/true, {{1, 1.0f, 0}},
                      {-1, -2, -3});
   return path;
+}
+
+// Found by tests/fuzz (scan_reader_raw): a contiguous dataset is stored whole, but a damaged
+// dataspace message can declare more rows than its storage holds; Open then asked for 2^48
+// path rows. Here the dims of a 5-row contiguous /path are patched in the file's bytes.
+TEST(ScanValidateTest, DamagedDataspaceDeclaringMoreThanStored) {
+  h5::Init();
+  const std::string path = TempPath("contiguous.h5");
+  {
+    Hid file(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT));
+    ASSERT_TRUE(h5::WriteStringAttr(file.get(), "format", "carvemap-scan").ok());
+    ASSERT_TRUE(h5::WriteIntAttr(file.get(), "version", 1).ok());
+    std::vector<PathRecord> poses;
+    for (int i = 0; i < 5; ++i) poses.push_back({double(i), 0, 0, 0, 1, 0, 0, 0});
+    Hid file_type = h5::PathFileType(), mem_type = h5::PathMemType();
+    const hsize_t dims[1] = {5};
+    Hid space(H5Screate_simple(1, dims, nullptr));
+    Hid dset(H5Dcreate2(file.get(), "path", file_type.get(), space.get(), H5P_DEFAULT,
+                        H5P_DEFAULT, H5P_DEFAULT));
+    ASSERT_GE(H5Dwrite(dset.get(), mem_type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, poses.data()),
+              0);
+  }
+  ASSERT_TRUE(OpenAndValidate(path).ok()) << OpenAndValidate(path);
+  // Dataspace message v1: version 1, rank 1, flags 1 (max dims follow), 5 reserved bytes,
+  // then dims and max dims as 8-byte little-endian numbers.
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  std::string message("\x01\x01\x01\0\0\0\0\0", 8);
+  message += std::string("\x05\0\0\0\0\0\0\0", 8) + std::string("\x05\0\0\0\0\0\0\0", 8);
+  const size_t at = bytes.find(message);
+  ASSERT_NE(at, std::string::npos);
+  ASSERT_EQ(bytes.find(message, at + 1), std::string::npos);
+  const std::string huge("\0\0\0\0\0\x01\0\0", 8);  // 2^40
+  bytes.replace(at + 8, 16, huge + huge);
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+  EXPECT_THAT(OpenAndValidate(path),
+              ErrorNaming(path, "/path", "declares 1099511627776 rows but stores 320 bytes"));
 }
 
 TEST(ScanValidateTest, ForeignWriterOpens) {
