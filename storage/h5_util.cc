@@ -188,7 +188,8 @@ absl::StatusOr<int64_t> ReadIntAttr(hid_t obj, const char* name) {
   auto attr = OpenAttr(obj, name);
   if (!attr.ok()) return attr.status();
   Hid type(H5Aget_type(attr->get()));
-  if (H5Tget_class(type.get()) != H5T_INTEGER || AttrPoints(attr->get()) != 1) {
+  if (H5Tget_class(type.get()) != H5T_INTEGER || AttrPoints(attr->get()) != 1 ||
+      !CheckTypeIsSane(type.get()).ok()) {
     return absl::InvalidArgumentError(
         absl::StrCat("attribute '", name, "' is not a single integer"));
   }
@@ -205,7 +206,8 @@ absl::StatusOr<std::vector<double>> ReadDoublesAttr(hid_t obj, const char* name,
   Hid type(H5Aget_type(attr->get()));
   const H5T_class_t cls = H5Tget_class(type.get());
   const hssize_t points = AttrPoints(attr->get());
-  if ((cls != H5T_INTEGER && cls != H5T_FLOAT) || points != static_cast<hssize_t>(n)) {
+  if ((cls != H5T_INTEGER && cls != H5T_FLOAT) || points != static_cast<hssize_t>(n) ||
+      !CheckTypeIsSane(type.get()).ok()) {
     return absl::InvalidArgumentError(
         absl::StrCat("attribute '", name, "' must hold ", n, " number", n == 1 ? "" : "s"));
   }
@@ -217,6 +219,62 @@ absl::StatusOr<std::vector<double>> ReadDoublesAttr(hid_t obj, const char* name,
 }
 
 // --- Compound types ----------------------------------------------------------------------
+
+absl::Status CheckTypeIsSane(hid_t type) {
+  const size_t size = H5Tget_size(type);
+  if (size == 0) return absl::InvalidArgumentError("a type of size 0");
+  switch (H5Tget_class(type)) {
+    case H5T_INTEGER:
+    case H5T_FLOAT: {
+      const size_t precision = H5Tget_precision(type);
+      const int offset = H5Tget_offset(type);
+      if (precision == 0 || offset < 0 || offset + precision > 8 * size) {
+        return absl::InvalidArgumentError(absl::StrCat("a number of ", size, " bytes with ",
+                                                       precision, " bits at bit ", offset));
+      }
+      if (H5Tget_class(type) == H5T_INTEGER) return absl::OkStatus();
+      size_t spos = 0, epos = 0, esize = 0, mpos = 0, msize = 0;
+      if (H5Tget_fields(type, &spos, &epos, &esize, &mpos, &msize) < 0) {
+        return Error(absl::StatusCode::kInvalidArgument, "a float without fields");
+      }
+      // Sign, exponent and mantissa: non-empty (but the sign), inside the precision, disjoint.
+      const auto overlap = [](size_t a, size_t na, size_t b, size_t nb) {
+        return a < b + nb && b < a + na;
+      };
+      if (esize == 0 || msize == 0 || spos >= precision || epos + esize > precision ||
+          mpos + msize > precision || overlap(epos, esize, mpos, msize) ||
+          overlap(spos, 1, epos, esize) || overlap(spos, 1, mpos, msize)) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "a float whose fields do not fit (sign ", spos, ", exponent ", epos, "+", esize,
+            ", mantissa ", mpos, "+", msize, " in ", precision, " bits)"));
+      }
+      return absl::OkStatus();
+    }
+    case H5T_COMPOUND: {
+      const int n = H5Tget_nmembers(type);
+      if (n < 0) return Error(absl::StatusCode::kInvalidArgument, "a compound without members");
+      for (int i = 0; i < n; ++i) {
+        char* name = H5Tget_member_name(type, static_cast<unsigned>(i));
+        const std::string member = name != nullptr ? name : "";
+        H5free_memory(name);
+        Hid member_type(H5Tget_member_type(type, static_cast<unsigned>(i)));
+        const size_t offset = H5Tget_member_offset(type, static_cast<unsigned>(i));
+        const size_t member_size = H5Tget_size(member_type.get());
+        if (!member_type.valid() || offset > size || member_size > size - offset) {
+          return absl::InvalidArgumentError(
+              absl::StrCat("field '", member, "' (", member_size, " bytes at byte ", offset,
+                           ") lies outside the ", size, "-byte record"));
+        }
+        if (absl::Status s = CheckTypeIsSane(member_type.get()); !s.ok()) {
+          return absl::InvalidArgumentError(absl::StrCat("field '", member, "': ", s.message()));
+        }
+      }
+      return absl::OkStatus();
+    }
+    default:
+      return absl::OkStatus();  // strings and others: no bit layout of ours to convert
+  }
+}
 
 Hid MakeCompound(size_t size, std::span<const Field> fields) {
   Hid type(H5Tcreate(H5T_COMPOUND, size));
@@ -240,6 +298,7 @@ absl::Status CheckCompoundFields(hid_t file_type, std::span<const Field> fields)
   if (H5Tget_class(file_type) != H5T_COMPOUND) {
     return absl::InvalidArgumentError("not a compound dataset");
   }
+  if (absl::Status s = CheckTypeIsSane(file_type); !s.ok()) return s;
   for (const Field& f : fields) {
     const int index = H5Tget_member_index(file_type, f.name);
     if (index < 0) {

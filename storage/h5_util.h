@@ -91,11 +91,18 @@ struct Field {
   size_t offset;
   hid_t mem_type;  // a native type (H5T_NATIVE_DOUBLE ...), not owned
 };
+// OK when a type read from a file is self-consistent: numbers' bits lie inside their size, a
+// float's sign, exponent and mantissa are disjoint and inside its precision, and a compound's
+// members (recursively) lie inside the record. HDF5 1.10 does not check this when it decodes a
+// damaged type message, and then converts out of bounds (found by fuzzing); readers check
+// before any conversion. InvalidArgument naming the member otherwise.
+absl::Status CheckTypeIsSane(hid_t type);
 // A memory compound of `size` bytes with `fields` at their offsets.
 Hid MakeCompound(size_t size, std::span<const Field> fields);
 // A packed little-endian file compound with the fields in order, each of its `file_types`.
 Hid MakePackedCompound(std::span<const Field> fields, std::span<const hid_t> file_types);
-// OK when `file_type` is a compound holding every field of `fields`, each integer or float.
+// OK when `file_type` is a compound holding every field of `fields`, each integer or float,
+// and CheckTypeIsSane.
 absl::Status CheckCompoundFields(hid_t file_type, std::span<const Field> fields);
 
 // Memory layouts of the records of storage/scan_types.h.

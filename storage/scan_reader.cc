@@ -74,6 +74,7 @@ absl::StatusOr<uint64_t> CheckNumericMatrix(hid_t dataset, hsize_t cols) {
   if (cls != H5T_FLOAT && cls != H5T_INTEGER) {
     return absl::InvalidArgumentError("not a numeric dataset");
   }
+  if (absl::Status s = h5::CheckTypeIsSane(type.get()); !s.ok()) return s;
   return CheckShape(dataset, cols);
 }
 

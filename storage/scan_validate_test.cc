@@ -511,44 +511,93 @@ std::string WriteForeignScan() {
   return path;
 }
 
-// Found by tests/fuzz (scan_reader_raw): a contiguous dataset is stored whole, but a damaged
-// dataspace message can declare more rows than its storage holds; Open then asked for 2^48
-// path rows. Here the dims of a 5-row contiguous /path are patched in the file's bytes.
-TEST(ScanValidateTest, DamagedDataspaceDeclaringMoreThanStored) {
+// A minimal scan with a 5-row contiguous /path (HDF5's oldest formats), for tests that damage
+// bytes of its metadata as a bad disk or transfer would.
+std::string WriteContiguousPathScan() {
   h5::Init();
   const std::string path = TempPath("contiguous.h5");
-  {
-    Hid file(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT));
-    ASSERT_TRUE(h5::WriteStringAttr(file.get(), "format", "carvemap-scan").ok());
-    ASSERT_TRUE(h5::WriteIntAttr(file.get(), "version", 1).ok());
-    std::vector<PathRecord> poses;
-    for (int i = 0; i < 5; ++i) poses.push_back({double(i), 0, 0, 0, 1, 0, 0, 0});
-    Hid file_type = h5::PathFileType(), mem_type = h5::PathMemType();
-    const hsize_t dims[1] = {5};
-    Hid space(H5Screate_simple(1, dims, nullptr));
-    Hid dset(H5Dcreate2(file.get(), "path", file_type.get(), space.get(), H5P_DEFAULT,
-                        H5P_DEFAULT, H5P_DEFAULT));
-    ASSERT_GE(H5Dwrite(dset.get(), mem_type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, poses.data()),
-              0);
-  }
-  ASSERT_TRUE(OpenAndValidate(path).ok()) << OpenAndValidate(path);
-  // Dataspace message v1: version 1, rank 1, flags 1 (max dims follow), 5 reserved bytes,
-  // then dims and max dims as 8-byte little-endian numbers.
+  Hid file(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT));
+  EXPECT_TRUE(h5::WriteStringAttr(file.get(), "format", "carvemap-scan").ok());
+  EXPECT_TRUE(h5::WriteIntAttr(file.get(), "version", 1).ok());
+  std::vector<PathRecord> poses;
+  for (int i = 0; i < 5; ++i) poses.push_back({double(i), 0, 0, 0, 1, 0, 0, 0});
+  Hid file_type = h5::PathFileType(), mem_type = h5::PathMemType();
+  const hsize_t dims[1] = {5};
+  Hid space(H5Screate_simple(1, dims, nullptr));
+  Hid dset(H5Dcreate2(file.get(), "path", file_type.get(), space.get(), H5P_DEFAULT,
+                      H5P_DEFAULT, H5P_DEFAULT));
+  EXPECT_GE(H5Dwrite(dset.get(), mem_type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, poses.data()),
+            0);
+  return path;
+}
+
+// Replaces the one occurrence of `from` in the file's bytes by `to` (same length).
+void PatchOnce(const std::string& path, const std::string& from, const std::string& to) {
+  ASSERT_EQ(from.size(), to.size());
   std::string bytes;
   {
     std::ifstream in(path, std::ios::binary);
     bytes.assign(std::istreambuf_iterator<char>(in), {});
   }
-  std::string message("\x01\x01\x01\0\0\0\0\0", 8);
-  message += std::string("\x05\0\0\0\0\0\0\0", 8) + std::string("\x05\0\0\0\0\0\0\0", 8);
-  const size_t at = bytes.find(message);
+  const size_t at = bytes.find(from);
   ASSERT_NE(at, std::string::npos);
-  ASSERT_EQ(bytes.find(message, at + 1), std::string::npos);
-  const std::string huge("\0\0\0\0\0\x01\0\0", 8);  // 2^40
-  bytes.replace(at + 8, 16, huge + huge);
+  ASSERT_EQ(bytes.find(from, at + 1), std::string::npos);
+  bytes.replace(at, from.size(), to);
   std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+}
+
+std::string Bytes(std::initializer_list<int> b) {
+  std::string s;
+  for (int c : b) s.push_back(static_cast<char>(c));
+  return s;
+}
+
+// Found by tests/fuzz (scan_reader_raw): a contiguous dataset is stored whole, but a damaged
+// dataspace message can declare more rows than its storage holds; Open then asked for 2^48
+// path rows.
+TEST(ScanValidateTest, DamagedDataspaceDeclaringMoreThanStored) {
+  const std::string path = WriteContiguousPathScan();
+  ASSERT_TRUE(OpenAndValidate(path).ok()) << OpenAndValidate(path);
+  // Dataspace message v1: version 1, rank 1, flags 1 (max dims follow), 5 reserved bytes,
+  // then dims and max dims as 8-byte little-endian numbers: 5 rows ➜ 2^40.
+  const std::string header = Bytes({1, 1, 1, 0, 0, 0, 0, 0});
+  const std::string five = Bytes({5, 0, 0, 0, 0, 0, 0, 0}), huge = Bytes({0, 0, 0, 0, 0, 1, 0, 0});
+  PatchOnce(path, header + five + five, header + huge + huge);
   EXPECT_THAT(OpenAndValidate(path),
               ErrorNaming(path, "/path", "declares 1099511627776 rows but stores 320 bytes"));
+}
+
+// Found by tests/fuzz (scan_reader_raw): HDF5 1.10 decodes a compound member's offset without
+// checking it against the record size, then converts out of bounds (SEGV in
+// H5T__conv_struct_opt). The reader checks the type first.
+TEST(ScanValidateTest, DamagedCompoundMemberOffset) {
+  const std::string path = WriteContiguousPathScan();
+  // Compound member (datatype message v1): name padded to 8 bytes, then its u32 byte offset.
+  PatchOnce(path, std::string("qy\0\0\0\0\0\0", 8) + Bytes({48, 0, 0, 0}),
+            std::string("qy\0\0\0\0\0\0", 8) + Bytes({0x5f, 0x63, 0x6f, 0}));
+  EXPECT_THAT(OpenAndValidate(path),
+              ErrorNaming(path, "/path",
+                          "field 'qy' (8 bytes at byte 7299935) lies outside the 64-byte record"));
+}
+
+// Found by tests/fuzz (scan_reader_raw): a float whose exponent overlaps its sign bit made
+// HDF5's conversion copy bits out of bounds (SEGV in H5T__bit_copy).
+TEST(ScanValidateTest, DamagedFloatFields) {
+  const std::string path = WriteContiguousPathScan();
+  // The first f64 of the file is /path's 't': offset 0, precision 64, exponent at bit 52 of
+  // 11 bits, mantissa at 0 of 52, bias 1023. Move the exponent onto the sign bit.
+  const std::string fields = Bytes({0, 0, 64, 0, 52, 11, 0, 52, 0xff, 3, 0, 0});
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const size_t at = bytes.find(fields);
+  ASSERT_NE(at, std::string::npos);
+  bytes[at + 4] = 53;
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+  EXPECT_THAT(OpenAndValidate(path),
+              ErrorNaming(path, "/path", "field 't': a float whose fields do not fit"));
 }
 
 TEST(ScanValidateTest, ForeignWriterOpens) {

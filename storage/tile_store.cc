@@ -298,6 +298,9 @@ absl::StatusOr<size_t> ReadColumn(hid_t group, const ColumnSpec& spec, size_t n,
   if (cls != (spec.integer ? H5T_INTEGER : H5T_FLOAT)) {
     return Corrupt(absl::StrCat(where, ": expected ", spec.integer ? "integers" : "floats"));
   }
+  if (absl::Status s = h5::CheckTypeIsSane(type.get()); !s.ok()) {
+    return Corrupt(absl::StrCat(where, ": ", s.message()));
+  }
   auto dims = h5::Dims(dataset->get());
   if (!dims.ok()) return h5::Prefixed(where, dims.status());
   if (dims->size() != 1) return Corrupt(absl::StrCat(where, ": rank ", dims->size(), ", expected 1"));

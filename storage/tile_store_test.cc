@@ -245,6 +245,28 @@ TEST_F(TileStoreTest, RowsDeclaredButNeverWrittenAreDataLoss) {
   EXPECT_THAT(read.status().message(), HasSubstr("/leaves/key: declares 8589934592 rows"));
 }
 
+// Found by tests/fuzz (the scan reader's twin): HDF5 1.10 converts a float whose exponent
+// overlaps another field out of bounds. A damaged type message in /leaves/p, the first f32
+// column (offset 0, precision 32, exponent at 23 of 8 bits, mantissa at 0 of 23, bias 127).
+TEST_F(TileStoreTest, DamagedColumnTypeIsDataLoss) {
+  auto path = WriteTile(Dir(), MakeTile(100, 5));
+  ASSERT_TRUE(path.ok()) << path.status();
+  std::string bytes;
+  {
+    std::ifstream in(*path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const std::string f32("\0\0\x20\0\x17\x08\0\x17\x7f\0\0\0", 12);
+  const size_t at = bytes.find(f32);
+  ASSERT_NE(at, std::string::npos);
+  bytes[at + 4] = 0x18;  // the exponent now covers the sign bit
+  std::ofstream(*path, std::ios::binary | std::ios::trunc) << bytes;
+  auto read = ReadTile(*path);
+  ASSERT_FALSE(read.ok());
+  EXPECT_EQ(read.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(read.status().message(), HasSubstr("/leaves/p: a float whose fields do not fit"));
+}
+
 TEST_F(TileStoreTest, BadValuesNameTheDataset) {
   struct Case {
     const char* dataset;
