@@ -4,6 +4,7 @@
 
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <memory>
 
 #include "absl/strings/str_cat.h"
@@ -19,6 +20,22 @@ struct FileCloser {
 };
 using File = std::unique_ptr<FILE, FileCloser>;
 
+// The header alone can declare 10^6 × 10^6 pixels (libpng's default limits). Pixel data is
+// deflated, deflate expands at most 1032:1, and a row is a filter byte and at least one bit a
+// pixel, so a file of n bytes holds at most 1032·n bytes of rows: checked before allocating.
+absl::Status CheckDeclaredSize(const std::string& path, uint64_t width, uint64_t height,
+                               uint64_t bits_per_pixel) {
+  std::error_code error;
+  const uint64_t file_bytes = std::filesystem::file_size(path, error);
+  const uint64_t row_bytes = 1 + (width * bits_per_pixel + 7) / 8;  // width < 2^31
+  if (error || height > 1032 * file_bytes / row_bytes) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": PNG declares ", width, "×", height, " pixels, more than its ",
+                     file_bytes, " bytes can hold"));
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 absl::StatusOr<Image<uint8_t>> ReadPngGray8(const std::string& path) {
@@ -28,6 +45,11 @@ absl::StatusOr<Image<uint8_t>> ReadPngGray8(const std::string& path) {
   image.version = PNG_IMAGE_VERSION;
   if (!png_image_begin_read_from_file(&image, path.c_str())) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": not a readable PNG: ", image.message));
+  }
+  // At least one bit per pixel (1-bit gray and palettes).
+  if (absl::Status s = CheckDeclaredSize(path, image.width, image.height, 1); !s.ok()) {
+    png_image_free(&image);
+    return s;
   }
   image.format = PNG_FORMAT_GRAY;
   Image<uint8_t> out;
@@ -76,6 +98,10 @@ absl::StatusOr<Image<uint16_t>> ReadPngGray16(const std::string& path) {
   png_set_swap(png);  // PNG stores big-endian samples
   out.width = static_cast<int>(png_get_image_width(png, info));
   out.height = static_cast<int>(png_get_image_height(png, info));
+  if (absl::Status s = CheckDeclaredSize(path, out.width, out.height, 16); !s.ok()) {
+    png_destroy_read_struct(&png, &info, nullptr);
+    return s;
+  }
   out.pixels.resize(size_t(out.width) * out.height);
   rows.resize(out.height);
   for (int r = 0; r < out.height; ++r) {
