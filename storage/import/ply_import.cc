@@ -237,6 +237,8 @@ absl::StatusOr<ImportedScan> ImportPly(const std::string& file, const PlyImportO
       vertex = &e;
       break;
     }
+    // Rows without properties hold no bytes: nothing to skip, however many the count says.
+    if (e.properties.empty()) continue;
     for (uint64_t i = 0; i < e.count; ++i) {
       if (!ReadRow(r, format, e, row)) {
         return absl::DataLossError(

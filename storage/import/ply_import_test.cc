@@ -215,6 +215,25 @@ TEST(PlyImportTest, PointBeyondFloatRangeIsNamed) {
   EXPECT_THAT(scan.status().message(), HasSubstr("vertex row 3: point minus sensor origin"));
 }
 
+// Found with the fuzz target (ply_import): an element without properties holds no bytes, so
+// skipping its 10^14 rows before the vertices looped 10^14 times (a hang).
+TEST(PlyImportTest, ElementWithoutPropertiesIsSkippedAtOnce) {
+  for (const std::string format : {"ascii", "binary_little_endian"}) {
+    std::string ply = "ply\nformat " + format + " 1.0\nelement empty 100000000000000\n";
+    ply += "element vertex 1\nproperty float x\nproperty float y\nproperty float z\n";
+    ply += "property float sx\nproperty float sy\nproperty float sz\nend_header\n";
+    if (format == "ascii") {
+      ply += "1 2 3 0 0 1\n";
+    } else {
+      for (float v : {1.0f, 2.0f, 3.0f, 0.0f, 0.0f, 1.0f}) Put<float>(ply, v, false);
+    }
+    auto scan = ImportPly(WriteTemp("empty_element.ply", ply));
+    ASSERT_TRUE(scan.ok()) << scan.status();
+    ASSERT_EQ(scan->frames.size(), 1u);
+    EXPECT_EQ(scan->frames[0].points_sensor[0], Eigen::Vector3f(1, 2, 2));
+  }
+}
+
 TEST(PlyImportTest, TimeGoingBackIsAnError) {
   std::vector<Row> rows = kRows;
   rows[3].t = rows[4].t = 0.5;  // a different origin at the same time
