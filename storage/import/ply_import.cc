@@ -174,6 +174,10 @@ absl::StatusOr<Header> ReadHeader(const std::string& file, ByteReader& r) {
         auto count_type = ParseType(tok[2]);
         auto type = ParseType(tok[3]);
         if (!count_type || !type) return bad("unknown type");
+        // A list's length is a count (and a float one would not convert to the byte count).
+        if (*count_type == Type::kFloat32 || *count_type == Type::kFloat64) {
+          return bad("a list's count type must be an integer type");
+        }
         p = Property{std::string(tok[4]), *type, true, *count_type};
       } else if (tok.size() == 3) {
         auto type = ParseType(tok[1]);

@@ -234,6 +234,19 @@ TEST(PlyImportTest, ElementWithoutPropertiesIsSkippedAtOnce) {
   }
 }
 
+// Found by tests/fuzz (ply_import, UBSan): a list counted by a float read 3.8e19 as its count
+// and converted it to an integer byte count (undefined behaviour).
+TEST(PlyImportTest, FloatListCountIsAnError) {
+  const std::string ply =
+      "ply\nformat binary_little_endian 1.0\nelement face 1\n"
+      "property list float int vertex_indices\nelement vertex 0\nend_header\n";
+  auto scan = ImportPly(WriteTemp("float_count.ply", ply));
+  ASSERT_FALSE(scan.ok());
+  EXPECT_THAT(scan.status().message(),
+              HasSubstr("header line 4 'property list float int vertex_indices': a list's count "
+                        "type must be an integer type"));
+}
+
 TEST(PlyImportTest, TimeGoingBackIsAnError) {
   std::vector<Row> rows = kRows;
   rows[3].t = rows[4].t = 0.5;  // a different origin at the same time
