@@ -20,6 +20,7 @@
 #include "services/rpc/bearer_tokens.h"
 #include "services/rpc/coordinator_service.h"
 #include "services/rpc/process_util.h"
+#include "services/rpc/server_log.h"
 #include "services/rpc/worker_service.h"
 
 namespace carvemap {
@@ -45,9 +46,31 @@ std::string HostOf(const std::string& listen) {
   return host.empty() || host == "0.0.0.0" || host == "[::]" ? "127.0.0.1" : host;
 }
 
-void SetUpLogging(bool verbose) {
-  spdlog::set_level(verbose ? spdlog::level::debug : spdlog::level::info);
-  spdlog::set_pattern("[%Y-%m-%d %H:%M:%S.%e] [%n] [%l] %v");
+// --log-format text|json (services/rpc/server_log.h); CARVEMAP_LOG_FORMAT sets it for every
+// server of a `carvemap run` too.
+void AddLogFlags(CLI::App* cmd, std::string& format, bool& verbose) {
+  cmd->add_option("--log-format", format,
+                  "text: '[time] [level] message' lines; json: one JSON object per line with "
+                  "time, level, component, message and job/chunk/lease/worker where known")
+      ->check(CLI::IsMember({"text", "json"}))
+      ->envname("CARVEMAP_LOG_FORMAT")
+      ->capture_default_str();
+  cmd->add_flag("-v,--verbose", verbose, "Debug logging");
+}
+
+LogFormat SetUpLogging(const std::string& format, const char* component, bool verbose) {
+  const LogFormat f = ParseLogFormat(format).value_or(LogFormat::kText);
+  SetUpServerLogging(f, component, verbose);
+  return f;
+}
+
+// The end of a server: in JSON, its error is a log record too, so that every line of the log
+// parses; the exit code is ReportStatus's.
+int ReportServerStatus(const char* command, LogFormat format, const absl::Status& status) {
+  if (format != LogFormat::kJson || status.ok()) return ReportStatus(command, status);
+  spdlog::critical("{}: {}", command, std::string(status.message()));
+  spdlog::default_logger()->flush();
+  return StatusExitCode(status);
 }
 
 // One line at exit with what the process used (benchmarks read it: tests/bench/pipeline_bench.sh).
@@ -66,6 +89,7 @@ struct CoordinatorFlags {
   std::string tokens_file;
   std::string secret_file;
   bool no_merge = false;
+  std::string log_format = "text";
   bool verbose = false;
 };
 
@@ -92,8 +116,7 @@ absl::Status LoadSecrets(CoordinatorFlags& flags) {
   return absl::OkStatus();
 }
 
-absl::Status RunCoordinator(CoordinatorFlags flags) {
-  SetUpLogging(flags.verbose);
+absl::Status RunCoordinator(CoordinatorFlags flags, LogFormat log_format) {
   if (absl::Status s = LoadSecrets(flags); !s.ok()) return s;
   // Set up before any thread exists (gRPC starts threads).
   auto stop = std::make_shared<std::atomic<CoordinatorServer*>>(nullptr);
@@ -109,8 +132,10 @@ absl::Status RunCoordinator(CoordinatorFlags flags) {
   if (!server.ok()) return server.status();
   const std::string address =
       absl::StrCat(HostOf(flags.spec.listen_address), ":", (*server)->port());
-  std::printf("listening on %s\n", address.c_str());
-  std::fflush(stdout);
+  if (log_format == LogFormat::kText) {  // JSON: the logged "listening on" line says it
+    std::printf("listening on %s\n", address.c_str());
+    std::fflush(stdout);
+  }
   if (!flags.port_file.empty()) {
     if (absl::Status s = WritePortFile(flags.port_file, address); !s.ok()) return s;
   }
@@ -199,20 +224,21 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
   cmd->add_option("--health-listen", s.health_listen_address,
                   "Also serve grpc.health.v1 alone, in plaintext, on this host:port (for "
                   "Kubernetes probes, which cannot speak TLS)");
-  cmd->add_flag("-v,--verbose", flags->verbose, "Debug logging");
+  AddLogFlags(cmd, flags->log_format, flags->verbose);
   cmd->callback([flags, &exit_code] {
-    exit_code = ReportStatus("coordinator", RunCoordinator(*flags));
+    const LogFormat format = SetUpLogging(flags->log_format, "coordinator", flags->verbose);
+    exit_code = ReportServerStatus("coordinator", format, RunCoordinator(*flags, format));
   });
 }
 
 struct WorkerFlags {
   WorkerSpec spec;
   SecurityFlags security;
+  std::string log_format = "text";
   bool verbose = false;
 };
 
 absl::Status RunWorker(WorkerFlags flags) {
-  SetUpLogging(flags.verbose);
   absl::StatusOr<ChannelSecurity> security = ResolveSecurity(flags.security, /*worker=*/true);
   if (!security.ok()) return security.status();
   flags.spec.security = *std::move(security);
@@ -250,8 +276,11 @@ void RegisterWorker(CLI::App& app, int& exit_code) {
                   "Exit when the coordinator has been unreachable this long")
       ->capture_default_str();
   AddSecurityFlags(cmd, flags->security, /*worker=*/true);
-  cmd->add_flag("-v,--verbose", flags->verbose, "Debug logging");
-  cmd->callback([flags, &exit_code] { exit_code = ReportStatus("worker", RunWorker(*flags)); });
+  AddLogFlags(cmd, flags->log_format, flags->verbose);
+  cmd->callback([flags, &exit_code] {
+    const LogFormat format = SetUpLogging(flags->log_format, "worker", flags->verbose);
+    exit_code = ReportServerStatus("worker", format, RunWorker(*flags));
+  });
 }
 
 }  // namespace

@@ -23,6 +23,9 @@ bool RegisterCommand(int order, CommandRegistrar registrar);
 // (0 when ok; 2 for invalid input; 1 otherwise).
 int ReportStatus(const std::string& command, const absl::Status& status);
 
+// ReportStatus's exit code without printing (for a server that logs its error as JSON).
+int StatusExitCode(const absl::Status& status);
+
 }  // namespace carvemap
 
 #define CARVEMAP_REGISTER_COMMAND(order, registrar) \

@@ -28,6 +28,11 @@ bool RegisterCommand(int order, CommandRegistrar registrar) {
 int ReportStatus(const std::string& command, const absl::Status& status) {
   if (status.ok()) return 0;
   std::cerr << "carvemap " << command << ": " << status.message() << "\n";
+  return StatusExitCode(status);
+}
+
+int StatusExitCode(const absl::Status& status) {
+  if (status.ok()) return 0;
   switch (status.code()) {
     case absl::StatusCode::kInvalidArgument:
     case absl::StatusCode::kNotFound:

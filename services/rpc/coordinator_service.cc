@@ -38,6 +38,7 @@
 #include "services/rpc/coordinator_metrics.h"
 #include "services/rpc/file_hash.h"
 #include "services/rpc/grpc_security.h"
+#include "services/rpc/server_log.h"
 #include "storage/confined_path.h"
 #include "storage/job_store.h"
 
@@ -703,6 +704,7 @@ void CoordinatorServer::Impl::Sweep() {
         ++it;
         continue;
       }
+      LogScope log_scope({{"worker", it->first}});
       absl::StatusOr<int> lost = table_->WorkerLost(it->first);
       spdlog::warn("coordinator: worker {} lost (no heartbeat for {:.1f} s); {} lease(s) requeued",
                    it->first, (now - it->second) / 1000.0, lost.ok() ? *lost : -1);
@@ -998,6 +1000,7 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
 }
 
 void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
+  LogScope log_scope({{"job", job_id}});  // JSON logs: every line of this job's thread
   absl::StatusOr<JobRecord> job = store_->GetJob(job_id);
   if (!job.ok()) {
     spdlog::error("coordinator: job {}: {}", job_id, job.status().ToString());
@@ -1241,6 +1244,7 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
     }
     return s;
   }
+  LogScope log_scope({{"job", job.id}, {"tenant", job.tenant}});
   spdlog::info("coordinator: job {} of tenant {} submitted: {} -> {} (resolution {} m)", job.id,
                job.tenant, (fs::path(DataDir(job.tenant_dir)) / input).string(), OutputDir(job),
                params->resolution_m);
@@ -1500,6 +1504,7 @@ absl::Status CoordinatorServer::Impl::RegisterWorker(grpc::ServerContext& ctx,
     id = absl::StrCat("w-", instance_, "-", next_worker_++);
     workers_[id] = NowMs();
   }
+  LogScope log_scope({{"worker", id}});
   spdlog::info("coordinator: worker {} registered (host {}, {} thread(s), peer {})", id,
                req.hostname(), req.threads(), ctx.peer());
   resp.set_worker_id(id);
@@ -1578,6 +1583,7 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
       }
     }
     if (grant) {
+      LogScope log_scope(LeaseLogFields(grant->lease_id, req.worker_id()));
       pb::Lease& lease = *resp.mutable_lease();
       lease.set_job_id(grant->job_id);
       lease.mutable_chunk()->set_x(grant->chunk.x);
@@ -1637,6 +1643,7 @@ absl::Status CoordinatorServer::Impl::CheckLeaseJob(absl::string_view lease_id) 
 
 absl::Status CoordinatorServer::Impl::CompleteChunk(const pb::CompleteChunkRequest& req,
                                                     pb::CompleteChunkResponse& resp) {
+  LogScope log_scope(LeaseLogFields(req.lease_id(), req.worker_id()));
   if (absl::Status s = CheckLeaseJob(req.lease_id()); !s.ok()) {
     // A tile finished after its job failed or was cancelled: the job's cleanup has already
     // run, so remove the late tile here, or it would sit in a tiles dir that looks partial.
@@ -1672,12 +1679,13 @@ absl::Status CoordinatorServer::Impl::CompleteChunk(const pb::CompleteChunkReque
 
 absl::Status CoordinatorServer::Impl::FailChunk(const pb::FailChunkRequest& req,
                                                 pb::FailChunkResponse& resp) {
+  LogScope log_scope(LeaseLogFields(req.lease_id(), req.worker_id()));
   if (absl::Status s = CheckLeaseJob(req.lease_id()); !s.ok()) return s;
   absl::MutexLock lock(&mu_);
   Touch(req.worker_id());
   absl::StatusOr<bool> requeued =
-      table_->Fail(req.lease_id(), req.generation(),
-                   absl::StrCat("worker ", req.worker_id(), ": ", req.reason()), req.retryable());
+      // The table prefixes "worker <id>: " itself.
+      table_->Fail(req.lease_id(), req.generation(), req.reason(), req.retryable());
   if (!requeued.ok()) return requeued.status();
   metrics_.ChunkFailed();
   spdlog::warn("coordinator: worker {} failed {}: {} ({})", req.worker_id(), req.lease_id(),

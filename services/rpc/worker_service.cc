@@ -25,6 +25,7 @@
 #include "services/grpc_status.h"
 #include "services/rpc/file_hash.h"
 #include "services/rpc/grpc_security.h"
+#include "services/rpc/server_log.h"
 #include "worker/chunk_carver.h"
 
 namespace carvemap {
@@ -405,6 +406,7 @@ void WorkerServer::Impl::CarveLoop() {
       continue;
     }
     const pb::Lease& lease = resp.lease();
+    LogScope log_scope(LeaseLogFields(lease.lease_id(), *id));  // JSON logs: job, chunk
     {
       absl::MutexLock lock(&mu_);
       active_.insert(lease.lease_id());
