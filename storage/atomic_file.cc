@@ -1,5 +1,7 @@
 #include "storage/atomic_file.h"
 
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -23,13 +25,18 @@ absl::Status WriteFileAtomically(const std::string& path,
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) return absl::PermissionDeniedError(absl::StrCat(path, ": cannot open for writing"));
+    errno = 0;
     write(out);
     out.flush();
     if (!out) {
+      // The stream keeps no error code; errno still holds the failed write(2)'s (ENOSPC,
+      // EDQUOT, EIO...), which is the reason a user can act on.
+      const int err = errno;
       out.close();
       std::error_code ec;
       std::filesystem::remove(tmp, ec);
-      return absl::DataLossError(absl::StrCat(path, ": write failed (disk full?)"));
+      return absl::DataLossError(absl::StrCat(
+          path, ": write failed: ", err != 0 ? std::strerror(err) : "unknown error (disk full?)"));
     }
   }
   return CommitPartial(path);
