@@ -14,6 +14,8 @@ PACKAGES=(
   prometheus-cpp-dev libcurl4-openssl-dev  # the coordinator's /metrics; `watch --metrics`
   python3 python3-h5py python3-numpy
   yamllint python3-yaml kubernetes-client
+  python3-grpcio python3-grpc-tools  # tests/tools: an independent client of the job API
+  iproute2  # tests/tools/fault_test.py, deploy/local/netns.sh: ip netns, veth links
 )
 
 missing=()
