@@ -141,7 +141,15 @@ absl::StatusOr<ImportedScan> ImportTum(const std::string& dir, const TumOptions&
 
   std::vector<DepthLine> depths;
   for (auto& [path, d] : depth_by_path) {
-    if (fs::exists(fs::path(dir) / path)) depths.push_back(std::move(d));
+    // The non-throwing overload: a name the system cannot look up (too long, a directory we
+    // may not read) is an error on its line, not an exception.
+    std::error_code error;
+    const bool exists = fs::exists(fs::path(dir) / path, error);
+    if (error) {
+      return absl::InvalidArgumentError(absl::StrCat(assoc, ": line ", d.line, ": depth image ",
+                                                     path.substr(0, 80), ": ", error.message()));
+    }
+    if (exists) depths.push_back(std::move(d));
   }
   std::sort(depths.begin(), depths.end(),
             [](const DepthLine& a, const DepthLine& b) { return a.t < b.t; });

@@ -161,6 +161,18 @@ TEST(TumImportTest, MalformedAssociationLineIsNamed) {
   EXPECT_THAT(scan.status().message(), HasSubstr("my_association.txt: line 2"));
 }
 
+// Found by tests/fuzz (tum_import): a depth image name longer than the system allows made
+// std::filesystem::exists throw (ENAMETOOLONG), and the import died of the exception.
+TEST(TumImportTest, DepthNameTooLongIsNamed) {
+  const std::string long_name = "depth/1" + std::string(300, '0') + ".png";
+  const std::string dir =
+      MakeDir("tumlong", "rgb/10.0.png " + long_name + " 0 0 0 0 0 0 1\n");
+  auto scan = ImportTum(dir);
+  ASSERT_FALSE(scan.ok());
+  EXPECT_THAT(scan.status().message(), HasSubstr("my_association.txt: line 1: depth image"));
+  EXPECT_THAT(scan.status().message(), HasSubstr("too long"));
+}
+
 TEST(TumImportTest, NonUnitQuaternionIsRejected) {
   const std::string dir =
       MakeDir("tumq", "rgb/10.0.png depth/10.5.png 0 0 0 0 0 0.5 1\n");
