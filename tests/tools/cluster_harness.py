@@ -4,11 +4,10 @@ client (Python stubs generated from proto/ at test time with grpc_tools.protoc) 
 watch jobs. Nothing here knows carvemap's C++ code: only the documented CLI flags (docs/RPC.md,
 docs/CLUSTER.md), the wire API (proto/) and the job store's schema (docs/JOB_STORE.md).
 
-Children die with the test (PR_SET_PDEATHSIG), so a test killed by ctest's timeout leaves no
-server behind. Every wait polls with a deadline; nothing sleeps a fixed time to "let things
+Children die with the test (setpriv --pdeathsig, not a preexec_fn, which is unsafe with the
+threads some tests run), so a test killed by ctest's timeout leaves no server behind. Every wait polls with a deadline; nothing sleeps a fixed time to "let things
 settle".
 """
-import ctypes
 import hashlib
 import os
 import shutil
@@ -131,14 +130,6 @@ def state(job):
 
 # ---- processes -------------------------------------------------------------------------------
 
-_libc = ctypes.CDLL(None, use_errno=True)
-PR_SET_PDEATHSIG = 1
-
-
-def _die_with_parent():
-    _libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-
-
 def random_secret():
     return os.urandom(32).hex()
 
@@ -257,24 +248,29 @@ class Cluster:
     def _spawn(self, args, log_path):
         out = open(log_path, "ab")
         try:
-            return subprocess.Popen(args, stdout=out, stderr=subprocess.STDOUT,
-                                    stdin=subprocess.DEVNULL, start_new_session=True,
-                                    preexec_fn=_die_with_parent)
+            # util-linux's setpriv sets PR_SET_PDEATHSIG and execs: the pid is the server's.
+            return subprocess.Popen(["setpriv", "--pdeathsig", "KILL", "--"] + args, stdout=out,
+                                    stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                    start_new_session=True)
         finally:
             out.close()
 
     def stop(self):
-        procs = [p for p in self.workers + [self.coordinator] if p is not None]
-        for p in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        deadline = time.monotonic() + 15
-        for p in procs:
-            try:
-                p.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                p.send_signal(signal.SIGKILL)
-                p.wait()
+        """Workers first (SIGTERM: each finishes and reports the chunk in hand), then the
+        coordinator, as `carvemap run` does: a tile a worker finishes after its job failed is
+        then still reported, and removed by the coordinator, instead of left behind."""
+        for group in ([p for p in self.workers if p is not None], [self.coordinator]):
+            group = [p for p in group if p is not None]
+            for p in group:
+                if p.poll() is None:
+                    p.send_signal(signal.SIGTERM)
+            deadline = time.monotonic() + 15
+            for p in group:
+                try:
+                    p.wait(timeout=max(0.1, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    p.send_signal(signal.SIGKILL)
+                    p.wait()
 
     def logs(self):
         """Every log's text, coordinator(s) first."""

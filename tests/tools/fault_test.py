@@ -151,7 +151,11 @@ def check_json_logs(trial):
     """--log-format json: every line of every server's log is one JSON object with time, level,
     component and message; the job's lines carry its id, the workers' chunk lines the chunk."""
     with_job = with_chunk = 0
-    for name, text in trial.cluster.logs().items():
+    c = trial.cluster
+    secrets = list(c.tenants.values()) + [open(c.secret_file).read().strip()]
+    for name, text in c.logs().items():
+        if any(secret in text for secret in secrets):
+            trial.fail(f"{name} contains a bearer token or the cluster secret")
         component = "coordinator" if name.startswith("coordinator") else "worker"
         for n, line in enumerate(text.splitlines(), 1):
             try:
@@ -171,7 +175,8 @@ def check_json_logs(trial):
                 with_chunk += 1
     if with_job == 0 or with_chunk == 0:
         trial.fail(f"JSON logs: {with_job} lines with the job id, {with_chunk} with a chunk")
-    log(f"reference: JSON logs ok ({with_job} lines name the job, {with_chunk} a chunk)")
+    log(f"reference: JSON logs ok ({with_job} lines name the job, {with_chunk} a chunk; no "
+        "token or secret in them)")
 
 
 # ---- coordinator restart ---------------------------------------------------------------------
@@ -182,8 +187,9 @@ def cmd_coordinator_restart(args):
         ("ingest", lambda j: state(j) == "INGESTING"),
         ("carving", lambda j: state(j) == "CARVING"
          and j.progress.chunks_done >= j.progress.chunks_total // 3),
-        # The merge's second pass: chunks leased again during MERGING (docs/RPC.md).
-        ("re-carving", lambda j: state(j) == "MERGING" and j.progress.chunks_leased > 0),
+        # The merge's second pass: chunks queued or leased again during MERGING (docs/RPC.md).
+        ("re-carving", lambda j: state(j) == "MERGING" and j.progress.chunks_total > 0 and (
+            j.progress.chunks_leased > 0 or j.progress.chunks_done < j.progress.chunks_total)),
     ]
     for name, when in moments:
         start = time.monotonic()
