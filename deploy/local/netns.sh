@@ -12,7 +12,8 @@
 #        netns.sh heal NAME K     set it up again
 #        netns.sh host-ip K       the address of this machine on link K (10.231.K.1)
 # NAME: at most 9 characters of [a-z0-9] (interface names are limited to 15).
-# CARVEMAP_NETNS_SUBNET: the first two octets of the addresses (default 10.231).
+# CARVEMAP_NETNS_SUBNET: the first two octets of the addresses (default 10.231); `up` refuses
+# a subnet this machine already has an address in (another harness running, a real network).
 set -euo pipefail
 SUBNET=${CARVEMAP_NETNS_SUBNET:-10.231}
 
@@ -43,6 +44,13 @@ case $cmd in
     [ $# -eq 3 ] || usage
     name=$2 n=$3
     check_name "$name"; check_k "$n"
+    for k in $(seq 1 "$n"); do
+      if [ -n "$(ip -4 -o addr show to "$SUBNET.$k.0/24")" ]; then
+        echo "netns.sh: $SUBNET.$k.0/24 is already in use on this machine; set" \
+             "CARVEMAP_NETNS_SUBNET to other first octets (e.g. 10.232)" >&2
+        exit 1
+      fi
+    done
     trap 'down "$name" "$n"' ERR
     for k in $(seq 1 "$n"); do
       ip netns add "$name-$k"

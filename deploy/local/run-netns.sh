@@ -40,8 +40,14 @@ trap cleanup EXIT
     --tokens "$WORK/tokens" --cluster-secret-file "$WORK/cluster-secret" --shared-dirs \
     --data-root "$(dirname "$SCAN")" --output-root "$(dirname "$OUT")" --work-dir "$WORK" \
     --heartbeat-interval-s 1 --worker-timeout-s 5 > "$WORK/coordinator.log" 2>&1 &
-pids+=($!)
-for _ in $(seq 1 300); do [ -s "$WORK/port" ] && break; sleep 0.1; done
+COORDINATOR=$!
+pids+=($COORDINATOR)
+for _ in $(seq 1 300); do
+  [ -s "$WORK/port" ] && break
+  kill -0 $COORDINATOR 2>/dev/null || { echo "the coordinator did not start:" >&2; tail -5 "$WORK/coordinator.log" >&2; exit 1; }
+  sleep 0.1
+done
+[ -s "$WORK/port" ] || { echo "the coordinator did not start within 30 s (see $WORK/coordinator.log)" >&2; exit 1; }
 PORT=$(sed 's/.*://' "$WORK/port")
 echo "coordinator on port $PORT of every address; workers in namespaces $NAME-1..$NAME-$WORKERS"
 

@@ -408,6 +408,8 @@ def cmd_storage_full(args):
 
 NETNS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "deploy", "local",
                      "netns.sh")
+# Each test its own addresses (CTest may run the two at once; netns.sh refuses a subnet in use).
+SUBNET = {"netns-link-cut": "10.231", "run-netns": "10.232"}
 
 
 def worker_ids(trial):
@@ -462,6 +464,7 @@ def wait_lease_outcome(trial, api, job_id, lease):
 
 
 def cmd_netns_link_cut(args):
+    os.environ["CARVEMAP_NETNS_SUBNET"] = SUBNET["netns-link-cut"]
     ref = reference(args)
     name = f"cmf{os.getpid() % 1000000}"
     up = subprocess.run([NETNS, "up", name, "2"], capture_output=True, text=True)
@@ -511,6 +514,7 @@ def cmd_netns_link_cut(args):
 
 def cmd_run_netns(args):
     """deploy/local/run-netns.sh end to end: a job through workers in namespaces of their own."""
+    os.environ["CARVEMAP_NETNS_SUBNET"] = SUBNET["run-netns"]
     probe = f"cmp{os.getpid() % 1000000}"
     up = subprocess.run([NETNS, "up", probe, "1"], capture_output=True, text=True)
     subprocess.run([NETNS, "down", probe, "1"])
