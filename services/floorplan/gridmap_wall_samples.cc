@@ -1,5 +1,6 @@
 #include "services/floorplan/gridmap_wall_samples.h"
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 
@@ -14,6 +15,10 @@ absl::Status GridMapOptions::Validate() const {
   }
   if (!std::isfinite(origin_x_m) || !std::isfinite(origin_y_m)) {
     return absl::InvalidArgumentError("grid map: origin is not finite");
+  }
+  if (!std::isfinite(clutter_max_extent_m) || clutter_max_extent_m < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "grid map: clutter_max_extent_m must be finite and ≥ 0, got ", clutter_max_extent_m));
   }
   if (occupied_below < 1 || occupied_below > 256) {
     return absl::InvalidArgumentError(
@@ -81,11 +86,53 @@ absl::StatusOr<WallSampleSet> GridMapWallSamples(const Image<uint8_t>& gray,
            grid.cells[static_cast<size_t>(iy) * w + ix] == 0;
   };
 
+  // Clutter (see the header): occupied 8-connected components whose bounding box has a diagonal
+  // under clutter_max_extent_m. A component touching the image border is the outside mass of a
+  // map (or cut off by it), never clutter.
+  std::vector<uint8_t> clutter(static_cast<size_t>(w) * h, 0);
+  if (options.clutter_max_extent_m > 0) {
+    std::vector<uint8_t> seen(static_cast<size_t>(w) * h, 0);
+    std::vector<int> stack, members;
+    for (int start = 0; start < w * h; ++start) {
+      if (grid.cells[start] == 0 || seen[start]) continue;
+      seen[start] = 1;
+      stack.assign(1, start);
+      members.clear();
+      int x0 = w, x1 = -1, y0 = h, y1 = -1;
+      while (!stack.empty()) {
+        const int c = stack.back();
+        stack.pop_back();
+        members.push_back(c);
+        const int cx = c % w, cy = c / w;
+        x0 = std::min(x0, cx);
+        x1 = std::max(x1, cx);
+        y0 = std::min(y0, cy);
+        y1 = std::max(y1, cy);
+        for (int dy = -1; dy <= 1; ++dy) {
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int nx = cx + dx, ny = cy + dy;
+            if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+            const int n = ny * w + nx;
+            if (grid.cells[n] == 0 || seen[n]) continue;
+            seen[n] = 1;
+            stack.push_back(n);
+          }
+        }
+      }
+      const bool on_border = x0 == 0 || y0 == 0 || x1 == w - 1 || y1 == h - 1;
+      const double extent = std::hypot(x1 - x0 + 1, y1 - y0 + 1) * res;
+      if (!on_border && extent < options.clutter_max_extent_m) {
+        for (int c : members) clutter[c] = 1;
+      }
+    }
+  }
+
   WallSampleSet set;
   set.spacing_m = res;
   set.poses = path;
   for (int iy = 0; iy < h; ++iy) {
     for (int ix = 0; ix < w; ++ix) {
+      if (clutter[static_cast<size_t>(iy) * w + ix]) continue;
       if (free(ix, iy) ||
           !(free(ix - 1, iy) || free(ix + 1, iy) || free(ix, iy - 1) || free(ix, iy + 1))) {
         continue;

@@ -4,6 +4,16 @@
 // has no heights, so every sample gets the same floor and ceiling (§3.1.2 takes them from the
 // scanners' estimates; here they are options).
 //
+// Clutter: §3.1.1 keeps furniture out of the wall samples with its height rule (a wall reaches
+// H = 2 m; "clutter such as furniture or plants do not affect position of wall samples"), and
+// §3.4.2 calls it desirable that cubicle walls and counters are left out of the floor plan. A 2D
+// map has no heights, so the rule here is by shape: a wall belongs to the building's connected
+// network of walls, or is at least a wall's length on its own; an occupied component (8-connected)
+// that stands free in the room and is shorter than clutter_max_extent_m is furniture (chairs,
+// tables, cabinets in the middle of a room) or map noise, and gives no samples. It still blocks
+// the lines of sight (the scanner saw it). Furniture touching a wall is part of the wall's
+// component and stays.
+//
 // Plain functions over plain data: no files, no logging.
 #pragma once
 
@@ -28,6 +38,10 @@ struct GridMapOptions {
   // Heights put on every sample, m (floor_z < ceiling_z).
   double floor_z = 0;
   double ceiling_z = 2.6;
+  // Occupied components whose bounding-box diagonal is below this are clutter: no samples (see
+  // the file comment). 0 keeps every occupied cell. On the real floor maps every free-standing
+  // piece of furniture is ≤ 2.7 m and every free-standing wall piece ≥ 3.5 m.
+  double clutter_max_extent_m = 3.0;
   VisibilityOptions visibility;
   // InvalidArgument naming the first bad field (including visibility's).
   [[nodiscard]] absl::Status Validate() const;
@@ -38,8 +52,8 @@ struct GridMapOptions {
 [[nodiscard]] OccupancyGrid2D GridFromImage(const Image<uint8_t>& gray,
                                             const GridMapOptions& options);
 
-// One sample per occupied cell with a free 4-neighbour (cells outside the image are not free),
-// at the cell centre, in row-major cell order (iy, then ix). spacing_m = resolution. normal =
+// One sample per occupied cell with a free 4-neighbour (cells outside the image are not free) and
+// not in a clutter component (clutter_max_extent_m), at the cell centre, in row-major cell order (iy, then ix). spacing_m = resolution. normal =
 // unit vector towards the free side: the normalised sum of the unit directions to the free cells
 // of the 5×5 window around the cell that are 4-connected in the window to its free 4-neighbours;
 // zero where they cancel (a one-cell wall with free space on both sides). poses = path, in

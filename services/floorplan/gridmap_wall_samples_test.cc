@@ -211,6 +211,60 @@ TEST(GridMapWallSamplesTest, ThinWallSeenFromBothSidesHasNoNormal) {
   EXPECT_EQ(thin, 30);
 }
 
+// Clutter (§3.1.1's height rule has no 2D counterpart, so free-standing pieces shorter than
+// clutter_max_extent_m are furniture): a room 10 m × 6 m (cols [10, 210) × rows [10, 130)) with
+// a chair (0.3 m square) and a table (1.5 m × 0.8 m) standing free, a free-standing partition
+// 3.5 m long, and a cabinet against the top wall. The chair and the table give no samples but
+// still hide the wall behind them; the partition and the cabinet stay.
+TEST(GridMapWallSamplesTest, FreeStandingClutterGivesNoSamplesButStillBlocks) {
+  Image<uint8_t> im;
+  im.width = 220;
+  im.height = 140;
+  im.pixels.assign(size_t(im.width) * im.height, 0);
+  FillPx(im, 10, 10, 210, 130, 255);
+  FillPx(im, 60, 60, 66, 66, 0);     // chair
+  FillPx(im, 100, 40, 130, 56, 0);   // table, x ∈ [5, 6.5), y ∈ (4.2, 5.0]
+  FillPx(im, 40, 100, 110, 102, 0);  // partition
+  FillPx(im, 150, 10, 170, 20, 0);   // cabinet, touching the wall above
+  const Eigen::Vector2d below_table(5.775, 3.0);
+  const std::vector<Eigen::Vector2d> path = {
+      {1, 1}, {10, 1}, {10, 5.5}, {1, 5.5}, {1, 3}, below_table, {9, 3}};
+  GridMapOptions o;
+  o.visibility.min_pose_spacing_m = 0;
+  auto r = GridMapWallSamples(im, path, o);
+  ASSERT_TRUE(r.ok()) << r.status();
+  auto in = [](const Eigen::Vector2i& px, int col0, int row0, int col1, int row1) {
+    return px.y() >= col0 && px.y() < col1 && px.x() >= row0 && px.x() < row1;
+  };
+  int chair = 0, table = 0, partition = 0, cabinet = 0, behind_table = 0;
+  for (const WallSample& s : r->samples) {
+    const Eigen::Vector2i px = PixelOf(im, s.position);
+    chair += in(px, 60, 60, 66, 66);
+    table += in(px, 100, 40, 130, 56);
+    partition += in(px, 40, 100, 110, 102);
+    cabinet += in(px, 150, 10, 170, 20);
+    if (px.x() == 9 && px.y() == 115) {  // the top wall, straight above the pose below the table
+      ++behind_table;
+      EXPECT_FALSE(s.poses.empty());  // seen from elsewhere
+      EXPECT_TRUE(std::find(s.poses.begin(), s.poses.end(), 5u) == s.poses.end())
+          << "seen through the table";
+    }
+  }
+  EXPECT_EQ(chair, 0);
+  EXPECT_EQ(table, 0);
+  EXPECT_EQ(partition, 2 * 70);  // two cells thick: every cell faces free space
+  EXPECT_EQ(cabinet, 2 * 10 + 20 - 2);  // its three faces, the corners at the wall excluded
+  EXPECT_EQ(behind_table, 1);
+
+  o.clutter_max_extent_m = 0;  // every occupied cell
+  auto all = GridMapWallSamples(im, path, o);
+  ASSERT_TRUE(all.ok()) << all.status();
+  EXPECT_EQ(all->samples.size(), r->samples.size() + (4 * 6 - 4) + (2 * 30 + 2 * 16 - 4));
+
+  o.clutter_max_extent_m = -1;
+  EXPECT_EQ(GridMapWallSamples(im, path, o).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
 // The real map Freiburg52_scan (SOURCES.md) with the walk the simulator would take.
 TEST(GridMapWallSamplesTest, Freiburg52RealMap) {
   const std::string dir = std::string(CARVEMAP_SHARED_DIR) + "/data/floormaps";
@@ -224,6 +278,7 @@ TEST(GridMapWallSamplesTest, Freiburg52RealMap) {
   for (const TimedPose& tp : walk->path) path.push_back(tp.pose.translation.head<2>());
 
   GridMapOptions o;
+  o.clutter_max_extent_m = 0;  // every wall cell, as counted below (clutter: its own test)
   const auto t0 = std::chrono::steady_clock::now();
   auto r = GridMapWallSamples(*im, path, o);
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

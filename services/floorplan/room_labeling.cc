@@ -426,17 +426,23 @@ struct Circle {
 bool Larger(const Circle& a, const Circle& b) {
   return std::tie(a.r, a.gx, a.gy) > std::tie(b.r, b.gx, b.gy);
 }
-bool Overlap(const Circle& a, const Circle& b) {
-  const double dx = a.cx - b.cx, dy = a.cy - b.cy, rr = a.r + b.r;
+// Whether two circles overlap by more than min_overlap × the smaller radius (see FindSeeds).
+bool Overlap(const Circle& a, const Circle& b, double min_overlap) {
+  const double dx = a.cx - b.cx, dy = a.cy - b.cy;
+  const double rr = a.r + b.r - min_overlap * std::min(a.r, b.r);
   return dx * dx + dy * dy < rr * rr;
 }
 
 // §3.3.2 room seeds: interior faces whose circumcircle is the largest of every interior
-// circumcircle it intersects. Circles go into a grid per radius octave (cell = twice the
+// circumcircle it intersects. "Intersects" means overlapping by more than min_overlap × the
+// smaller radius (extension): a large room's circle bulges a few cm through a doorway (the
+// sagitta of the door's chord) and would otherwise suppress the seed of the room behind the door
+// whose own largest circle touches the wall there — two rooms would share one seed and merge.
+// Circles of one space overlap deeply. Circles go into a grid per radius octave (cell = twice the
 // octave's largest radius), so a query looks at ≤ 5×5 cells per octave at or above its own and
 // exits at the first larger overlapping circle: about linear, not O(n²).
 std::vector<int> FindSeeds(const Mesh& m, const std::vector<Circle>& circles,
-                           const std::vector<char>& interior) {
+                           const std::vector<char>& interior, double min_overlap) {
   std::vector<int> faces;
   double rmin = std::numeric_limits<double>::infinity();
   for (size_t f = 0; f < interior.size(); ++f) {
@@ -468,9 +474,12 @@ std::vector<int> FindSeeds(const Mesh& m, const std::vector<Circle>& circles,
   for (int f : faces) {
     const Circle& c = circles[f];
     bool beaten = false;
-    // Adjacent circles always overlap (they share an edge's ends): most faces stop here.
+    // Adjacent circles always meet (they share an edge's ends) and most overlap deeply: most
+    // faces stop here.
     for (int n : m.fn[f]) {
-      if (n >= 0 && interior[n] && Larger(circles[n], c)) beaten = true;
+      if (n >= 0 && interior[n] && Larger(circles[n], c) && Overlap(circles[n], c, min_overlap)) {
+        beaten = true;
+      }
     }
     for (int level = level_of(c.r); !beaten && level <= max_level; ++level) {
       const double cs = cell_size(level);
@@ -484,7 +493,7 @@ std::vector<int> FindSeeds(const Mesh& m, const std::vector<Circle>& circles,
           const auto it = grid.find(key(level, ix, iy));
           if (it == grid.end()) continue;
           for (int g : it->second) {
-            if (Larger(circles[g], c) && Overlap(circles[g], c)) {
+            if (Larger(circles[g], c) && Overlap(circles[g], c, min_overlap)) {
               beaten = true;
               break;
             }
@@ -497,12 +506,28 @@ std::vector<int> FindSeeds(const Mesh& m, const std::vector<Circle>& circles,
   return seeds;
 }
 
+double FaceArea(const Mesh& m, int f) {
+  const Vector2d &a = m.pts[m.fv[f][0]], &b = m.pts[m.fv[f][1]], &c = m.pts[m.fv[f][2]];
+  return 0.5 * std::abs((b - a).x() * (c - a).y() - (b - a).y() * (c - a).x());
+}
+
+// Thin walls (extension of §3.3.1–§3.3.2): a wall one sample thick (a one-pixel wall of a grid
+// map, a partition whose two faces lie within d_s) is scanned from both sides, so the triangles
+// on both sides are interior and meet along the chain of its samples, d_s apart. The seed's
+// rooms assume walls with an exterior inside them; here an edge between two interior triangles
+// that is no longer than wall_edge_m (a couple of sample spacings: far narrower than any door,
+// and no line of sight passes it, §3.3.1's occlusion check) is a wall: the partition does not
+// cross it and it is no part of a border between rooms.
+bool IsThinWall(double edge_length_m, double wall_edge_m) { return edge_length_m <= wall_edge_m; }
+
 // §3.3.2 greedy partition: flood fill from the seeds, longest shared edge first. Returns the
-// label (index into seeds) per face, −1 for exterior. An interior component without a seed
-// (possible only when a larger circle of another component overlaps all of its circles) gets
-// its largest circle as an extra seed, appended to `seeds`, so every interior face is labelled.
+// label (index into seeds) per face, −1 for exterior. Edges no longer than wall_edge_m are thin
+// walls (IsThinWall) and are not crossed. An interior component without a seed (when a larger
+// circle of another component overlaps all of its circles, or a thin wall cuts it off) gets its
+// largest circle as an extra seed, appended to `seeds`, so every interior face is labelled.
 std::vector<int> Partition(const Mesh& m, const std::vector<Circle>& circles,
-                           const std::vector<char>& interior, std::vector<int>& seeds) {
+                           const std::vector<char>& interior, std::vector<int>& seeds,
+                           double wall_edge_m) {
   struct Item {
     double len, mx, my;  // the edge: longest first; its midpoint breaks ties (unique per edge)
     int face, label;
@@ -518,7 +543,9 @@ std::vector<int> Partition(const Mesh& m, const std::vector<Circle>& circles,
       if (n < 0 || !interior[n] || label[n] >= 0) continue;
       const Vector2d& p = m.pts[m.fv[f][(i + 1) % 3]];
       const Vector2d& q = m.pts[m.fv[f][(i + 2) % 3]];
-      queue.push({(p - q).norm(), 0.5 * (p.x() + q.x()), 0.5 * (p.y() + q.y()), n, label[f]});
+      const double len = (p - q).norm();
+      if (IsThinWall(len, wall_edge_m)) continue;
+      queue.push({len, 0.5 * (p.x() + q.x()), 0.5 * (p.y() + q.y()), n, label[f]});
     }
   };
   auto fill = [&]() {
@@ -549,6 +576,132 @@ std::vector<int> Partition(const Mesh& m, const std::vector<Circle>& circles,
   return label;
 }
 
+// What the §3.3.2 merge test looks at for a pair of adjacent rooms. Their shared edges (thin
+// walls left out) form pieces: chains of edges joined at vertices; each piece is one opening.
+//  - length: the longest piece. The seed speaks of "a border" between two rooms; summing all
+//    shared edges instead would merge two rooms joined by two ordinary doors.
+//  - narrowing: the largest, over pieces no longer than max_door_width_m, of the piece's length
+//    over the local free-space diameter: twice the largest circumradius (§3.3.2: the local
+//    feature size) among the faces on either side reached from the piece through edges whose
+//    midpoint lies within context × its length of a midpoint of the piece.
+struct RoomBorder {
+  double length = 0;
+  double narrowing = 0;
+};
+
+// Key (lower label << 32 | higher label).
+absl::flat_hash_map<uint64_t, RoomBorder> RoomBorders(const Mesh& m,
+                                                      const std::vector<Circle>& circles,
+                                                      const std::vector<int>& label,
+                                                      double wall_edge_m,
+                                                      double max_door_width_m, double context) {
+  struct SharedEdge {
+    uint64_t pair;
+    int u, v;        // its ends
+    int side[2];     // the faces of the lower and the higher label
+    double length;
+  };
+  const int nf = static_cast<int>(m.fv.size());
+  std::vector<SharedEdge> shared;
+  for (int f = 0; f < nf; ++f) {
+    if (label[f] < 0) continue;
+    for (int i = 0; i < 3; ++i) {
+      const int n = m.fn[f][i];
+      if (n < f || label[n] < 0 || label[n] == label[f]) continue;  // n < f includes n < 0
+      const int u = m.fv[f][(i + 1) % 3], v = m.fv[f][(i + 2) % 3];
+      const double len = (m.pts[u] - m.pts[v]).norm();
+      if (IsThinWall(len, wall_edge_m)) continue;
+      const bool f_lower = label[f] < label[n];
+      const uint64_t lo = static_cast<uint64_t>(std::min(label[f], label[n]));
+      const uint64_t hi = static_cast<uint64_t>(std::max(label[f], label[n]));
+      shared.push_back({(lo << 32) | hi, u, v, {f_lower ? f : n, f_lower ? n : f}, len});
+    }
+  }
+  // Pieces: union-find over the shared edges of a pair that meet at a vertex.
+  std::vector<int> parent(shared.size());
+  std::iota(parent.begin(), parent.end(), 0);
+  auto root = [&](int e) {
+    while (parent[e] != e) e = parent[e] = parent[parent[e]];
+    return e;
+  };
+  {
+    absl::flat_hash_map<std::pair<uint64_t, int>, int> at;
+    for (size_t e = 0; e < shared.size(); ++e) {
+      for (int w : {shared[e].u, shared[e].v}) {
+        const auto [it, inserted] = at.try_emplace({shared[e].pair, w}, static_cast<int>(e));
+        if (!inserted) parent[root(static_cast<int>(e))] = root(it->second);
+      }
+    }
+  }
+  // Pieces in order of their first edge (deterministic).
+  std::vector<std::vector<int>> pieces;
+  {
+    std::vector<int> piece_of(shared.size(), -1);
+    for (size_t e = 0; e < shared.size(); ++e) {
+      int& p = piece_of[root(static_cast<int>(e))];
+      if (p < 0) {
+        p = static_cast<int>(pieces.size());
+        pieces.emplace_back();
+      }
+      pieces[p].push_back(static_cast<int>(e));
+    }
+  }
+  absl::flat_hash_map<uint64_t, RoomBorder> borders;
+  std::vector<uint32_t> stamp_of(nf, 0);
+  uint32_t stamp = 0;
+  std::vector<Vector2d> mids;
+  std::vector<int> stack;
+  for (const std::vector<int>& piece : pieces) {
+    double len = 0;
+    for (int e : piece) len += shared[e].length;
+    RoomBorder& border = borders[shared[piece[0]].pair];
+    border.length = std::max(border.length, len);
+    if (len > max_door_width_m) continue;  // too wide for a door anyway: no local size needed
+    mids.clear();
+    for (int e : piece) mids.push_back(0.5 * (m.pts[shared[e].u] + m.pts[shared[e].v]));
+    const double reach2 = context * context * len * len;
+    double rmax = 0;
+    for (int side = 0; side < 2; ++side) {
+      ++stamp;
+      stack.clear();
+      for (int e : piece) {
+        const int f = shared[e].side[side];
+        if (stamp_of[f] != stamp) {
+          stamp_of[f] = stamp;
+          stack.push_back(f);
+        }
+      }
+      const int room = label[stack.front()];
+      while (!stack.empty()) {
+        const int f = stack.back();
+        stack.pop_back();
+        rmax = std::max(rmax, circles[f].r);
+        for (int i = 0; i < 3; ++i) {
+          const int n = m.fn[f][i];
+          if (n < 0 || label[n] != room || stamp_of[n] == stamp) continue;
+          const Vector2d& p = m.pts[m.fv[f][(i + 1) % 3]];
+          const Vector2d& q = m.pts[m.fv[f][(i + 2) % 3]];
+          if (IsThinWall((p - q).norm(), wall_edge_m)) continue;
+          const Vector2d mid = 0.5 * (p + q);
+          bool near = false;
+          for (const Vector2d& c : mids) {
+            if ((mid - c).squaredNorm() <= reach2) {
+              near = true;
+              break;
+            }
+          }
+          if (!near) continue;
+          stamp_of[n] = stamp;
+          stack.push_back(n);
+        }
+      }
+    }
+    // rmax > 0: every face has a positive circumradius.
+    border.narrowing = std::max(border.narrowing, len / (2 * rmax));
+  }
+  return borders;
+}
+
 }  // namespace
 
 absl::Status RoomLabelingOptions::Validate() const {
@@ -559,6 +712,26 @@ absl::Status RoomLabelingOptions::Validate() const {
   if (!std::isfinite(max_door_width_m) || max_door_width_m <= 0) {
     return absl::InvalidArgumentError(absl::StrCat(
         "room labeling: max_door_width_m must be finite and > 0, got ", max_door_width_m));
+  }
+  if (!std::isfinite(door_narrowing) || door_narrowing < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: door_narrowing must be finite and ≥ 0, got ", door_narrowing));
+  }
+  if (!std::isfinite(door_context) || door_context <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: door_context must be finite and > 0, got ", door_context));
+  }
+  if (!std::isfinite(thin_wall_spacings) || thin_wall_spacings < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: thin_wall_spacings must be finite and ≥ 0, got ", thin_wall_spacings));
+  }
+  if (!std::isfinite(seed_min_overlap) || seed_min_overlap < 0 || seed_min_overlap > 2) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: seed_min_overlap must be in [0, 2], got ", seed_min_overlap));
+  }
+  if (!std::isfinite(min_room_area_m2) || min_room_area_m2 < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: min_room_area_m2 must be finite and ≥ 0, got ", min_room_area_m2));
   }
   if (max_rounds < 1) {
     return absl::InvalidArgumentError(
@@ -793,39 +966,37 @@ absl::StatusOr<FloorPlan> LabelRooms(const WallSampleSet& samples,
   }
 
   // §3.3.2 refinement. Each round partitions, then (1) drops, for every pair of rooms sharing a
-  // border longer than a door, the seed with the smaller circle — all such seeds at once: a
-  // border too long for a door is transitive ("same room"), and the largest seed of each group
-  // of rooms so joined is never dropped, so no room is lost and hallways merge in few rounds;
-  // (2) only when no seed was dropped, removes the rooms the path never entered and recomputes
-  // the seeds. Merging first keeps a room the path entered only partly (an L-shaped room with
-  // two seeds) from losing its unvisited half.
-  std::vector<int> seeds = FindSeeds(m, circles, interior);
+  // border that is no door (RoomBorders: longer than max_door_width_m, or not narrowing the free
+  // space), the seed with the smaller circle — all such seeds at once: "no door between them" is
+  // transitive ("same room"), and the largest seed of each group of rooms so joined is never
+  // dropped, so no room is lost and hallways merge in few rounds; (2) only when no seed was
+  // dropped, removes the rooms the path never entered and recomputes the seeds. Merging first
+  // keeps a room the path entered only partly (an L-shaped room with two seeds) from losing its
+  // unvisited half.
+  const double wall_edge_m = options.thin_wall_spacings * samples.spacing_m;
+  std::vector<int> seeds = FindSeeds(m, circles, interior, options.seed_min_overlap);
   rep.initial_seeds = seeds.size();
   std::vector<int> label;
   std::vector<int> part_seeds;  // the seeds of `label` (the last partition)
   rep.converged = false;
   while (rep.rounds < options.max_rounds) {
     ++rep.rounds;
-    label = Partition(m, circles, interior, seeds);
+    label = Partition(m, circles, interior, seeds, wall_edge_m);
     part_seeds = seeds;
     const size_t k = seeds.size();
-    absl::flat_hash_map<uint64_t, double> border;
-    for (int f = 0; f < nf; ++f) {
-      if (label[f] < 0) continue;
-      for (int i = 0; i < 3; ++i) {
-        const int n = m.fn[f][i];
-        if (n < f || n < 0 || label[n] < 0 || label[n] == label[f]) continue;
-        const uint64_t lo = std::min(label[f], label[n]), hi = std::max(label[f], label[n]);
-        border[(lo << 32) | hi] +=
-            (m.pts[m.fv[f][(i + 1) % 3]] - m.pts[m.fv[f][(i + 2) % 3]]).norm();
-      }
-    }
-    std::vector<char> drop(k, 0);
+    std::vector<char> drop(k, 0), wide(k, 0);  // wide: dropped for max_door_width_m
     bool dropped = false;
-    for (const auto& [pair, len] : border) {
-      if (len <= options.max_door_width_m) continue;
+    for (const auto& [pair, border] :
+         RoomBorders(m, circles, label, wall_edge_m, options.max_door_width_m,
+                     options.door_context)) {
+      const bool too_wide = border.length > options.max_door_width_m;
+      const bool no_narrowing =
+          options.door_narrowing > 0 && border.narrowing > options.door_narrowing;
+      if (!too_wide && !no_narrowing) continue;
       const int a = static_cast<int>(pair >> 32), b = static_cast<int>(pair & 0xFFFFFFFFu);
-      drop[Larger(circles[seeds[a]], circles[seeds[b]]) ? b : a] = 1;
+      const int lose = Larger(circles[seeds[a]], circles[seeds[b]]) ? b : a;
+      drop[lose] = 1;
+      wide[lose] |= too_wide ? 1 : 0;
       dropped = true;
     }
     if (dropped) {
@@ -833,6 +1004,7 @@ absl::StatusOr<FloorPlan> LabelRooms(const WallSampleSet& samples,
       for (size_t i = 0; i < k; ++i) {
         if (drop[i]) {
           ++rep.merged_seeds;
+          rep.narrow_merged_seeds += wide[i] ? 0 : 1;
         } else {
           kept.push_back(seeds[i]);
         }
@@ -855,9 +1027,12 @@ absl::StatusOr<FloorPlan> LabelRooms(const WallSampleSet& samples,
         }
         rep.removed_rooms += removed;
         for (int f = 0; f < nf; ++f) {
-          if (label[f] >= 0 && !room_entered[label[f]]) interior[f] = 0;
+          if (label[f] >= 0 && !room_entered[label[f]]) {
+            interior[f] = 0;
+            rep.removed_area_m2 += FaceArea(m, f);
+          }
         }
-        seeds = FindSeeds(m, circles, interior);
+        seeds = FindSeeds(m, circles, interior, options.seed_min_overlap);
         continue;
       }
     }
@@ -865,9 +1040,71 @@ absl::StatusOr<FloorPlan> LabelRooms(const WallSampleSet& samples,
     break;
   }
 
+  seeds = std::move(part_seeds);
+  // Extension: a room under min_room_area_m2 is no room (a sliver between a wall and furniture
+  // that the path happens to cross, a pocket cut off by thin walls): once the rooms have
+  // converged, it joins the room it shares the most edge length with (thin walls included),
+  // smallest first. One with no neighbour stays.
+  if (options.min_room_area_m2 > 0) {
+    const size_t k0 = seeds.size();
+    std::vector<std::vector<int>> faces_of(k0);
+    std::vector<double> room_area(k0, 0);
+    for (int f = 0; f < nf; ++f) {
+      if (label[f] < 0) continue;
+      faces_of[label[f]].push_back(f);
+      room_area[label[f]] += FaceArea(m, f);
+    }
+    std::vector<int> order(k0);
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](int a, int b) { return room_area[a] < room_area[b]; });
+    absl::flat_hash_map<int, double> shared_with;
+    bool merged = false;
+    for (int l : order) {
+      if (room_area[l] >= options.min_room_area_m2) break;
+      shared_with.clear();
+      for (int f : faces_of[l]) {
+        for (int i = 0; i < 3; ++i) {
+          const int n = m.fn[f][i];
+          if (n < 0 || label[n] < 0 || label[n] == l) continue;
+          shared_with[label[n]] +=
+              (m.pts[m.fv[f][(i + 1) % 3]] - m.pts[m.fv[f][(i + 2) % 3]]).norm();
+        }
+      }
+      int into = -1;
+      double best = 0;
+      for (const auto& [t, len] : shared_with) {
+        if (len > best || (len == best && t < into)) {
+          best = len;
+          into = t;
+        }
+      }
+      if (into < 0) continue;
+      for (int f : faces_of[l]) label[f] = into;
+      faces_of[into].insert(faces_of[into].end(), faces_of[l].begin(), faces_of[l].end());
+      faces_of[l].clear();
+      room_area[into] += room_area[l];
+      room_area[l] = 0;
+      ++rep.small_merged_rooms;
+      merged = true;
+    }
+    if (merged) {  // compact the labels
+      std::vector<int> new_label(k0, -1);
+      std::vector<int> kept;
+      for (size_t l = 0; l < k0; ++l) {
+        if (faces_of[l].empty()) continue;
+        new_label[l] = static_cast<int>(kept.size());
+        kept.push_back(seeds[l]);
+      }
+      for (int f = 0; f < nf; ++f) {
+        if (label[f] >= 0) label[f] = new_label[label[f]];
+      }
+      seeds = std::move(kept);
+    }
+  }
+
   // Output: every vertex; interior triangles in face order (CCW, as CGAL keeps them); rooms
   // largest area first, ties by the seed's circle.
-  seeds = std::move(part_seeds);
   FloorPlan plan;
   plan.vertices = m.pts;
   plan.vertex_floor_z = std::move(vfloor);

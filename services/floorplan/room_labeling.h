@@ -6,11 +6,23 @@
 //     occlusion_diameter_m around another sample p' is truncated at p' (§3.3.1), so a wall
 //     scanned from both sides is never carved away.
 //  3. Room seeds: interior triangles whose circumcircle is the largest of all interior
-//     circumcircles it intersects (§3.3.2).
-//  4. Partition: greedy flood fill from the seeds, longest shared edge first (§3.3.2).
-//  5. Refinement to convergence: two rooms sharing a border longer than max_door_width_m lose
-//     the seed with the smaller circumradius; a room no path segment enters is removed from the
-//     interior and the seeds are recomputed (§3.3.2).
+//     circumcircles it intersects (§3.3.2), "intersects" meaning by more than seed_min_overlap.
+//  4. Partition: greedy flood fill from the seeds, longest shared edge first (§3.3.2); thin
+//     walls (edges between interior triangles no longer than thin_wall_spacings × d_s) are not
+//     crossed.
+//  5. Refinement to convergence: two rooms sharing a border that is no door lose the seed with
+//     the smaller circumradius; a room no path segment enters is removed from the interior and
+//     the seeds are recomputed (§3.3.2). A border (one contiguous piece of shared edges) is no
+//     door when it is longer than max_door_width_m (§3.3.2) or when the free space does not
+//     narrow there (door_narrowing, an extension: a 2 m corridor's pieces share borders of its
+//     width, under a double door's 2.44 m, and would stay split).
+//  6. Rooms under min_room_area_m2 join a neighbour (extension).
+//
+// The extensions, where the seed is silent or its rule fails on real maps (measured on the 9
+// real floor maps, docs/BENCHMARKS.md "Floor plans with rooms"), each with its own option so it
+// can be switched off (0): door narrowing, thin walls, seed overlap, small rooms. Borders are
+// counted as contiguous pieces, the seed's "a border": the sum of all shared edges would merge
+// two rooms joined by two ordinary doors.
 //
 // Plain function over plain data: no files, no logging. Thread-compatible.
 #pragma once
@@ -28,6 +40,30 @@ struct RoomLabelingOptions {
   double occlusion_diameter_m = 0;
   // §3.3.2: ADA double door, 96 in.
   double max_door_width_m = 2.44;
+  // Extension of §3.3.2's door test: a border piece no wider than max_door_width_m is a door
+  // only if its length is at most door_narrowing × the local free-space diameter: twice the
+  // largest circumradius (§3.3.2's local feature size) of the faces on either side within
+  // door_context × its length of it. A door narrows the space it joins: 0.9 m into a 2 m
+  // corridor is 0.45, a 1.2 m wide room's 1 m door off a hall is small against the hall, while
+  // the border between two pieces of one corridor is as wide as the corridor (ratio ≈ 1).
+  // 0 disables the extension (the seed's rule alone).
+  double door_narrowing = 0.7;
+  double door_context = 2.0;
+  // Extension of §3.3.1–§3.3.2: an edge between two interior triangles no longer than
+  // thin_wall_spacings × d_s (the samples' spacing) is a wall one sample thick, scanned from
+  // both sides; the partition does not cross it and borders leave it out. 2.1: neighbours on a
+  // grid (d_s, √2·d_s) and one missing sample (2·d_s), with slack for rounding. 0 disables it.
+  double thin_wall_spacings = 2.1;
+  // Extension of §3.3.2's seed test: two circumcircles intersect only when they overlap by more
+  // than seed_min_overlap × the smaller radius, so a large room's circle bulging a few cm
+  // through a doorway does not suppress the seed of the room behind it. 0 = any overlap (the
+  // seed's literal test).
+  double seed_min_overlap = 0.25;
+  // Extension: once the rooms have converged, a room smaller than this (a sliver between a wall
+  // and furniture that the path crosses, a pocket cut off by thin walls) joins the room it
+  // shares the most edge length with. 1 m²: the floor maps' own rule for what is a room
+  // (../shared/data/SOURCES.md); no usable room is smaller. 0 disables it.
+  double min_room_area_m2 = 1.0;
   // §3.3.2: remove rooms the scanner's path never entered.
   bool remove_unentered_rooms = true;
   // Bound on refinement rounds (each round partitions, then merges or removes); reaching it is
@@ -45,8 +81,11 @@ struct RoomLabelingReport {
   size_t sight_segments = 0;     // scanner-to-sample segments carved
   size_t truncated_segments = 0; // of those, shortened by the occlusion check
   size_t initial_seeds = 0;      // seeds of the first round
-  size_t merged_seeds = 0;       // seeds dropped by the door-width rule
-  size_t removed_rooms = 0;      // rooms removed as never entered
+  size_t merged_seeds = 0;       // seeds dropped because a border is no door
+  size_t narrow_merged_seeds = 0;  // of those, for door_narrowing alone (not max_door_width_m)
+  size_t small_merged_rooms = 0;   // rooms under min_room_area_m2 joined to a neighbour
+  size_t removed_rooms = 0;      // rooms removed as never entered (thin-wall pockets included)
+  double removed_area_m2 = 0;    // their area
   int rounds = 0;
   bool converged = true;
 };
