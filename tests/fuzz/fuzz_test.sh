@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# The fuzz targets in the test suite (tests/CMakeLists.txt) and by hand (README.md here).
+#   fuzz_test.sh build BUILD_DIR             configure tests/fuzz with clang-14 into BUILD_DIR, build
+#   fuzz_test.sh run BUILD_DIR TARGET SECONDS [libFuzzer flags...]
+#       runs BUILD_DIR/TARGET_fuzzer for SECONDS on the seeds in corpus/TARGET (read-only; new
+#       inputs go to BUILD_DIR/work/TARGET, started afresh each run), crashes to
+#       BUILD_DIR/artifacts/TARGET/. Fails, naming the input and how to reproduce it, when
+#       the target crashes, leaks, runs out of memory (2.5 GB) or takes over 10 s on one input.
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+
+case "${1:-}" in
+  build)
+    build="$2"
+    cxx="${CARVEMAP_FUZZ_CXX:-clang++-14}"
+    cc="${CARVEMAP_FUZZ_CC:-clang-14}"
+    command -v "$cxx" >/dev/null || {
+      echo "fuzz: $cxx not found (scripts/install-deps.sh installs clang-14 and libclang-rt-14-dev)" >&2
+      exit 1
+    }
+    cmake -S "$here" -B "$build" -G Ninja -DCMAKE_CXX_COMPILER="$cxx" -DCMAKE_C_COMPILER="$cc" \
+      > "$build.configure.log" 2>&1 || { cat "$build.configure.log" >&2; exit 1; }
+    cmake --build "$build" -j "${CARVEMAP_FUZZ_BUILD_JOBS:-$(nproc)}"
+    ;;
+  run)
+    build="$2" target="$3" seconds="$4"
+    shift 4
+    work="$build/work/$target" artifacts="$build/artifacts/$target"
+    case "$target" in  # the format's words help mutations reach past the header parsers
+      ply_import|ply_mesh) set -- -dict="$here/dict/ply.dict" "$@" ;;
+      scan_reader*) set -- -dict="$here/dict/scan.dict" "$@" ;;
+      tile_reader*) set -- -dict="$here/dict/tile.dict" "$@" ;;
+      tum_import|png) set -- -dict="$here/dict/tum.dict" "$@" ;;
+    esac
+    rm -rf "$work"
+    mkdir -p "$work" "$artifacts"
+    status=0
+    "$build/${target}_fuzzer" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2560 \
+      -print_final_stats=1 -artifact_prefix="$artifacts/" "$@" "$work" "$here/corpus/$target" \
+      2>&1 | grep -v -E '^#[0-9]+.*(NEW|REDUCE|pulse)|NEW_FUNC' || status=${PIPESTATUS[0]}
+    if [ "$status" -ne 0 ]; then
+      echo "fuzz: $target failed (exit $status). Inputs that failed:" >&2
+      ls -1 "$artifacts" >&2
+      echo "Reproduce: $build/${target}_fuzzer $artifacts/<input>" >&2
+      exit 1
+    fi
+    ;;
+  *)
+    echo "usage: fuzz_test.sh build BUILD_DIR | run BUILD_DIR TARGET SECONDS [flags...]" >&2
+    exit 2
+    ;;
+esac
