@@ -380,6 +380,10 @@ class CoordinatorServer::Impl {
     return (fs::path(tiles_dir).parent_path() / "object_tiles").string();
   }
   void FailJob(const std::string& job_id, const std::string& why);
+  // Job.error is the tenant's to read: the server's folders in a reason (a worker's HDF5 error,
+  // the merge's) become names relative to the job's output folder, as FetchArtifact names its
+  // files, so the server's layout does not leak (DESIGN §8). The log keeps the full text.
+  std::string TenantView(const JobRuntime& rt, std::string text) const;
   void CleanUp(const std::string& job_id, bool succeeded);
   void EnterStage(const std::string& job_id, const std::string& stage);
   void Sweep();
@@ -807,12 +811,43 @@ void CoordinatorServer::Impl::EnterStage(const std::string& job_id, const std::s
   }
 }
 
-void CoordinatorServer::Impl::FailJob(const std::string& job_id, const std::string& why) {
+std::string CoordinatorServer::Impl::TenantView(const JobRuntime& rt, std::string text) const {
+  // Longest first: the tiles live inside the output folder unless --storage-root moves them.
+  std::vector<std::pair<std::string, std::string>> dirs = {
+      {ObjectTilesDir(rt.tiles_dir), "object_tiles"}, {rt.tiles_dir, "tiles"},
+      {rt.spill_dir, "spill"}, {rt.output_dir, "."},
+      {fs::absolute(work_dir_).lexically_normal().string(), "work"}};
+  std::sort(dirs.begin(), dirs.end(),
+            [](const auto& a, const auto& b) { return a.first.size() > b.first.size(); });
+  for (const auto& [dir, name] : dirs) {
+    if (dir.size() < 2 || dir.front() != '/') continue;  // absolute folders only
+    for (size_t at = text.find(dir); at != std::string::npos; at = text.find(dir, at)) {
+      const size_t end = at + dir.size();
+      const bool whole = end == text.size() || text[end] == '/' || text[end] == '\'' ||
+                         text[end] == ':' || text[end] == ' ' || text[end] == ',';
+      if (!whole) {
+        at = end;
+        continue;
+      }
+      const bool slash = end < text.size() && text[end] == '/' && name == ".";
+      text.replace(at, dir.size() + (slash ? 1 : 0), slash ? "" : name);
+      at += slash ? 0 : name.size();
+    }
+  }
+  return text;
+}
+
+void CoordinatorServer::Impl::FailJob(const std::string& job_id, const std::string& raw) {
+  std::string why;
+  {
+    absl::MutexLock lock(&mu_);
+    why = TenantView(runtime_[job_id], raw);
+  }
   absl::Status s = store_->TransitionJob(job_id, {JobState::kFailed, why, NowMs()});
   if (s.ok()) {
-    spdlog::error("coordinator: job {} FAILED: {}", job_id, why);
+    spdlog::error("coordinator: job {} FAILED: {}", job_id, raw);
   } else {
-    spdlog::warn("coordinator: job {}: could not mark FAILED ({}): {}", job_id, s.ToString(), why);
+    spdlog::warn("coordinator: job {}: could not mark FAILED ({}): {}", job_id, s.ToString(), raw);
   }
 }
 
@@ -1683,9 +1718,11 @@ absl::Status CoordinatorServer::Impl::FailChunk(const pb::FailChunkRequest& req,
   if (absl::Status s = CheckLeaseJob(req.lease_id()); !s.ok()) return s;
   absl::MutexLock lock(&mu_);
   Touch(req.worker_id());
+  const std::string job_id = *JobOfLease(req.lease_id());  // checked by CheckLeaseJob
   absl::StatusOr<bool> requeued =
-      // The table prefixes "worker <id>: " itself.
-      table_->Fail(req.lease_id(), req.generation(), req.reason(), req.retryable());
+      // The table prefixes "worker <id>: " itself; the reason may become the job's error.
+      table_->Fail(req.lease_id(), req.generation(), TenantView(runtime_[job_id], req.reason()),
+                   req.retryable());
   if (!requeued.ok()) return requeued.status();
   metrics_.ChunkFailed();
   spdlog::warn("coordinator: worker {} failed {}: {} ({})", req.worker_id(), req.lease_id(),

@@ -306,9 +306,12 @@ def cmd_worker_kill(args):
 
 # ---- failures --------------------------------------------------------------------------------
 
-def check_nothing_looks_complete(trial, ref):
+def check_nothing_looks_complete(trial, ref, job):
     """After a failed job: no job.json, no tiles, and every file left under a final name is
-    byte-identical to the reference's (so complete), and no temporary files."""
+    byte-identical to the reference's (so complete), and no temporary files. And the reason,
+    which the tenant reads, names no server folder."""
+    if trial.dir in job.error or trial.cluster.work in job.error:
+        trial.fail(f"the job's error shows the server's folders: {job.error!r}")
     left = output_files(trial.out) if os.path.isdir(trial.out) else {}
     if os.path.exists(os.path.join(trial.out, "job.json")):
         trial.fail("job.json written by a failed job")
@@ -338,7 +341,7 @@ def cmd_failures(args):
         trial.fail(f"job {state(job)} after its input was deleted")
     if SCAN_NAME not in job.error or "no such file" not in job.error:
         trial.fail(f"the reason does not name the missing input: {job.error!r}")
-    left = check_nothing_looks_complete(trial, ref)
+    left = check_nothing_looks_complete(trial, ref, job)
     log(f"input deleted while carving: FAILED: {job.error!r}; left {len(left)} complete "
         f"file(s), no tiles, no job.json ({time.monotonic() - start:.1f} s)")
 
@@ -390,7 +393,7 @@ def cmd_storage_full(args):
                 trial.fail(f"job {state(job)} with {size} bytes for outputs")
             if "No space left on device" not in job.error:
                 trial.fail(f"the reason does not say the storage is full: {job.error!r}")
-            left = check_nothing_looks_complete(trial, ref)
+            left = check_nothing_looks_complete(trial, ref, job)
             partial = [f for f in os.listdir(trial.out_root) if f != OUTPUT_NAME]
             for root, _, names in os.walk(trial.out):
                 partial += [os.path.join(root, n) for n in names if ".partial" in n
