@@ -8,6 +8,7 @@ Children die with the test (setpriv --pdeathsig, not a preexec_fn, which is unsa
 threads some tests run), so a test killed by ctest's timeout leaves no server behind. Every wait polls with a deadline; nothing sleeps a fixed time to "let things
 settle".
 """
+import atexit
 import hashlib
 import os
 import shutil
@@ -51,6 +52,7 @@ def stubs():
         raise TestFailure(f"{e}: install python3-grpcio and python3-grpc-tools "
                           "(scripts/install-deps.sh)")
     out = tempfile.mkdtemp(prefix="carvemap-stubs-")
+    atexit.register(shutil.rmtree, out, True)
     proto = os.path.abspath(PROTO_DIR)
     rc = protoc.main(["protoc", f"-I{proto}", f"--python_out={out}", f"--grpc_python_out={out}",
                       os.path.join(proto, "carvemap/v1/jobs.proto")])
@@ -58,7 +60,6 @@ def stubs():
         raise TestFailure(f"grpc_tools.protoc failed on {proto}/carvemap/v1/jobs.proto ({rc})")
     sys.path.insert(0, out)
     from carvemap.v1 import jobs_pb2, jobs_pb2_grpc  # noqa: E402
-    import grpc
     _stubs = (jobs_pb2, jobs_pb2_grpc, grpc)
     return _stubs
 

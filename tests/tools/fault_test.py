@@ -118,7 +118,6 @@ def expect_succeeded(trial, job):
 
 def cmd_reference(args):
     fresh_dir(args.work)
-    t = time.monotonic()
     sim = subprocess.run([args.carvemap, "simulate", "--preset", "room", "--seed", "1",
                           "--rate-hz", "5", "--beam-step-deg", "2", "--max-duration", "8", "-q",
                           "-o", sim_dir(args)], capture_output=True, text=True)

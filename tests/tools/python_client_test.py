@@ -15,9 +15,11 @@ another tenant's token sees nothing of the job.
 Usage: python_client_test.py --carvemap BIN --work DIR
 """
 import argparse
+import atexit
 import hashlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -39,6 +41,7 @@ def generate_stubs():
         raise TestFailure(f"{e}: install python3-grpcio and python3-grpc-tools "
                           "(scripts/install-deps.sh)")
     out = tempfile.mkdtemp(prefix="carvemap-pyclient-")
+    atexit.register(shutil.rmtree, out, True)
     rc = protoc.main(["protoc", f"-I{PROTO}", f"--python_out={out}", f"--grpc_python_out={out}",
                       os.path.join(PROTO, "carvemap/v1/jobs.proto")])
     if rc != 0:
