@@ -14,8 +14,10 @@ timings) byte for byte.
                        job store and port: the job resumes and completes; chunks DONE at the kill
                        are not carved again (their tiles keep their inode), LEASED ones are
                        carved (again or by their old lease)
-  worker-kill          N trials (seeded): a worker SIGKILLed at a random moment of the job and a
-                       replacement started; every job completes
+  worker-kill          N trials (seeded): at a random point of the job's carving work (a
+                       fraction of the chunk commits of both passes, so load does not move it)
+                       a worker holding a lease is SIGKILLed and a replacement started; every
+                       job completes
   failures             the input deleted mid-job: FAILED with a reason naming the input, no
                        job.json, no tiles, no file that differs from the reference's
   storage-full         the output folder on a small tmpfs (a private mount namespace; skipped,
@@ -242,24 +244,50 @@ def cmd_coordinator_restart(args):
 def cmd_worker_kill(args):
     ref = reference(args)
     rng = random.Random(args.seed)
-    # The moments, drawn up front so the trials are the same whatever runs in parallel.
-    plan = [(i + 1, rng.uniform(0.05, 0.95) * ref["seconds"], rng.randint(1, 2))
+    # The moments, drawn up front so the trials are the same whatever runs in parallel, as a
+    # point in the job's carving work rather than in seconds (so a loaded machine moves them
+    # nowhere): u of the chunk commits of the first pass and the merge's second pass together.
+    first = ref["chunks_total"]
+    second = sum(1 for f in ref["files"] if f.startswith("object_tiles/"))
+    plan = [(i + 1, rng.random() * (first + second), rng.randint(1, 2))
             for i in range(args.trials)]
     results, errors = {}, []
     lock = threading.Lock()
 
-    def one(i, delay, victim):
+    def one(i, target, preferred):
         trial = Trial(args, f"worker_kill_{i}")
         info = {}
 
+        def reached(job, pass_seen):
+            done, total = job.progress.chunks_done, job.progress.chunks_total
+            if target < first:  # in the first pass (or past it, if the poll missed the moment)
+                return state(job) not in ("QUEUED", "INGESTING") and done >= target
+            # The second pass: the object chunks go back to the queue during MERGING, so done
+            # drops by `second` and climbs back (docs/RPC.md, "Second pass").
+            return pass_seen and done - (total - second) >= target - first
+
         def inject(trial, api, job_id, t0):
-            remaining = t0 + delay - time.monotonic()
-            if remaining > 0:
-                time.sleep(remaining)  # the random moment itself, not a wait for something
-            job = api.try_get(job_id)
-            info["at"] = f"{time.monotonic() - t0:.2f} s, " + (
-                f"{state(job)} {job.progress.chunks_done}/{job.progress.chunks_total} done"
-                if job else "?")
+            pass_seen = False
+            deadline = time.monotonic() + 300
+            while time.monotonic() < deadline:
+                job = api.try_get(job_id)
+                if job is not None:
+                    if state(job) == "MERGING" and (job.progress.chunks_done <
+                                                    job.progress.chunks_total):
+                        pass_seen = True
+                    if reached(job, pass_seen) or state(job) in ("SUCCEEDED", "FAILED"):
+                        break
+                time.sleep(0.01)
+            # The victim: a worker that holds a lease now (the job store says who), if any.
+            holders = sorted({n for n, wid in worker_ids(trial).items()
+                              for r in trial.cluster.store_chunks(job_id).values()
+                              if r["state"] == 2 and r["worker_id"] == wid})
+            victim = holders[(preferred - 1) % len(holders)] if holders else preferred
+            info["victim"] = victim
+            info["at"] = (f"{target:.1f} of {first}+{second} chunk commits ("
+                          f"{'first' if target < first else 'second'} pass): {state(job)} "
+                          f"{job.progress.chunks_done}/{job.progress.chunks_total} done, "
+                          f"worker(s) {holders or 'none'} holding a lease")
             trial.cluster.kill_worker(victim)
             trial.cluster.start_worker()  # a replacement, as a Deployment would start
 
@@ -291,10 +319,10 @@ def cmd_worker_kill(args):
         t.start()
     for t in threads:
         t.join()
-    for i, delay, victim in plan:
+    for i, _, _ in plan:
         if i in results:
             r = results[i]
-            log(f"trial {i}: worker-{victim} SIGKILLed at {r['at']}; {r['lost']}; "
+            log(f"trial {i}: worker-{r['victim']} SIGKILLed at {r['at']}; {r['lost']}; "
                 f"{r['retries']} chunk retries; SUCCEEDED, identical ({r['seconds']:.1f} s)")
     if errors:
         raise TestFailure("\n".join(errors))
