@@ -7,14 +7,13 @@
 // Clutter: §3.1.1 keeps furniture out of the wall samples with its height rule (a wall reaches
 // H = 2 m; "clutter such as furniture or plants do not affect position of wall samples"), and
 // §3.4.2 calls it desirable that cubicle walls and counters are left out of the floor plan. A 2D
-// map has no heights, so the rule here is by shape: a wall belongs to the building's connected
-// network of walls, or is at least a wall's length on its own; an occupied component (8-connected)
-// that stands free in the room and is shorter than clutter_max_extent_m is furniture (chairs,
-// tables, cabinets in the middle of a room) or map noise, and gives no samples. It still blocks
-// the lines of sight (the scanner saw it). Furniture touching a wall is part of the wall's
-// component and stays.
-//
-// Plain functions over plain data: no files, no logging.
+// map has no heights, so the rule here is by size: an occupied component (8-connected) that
+// stands free (touches no wall, nor the map's border) and is smaller than clutter_max_extent_m
+// across is furniture (a chair, a small table, a plant, a bin) or map noise, and gives no
+// samples. It still blocks the lines of sight (the scanner saw it). Furniture touching a wall is
+// part of the wall's component and stays; so do larger free-standing pieces, since a wall stub
+// standing free between two doors is one of them, and dropping a wall merges rooms for good while
+// a desk left in only splits one (which room_labeling's rules mostly repair).
 #pragma once
 
 #include <Eigen/Core>
@@ -38,10 +37,11 @@ struct GridMapOptions {
   // Heights put on every sample, m (floor_z < ceiling_z).
   double floor_z = 0;
   double ceiling_z = 2.6;
-  // Occupied components whose bounding-box diagonal is below this are clutter: no samples (see
-  // the file comment). 0 keeps every occupied cell. On the real floor maps every free-standing
-  // piece of furniture is ≤ 2.7 m and every free-standing wall piece ≥ 3.5 m.
-  double clutter_max_extent_m = 3.0;
+  // Free-standing occupied components whose bounding-box diagonal is below this are clutter: no
+  // samples (see the file comment). 0 keeps every occupied cell. On the real floor maps
+  // (../shared/data/floormaps) every free-standing piece of furniture is ≤ 1.17 m across and
+  // every free-standing piece of wall (stubs between doors, in the plain maps too) ≥ 1.45 m.
+  double clutter_max_extent_m = 1.3;
   VisibilityOptions visibility;
   // InvalidArgument naming the first bad field (including visibility's).
   [[nodiscard]] absl::Status Validate() const;

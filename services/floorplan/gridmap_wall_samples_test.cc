@@ -211,11 +211,11 @@ TEST(GridMapWallSamplesTest, ThinWallSeenFromBothSidesHasNoNormal) {
   EXPECT_EQ(thin, 30);
 }
 
-// Clutter (§3.1.1's height rule has no 2D counterpart, so free-standing pieces shorter than
-// clutter_max_extent_m are furniture): a room 10 m × 6 m (cols [10, 210) × rows [10, 130)) with
-// a chair (0.3 m square) and a table (1.5 m × 0.8 m) standing free, a free-standing partition
-// 3.5 m long, and a cabinet against the top wall. The chair and the table give no samples but
-// still hide the wall behind them; the partition and the cabinet stay.
+// Clutter (§3.1.1's height rule has no 2D counterpart, so free-standing pieces smaller than
+// clutter_max_extent_m across are furniture): a room 10 m × 6 m (cols [10, 210) × rows [10, 130))
+// with a chair (0.3 m square) and a table (1.0 m × 0.6 m) standing free, a free-standing wall
+// stub 1.5 m long, and a cabinet against the top wall. The chair and the table give no samples
+// but still hide the wall behind them; the stub and the cabinet stay.
 TEST(GridMapWallSamplesTest, FreeStandingClutterGivesNoSamplesButStillBlocks) {
   Image<uint8_t> im;
   im.width = 220;
@@ -223,8 +223,8 @@ TEST(GridMapWallSamplesTest, FreeStandingClutterGivesNoSamplesButStillBlocks) {
   im.pixels.assign(size_t(im.width) * im.height, 0);
   FillPx(im, 10, 10, 210, 130, 255);
   FillPx(im, 60, 60, 66, 66, 0);     // chair
-  FillPx(im, 100, 40, 130, 56, 0);   // table, x ∈ [5, 6.5), y ∈ (4.2, 5.0]
-  FillPx(im, 40, 100, 110, 102, 0);  // partition
+  FillPx(im, 105, 44, 125, 56, 0);   // table, x ∈ [5.25, 6.25), y ∈ (4.2, 4.8]
+  FillPx(im, 40, 100, 70, 102, 0);   // wall stub
   FillPx(im, 150, 10, 170, 20, 0);   // cabinet, touching the wall above
   const Eigen::Vector2d below_table(5.775, 3.0);
   const std::vector<Eigen::Vector2d> path = {
@@ -236,12 +236,12 @@ TEST(GridMapWallSamplesTest, FreeStandingClutterGivesNoSamplesButStillBlocks) {
   auto in = [](const Eigen::Vector2i& px, int col0, int row0, int col1, int row1) {
     return px.y() >= col0 && px.y() < col1 && px.x() >= row0 && px.x() < row1;
   };
-  int chair = 0, table = 0, partition = 0, cabinet = 0, behind_table = 0;
+  int chair = 0, table = 0, stub = 0, cabinet = 0, behind_table = 0;
   for (const WallSample& s : r->samples) {
     const Eigen::Vector2i px = PixelOf(im, s.position);
     chair += in(px, 60, 60, 66, 66);
-    table += in(px, 100, 40, 130, 56);
-    partition += in(px, 40, 100, 110, 102);
+    table += in(px, 105, 44, 125, 56);
+    stub += in(px, 40, 100, 70, 102);
     cabinet += in(px, 150, 10, 170, 20);
     if (px.x() == 9 && px.y() == 115) {  // the top wall, straight above the pose below the table
       ++behind_table;
@@ -252,14 +252,14 @@ TEST(GridMapWallSamplesTest, FreeStandingClutterGivesNoSamplesButStillBlocks) {
   }
   EXPECT_EQ(chair, 0);
   EXPECT_EQ(table, 0);
-  EXPECT_EQ(partition, 2 * 70);  // two cells thick: every cell faces free space
+  EXPECT_EQ(stub, 2 * 30);  // two cells thick: every cell faces free space
   EXPECT_EQ(cabinet, 2 * 10 + 20 - 2);  // its three faces, the corners at the wall excluded
   EXPECT_EQ(behind_table, 1);
 
   o.clutter_max_extent_m = 0;  // every occupied cell
   auto all = GridMapWallSamples(im, path, o);
   ASSERT_TRUE(all.ok()) << all.status();
-  EXPECT_EQ(all->samples.size(), r->samples.size() + (4 * 6 - 4) + (2 * 30 + 2 * 16 - 4));
+  EXPECT_EQ(all->samples.size(), r->samples.size() + (4 * 6 - 4) + (2 * 20 + 2 * 12 - 4));
 
   o.clutter_max_extent_m = -1;
   EXPECT_EQ(GridMapWallSamples(im, path, o).status().code(), absl::StatusCode::kInvalidArgument);
