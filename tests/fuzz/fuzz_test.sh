@@ -6,6 +6,10 @@
 #       inputs go to BUILD_DIR/work/TARGET, started afresh each run), crashes to
 #       BUILD_DIR/artifacts/TARGET/. Fails, naming the input and how to reproduce it, when
 #       the target crashes, leaks, runs out of memory (2.5 GB) or takes over 10 s on one input.
+#   fuzz_test.sh coverage COV_DIR BUILD_DIR TARGET SOURCE...
+#       builds the targets with source-based coverage into COV_DIR, runs TARGET once over its
+#       seeds and BUILD_DIR/work/TARGET (the corpus the last run grew), and prints llvm-cov's
+#       line and branch coverage of each SOURCE (paths in the repository).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 
@@ -45,8 +49,23 @@ case "${1:-}" in
       exit 1
     fi
     ;;
+  coverage)
+    cov="$2" build="$3" target="$4"
+    shift 4
+    root="$(cd "$here/../.." && pwd)"
+    cmake -S "$here" -B "$cov" -G Ninja -DCMAKE_CXX_COMPILER="${CARVEMAP_FUZZ_CXX:-clang++-14}" \
+      -DCMAKE_C_COMPILER="${CARVEMAP_FUZZ_CC:-clang-14}" -DCARVEMAP_FUZZ_COVERAGE=ON >/dev/null
+    cmake --build "$cov" --target "${target}_fuzzer" >/dev/null
+    rm -f "$cov/$target.profraw"
+    LLVM_PROFILE_FILE="$cov/$target.profraw" ASAN_OPTIONS=detect_leaks=0 \
+      "$cov/${target}_fuzzer" -runs=0 "$build/work/$target" "$here/corpus/$target" >/dev/null 2>&1
+    llvm-profdata-14 merge -sparse "$cov/$target.profraw" -o "$cov/$target.profdata"
+    llvm-cov-14 report "$cov/${target}_fuzzer" -instr-profile="$cov/$target.profdata" \
+      "${@/#/$root/}"
+    ;;
   *)
     echo "usage: fuzz_test.sh build BUILD_DIR | run BUILD_DIR TARGET SECONDS [flags...]" >&2
+    echo "       | coverage COV_DIR BUILD_DIR TARGET SOURCE..." >&2
     exit 2
     ;;
 esac
