@@ -1,5 +1,5 @@
-// Cross-service test (STYLE habit 13): a real coordinator and a real worker on 127.0.0.1:0 in
-// this process, talked to over gRPC as a client would. The process-level behaviour (`carvemap
+// Cross-service test (STYLE habit 13): a real coordinator, a real worker and a real merge
+// service on 127.0.0.1:0 in this process, talked to over gRPC as a client would. The process-level behaviour (`carvemap
 // run`, a SIGKILLed worker, bad jobs) is tests/tools/distributed_test.sh.
 #include <grpcpp/grpcpp.h>
 
@@ -16,6 +16,8 @@
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
 #include "services/rpc/coordinator_service.h"
 #include "services/rpc/job_client.h"
+#include "services/rpc/merge_client.h"
+#include "services/rpc/merge_service.h"
 #include "services/rpc/worker_service.h"
 #include "services/sim/simulator.h"
 #include "storage/tile_store.h"
@@ -37,13 +39,25 @@ class DistributedTest : public ::testing::Test {
     spec.output_root = (root_ / "out").string();
     spec.heartbeat_interval_s = 0.5;
     spec.worker_timeout_s = 2;
-    // A test may look into the merge's request first (merge_hook_), then the real merge runs.
-    spec.merge = [this](const MergeJobRequest& req) -> absl::Status {
+    // The merge runs on a merge service (here in this process, over gRPC on loopback, as
+    // `carvemap coordinator --merge-server` calls `carvemap merger`). A test may look into
+    // the merge's request first (merge_hook_, on the service's side), then the real merge runs.
+    MergeServerSpec merge_spec;
+    merge_spec.merge = [this](const MergeJobRequest& req) -> absl::Status {
       if (merge_hook_) {
         if (absl::Status s = merge_hook_(req); !s.ok()) return s;
       }
-      return FirstOutputsMerge()(req);
+      return LocalMerge()(req);
     };
+    auto merger = MergeServer::Start(merge_spec);
+    ASSERT_TRUE(merger.ok()) << merger.status();
+    merger_ = *std::move(merger);
+    MergeClientSpec client;
+    client.addresses = {"127.0.0.1:" + std::to_string(merger_->port())};
+    auto remote = RemoteMerge(client);
+    ASSERT_TRUE(remote.ok()) << remote.status();
+    spec.merge = *std::move(remote);
+    spec.merge_in_process = false;
     auto server = CoordinatorServer::Start(spec);
     ASSERT_TRUE(server.ok()) << server.status();
     coordinator_ = *std::move(server);
@@ -68,6 +82,7 @@ class DistributedTest : public ::testing::Test {
 
   fs::path root_;
   std::function<absl::Status(const MergeJobRequest&)> merge_hook_;
+  std::unique_ptr<MergeServer> merger_;  // outlives the coordinator (declared first)
   std::unique_ptr<CoordinatorServer> coordinator_;
   std::string address_;
   std::shared_ptr<grpc::Channel> channel_;
@@ -192,7 +207,9 @@ TEST_F(DistributedTest, JobRunsToSucceededWithAWorker) {
 }
 
 // §5.6.1: during the merge, chunks go to the workers once more at a finer resolution, into
-// <job dir>/object_tiles; the job's own tiles and counters are as before afterwards.
+// <job dir>/object_tiles; the job's own tiles and counters are as before afterwards. The
+// request goes from the merge service to the coordinator on the merge's stream and the
+// answer comes back on it (MergeService's RecarveRequest/RecarveResult).
 TEST_F(DistributedTest, MergeCarvesChunksAgainFinerThroughTheWorkers) {
   const std::string scan = SimulateScan();
   WorkerSpec ws;

@@ -50,7 +50,7 @@ class MetricsTest : public ::testing::Test {
     spec.lease_timeout_s = 1;
     spec.sweep_interval_s = 0.1;
     spec.metrics_listen_address = "127.0.0.1:0";
-    spec.merge = FirstOutputsMerge();
+    spec.merge = LocalMerge();
     auto server = CoordinatorServer::Start(spec);
     ASSERT_TRUE(server.ok()) << server.status();
     coordinator_ = *std::move(server);

@@ -73,7 +73,7 @@ class SecurityTest : public ::testing::Test {
     spec.worker_timeout_s = 2;
     spec.tokens = {{kAcme, "acme"}, {kBeta, "beta"}};
     spec.cluster_secret = kSecret;
-    spec.merge = FirstOutputsMerge();
+    spec.merge = LocalMerge();
     return spec;
   }
   void Start(CoordinatorSpec spec) {

@@ -122,7 +122,8 @@ absl::Status RunDemo(const DemoFlags& flags) {
   std::printf("  valid: %zu sensors, %zu poses\n", (*reader)->sensors().size(),
               (*reader)->path().size());
 
-  std::printf("carvemap demo: carving with a local coordinator and %d workers\n", flags.workers);
+  std::printf("carvemap demo: carving with a local coordinator, %d workers and a merge service\n",
+              flags.workers);
   std::vector<std::string> run_args = {
       "run", sim->scan_path, "-o", flags.output_dir, "--workers", std::to_string(flags.workers)};
   if (flags.quiet) run_args.push_back("--quiet");

@@ -1,6 +1,6 @@
 // `carvemap run SCAN.h5 -o OUT`: the whole distributed job on one machine (DESIGN §9). Starts
-// the coordinator and N workers as separate processes on loopback (the merge runs inside the
-// coordinator for now), submits the job over RPC, shows its progress, and stops them.
+// the merge service, the coordinator and N workers as separate processes on loopback, submits
+// the job over RPC, shows its progress, and stops them.
 //
 // OUT/ gets the outputs (tiles/, octree.bt, level_0/, job.json); OUT/.carvemap/ holds the job
 // store, the spill files while the job runs, the servers' logs and their pid/port files.
@@ -54,6 +54,7 @@ struct RunState {
   absl::Mutex mu;
   std::vector<pid_t> workers ABSL_GUARDED_BY(mu);
   pid_t coordinator ABSL_GUARDED_BY(mu) = -1;
+  pid_t merger ABSL_GUARDED_BY(mu) = -1;
   std::string job_id ABSL_GUARDED_BY(mu);
   std::unique_ptr<JobClient> client;  // set once, before the job is submitted
   std::atomic<bool> interrupted{false};
@@ -63,7 +64,8 @@ void WriteText(const fs::path& path, const std::string& text) {
   std::ofstream(path) << text << "\n";
 }
 
-absl::StatusOr<std::string> WaitForPortFile(const fs::path& path, pid_t coordinator,
+// `who` ("the coordinator", "the merge service") for the messages.
+absl::StatusOr<std::string> WaitForPortFile(const fs::path& path, pid_t server, const char* who,
                                             const fs::path& log, double timeout_s) {
   const auto deadline =
       std::chrono::steady_clock::now() + std::chrono::milliseconds(int(timeout_s * 1000));
@@ -72,30 +74,34 @@ absl::StatusOr<std::string> WaitForPortFile(const fs::path& path, pid_t coordina
     std::string address;
     if (in >> address && !address.empty()) return address;
     int status = 0;
-    if (waitpid(coordinator, &status, WNOHANG) == coordinator) {
-      return absl::UnavailableError(absl::StrCat(
-          "the coordinator exited during start-up (status ", status, "); see ", log.string()));
+    if (waitpid(server, &status, WNOHANG) == server) {
+      return absl::UnavailableError(absl::StrCat(who, " exited during start-up (status ", status,
+                                                 "); see ", log.string()));
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   return absl::DeadlineExceededError(
-      absl::StrCat("the coordinator did not start within ", timeout_s, " s; see ", log.string()));
+      absl::StrCat(who, " did not start within ", timeout_s, " s; see ", log.string()));
 }
 
 void StopAll(RunState& state) {
   std::vector<pid_t> workers;
-  pid_t coordinator;
+  pid_t coordinator, merger;
   {
     absl::MutexLock lock(&state.mu);
     workers.swap(state.workers);
     coordinator = state.coordinator;
     state.coordinator = -1;
+    merger = state.merger;
+    state.merger = -1;
   }
-  // Workers first: they finish the chunk in hand; then the coordinator.
+  // Workers first: they finish the chunk in hand; then the coordinator (which cancels a merge
+  // still running); then the merge service.
   std::vector<std::thread> stoppers;
   for (pid_t pid : workers) stoppers.emplace_back([pid] { StopChild(pid, 10.0); });
   for (std::thread& t : stoppers) t.join();
   if (coordinator > 0) StopChild(coordinator, 10.0);
+  if (merger > 0) StopChild(merger, 10.0);
 }
 
 absl::Status Run(const RunFlags& flags, RunState& state) {
@@ -125,12 +131,13 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   for (const char* name :
        {"CARVEMAP_SERVER", "CARVEMAP_TOKEN", "CARVEMAP_TOKEN_FILE", "CARVEMAP_TOKENS",
         "CARVEMAP_TOKENS_FILE", "CARVEMAP_CLUSTER_SECRET", "CARVEMAP_CLUSTER_SECRET_FILE",
-        "CARVEMAP_TLS_CA", "CARVEMAP_TLS_CERT", "CARVEMAP_TLS_KEY", "CARVEMAP_TLS_SERVER_NAME"}) {
+        "CARVEMAP_TLS_CA", "CARVEMAP_TLS_CERT", "CARVEMAP_TLS_KEY", "CARVEMAP_TLS_SERVER_NAME",
+        "CARVEMAP_MERGE_SERVER"}) {
     ::unsetenv(name);
   }
   // Our own servers get our own secrets, made fresh for this run: a tenant token for the job
-  // API and the cluster secret for the workers. Other users of this machine cannot talk to
-  // them (the files are 0600), and nobody has to set anything up.
+  // API and the cluster secret for the workers and the merge service. Other users of this
+  // machine cannot talk to them (the files are 0600), and nobody has to set anything up.
   absl::StatusOr<std::string> token = RandomSecret();
   if (!token.ok()) return token.status();
   absl::StatusOr<std::string> secret = RandomSecret();
@@ -142,8 +149,26 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   }
   if (absl::Status s = WritePrivateFile(secret_file.string(), *secret + "\n"); !s.ok()) return s;
 
+  // The merge service first: the coordinator is told where it is. It reads the tiles and
+  // writes the outputs by path, as on a cluster's shared volume.
+  const fs::path merger_log = work / "merger.log";
+  absl::StatusOr<pid_t> merger =
+      SpawnSelf({"merger", "--listen", "127.0.0.1:0", "--port-file",
+                 (work / "merger-port").string(), "--cluster-secret-file", secret_file.string()},
+                merger_log.string());
+  if (!merger.ok()) return merger.status();
+  {
+    absl::MutexLock lock(&state.mu);
+    state.merger = *merger;
+  }
+  WriteText(work / "merger.pid", absl::StrCat(*merger));
+  absl::StatusOr<std::string> merger_address =
+      WaitForPortFile(work / "merger-port", *merger, "the merge service", merger_log, 30.0);
+  if (!merger_address.ok()) return merger_address.status();
+
   std::vector<std::string> args = {
       "coordinator", "--listen", "127.0.0.1:0", "--port-file", (work / "port").string(),
+      "--merge-server", *merger_address,
       "--tokens", tokens_file.string(), "--cluster-secret-file", secret_file.string(),
       "--shared-dirs",
       "--data-root", scan.parent_path().string(), "--output-root", out.parent_path().string(),
@@ -164,7 +189,7 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   }
   WriteText(work / "coordinator.pid", absl::StrCat(*coordinator));
   absl::StatusOr<std::string> address =
-      WaitForPortFile(work / "port", *coordinator, coordinator_log, 30.0);
+      WaitForPortFile(work / "port", *coordinator, "the coordinator", coordinator_log, 30.0);
   if (!address.ok()) return address.status();
 
   for (int i = 0; i < flags.workers; ++i) {
@@ -179,8 +204,10 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
     state.workers.push_back(*pid);
   }
   if (!flags.quiet) {
-    std::fprintf(stderr, "carvemap run: coordinator on %s, %d worker(s); logs in %s\n",
-                 address->c_str(), flags.workers, work.c_str());
+    std::fprintf(stderr,
+                 "carvemap run: coordinator on %s, %d worker(s), merge service on %s; logs in "
+                 "%s\n",
+                 address->c_str(), flags.workers, merger_address->c_str(), work.c_str());
   }
 
   ChannelSecurity security;
@@ -243,7 +270,8 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
 void RegisterRun(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "run",
-      "Carve a scan with a local coordinator and workers (separate processes on loopback)");
+      "Carve and merge a scan with a local coordinator, workers and merge service (separate "
+      "processes on loopback)");
   auto flags = std::make_shared<RunFlags>();
   cmd->add_option("scan", flags->scan, "Input scan.h5")->required();
   cmd->add_option("-o,--output", flags->output_dir, "Output directory")->required();

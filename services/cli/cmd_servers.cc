@@ -1,5 +1,5 @@
-// `carvemap coordinator` and `carvemap worker`: the servers of DESIGN §8 on their own. Thin
-// shells: flags ➜ Spec ➜ Start ➜ Wait (services/rpc/).
+// `carvemap coordinator`, `carvemap worker` and `carvemap merger`: the servers of DESIGN §8 on
+// their own. Thin shells: flags ➜ Spec ➜ Start ➜ Wait (services/rpc/).
 #include <sys/resource.h>
 
 #include <atomic>
@@ -19,6 +19,8 @@
 #include "services/cli/security_flags.h"
 #include "services/rpc/bearer_tokens.h"
 #include "services/rpc/coordinator_service.h"
+#include "services/rpc/merge_client.h"
+#include "services/rpc/merge_service.h"
 #include "services/rpc/process_util.h"
 #include "services/rpc/server_log.h"
 #include "services/rpc/worker_service.h"
@@ -89,6 +91,9 @@ struct CoordinatorFlags {
   std::string tokens_file;
   std::string secret_file;
   bool no_merge = false;
+  // The merge services (`carvemap merger`) and how to reach them; the bearer is the
+  // coordinator's own cluster secret.
+  MergeClientSpec merge;
   std::string log_format = "text";
   bool verbose = false;
 };
@@ -126,7 +131,25 @@ absl::Status RunCoordinator(CoordinatorFlags flags, LogFormat log_format) {
     stop_requested->store(true);
     if (CoordinatorServer* s = stop->load()) s->Shutdown();
   });
-  if (!flags.no_merge) flags.spec.merge = FirstOutputsMerge();
+  // The server's own rules first (an open service off loopback, bad TLS files): their
+  // messages say more than a missing merge service.
+  if (absl::Status s = flags.spec.Validate(); !s.ok()) return s;
+  if (flags.no_merge) {
+    if (!flags.merge.addresses.empty()) {
+      return absl::InvalidArgumentError("--no-merge and --merge-server exclude each other");
+    }
+  } else {
+    if (flags.merge.addresses.empty()) {
+      return absl::InvalidArgumentError(
+          "no merge service: give --merge-server HOST:PORT (a `carvemap merger`; DESIGN §8 runs "
+          "the merge as its own service), or --no-merge for tiles only");
+    }
+    flags.merge.security.bearer = flags.spec.cluster_secret;
+    absl::StatusOr<MergeFunction> merge = RemoteMerge(flags.merge);
+    if (!merge.ok()) return merge.status();
+    flags.spec.merge = *std::move(merge);
+    flags.spec.merge_in_process = false;
+  }
   absl::StatusOr<std::unique_ptr<CoordinatorServer>> server =
       CoordinatorServer::Start(flags.spec);
   if (!server.ok()) return server.status();
@@ -151,9 +174,10 @@ absl::Status RunCoordinator(CoordinatorFlags flags, LogFormat log_format) {
 void RegisterCoordinator(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "coordinator",
-      "Run the coordinator server: job service and carve-task service (gRPC). On a "
-      "non-loopback address it needs --tokens (tenants' bearer tokens) and "
-      "--cluster-secret-file or --tls-client-ca (workers), or --insecure");
+      "Run the coordinator server: job service and carve-task service (gRPC); jobs are "
+      "merged by the merge service of --merge-server. On a non-loopback address it needs "
+      "--tokens (tenants' bearer tokens) and --cluster-secret-file or --tls-client-ca "
+      "(workers), or --insecure");
   auto flags = std::make_shared<CoordinatorFlags>();
   flags->spec.listen_address = "127.0.0.1:7600";
   CoordinatorSpec& s = flags->spec;
@@ -182,6 +206,29 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
                   "Send wedges up to this size inside the lease (0: always by spill path)")
       ->capture_default_str();
   cmd->add_flag("--keep-spill", s.keep_spill, "Keep the spill files after a job ends");
+  // The merge service (DESIGN §8; docs/RPC.md "MergeService").
+  MergeClientSpec& m = flags->merge;
+  cmd->add_option("--merge-server", m.addresses,
+                  "host:port of a merge service (`carvemap merger`); repeat or separate with "
+                  "commas for several: a merge whose service is lost runs again on the next")
+      ->delimiter(',')
+      ->envname("CARVEMAP_MERGE_SERVER");
+  cmd->add_option("--merge-attempts", m.attempts,
+                  "Merge services lost (or unreachable) this many times in one job's merge: "
+                  "the job fails")
+      ->capture_default_str();
+  cmd->add_option("--merge-connect-timeout-s", m.connect_timeout_s,
+                  "How long one merge attempt waits for its service to accept a connection")
+      ->capture_default_str();
+  cmd->add_option("--merge-tls-ca", m.security.ca_file,
+                  "Reach the merge services over TLS, trusting the CA certificate(s) in this "
+                  "PEM file");
+  cmd->add_option("--merge-tls-server-name", m.security.server_name,
+                  "Name the merge service's certificate must carry, when it is not the "
+                  "--merge-server host");
+  cmd->add_option("--merge-tls-cert", m.security.cert_file,
+                  "Client certificate (PEM) for mutual TLS with the merge services");
+  cmd->add_option("--merge-tls-key", m.security.key_file, "Private key (PEM) of --merge-tls-cert");
   cmd->add_flag("--no-merge", flags->no_merge, "Skip the merge step (tiles only)");
   // Security (docs/RPC.md "Authentication", docs/CLUSTER.md).
   cmd->add_option("--tokens", flags->tokens_file,
@@ -192,8 +239,8 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
       ->envname("CARVEMAP_TOKENS_FILE");
   cmd->add_option("--cluster-secret-file", flags->secret_file,
                   "Secret that workers must present on the carve-task API (else the "
-                  "CARVEMAP_CLUSTER_SECRET variable); required off loopback unless "
-                  "--tls-client-ca or --insecure")
+                  "CARVEMAP_CLUSTER_SECRET variable), and that the coordinator presents to the "
+                  "merge services; required off loopback unless --tls-client-ca or --insecure")
       ->envname("CARVEMAP_CLUSTER_SECRET_FILE");
   cmd->add_option("--tls-cert", s.tls_cert_file, "Serve TLS with this PEM certificate chain")
       ->envname("CARVEMAP_TLS_CERT");
@@ -283,9 +330,98 @@ void RegisterWorker(CLI::App& app, int& exit_code) {
   });
 }
 
+struct MergerFlags {
+  MergeServerSpec spec;
+  std::string port_file;
+  std::string secret_file;
+  std::string log_format = "text";
+  bool verbose = false;
+};
+
+absl::Status RunMerger(MergerFlags flags, LogFormat log_format) {
+  // The cluster secret the coordinator presents, from its file or else the variable (as the
+  // coordinator and the workers read it).
+  if (!flags.secret_file.empty()) {
+    absl::StatusOr<std::string> secret = ReadSecretFile(flags.secret_file, "cluster secret file");
+    if (!secret.ok()) return secret.status();
+    flags.spec.cluster_secret = *secret;
+  } else if (const char* env = std::getenv("CARVEMAP_CLUSTER_SECRET"); env && *env) {
+    flags.spec.cluster_secret = env;
+    if (absl::Status s = ValidateSecret(env, "CARVEMAP_CLUSTER_SECRET"); !s.ok()) return s;
+  }
+  auto stop = std::make_shared<std::atomic<MergeServer*>>(nullptr);
+  auto stop_requested = std::make_shared<std::atomic<bool>>(false);
+  HandleTerminationSignals([stop, stop_requested](int signo) {
+    spdlog::info("merger: signal {}, shutting down", signo);
+    stop_requested->store(true);
+    if (MergeServer* s = stop->load()) s->Shutdown();
+  });
+  absl::StatusOr<std::unique_ptr<MergeServer>> server = MergeServer::Start(flags.spec);
+  if (!server.ok()) return server.status();
+  const std::string address =
+      absl::StrCat(HostOf(flags.spec.listen_address), ":", (*server)->port());
+  if (log_format == LogFormat::kText) {
+    std::printf("listening on %s\n", address.c_str());
+    std::fflush(stdout);
+  }
+  if (!flags.port_file.empty()) {
+    if (absl::Status s = WritePortFile(flags.port_file, address); !s.ok()) return s;
+  }
+  stop->store(server->get());
+  if (stop_requested->load()) (*server)->Shutdown();
+  (*server)->Wait();
+  (*server)->Shutdown();
+  stop->store(nullptr);
+  LogResourceUsage("merger");
+  return absl::OkStatus();
+}
+
+void RegisterMerger(CLI::App& app, int& exit_code) {
+  CLI::App* cmd = app.add_subcommand(
+      "merger",
+      "Run a merge service (gRPC): merges the jobs a coordinator hands it (--merge-server), "
+      "reading tiles and writing outputs on the storage it shares with the coordinator, at the "
+      "same paths. On a non-loopback address it needs --cluster-secret-file or "
+      "--tls-client-ca, or --insecure");
+  auto flags = std::make_shared<MergerFlags>();
+  MergeServerSpec& s = flags->spec;
+  s.listen_address = "127.0.0.1:7610";
+  cmd->add_option("--listen", s.listen_address, "host:port to serve on (port 0: any free port)")
+      ->capture_default_str();
+  cmd->add_option("--port-file", flags->port_file,
+                  "Write the bound host:port to this file once serving");
+  cmd->add_option("--cluster-secret-file", flags->secret_file,
+                  "Secret the coordinator must present (the cluster secret; else the "
+                  "CARVEMAP_CLUSTER_SECRET variable); required off loopback unless "
+                  "--tls-client-ca or --insecure")
+      ->envname("CARVEMAP_CLUSTER_SECRET_FILE");
+  cmd->add_option("--tls-cert", s.tls_cert_file, "Serve TLS with this PEM certificate chain")
+      ->envname("CARVEMAP_TLS_CERT");
+  cmd->add_option("--tls-key", s.tls_key_file, "PEM private key of --tls-cert")
+      ->envname("CARVEMAP_TLS_KEY");
+  cmd->add_option("--tls-client-ca", s.tls_client_ca_file,
+                  "Mutual TLS: a client certificate signed by this CA authenticates the "
+                  "coordinator (as the cluster secret does)");
+  cmd->add_flag("--insecure", s.insecure,
+                "Allow serving a non-loopback address without the cluster secret or mutual TLS "
+                "(anyone reaching the port could have the merge read and write any path it can)");
+  cmd->add_option("--max-request-bytes", s.max_request_bytes,
+                  "Largest message accepted from the coordinator")
+      ->capture_default_str();
+  cmd->add_option("--health-listen", s.health_listen_address,
+                  "Also serve grpc.health.v1 alone, in plaintext, on this host:port (for "
+                  "Kubernetes probes, which cannot speak TLS)");
+  AddLogFlags(cmd, flags->log_format, flags->verbose);
+  cmd->callback([flags, &exit_code] {
+    const LogFormat format = SetUpLogging(flags->log_format, "merger", flags->verbose);
+    exit_code = ReportServerStatus("merger", format, RunMerger(*flags, format));
+  });
+}
+
 }  // namespace
 
 CARVEMAP_REGISTER_COMMAND(60, RegisterCoordinator);
 CARVEMAP_REGISTER_COMMAND(61, RegisterWorker);
+CARVEMAP_REGISTER_COMMAND(62, RegisterMerger);
 
 }  // namespace carvemap

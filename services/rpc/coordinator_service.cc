@@ -806,8 +806,9 @@ void CoordinatorServer::Impl::EnterStage(const std::string& job_id, const std::s
   rt.current_stage = stage;
   rt.stage_start = now;
   if (!stage.empty()) {
+    // A stage entered again (a merge retried on another merge service) is listed once.
+    if (rt.stages.count(stage) == 0) rt.stage_order.push_back(stage);
     rt.stages[stage] = {now, 0.0};
-    rt.stage_order.push_back(stage);
   }
 }
 
@@ -1151,15 +1152,16 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       return RecarveStage(job_id, chunks, resolution_m);
     };
     if (spec_.merge) {
+      // The merge opens the scan itself, confined to the tenant's folder as at submit and
+      // ingest (LocalMerge here, or a merge service on the same shared storage).
+      req.scan_root = fs::absolute(DataDir(job->tenant_dir)).lexically_normal().string();
+      req.scan_input = job->input_path;
       absl::Status merged;
-      absl::StatusOr<ConfinedFile> scan =
-          ConfinedFile::Open(DataDir(job->tenant_dir), job->input_path, "input_path");
-      if (!scan.ok()) {
-        merged = scan.status();
-      } else {
-        req.scan_path = scan->path();
+      if (spec_.merge_in_process) {
         absl::MutexLock lock(&hdf5_mu_);
-        merged = scan->Rename(spec_.merge(req));
+        merged = spec_.merge(req);
+      } else {
+        merged = spec_.merge(req);
       }
       if (absl::Status s = merged; !s.ok()) {
         if (stopping_) return;  // resumed by the next coordinator

@@ -18,29 +18,9 @@
 #include "absl/status/statusor.h"
 #include "services/geometry/chunk_region.h"
 #include "services/rpc/bearer_tokens.h"
+#include "services/rpc/merge_request.h"
 
 namespace carvemap {
-
-// What the merge step gets: the job's tiles and where the outputs go.
-struct MergeJobRequest {
-  std::string job_id;
-  std::string tiles_dir;   // the committed tiles of every chunk
-  std::string output_dir;  // octree.bt, level_0/, job.json go here
-  std::string scan_path;   // the job's input scan.h5 (the merge reads its /path)
-  double resolution_m = 0.0625;
-  // §5.6.1: the object chunks are carved again at this resolution by `recarve` (the
-  // coordinator leases them to its workers once more, each limited to its region, and returns
-  // the directory of their tiles). Equal to resolution_m, or no `recarve`: no re-carving.
-  double object_resolution_m = 0.0625;
-  std::function<absl::StatusOr<std::string>(const std::vector<RecarveChunk>& chunks,
-                                            double resolution_m)>
-      recarve;
-  std::string job_json;  // the job document (id, input, parameters, counts) as JSON text
-  // Called by the merge as it goes (stage name, done, total); false = stop (job cancelled or
-  // coordinator stopping): the merge then returns Cancelled. May be empty.
-  std::function<bool(const std::string& stage, uint64_t done, uint64_t total)> progress;
-};
-using MergeFunction = std::function<absl::Status(const MergeJobRequest&)>;
 
 struct CoordinatorSpec {
   // "host:port"; port 0 picks a free port (see CoordinatorServer::port()).
@@ -68,8 +48,13 @@ struct CoordinatorSpec {
   int64_t max_inline_wedge_bytes = 0;
   // Keep the spill files after a job ends (debugging). Default: removed when the job ends.
   bool keep_spill = false;
-  // The merge step; empty: MERGING is skipped with a warning (tiles only).
+  // The merge step; empty: MERGING is skipped with a warning (tiles only). `carvemap
+  // coordinator` gives RemoteMerge (a merge service, services/rpc/merge_client.h); tests may
+  // give LocalMerge() or their own.
   MergeFunction merge;
+  // The merge runs in this process (LocalMerge): it then holds the process's HDF5 lock, as
+  // the ingest does. False for a remote merge, which does no HDF5 here.
+  bool merge_in_process = true;
 
   // ---- security (docs/RPC.md "Authentication", docs/CLUSTER.md)
   // Bearer tokens of the job API, each mapped to a tenant; a call sees only its tenant's jobs
@@ -108,10 +93,6 @@ struct CoordinatorSpec {
 
   absl::Status Validate() const;
 };
-
-// The merge step of this build: RunMerge (services/merge/merge_job.h) in the coordinator's
-// process, until the merge service runs as its own process.
-MergeFunction FirstOutputsMerge();
 
 // Thread-safe. Destroying it shuts it down.
 class CoordinatorServer {

@@ -95,10 +95,15 @@ absl::Status ChannelSecurity::Validate() const {
 }
 
 absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const std::string& address,
-                                                           const ChannelSecurity& security) {
+                                                           const ChannelSecurity& security,
+                                                           grpc::ChannelArguments args) {
   if (absl::Status s = security.Validate(); !s.ok()) return s;
-  grpc::ChannelArguments args;
-  args.SetMaxReceiveMessageSize(kClientMaxReceiveBytes);
+  grpc_channel_args raw = args.c_channel_args();
+  bool has_limit = false;
+  for (size_t i = 0; i < raw.num_args; ++i) {
+    has_limit = has_limit || std::string(raw.args[i].key) == GRPC_ARG_MAX_RECEIVE_MESSAGE_LENGTH;
+  }
+  if (!has_limit) args.SetMaxReceiveMessageSize(kClientMaxReceiveBytes);
   std::shared_ptr<grpc::ChannelCredentials> creds;
   if (security.UsesTls()) {
     grpc::SslCredentialsOptions options;

@@ -20,11 +20,13 @@ namespace carvemap {
 // plus their fields.
 inline constexpr int kClientMaxReceiveBytes = 8 << 20;
 
-// A channel to `address` as `security` says (TLS or plaintext). Files that cannot be read or
-// are not PEM are INVALID_ARGUMENT naming the file. The bearer is not part of the channel:
-// AttachBearer adds it to each call.
-absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const std::string& address,
-                                                           const ChannelSecurity& security);
+// A channel to `address` as `security` says (TLS or plaintext), with `args` (keepalive,
+// backoff; the receive limit is set to kClientMaxReceiveBytes unless `args` sets one). Files
+// that cannot be read or are not PEM are INVALID_ARGUMENT naming the file. The bearer is not
+// part of the channel: AttachBearer adds it to each call.
+absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(
+    const std::string& address, const ChannelSecurity& security,
+    grpc::ChannelArguments args = grpc::ChannelArguments());
 void AttachBearer(grpc::ClientContext& ctx, const std::string& bearer);
 
 // TLS credentials of a server from PEM files: certificate chain and key (which must match),

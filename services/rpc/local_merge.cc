@@ -1,22 +1,34 @@
-// The coordinator's in-process merge step (CoordinatorSpec::merge).
+// LocalMerge (services/rpc/merge_request.h): RunMerge in this process.
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
+#include <optional>
+
 #include "absl/strings/str_cat.h"
 #include "services/merge/merge_job.h"
-#include "services/rpc/coordinator_service.h"
+#include "services/rpc/merge_request.h"
+#include "storage/confined_path.h"
 
 namespace carvemap {
 
-MergeFunction FirstOutputsMerge() {
+MergeFunction LocalMerge() {
   return [](const MergeJobRequest& req) -> absl::Status {
     MergeOptions options;
     options.tiles_dir = req.tiles_dir;
     options.output_dir = req.output_dir;
-    options.scan_path = req.scan_path;
     options.resolution_m = req.resolution_m;
     options.object_resolution_m = req.object_resolution_m;
     options.recarve = req.recarve;
+    // The scan through the descriptor checked here (ConfinedFile: "/proc/self/fd/N"), as the
+    // ingest reads it; its errors then name the path as the tenant gave it.
+    std::optional<ConfinedFile> scan;
+    if (!req.scan_input.empty()) {
+      absl::StatusOr<ConfinedFile> opened =
+          ConfinedFile::Open(req.scan_root, req.scan_input, "input_path");
+      if (!opened.ok()) return opened.status();
+      scan.emplace(*std::move(opened));
+      options.scan_path = scan->path();
+    }
     nlohmann::json job = nlohmann::json::parse(req.job_json, nullptr, /*allow_exceptions=*/false);
     options.job = job.is_object() ? job : nlohmann::json::object({{"job_id", req.job_id}});
     MergeProgressCallback progress;
@@ -24,7 +36,7 @@ MergeFunction FirstOutputsMerge() {
       progress = [&req](const MergeProgress& p) { return req.progress(p.stage, p.done, p.total); };
     }
     absl::StatusOr<MergeSummary> summary = RunMerge(options, progress);
-    if (!summary.ok()) return summary.status();
+    if (!summary.ok()) return scan ? scan->Rename(summary.status()) : summary.status();
     spdlog::info(
         "merge: job {}: {} tiles, {} leaves, {} levels, {} planar regions, dense {} / planar {} "
         "triangles -> {} in {:.1f} s",

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The local pipeline's scaling benchmarks (issue 3), through `carvemap run` as a user runs it:
 #   1. wall time with 1 worker vs 2 workers on the same scan (and the carve stage alone);
-#   2. peak RSS of the coordinator and of each worker for the same building and walk scanned
-#      at 1×, 2× and 4× the data (scanner rate 10, 20, 40 Hz: the same volume, more rays);
+#   2. peak RSS of the coordinator, of each worker and of the merge service for the same
+#      building and walk scanned at 1×, 2× and 4× the data (scanner rate 10, 20, 40 Hz: the same
+#      volume, more rays);
 #   3. bytes per ray spilled for the workers and stored in tiles.
 # Prints Markdown tables for docs/BENCHMARKS.md.
 #
@@ -29,7 +30,8 @@ simulate() {  # rate → scan path
   echo "$dir/scan.h5"
 }
 
-# run SCAN WORKERS NAME → prints: wall_s carve_s rays spill_B/ray tile_B/ray coord_rss max_worker_rss
+# run SCAN WORKERS NAME → prints: wall_s carve_s rays spill_B/ray tile_B/ray coord_rss
+#   max_worker_rss merger_rss
 run() {
   local scan=$1 workers=$2 out=$work/$3
   local t0 t1
@@ -52,14 +54,15 @@ logs = os.path.join(out, ".carvemap")
 workers = [rss(os.path.join(logs, f)) for f in sorted(os.listdir(logs)) if f.startswith("worker-") and f.endswith(".log")]
 print(f"{t1 - t0:.1f} {job['stage_seconds'].get('carve', 0):.1f} {rays} "
       f"{ingest.get('spill_bytes_per_ray', 0):.0f} {tile_bytes / max(rays, 1):.1f} "
-      f"{rss(os.path.join(logs, 'coordinator.log')):.0f} {max(workers) if workers else float('nan'):.0f}")
+      f"{rss(os.path.join(logs, 'coordinator.log')):.0f} {max(workers) if workers else float('nan'):.0f} "
+      f"{rss(os.path.join(logs, 'merger.log')):.0f}")
 PY
 }
 
 echo "pipeline_bench: $preset, ${walk_s} s walk, ${beam_deg} deg beams, $(nproc) cores, $(date -u +%F)"
 scan10=$(simulate 10)
-read -r w1 c1 rays sp1 tb1 cr1 wr1 < <(run "$scan10" 1 w1-10hz)
-read -r w2 c2 _ _ _ cr2 wr2 < <(run "$scan10" 2 w2-10hz)
+read -r w1 c1 rays sp1 tb1 cr1 wr1 mr1 < <(run "$scan10" 1 w1-10hz)
+read -r w2 c2 _ _ _ cr2 wr2 mr2 < <(run "$scan10" 2 w2-10hz)
 echo
 echo "| workers | rays | wall s | carve stage s | speed-up (wall / carve) |"
 echo "|---|---|---|---|---|"
@@ -67,11 +70,11 @@ echo "| 1 | $rays | $w1 | $c1 | 1 |"
 "$py" -c "print(f'| 2 | $rays | $w2 | $c2 | {$w1/$w2:.2f} / {$c1/max($c2,1e-9):.2f} |')"
 
 echo
-echo "| scanner rate | rays | coordinator peak RSS MiB | largest worker peak RSS MiB | spill B/ray | tile B/ray |"
-echo "|---|---|---|---|---|---|"
-echo "| 10 Hz (1×) | $rays | $cr2 | $wr2 | $sp1 | $tb1 |"
+echo "| scanner rate | rays | coordinator peak RSS MiB | largest worker peak RSS MiB | merge service peak RSS MiB | spill B/ray | tile B/ray |"
+echo "|---|---|---|---|---|---|---|"
+echo "| 10 Hz (1×) | $rays | $cr2 | $wr2 | $mr2 | $sp1 | $tb1 |"
 for rate in 20 40; do
   scan=$(simulate $rate)
-  read -r _ _ r sp tb cr wr < <(run "$scan" 2 w2-${rate}hz)
-  echo "| $rate Hz ($((rate / 10))×) | $r | $cr | $wr | $sp | $tb |"
+  read -r _ _ r sp tb cr wr mr < <(run "$scan" 2 w2-${rate}hz)
+  echo "| $rate Hz ($((rate / 10))×) | $r | $cr | $wr | $mr | $sp | $tb |"
 done

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The security flags of the `carvemap` binary end to end (docs/RPC.md, "Authentication"):
-# a coordinator off loopback refuses to start open; with tokens, the job commands need a
+# a coordinator (and a merge service) off loopback refuses to start open, a coordinator
+# without a merge service too; with tokens, the job commands need a
 # token (flag, file or variable) and see only their tenant's jobs; a worker without the
 # cluster secret exits with the reason; bad token files are named at start. Last, the
 # refusals as `carvemap watch --metrics` shows them from the coordinator's /metrics.
@@ -34,6 +35,11 @@ expect "open on 0.0.0.0 refused" 2 "without bearer tokens.*--insecure" -- \
 printf 'short acme\n' > "$WORK/bad_tokens"
 expect "short token named by file and line" 2 "bad_tokens: entry 1: token: 5 characters" -- \
     timeout 20 "$CARVEMAP" coordinator --tokens "$WORK/bad_tokens" --work-dir "$WORK/w1"
+expect "no merge service refused" 2 "no merge service: give --merge-server" -- \
+    timeout 20 "$CARVEMAP" coordinator --data-root "$WORK/data" --output-root "$WORK/out" \
+    --work-dir "$WORK/w3"
+expect "merger open on 0.0.0.0 refused" 2 "open merge API.*--insecure" -- \
+    timeout 20 "$CARVEMAP" merger --listen 0.0.0.0:0
 
 # ---- a coordinator with two tenants, a cluster secret, per-tenant folders
 (umask 077
@@ -42,9 +48,16 @@ expect "short token named by file and line" 2 "bad_tokens: entry 1: token: 5 cha
  echo "acme-token-0123456789abcdef" > "$WORK/acme.token"
  echo "cluster-secret-0123456789abcdef" > "$WORK/secret")
 echo junk > "$WORK/data/acme/junk.h5"
+"$CARVEMAP" merger --listen 127.0.0.1:0 --port-file "$WORK/merger-port" \
+    --cluster-secret-file "$WORK/secret" > "$WORK/merger.log" 2>&1 &
+pids+=($!)
+for _ in $(seq 1 300); do [ -s "$WORK/merger-port" ] && break; sleep 0.1; done
+MERGER=$(cat "$WORK/merger-port" 2>/dev/null)
+[ -n "$MERGER" ] || { cat "$WORK/merger.log"; fail "merger did not start"; exit 1; }
 "$CARVEMAP" coordinator --listen 127.0.0.1:0 --port-file "$WORK/port" --tokens "$WORK/tokens" \
     --cluster-secret-file "$WORK/secret" --data-root "$WORK/data" --output-root "$WORK/out" \
-    --work-dir "$WORK/w2" --metrics-listen 127.0.0.1:0 > "$WORK/coordinator.log" 2>&1 &
+    --work-dir "$WORK/w2" --metrics-listen 127.0.0.1:0 --merge-server "$MERGER" \
+    > "$WORK/coordinator.log" 2>&1 &
 pids+=($!)
 for _ in $(seq 1 300); do [ -s "$WORK/port" ] && break; sleep 0.1; done
 ADDR=$(cat "$WORK/port" 2>/dev/null)

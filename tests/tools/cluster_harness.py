@@ -1,12 +1,13 @@
 """A local carvemap cluster for the fault, recovery, load and client tests (issue 7):
-a coordinator and workers as separate `carvemap` processes, each with its own log, and a gRPC
+a coordinator, workers and merge services as separate `carvemap` processes (DESIGN §1, §9),
+each with its own log, and a gRPC
 client (Python stubs generated from proto/ at test time with grpc_tools.protoc) to submit and
 watch jobs. Nothing here knows carvemap's C++ code: only the documented CLI flags (docs/RPC.md,
 docs/CLUSTER.md), the wire API (proto/) and the job store's schema (docs/JOB_STORE.md).
 
 Children die with the test (setpriv --pdeathsig, not a preexec_fn, which is unsafe with the
-threads some tests run), so a test killed by ctest's timeout leaves no server behind. Every wait polls with a deadline; nothing sleeps a fixed time to "let things
-settle".
+threads some tests run), so a test killed by ctest's timeout leaves no server behind. Every
+wait polls with a deadline; nothing sleeps a fixed time to "let things settle".
 """
 import atexit
 import hashlib
@@ -54,14 +55,23 @@ def stubs():
     out = tempfile.mkdtemp(prefix="carvemap-stubs-")
     atexit.register(shutil.rmtree, out, True)
     proto = os.path.abspath(PROTO_DIR)
-    rc = protoc.main(["protoc", f"-I{proto}", f"--python_out={out}", f"--grpc_python_out={out}",
-                      os.path.join(proto, "carvemap/v1/jobs.proto")])
+    files = [os.path.join(proto, f"carvemap/v1/{name}.proto")
+             for name in ("jobs", "carve", "merge")]
+    rc = protoc.main(["protoc", f"-I{proto}", f"--python_out={out}", f"--grpc_python_out={out}"]
+                     + files)
     if rc != 0:
-        raise TestFailure(f"grpc_tools.protoc failed on {proto}/carvemap/v1/jobs.proto ({rc})")
+        raise TestFailure(f"grpc_tools.protoc failed on {files} ({rc})")
     sys.path.insert(0, out)
     from carvemap.v1 import jobs_pb2, jobs_pb2_grpc  # noqa: E402
     _stubs = (jobs_pb2, jobs_pb2_grpc, grpc)
     return _stubs
+
+
+def merge_stubs():
+    """(merge_pb2, merge_pb2_grpc): the internal MergeService (proto/carvemap/v1/merge.proto)."""
+    stubs()
+    from carvemap.v1 import merge_pb2, merge_pb2_grpc  # noqa: E402
+    return merge_pb2, merge_pb2_grpc
 
 
 class JobApi:
@@ -142,15 +152,17 @@ def write_private(path, text):
 
 
 class Cluster:
-    """A coordinator and workers over one work dir (job store, spill, logs, secrets).
+    """A coordinator, workers and merge services over one work dir (job store, spill, logs,
+    secrets).
 
     tenants: {tenant: token}; with one tenant the folders are shared (--shared-dirs) unless
-    shared_dirs=False.
+    shared_dirs=False. mergers: how many merge services (`carvemap merger`) start_coordinator
+    starts first, if none runs yet; the coordinator gets all their addresses (--merge-server).
     """
 
     def __init__(self, carvemap, work, data_root, output_root, tenants=None, shared_dirs=None,
                  listen_host="127.0.0.1", heartbeat_s=0.5, worker_timeout_s=3.0,
-                 max_attempts=5, log_format=None, extra_coordinator_args=()):
+                 max_attempts=5, log_format=None, extra_coordinator_args=(), mergers=1):
         self.carvemap = carvemap
         self.work = os.path.abspath(work)
         self.data_root = os.path.abspath(data_root)
@@ -174,6 +186,10 @@ class Cluster:
         self.port = 0
         self.workers = []  # Popen, in start order (worker-1 is workers[0])
         self.worker_logs = []
+        self.initial_mergers = mergers
+        self.mergers = []  # Popen of merge service k (merger-k is mergers[k - 1]), latest start
+        self.merger_ports = []
+        self.merger_logs = []  # every log, restarts included (merger-2.log, merger-2.2.log)
 
     # -- coordinator
     def start_coordinator(self, port=None):
@@ -183,6 +199,10 @@ class Cluster:
             os.remove(port_file)
         self.coordinator_starts += 1
         log_path = os.path.join(self.work, f"coordinator-{self.coordinator_starts}.log")
+        while len(self.mergers) < self.initial_mergers:
+            self.start_merger()
+        merge = (["--merge-server", ",".join(self.merger_addresses())] if self.mergers
+                 else ["--no-merge"])
         args = [self.carvemap, "coordinator", "--listen",
                 f"{self.listen_host}:{port if port is not None else self.port}",
                 "--port-file", port_file, "--tokens", self.tokens_file,
@@ -191,7 +211,7 @@ class Cluster:
                 "--work-dir", self.work,
                 "--heartbeat-interval-s", str(self.heartbeat_s),
                 "--worker-timeout-s", str(self.worker_timeout_s),
-                "--max-attempts", str(self.max_attempts)] + self.extra_coordinator_args
+                "--max-attempts", str(self.max_attempts)] + merge + self.extra_coordinator_args
         if self.shared_dirs:
             args.append("--shared-dirs")
         if self.log_format:
@@ -226,6 +246,59 @@ class Cluster:
         tenant = tenant or next(iter(self.tenants))
         return JobApi(self.address(), self.tenants[tenant])
 
+    # -- merge services
+    def start_merger(self, n=None):
+        """Starts merge service n (1-based; default: a new one) and returns host:port; an
+        existing n is started again on its old port, as a restarted pod behind its Service."""
+        if n is None:
+            self.mergers.append(None)
+            self.merger_ports.append(0)
+            n = len(self.mergers)
+        starts = sum(1 for p in self.merger_logs if os.path.basename(p).startswith(f"merger-{n}."))
+        name = f"merger-{n}.log" if starts == 0 else f"merger-{n}.{starts + 1}.log"
+        log_path = os.path.join(self.work, name)
+        port_file = os.path.join(self.work, f"merger-{n}.port")
+        if os.path.exists(port_file):
+            os.remove(port_file)
+        args = [self.carvemap, "merger", "--listen", f"127.0.0.1:{self.merger_ports[n - 1]}",
+                "--port-file", port_file, "--cluster-secret-file", self.secret_file]
+        if self.log_format:
+            args += ["--log-format", self.log_format]
+        proc = self._spawn(args, log_path)
+        self.mergers[n - 1] = proc
+        self.merger_logs.append(log_path)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if os.path.exists(port_file):
+                with open(port_file) as f:
+                    address = f.read().strip()
+                if address:
+                    self.merger_ports[n - 1] = int(address.rsplit(":", 1)[1])
+                    return address
+            if proc.poll() is not None:
+                raise TestFailure(f"merge service {n} exited during start-up ({proc.returncode}):"
+                                  f"\n{tail(log_path)}")
+            time.sleep(0.02)
+        raise TestFailure(f"merge service {n} did not start within 60 s:\n{tail(log_path)}")
+
+    def merger_addresses(self):
+        return [f"127.0.0.1:{port}" for port in self.merger_ports]
+
+    def kill_merger(self, n):
+        """SIGKILL merge service n (1-based), mid-merge or not."""
+        p = self.mergers[n - 1]
+        p.send_signal(signal.SIGKILL)
+        p.wait()
+
+    def merger_serving(self, job_id):
+        """Numbers of the merge services whose latest log says they started job_id's merge."""
+        serving = []
+        for n in range(1, len(self.mergers) + 1):
+            logs = [p for p in self.merger_logs if os.path.basename(p).startswith(f"merger-{n}.")]
+            if logs and f"job {job_id}: merge started" in read_text(logs[-1]):
+                serving.append(n)
+        return serving
+
     # -- workers
     def start_worker(self, prefix=(), coordinator_host=None, extra=()):
         """A worker, optionally run through `prefix` (e.g. ip netns exec NS)."""
@@ -258,9 +331,11 @@ class Cluster:
 
     def stop(self):
         """Workers first (SIGTERM: each finishes and reports the chunk in hand), then the
-        coordinator, as `carvemap run` does: a tile a worker finishes after its job failed is
-        then still reported, and removed by the coordinator, instead of left behind."""
-        for group in ([p for p in self.workers if p is not None], [self.coordinator]):
+        coordinator, then the merge services, as `carvemap run` does: a tile a worker finishes
+        after its job failed is then still reported, and removed by the coordinator, instead
+        of left behind."""
+        for group in ([p for p in self.workers if p is not None], [self.coordinator],
+                      [p for p in self.mergers if p is not None]):
             group = [p for p in group if p is not None]
             for p in group:
                 if p.poll() is None:
@@ -274,9 +349,10 @@ class Cluster:
                     p.wait()
 
     def logs(self):
-        """Every log's text, coordinator(s) first."""
+        """Every log's text, coordinator(s) first, then workers, then merge services."""
         paths = [os.path.join(self.work, f"coordinator-{i}.log")
-                 for i in range(1, self.coordinator_starts + 1)] + self.worker_logs
+                 for i in range(1, self.coordinator_starts + 1)] + self.worker_logs + \
+            self.merger_logs
         return {os.path.basename(p): read_text(p) for p in paths if os.path.exists(p)}
 
     def store_chunks(self, job_id):

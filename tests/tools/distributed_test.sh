@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # End-to-end test of the distributed carving (DESIGN §5, §8, §9) through real processes:
-#   determinism   `carvemap run` with 1 and with 2 workers gives byte-identical tiles;
+#   determinism   `carvemap run` with 1 and with 2 workers gives byte-identical tiles, and the
+#                 merge runs on the merge service `run` starts;
 #   lost worker   a worker SIGKILLed mid-job: the job still completes, same tiles;
 #   bad jobs      missing input, corrupt input, unwritable output: non-zero exit, a clear
 #                 reason, and no output that looks complete (no job.json, no tiles/).
@@ -39,6 +40,13 @@ if msg=$(same_tiles "$WORK/one" "$WORK/two"); then pass "1 vs 2 workers: $msg"; 
 for f in job.json octree.bt level_0/topdown.png; do
   [ -s "$WORK/two/$f" ] || fail "run did not write $f"
 done
+# The merge ran in its own process (DESIGN §9), the merge service `run` started.
+if grep -q "merge started" "$WORK/two/.carvemap/merger.log" 2>/dev/null \
+    && grep -q "merging on 127.0.0.1:" "$WORK/two/.carvemap/coordinator.log"; then
+  pass "the merge ran on the merge service"
+else
+  fail "no merge on the merge service (merger.log, coordinator.log)"
+fi
 
 # ---- a worker SIGKILLed mid-job
 "$CARVEMAP" run "$SCAN" -o "$WORK/kill" --workers 2 -q --heartbeat-interval-s 0.5 \

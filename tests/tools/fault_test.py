@@ -23,6 +23,12 @@ timings) byte for byte.
   storage-full         the output folder on a small tmpfs (a private mount namespace; skipped,
                        exit 77, only when the kernel refuses one): tiles that do not fit, and
                        meshes that do not fit: FAILED naming ENOSPC, nothing that looks complete
+  merge-kill           the merge service SIGKILLed mid-merge (DESIGN §8: the merge is its own
+                       service): with a second service running, the coordinator merges again
+                       there; during the merge's second carving pass (§5.6.1) with the service
+                       restarted on its port, it merges again there without carving the object
+                       chunks a second time; with no service left, the job FAILS with the
+                       reason and nothing that looks complete
   netns-link-cut       each worker in a network namespace of its own (deploy/local/netns.sh);
                        worker 1's link set down while it carves a chunk: the coordinator
                        declares it lost, the chunk is carved by the other, the job completes
@@ -157,7 +163,7 @@ def check_json_logs(trial):
     for name, text in c.logs().items():
         if any(secret in text for secret in secrets):
             trial.fail(f"{name} contains a bearer token or the cluster secret")
-        component = "coordinator" if name.startswith("coordinator") else "worker"
+        component = next(c for c in ("coordinator", "merger", "worker") if name.startswith(c))
         for n, line in enumerate(text.splitlines(), 1):
             try:
                 rec = json.loads(line)
@@ -176,6 +182,9 @@ def check_json_logs(trial):
                 with_chunk += 1
     if with_job == 0 or with_chunk == 0:
         trial.fail(f"JSON logs: {with_job} lines with the job id, {with_chunk} with a chunk")
+    merger = "\n".join(t for n, t in c.logs().items() if n.startswith("merger"))
+    if f'"job":"{trial.job_id}"' not in merger.replace(" ", ""):
+        trial.fail("the merge service's JSON log has no line naming the job")
     log(f"reference: JSON logs ok ({with_job} lines name the job, {with_chunk} a chunk; no "
         "token or secret in them)")
 
@@ -329,6 +338,116 @@ def cmd_worker_kill(args):
     log(f"{args.trials} worker-kill trials (seed {args.seed}, {args.parallel} at a time): all "
         f"completed with outputs identical to the undisturbed run ({summarize(ref['files'])}) "
         f"in {time.monotonic() - start:.1f} s")
+
+
+# ---- merge service kills ----------------------------------------------------------------------
+
+def merge_started(trial, job_id):
+    """Waits until a merge service runs job_id's merge past its levels (levels.json written,
+    job.json not yet); returns the services serving it."""
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        serving = trial.cluster.merger_serving(job_id)
+        if serving and os.path.exists(os.path.join(trial.out, "levels.json")):
+            if os.path.exists(os.path.join(trial.out, "job.json")):
+                trial.fail("the merge finished before the merge service could be killed")
+            return serving
+        job = trial.api.try_get(job_id)
+        if job is not None and state(job) in ("SUCCEEDED", "FAILED", "CANCELLED"):
+            trial.fail(f"the job ended ({state(job)}) before its merge was under way")
+        time.sleep(0.01)
+    trial.fail("no merge service started the merge within 300 s")
+
+
+def cmd_merge_kill(args):
+    ref = reference(args)
+
+    # 1. Two merge services; the one merging is SIGKILLed after the levels: the coordinator
+    #    merges again on the other.
+    start = time.monotonic()
+    trial = Trial(args, "merge_kill_other_service", mergers=2)
+    seen = {}
+
+    def inject(trial, api, job_id, t0):
+        serving = merge_started(trial, job_id)
+        seen["victim"] = serving[0]
+        trial.cluster.kill_merger(serving[0])
+
+    job = trial.run(inject)
+    expect_succeeded(trial, job)
+    check_same_as_reference(trial, ref)
+    text = trial.coordinator_log()
+    if "lost (attempt 1 of 3)" not in text:
+        trial.fail("the coordinator did not log the lost merge service")
+    other = 3 - seen["victim"]
+    if "merge started (attempt 2)" not in trial.cluster.logs()[f"merger-{other}.log"]:
+        trial.fail(f"merger-{other} did not run the second attempt")
+    log(f"merge service {seen['victim']} of 2 SIGKILLed mid-merge (after levels.json): merged "
+        f"again on service {other}, SUCCEEDED, {summarize(ref['files'])} identical "
+        f"({time.monotonic() - start:.1f} s)")
+
+    # 2. One merge service, SIGKILLed while the workers carve the object chunks again for it
+    #    (§5.6.1), and started again on its port: the coordinator merges again there, and the
+    #    object chunks are not carved a second time (their tiles keep their inode).
+    start = time.monotonic()
+    trial = Trial(args, "merge_kill_during_recarve")
+
+    def inject(trial, api, job_id, t0):
+        api.wait(job_id, lambda j: state(j) == "MERGING" and j.progress.chunks_total > 0 and (
+            j.progress.chunks_leased > 0 or j.progress.chunks_done < j.progress.chunks_total),
+            300, "re-carving", poll_s=0.01)
+        c = trial.cluster
+        c.kill_merger(1)
+        seen["recarve_chunks"] = sum(1 for r in c.store_chunks(job_id).values()
+                                     if r["state"] != 3)
+        # Once the pass is done its tiles must stay untouched: the retry reuses them.
+        api.wait(job_id, lambda j: j.progress.chunks_done == j.progress.chunks_total, 300,
+                 "done re-carving", poll_s=0.01)
+        tiles = os.path.join(trial.out, "object_tiles")
+        seen["keep"] = {f: os.stat(os.path.join(tiles, f)).st_ino for f in os.listdir(tiles)
+                        if f.endswith(".h5")}
+        c.start_merger(1)  # the same port, as a pod restarted behind its Service
+
+    job = trial.run(inject)
+    expect_succeeded(trial, job)
+    check_same_as_reference(trial, ref)
+    text = trial.coordinator_log()
+    if "lost (attempt 1 of 3)" not in text or "reusing them" not in text:
+        trial.fail("the coordinator did not log the lost merge service and the reused re-carve")
+    tiles = os.path.join(trial.out, "object_tiles")
+    rewritten = [f for f, ino in seen["keep"].items()
+                 if not os.path.exists(os.path.join(tiles, f)) or
+                 os.stat(os.path.join(tiles, f)).st_ino != ino]
+    if rewritten or not seen["keep"]:
+        trial.fail(f"object tiles carved again after the retry: {rewritten[:3]} "
+                   f"(of {len(seen['keep'])})")
+    log(f"merge service SIGKILLed while {seen['recarve_chunks']} object chunks were carved "
+        f"again, restarted on its port: merged again without carving them twice "
+        f"({len(seen['keep'])} object tiles kept), SUCCEEDED, identical "
+        f"({time.monotonic() - start:.1f} s)")
+
+    # 3. One merge service, SIGKILLed and not restarted: after --merge-attempts the job FAILS
+    #    with the reason, and nothing it left looks complete.
+    start = time.monotonic()
+    trial = Trial(args, "merge_kill_no_service_left", extra_coordinator_args=[
+        "--merge-attempts", "2", "--merge-connect-timeout-s", "2"])
+
+    def inject(trial, api, job_id, t0):
+        merge_started(trial, job_id)
+        trial.cluster.kill_merger(1)
+
+    job = trial.run(inject)
+    if state(job) != "FAILED":
+        trial.fail(f"job {state(job)} with its only merge service killed")
+    if "merge service was lost 2 time(s)" not in job.error or "no job.json" not in job.error:
+        trial.fail(f"the reason does not say the merge service was lost: {job.error!r}")
+    left = check_nothing_looks_complete(trial, ref, job)
+    partial = [os.path.join(root, n) for root, _, names in os.walk(trial.out) for n in names
+               if n.endswith(".partial")]
+    if partial or os.path.exists(os.path.join(trial.out, ".segment")):
+        trial.fail(f"the lost merge's temporary files stayed: {partial[:5]}")
+    log(f"the only merge service SIGKILLed mid-merge, not restarted: FAILED: {job.error!r}; left "
+        f"{len(left)} complete file(s), no job.json, no tiles ({time.monotonic() - start:.1f} s)")
 
 
 # ---- failures --------------------------------------------------------------------------------
@@ -580,8 +699,8 @@ def main():
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("command", choices=["reference", "coordinator-restart", "worker-kill",
-                                       "failures", "storage-full", "netns-link-cut",
-                                       "run-netns"])
+                                       "merge-kill", "failures", "storage-full",
+                                       "netns-link-cut", "run-netns"])
     p.add_argument("--carvemap", required=True)
     p.add_argument("--work", required=True)
     p.add_argument("--trials", type=int, default=10)
@@ -594,7 +713,8 @@ def main():
     start = time.monotonic()
     try:
         rc = {"reference": cmd_reference, "coordinator-restart": cmd_coordinator_restart,
-              "worker-kill": cmd_worker_kill, "failures": cmd_failures,
+              "worker-kill": cmd_worker_kill, "merge-kill": cmd_merge_kill,
+              "failures": cmd_failures,
               "storage-full": cmd_storage_full,
               "netns-link-cut": cmd_netns_link_cut,
               "run-netns": cmd_run_netns}[args.command](args)

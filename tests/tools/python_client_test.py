@@ -3,14 +3,16 @@
 generated from proto/ at test time with python3-grpc-tools; it knows only the .proto files and
 docs/RPC.md, none of carvemap's C++.
 
-Against a running coordinator (started here with two workers, `carvemap coordinator|worker`,
-a bearer token for the tenant): no token and a wrong token are UNAUTHENTICATED without the
-token in the answer; SubmitJob with the token; the same idempotency key again is deduplicated;
+Against a running coordinator (started here with two workers and a merge service, `carvemap
+coordinator|worker|merger`, a bearer token for the tenant): no token and a wrong token are
+UNAUTHENTICATED without the token in the answer; SubmitJob with the token; the same idempotency key again is deduplicated;
 WatchJob streams a snapshot, state changes strictly forward, progress, and ends after the
 terminal SUCCEEDED; FetchArtifact streams levels.json (in 4 KiB chunks) and mesh/dense.ply,
 contiguous, with the SHA-256 of the whole in the last chunk, byte-identical to the files on
 disk; a PLY's size agrees with its header; a fetch resumed at an offset gives the tail;
-another tenant's token sees nothing of the job.
+another tenant's token sees nothing of the job. The internal MergeService of the merge
+service: no cluster secret, a wrong one or a tenant's token are UNAUTHENTICATED; with the
+secret the call gets past authentication (a bad MergeJob is INVALID_ARGUMENT).
 
 Usage: python_client_test.py --carvemap BIN --work DIR
 """
@@ -33,7 +35,8 @@ PROTO = os.path.abspath(os.path.join(os.path.dirname(os.path.abspath(__file__)),
 
 
 def generate_stubs():
-    """jobs_pb2, jobs_pb2_grpc from proto/carvemap/v1/jobs.proto, generated now."""
+    """jobs_pb2, jobs_pb2_grpc from proto/carvemap/v1/*.proto, generated now (merge_pb2 and
+    merge_pb2_grpc are importable afterwards)."""
     try:
         import grpc  # noqa: F401
         from grpc_tools import protoc
@@ -42,10 +45,12 @@ def generate_stubs():
                           "(scripts/install-deps.sh)")
     out = tempfile.mkdtemp(prefix="carvemap-pyclient-")
     atexit.register(shutil.rmtree, out, True)
-    rc = protoc.main(["protoc", f"-I{PROTO}", f"--python_out={out}", f"--grpc_python_out={out}",
-                      os.path.join(PROTO, "carvemap/v1/jobs.proto")])
+    files = [os.path.join(PROTO, f"carvemap/v1/{name}.proto") for name in ("jobs", "carve",
+                                                                          "merge")]
+    rc = protoc.main(["protoc", f"-I{PROTO}", f"--python_out={out}", f"--grpc_python_out={out}"]
+                     + files)
     if rc != 0:
-        raise TestFailure(f"protoc failed on {PROTO}/carvemap/v1/jobs.proto")
+        raise TestFailure(f"protoc failed on {files}")
     sys.path.insert(0, out)
     from carvemap.v1 import jobs_pb2, jobs_pb2_grpc
     return jobs_pb2, jobs_pb2_grpc
@@ -83,6 +88,8 @@ def main():
         cluster.start_worker()
         cluster.start_worker()
         run_client(address, token, other, os.path.join(work, "outputs", "acme"))
+        check_merge_service(cluster.merger_addresses()[0],
+                            open(cluster.secret_file).read().strip(), token)
     except TestFailure as e:
         print(f"FAIL: {e}")
         for name, text in cluster.logs().items():
@@ -92,6 +99,38 @@ def main():
         cluster.stop()
     log(f"python client: passed in {time.monotonic() - start:.1f} s")
     return 0
+
+
+def check_merge_service(address, secret, tenant_token):
+    """The internal MergeService refuses callers without the cluster secret."""
+    generate_stubs()
+    import grpc
+    from carvemap.v1 import merge_pb2, merge_pb2_grpc
+    channel = grpc.insecure_channel(address)
+    grpc.channel_ready_future(channel).result(timeout=30)
+    merge = merge_pb2_grpc.MergeServiceStub(channel)
+
+    def call(md, tiles_dir):
+        start = merge_pb2.MergeClientMessage(start=merge_pb2.MergeJob(
+            job_id="j-python", tiles_dir=tiles_dir, output_dir="/nonexistent/out"))
+        try:
+            list(merge.Merge(iter([start]), metadata=md, timeout=30))
+            return grpc.StatusCode.OK, ""
+        except grpc.RpcError as e:
+            return e.code(), e.details()
+
+    for md, what in (([], "no secret"),
+                     ([("authorization", "Bearer " + "y" * 40)], "a wrong secret"),
+                     ([("authorization", f"Bearer {tenant_token}")], "a tenant's token")):
+        code, details = call(md, "/nonexistent/tiles")
+        expect(code == grpc.StatusCode.UNAUTHENTICATED, f"MergeService with {what}: {code}")
+        expect("cluster secret" in details and "y" * 20 not in details and
+               tenant_token not in details, f"MergeService with {what}: {details!r}")
+    code, details = call([("authorization", f"Bearer {secret}")], "relative/tiles")
+    expect(code == grpc.StatusCode.INVALID_ARGUMENT and "absolute" in details,
+           f"MergeService with the secret and a relative tiles_dir: {code} {details!r}")
+    log("MergeService: no secret, a wrong one, a tenant's token: UNAUTHENTICATED; with the "
+        "cluster secret a bad MergeJob is INVALID_ARGUMENT")
 
 
 def run_client(address, token, other_token, output_root):
