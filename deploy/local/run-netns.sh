@@ -2,7 +2,9 @@
 # The multi-host harness: run-local.sh with each worker on a "host" of its own, a network
 # namespace joined to this machine by a veth pair (deploy/local/netns.sh). The coordinator
 # listens on every address of this machine, so off loopback it runs as on a cluster: bearer
-# token for the job API, cluster secret for the workers (docs/RPC.md, "Authentication").
+# token for the job API, cluster secret for the workers (docs/RPC.md, "Authentication"). The
+# merge service stays on this machine's loopback (the coordinator is its only caller), with
+# the cluster secret too.
 # Workers share this machine's filesystem (the spill files and tiles), as pods share a volume.
 # Needs root (network namespaces) and iproute2.
 # Usage: deploy/local/run-netns.sh SCAN.h5 OUT [CARVEMAP] [WORKERS (default 2)]
@@ -16,7 +18,7 @@ NAME=cmr$$
 NAME=${NAME:0:9}
 WORK=$OUT/.carvemap
 mkdir -p "$WORK"
-rm -f "$WORK/port" "$WORK/jobs.db"*
+rm -f "$WORK/port" "$WORK/merger-port" "$WORK/jobs.db"*
 
 random_secret() { od -An -tx1 -N32 /dev/urandom | tr -d ' \n'; }
 (
@@ -36,7 +38,14 @@ cleanup() {
 trap cleanup EXIT
 "$HERE/netns.sh" up "$NAME" "$WORKERS"
 
+"$CARVEMAP" merger --listen 127.0.0.1:0 --port-file "$WORK/merger-port" \
+    --cluster-secret-file "$WORK/cluster-secret" > "$WORK/merger.log" 2>&1 &
+pids+=($!)
+for _ in $(seq 1 300); do [ -s "$WORK/merger-port" ] && break; sleep 0.1; done
+[ -s "$WORK/merger-port" ] || { echo "the merge service did not start (see $WORK/merger.log)" >&2; exit 1; }
+
 "$CARVEMAP" coordinator --listen 0.0.0.0:0 --port-file "$WORK/port" \
+    --merge-server "$(cat "$WORK/merger-port")" \
     --tokens "$WORK/tokens" --cluster-secret-file "$WORK/cluster-secret" --shared-dirs \
     --data-root "$(dirname "$SCAN")" --output-root "$(dirname "$OUT")" --work-dir "$WORK" \
     --heartbeat-interval-s 1 --worker-timeout-s 5 > "$WORK/coordinator.log" 2>&1 &

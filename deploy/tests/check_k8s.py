@@ -21,6 +21,7 @@ INSTALL = "run scripts/install-deps.sh (Debian packages kubernetes-client, yamll
 
 COORDINATOR = "carvemap-coordinator"
 WORKER = "carvemap-worker"
+MERGER = "carvemap-merger"
 SHARED_PVC = "carvemap-shared"
 STATE_PVC = "carvemap-coordinator-state"
 # Secrets the base references but does not contain: created by hand on a real cluster
@@ -36,7 +37,13 @@ SECRET_OF_FLAG = {
                     "--tls-client-ca": TLS_SECRET},
     "worker": {"--cluster-secret-file": CLUSTER_SECRET, "--tls-ca": TLS_SECRET,
                "--tls-cert": TLS_SECRET, "--tls-key": TLS_SECRET},
+    "merger": {"--cluster-secret-file": CLUSTER_SECRET, "--tls-cert": TLS_SECRET,
+               "--tls-key": TLS_SECRET, "--tls-client-ca": TLS_SECRET},
 }
+# The coordinator's flags for reaching the merge service (it is their client).
+SECRET_OF_FLAG["coordinator"].update({"--merge-tls-ca": TLS_SECRET,
+                                      "--merge-tls-cert": TLS_SECRET,
+                                      "--merge-tls-key": TLS_SECRET})
 
 errors = []
 
@@ -190,12 +197,14 @@ def check(label, objs, carvemap):
 
     coord = get("Deployment", COORDINATOR)
     worker = get("Deployment", WORKER)
+    merger = get("Deployment", MERGER)
     svc = get("Service", COORDINATOR)
+    msvc = get("Service", MERGER)
     shared = get("PersistentVolumeClaim", SHARED_PVC)
     state = get("PersistentVolumeClaim", STATE_PVC)
     hpa = get("HorizontalPodAutoscaler", WORKER)
     pdb = get("PodDisruptionBudget", WORKER)
-    if None in (coord, worker, svc, shared, state, hpa, pdb):
+    if None in (coord, worker, merger, svc, msvc, shared, state, hpa, pdb):
         return
 
     namespaces = {o["metadata"].get("namespace") for o in objs if o["kind"] != "Namespace"}
@@ -203,7 +212,7 @@ def check(label, objs, carvemap):
         where(f"objects should share one namespace, got {namespaces}")
     namespace = next(iter(namespaces))
 
-    # No merge server Deployment: the binary has no such mode; the coordinator merges.
+    # The merge service is `carvemap merger`; `carvemap merge` is the offline batch command.
     for o in objs:
         if o["kind"] in ("Deployment", "StatefulSet", "DaemonSet", "Job"):
             for c in pod_spec(o)["containers"]:
@@ -224,28 +233,32 @@ def check(label, objs, carvemap):
         where(f"PVC {STATE_PVC} must be ReadWriteOnce")
     pvcs = {n for (k, n) in by if k == "PersistentVolumeClaim"}
 
-    cspec, wspec = pod_spec(coord), pod_spec(worker)
+    cspec, wspec, mspec = pod_spec(coord), pod_spec(worker), pod_spec(merger)
     cc = next((c for c in cspec["containers"] if c["name"] == "coordinator"), None)
     wc = next((c for c in wspec["containers"] if c["name"] == "worker"), None)
-    if cc is None or wc is None:
-        where("containers named coordinator and worker expected")
+    mc = next((c for c in mspec["containers"] if c["name"] == "merger"), None)
+    if cc is None or wc is None or mc is None:
+        where("containers named coordinator, worker and merger expected")
         return
-    cargs, wargs = cc.get("args", []), wc.get("args", [])
-    if cargs[:1] != ["coordinator"] or wargs[:1] != ["worker"]:
-        where("the containers must run `carvemap coordinator` and `carvemap worker`")
+    cargs, wargs, margs = cc.get("args", []), wc.get("args", []), mc.get("args", [])
+    if cargs[:1] != ["coordinator"] or wargs[:1] != ["worker"] or margs[:1] != ["merger"]:
+        where("the containers must run `carvemap coordinator`, `carvemap worker` and "
+              "`carvemap merger`")
 
-    for name, spec in ((COORDINATOR, cspec), (WORKER, wspec)):
+    for name, spec in ((COORDINATOR, cspec), (WORKER, wspec), (MERGER, mspec)):
         for claim in volume_claims(spec).values():
             if claim not in pvcs:
                 where(f"{name} uses PVC {claim}, which is not rendered")
 
     c_shared = mount_path_of_claim(cspec, cc, SHARED_PVC)
     w_shared = mount_path_of_claim(wspec, wc, SHARED_PVC)
-    if c_shared is None or w_shared is None:
-        where(f"coordinator and worker must both mount {SHARED_PVC}")
-    elif c_shared != w_shared:
-        where(f"{SHARED_PVC} mounted at {c_shared} (coordinator) but {w_shared} (worker): "
-              "leases and tiles carry absolute paths, the paths must match")
+    m_shared = mount_path_of_claim(mspec, mc, SHARED_PVC)
+    if c_shared is None or w_shared is None or m_shared is None:
+        where(f"coordinator, worker and merger must all mount {SHARED_PVC}")
+    elif len({c_shared, w_shared, m_shared}) != 1:
+        where(f"{SHARED_PVC} mounted at {c_shared} (coordinator), {w_shared} (worker), "
+              f"{m_shared} (merger): leases, tiles and merge requests carry absolute paths, "
+              "the paths must match")
     else:
         for f in ("--data-root", "--output-root", "--work-dir"):
             v = flag(cargs, f)
@@ -273,7 +286,7 @@ def check(label, objs, carvemap):
     # Secrets: the coordinator reads all three; workers the cluster secret and the CA, never
     # the tenants' tokens.
     secrets = {n for (k, n) in by if k == "Secret"}
-    for name, spec in ((COORDINATOR, cspec), (WORKER, wspec)):
+    for name, spec in ((COORDINATOR, cspec), (WORKER, wspec), (MERGER, mspec)):
         refs = referenced_secrets(spec)
         for s in refs - secrets:
             if label == "base" and s in EXTERNAL_SECRETS:
@@ -285,8 +298,14 @@ def check(label, objs, carvemap):
         where(f"worker should mount the Secrets {CLUSTER_SECRET} and {TLS_SECRET}")
     if TOKENS_SECRET in referenced_secrets(wspec):
         where(f"worker mounts {TOKENS_SECRET}: workers have no business with tenants' tokens")
+    if TOKENS_SECRET in referenced_secrets(mspec):
+        where(f"merger mounts {TOKENS_SECRET}: the merge service has no business with tenants' "
+              "tokens")
+    if CLUSTER_SECRET not in referenced_secrets(mspec):
+        where(f"merger should mount the Secret {CLUSTER_SECRET}")
     # Each security flag names a file of the right Secret, and that Secret has the key.
-    for role, spec, c, args in (("coordinator", cspec, cc, cargs), ("worker", wspec, wc, wargs)):
+    for role, spec, c, args in (("coordinator", cspec, cc, cargs), ("worker", wspec, wc, wargs),
+                                ("merger", mspec, mc, margs)):
         for f, secret in SECRET_OF_FLAG[role].items():
             path = flag(args, f)
             if path is None:
@@ -304,6 +323,24 @@ def check(label, objs, carvemap):
     # Off loopback the binary refuses to start open; the manifests must not ask it to.
     if "--insecure" in cargs:
         where("coordinator runs with --insecure")
+    if "--insecure" in margs:
+        where("merger runs with --insecure")
+    if flag(margs, "--cluster-secret-file") is None and flag(margs, "--tls-client-ca") is None:
+        where("merger has neither --cluster-secret-file nor --tls-client-ca: its merge API "
+              "would be open")
+    if flag(margs, "--cluster-secret-file") is not None and \
+            flag(cargs, "--cluster-secret-file") is None:
+        where("the merger requires the cluster secret but the coordinator has none to present")
+    if flag(margs, "--tls-client-ca") is not None and flag(margs, "--cluster-secret-file") is None \
+            and flag(cargs, "--merge-tls-cert") is None:
+        where("the merger requires a client certificate but the coordinator presents none")
+    m_tls = flag(margs, "--tls-cert") is not None
+    cm_tls = flag(cargs, "--merge-tls-ca") is not None
+    if m_tls != cm_tls:
+        where(f"merger TLS {m_tls} but the coordinator's merge client TLS {cm_tls}: they "
+              "cannot talk")
+    if label == "base" and not m_tls:
+        where("the base must serve the merge service over TLS (--tls-cert/--tls-key)")
     if flag(cargs, "--tokens") is None:
         where("coordinator has no --tokens: the job API would be open")
     needs_secret = flag(cargs, "--cluster-secret-file") is not None
@@ -343,6 +380,40 @@ def check(label, objs, carvemap):
     if listen_port not in svc_ports.values():
         where(f"no Service port targets the coordinator's --listen port {listen_port}")
 
+    # The coordinator finds the merge service through its Service.
+    if not selects(msvc["spec"].get("selector"), merger["spec"]["template"]["metadata"]["labels"]):
+        where("the merger Service does not select the merger pods")
+    for other, olabels in ((COORDINATOR, clabels), (WORKER, wlabels)):
+        if selects(msvc["spec"].get("selector"), olabels):
+            where(f"the merger Service also selects {other} pods")
+    if selects(svc["spec"].get("selector"), merger["spec"]["template"]["metadata"]["labels"]):
+        where("the coordinator Service also selects merger pods")
+    mports = {p["name"]: p["containerPort"] for p in mc.get("ports", [])}
+    msvc_ports = {}
+    for p in msvc["spec"]["ports"]:
+        target = p.get("targetPort", p["port"])
+        msvc_ports[p["port"]] = mports.get(target) if isinstance(target, str) else target
+    m_listen_host, _, _ = (flag(margs, "--listen") or "").rpartition(":")
+    _, m_listen_port = split_hostport(flag(margs, "--listen") or "")
+    if m_listen_host not in ("0.0.0.0", "[::]", ""):
+        where(f"merger --listen host {m_listen_host!r}: the coordinator's pod cannot reach it")
+    merge_addr = flag(cargs, "--merge-server")
+    if "--no-merge" in cargs:
+        where("coordinator runs with --no-merge: jobs would end without outputs")
+    elif not merge_addr:
+        where("coordinator has no --merge-server")
+    else:
+        for addr in merge_addr.split(","):
+            host, port = split_hostport(addr)
+            names = {MERGER, f"{MERGER}.{namespace}", f"{MERGER}.{namespace}.svc",
+                     f"{MERGER}.{namespace}.svc.cluster.local"}
+            if host not in names:
+                where(f"coordinator --merge-server host {host!r} is not the merger Service's "
+                      f"DNS name ({sorted(names)})")
+            if port not in msvc_ports or msvc_ports[port] != m_listen_port:
+                where(f"coordinator --merge-server port {port} is not a merger Service port "
+                      f"that reaches the merger's port {m_listen_port}")
+
     # Workers find the coordinator through the Service.
     coord_addr = flag(wargs, "--coordinator") or flag(wargs, "--server")
     if not coord_addr:
@@ -381,7 +452,7 @@ def check(label, objs, carvemap):
 
     # Every container: requests/limits, non-root; main containers: gRPC probes on the port
     # they listen on.
-    for dep in (coord, worker):
+    for dep in (coord, worker, merger):
         spec = pod_spec(dep)
         psc = spec.get("securityContext", {})
         if psc.get("runAsNonRoot") is not True or not psc.get("runAsUser"):
@@ -431,7 +502,7 @@ def check(label, objs, carvemap):
 
     # Only flags the binary has.
     if carvemap:
-        for dep in (coord, worker):
+        for dep in (coord, worker, merger):
             for c in pod_spec(dep)["containers"]:
                 args = c.get("args", [])
                 known = help_flags(carvemap, args[0])
