@@ -1,8 +1,8 @@
 // LocalMerge (services/rpc/merge_request.h): RunMerge in this process.
+#include <optional>
+
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
-
-#include <optional>
 
 #include "absl/strings/str_cat.h"
 #include "services/merge/merge_job.h"
