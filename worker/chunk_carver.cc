@@ -69,6 +69,7 @@ absl::StatusOr<CarveChunkResult> CarveChunkToTile(const CarveChunkRequest& reque
   if (ec) result.tile_bytes = 0;
   result.wedges = tree.num_wedges();
   result.leaf_updates = tree.num_leaf_updates();
+  result.leaf_touches = tree.num_leaf_touches();
   result.leaves = tile.leaves.size();
   result.elapsed_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

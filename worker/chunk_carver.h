@@ -29,6 +29,7 @@ struct CarveChunkResult {
   std::string tile_path;
   uint64_t tile_bytes = 0;
   uint64_t wedges = 0, leaf_updates = 0, leaves = 0;
+  uint64_t leaf_touches = 0;  // (leaf, wedge) pairs the wedge hulls touched
   double elapsed_s = 0;
 };
 

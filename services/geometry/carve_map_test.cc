@@ -222,5 +222,43 @@ TEST(CarveMapTest, FusionIsTheWeightedMean) {
   EXPECT_NEAR(leaf.p(), (a.p * a.w + b.p * b.w) / (a.w + b.w), 1e-12);
 }
 
+TEST(CarveMapTest, ExpNegIsExpToTwoUlp) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0, 40);
+  for (int i = 0; i < 200000; ++i) {
+    const double x = i < 100 ? i * 0.5 : u(rng);
+    const double want = std::exp(-x);
+    EXPECT_NEAR(ExpNeg(x), want, 4.5e-16 * want) << x;
+  }
+  EXPECT_EQ(ExpNeg(0.0), 1.0);
+  EXPECT_EQ(ExpNeg(800.0), 0.0);
+  EXPECT_EQ(ExpNeg(720.0), 0.0);  // subnormal range: flushed
+  EXPECT_TRUE(std::isnan(ExpNeg(NAN)));
+}
+
+TEST(CarveMapTest, EvaluateAlongARowIsEvaluateAtEachPoint) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(-1, 1);
+  int with_weight = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    const RayModel ray = RandomRay(rng);
+    const absl::StatusOr<PreparedRay> pr = PreparedRay::Make(ray);
+    ASSERT_TRUE(pr.ok());
+    // A row crossing the ray near its middle, along one axis, 0.05 m apart.
+    const Vector3d mid = 0.5 * (ray.sensor_mean + ray.point_mean).cast<double>();
+    const int axis = trial % 3;
+    Vector3d step = Vector3d::Zero();
+    step[axis] = 0.05;
+    const Vector3d x0 = mid - 20 * step + Vector3d(u(rng), u(rng), u(rng)) * 0.05;
+    pr->EvaluateAlong(x0, step, 0, 39, [&](int i, const CarveSample& s) {
+      const CarveSample e = pr->Evaluate(x0 + i * step);
+      EXPECT_NEAR(s.p, e.p, 1e-13);
+      EXPECT_NEAR(s.w, e.w, 1e-13);
+      with_weight += e.w > 1e-6;
+    });
+  }
+  EXPECT_GT(with_weight, 500);
+}
+
 }  // namespace
 }  // namespace carvemap

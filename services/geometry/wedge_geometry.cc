@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cassert>
 #include <cmath>
 #include <limits>
 
@@ -98,25 +99,32 @@ void OrientedBoxHull(const PointSet& s, const Eigen::Matrix3d& axes, const Vecto
 }
 
 // Convex hull of points spanning 3D: a plane through every non-degenerate triple that has all
-// points on one side is a facet plane (n ≤ 8, so 56 triples; simpler and sturdier than an
-// incremental hull for this size).
-void BruteForceHull(const PointSet& s, double extent, WedgeHull& hull) {
+// points on one side is a facet plane (n ≤ 8, so ≤ 56 triples; simpler and sturdier than an
+// incremental hull for this size). `thinnest`, if given, receives the smallest width of the
+// points along a facet normal (about the hull's thickness).
+void BruteForceHull(const PointSet& s, double extent, WedgeHull& hull, double* thinnest) {
   const double tol = 1e-9 * extent;
+  const double min_cross = kMinRelativeCross * extent * extent;
   for (int i = 0; i < s.n; ++i) {
     for (int j = i + 1; j < s.n; ++j) {
+      const Vector3d eij = s.p[j] - s.p[i];
       for (int k = j + 1; k < s.n; ++k) {
-        Vector3d n = (s.p[j] - s.p[i]).cross(s.p[k] - s.p[i]);
+        Vector3d n = eij.cross(s.p[k] - s.p[i]);
         const double len = n.norm();
-        if (len <= kMinRelativeCross * extent * extent) continue;
+        if (len <= min_cross) continue;
         n /= len;
         const double o = n.dot(s.p[i]);
         bool above = false, below = false;
+        double lo = 0, hi = 0;
         for (int m = 0; m < s.n; ++m) {
           const double dist = n.dot(s.p[m]) - o;
           above |= dist > tol;
           below |= dist < -tol;
+          lo = std::min(lo, dist);
+          hi = std::max(hi, dist);
         }
         if (above && below) continue;
+        if (thinnest != nullptr) *thinnest = std::min(*thinnest, hi - lo);
         AddSupportPlane(s, below ? n : Vector3d(-n), 0.0, hull);
       }
     }
@@ -188,13 +196,41 @@ WedgeHull SingleRayHull(const RayModel& ray, double sigmas) {
 WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas) {
   const int num_rays = std::clamp<int>(wedge.num_rays, 1, 4);
   if (num_rays == 1) return SingleRayHull(wedge.rays[0], sigmas);
-
-  PointSet s;
-  s.origin = wedge.rays[0].point_mean.cast<double>();
+  std::array<Vector3d, 4> sensors, ends;
   for (int i = 0; i < num_rays; ++i) {
-    const RayModel& ray = wedge.rays[i];
-    s.Add(ray.sensor_mean.cast<double>());
-    s.Add(ExtendedPointMean(ray, sigmas));
+    sensors[i] = wedge.rays[i].sensor_mean.cast<double>();
+    ends[i] = ExtendedPointMean(wedge.rays[i], sigmas);
+  }
+  return HullOfWedgePoints(std::span(sensors.data(), num_rays), std::span(ends.data(), num_rays));
+}
+
+WedgeHull HullOfWedgePoints(std::span<const Vector3d> sensor_means,
+                            std::span<const Vector3d> far_ends) {
+  assert(!far_ends.empty() && sensor_means.size() + far_ends.size() <= 8);
+  PointSet s;
+  s.origin = far_ends[0];
+  // Rays of one frame share their sensor mean: a repeated point adds no facet, only work.
+  auto add = [&s](const Vector3d& x) {
+    const Vector3d rel = x - s.origin;
+    for (int i = 0; i < s.n; ++i) {
+      if (s.p[i] == rel) return;
+    }
+    s.p[s.n++] = rel;
+  };
+  for (const Vector3d& x : sensor_means) add(x);
+  for (const Vector3d& x : far_ends) add(x);
+
+  // The usual wedge spans 3D well: its facets are the planes through triples of points with
+  // every point on one side. Only a thin (flat or collinear) set needs the principal axes.
+  if (s.n >= 4) {
+    Eigen::AlignedBox3d box;
+    for (int i = 0; i < s.n; ++i) box.extend(s.p[i]);
+    const double extent = box.diagonal().norm();
+    WedgeHull hull;
+    hull.planes.reserve(16);
+    double thinnest = std::numeric_limits<double>::infinity();
+    BruteForceHull(s, extent, hull, &thinnest);
+    if (hull.planes.size() >= 4 && thinnest >= 2 * kMinHalfThicknessM) return hull;
   }
 
   // Principal axes of the points, to detect flat and collinear wedges.
@@ -228,7 +264,7 @@ WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas) {
   } else if (extent[2] < 2 * kMinHalfThicknessM) {
     PrismHull(s, axes, kMinHalfThicknessM, hull);
   } else {
-    BruteForceHull(s, extent[0], hull);
+    BruteForceHull(s, extent[0], hull, nullptr);
   }
   return hull;
 }

@@ -3,6 +3,7 @@
 // touch, and the workers, which find the leaves they touch: both must agree.
 #pragma once
 
+#include <span>
 #include <vector>
 
 #include <Eigen/Core>
@@ -22,6 +23,10 @@ struct WedgeHull {
 // deviations (of the point Gaussian, along the ray) past the point (§4.3.1: 3σ). A single-ray
 // wedge is that segment dilated laterally by `sigmas` of the ray's lateral spread.
 [[nodiscard]] WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas = 3.0);
+// The same hull from a multi-ray wedge's points, for callers that computed them once per ray:
+// the rays' sensor means and their ExtendedPointMean (same order, 2 to 4 rays).
+[[nodiscard]] WedgeHull HullOfWedgePoints(std::span<const Eigen::Vector3d> sensor_means,
+                                          std::span<const Eigen::Vector3d> far_ends);
 
 // Conservative: true whenever the hull and the box intersect (it may also say true for a box
 // that only comes near the hull, never false for one that touches it).
