@@ -231,6 +231,7 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   std::vector<std::array<std::vector<LeafRun>, 3>> runs(num_wedges);
   std::vector<std::vector<LeafRun>> pool;  // emptied run lists, reused
   std::vector<LeafRun> merged;
+  std::vector<std::pair<const LeafRun*, const LeafRun*>> heads;
   LeafScratch scratch(grid_.chunk_depth);
   Wedge wedge;
   uint64_t updates = 0, touches = 0;
@@ -266,11 +267,28 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
     for (uint32_t r : voters.Row(w)) {
       if (axis[r] < 0) continue;
       const int a = axis[r], u = (a + 1) % 3, v = (a + 2) % 3;
+      // The union of the ray's wedges' runs, sorted: a merge of their sorted lists.
       merged.clear();
+      heads.clear();
       for (uint32_t rw : ray_wedges.Row(r)) {
-        merged.insert(merged.end(), runs[rw][a].begin(), runs[rw][a].end());
+        const std::vector<LeafRun>& list = runs[rw][a];
+        if (!list.empty()) heads.push_back({list.data(), list.data() + list.size()});
       }
-      if (ray_wedges.Row(r).size() > 1) std::sort(merged.begin(), merged.end());
+      if (heads.size() == 1) {
+        merged.assign(heads[0].first, heads[0].second);
+      } else {
+        while (!heads.empty()) {
+          size_t best = 0;
+          for (size_t h = 1; h < heads.size(); ++h) {
+            if (*heads[h].first < *heads[best].first) best = h;
+          }
+          merged.push_back(*heads[best].first++);
+          if (heads[best].first == heads[best].second) {
+            heads[best] = heads.back();
+            heads.pop_back();
+          }
+        }
+      }
       const PreparedRay& ray = *rays[r];
       Eigen::Vector3d step = Eigen::Vector3d::Zero();
       step[a] = leaf_size;

@@ -103,6 +103,11 @@ class Rasterizer {
       if ((p.g - least) * s_ < -kAmbiguousM) return false;  // holds for none
       planes_.push_back(p);
     }
+    double a_min = std::numeric_limits<double>::infinity();
+    for (const IndexPlane& p : planes_) {
+      if (p.a != 0) a_min = std::min(a_min, std::abs(p.a));
+    }
+    tol_ = kAmbiguousM / (a_min * s_);  // 0 without such planes
     return true;
   }
 
@@ -160,22 +165,37 @@ class Rasterizer {
   }
 
   void Row(int u, int v) {
-    double lo = lo_[a_], hi = hi_[a_];
+    double lo = -std::numeric_limits<double>::infinity(), hi = -lo, flat = hi;
     for (const IndexPlane& p : planes_) {
       const double w = p.g - p.b * u - p.c * v;
       if (p.a > 0) {
         hi = std::min(hi, w / p.a);
       } else if (p.a < 0) {
         lo = std::max(lo, w / p.a);
-      } else if (w * s_ < -kAmbiguousM) {
-        return;
+      } else {
+        flat = std::min(flat, w);
       }
     }
-    if (!(lo <= hi + 2)) return;  // also NaN
-    int t0 = std::max(lo_[a_], int(std::ceil(std::max(lo, lo_[a_] - 1.0))) - 1);
-    int t1 = std::min(hi_[a_], int(std::floor(std::min(hi, hi_[a_] + 1.0))) + 1);
-    while (t0 <= t1 && !Touched(t0, u, v)) ++t0;
-    while (t1 > t0 && !Touched(t1, u, v)) --t1;
+    if (flat * s_ < -kAmbiguousM || !(lo <= hi + 1)) return;  // also NaN
+    // The analytic interval, inside the box range (exact already).
+    int t0 = std::max(lo_[a_], int(std::ceil(std::max(lo, lo_[a_] - 1.0))));
+    int t1 = std::min(hi_[a_], int(std::floor(std::min(hi, hi_[a_] + 1.0))));
+    // A plane's margin at leaf t is at least min|a|·s·(distance from t to its bound), so the
+    // analytic answer can only be wrong at a leaf nearer than `tol` to a bound: check those.
+    const double tol = tol_;
+    const bool flat_near = flat * s_ < kAmbiguousM;
+    const bool near0 = flat_near || t0 - lo < tol || (t0 > lo_[a_] && lo - (t0 - 1) < tol) ||
+                       hi - t0 < tol;
+    const bool near1 = flat_near || hi - t1 < tol || (t1 < hi_[a_] && (t1 + 1) - hi < tol) ||
+                       t1 - lo < tol;
+    if (near0) {
+      t0 = std::max(lo_[a_], t0 - 1);
+      while (t0 <= std::min(t1 + 1, hi_[a_]) && !Touched(t0, u, v)) ++t0;
+    }
+    if (near1) {
+      t1 = std::min(hi_[a_], t1 + 1);
+      while (t1 >= t0 && !Touched(t1, u, v)) --t1;
+    }
     if (t0 <= t1) Emit(u, v, t0, t1);
   }
 
@@ -216,6 +236,7 @@ class Rasterizer {
   int n_ = 0;
   std::array<int, 3> lo_{}, hi_{};
   std::vector<IndexPlane> planes_;
+  double tol_ = 0;  // index units: closer than this to a plane's bound, the test decides
   std::vector<RowBound> row_bounds_;
   size_t count_ = 0;
 };

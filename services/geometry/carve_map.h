@@ -82,25 +82,33 @@ class PreparedRay {
 // Eq 4.8 accumulation of one ray's vote into a leaf.
 inline void FuseInto(LeafStats& leaf, const CarveSample& s) { leaf.Add(s.p, s.w); }
 
-// e^−x for x ≥ 0, 0 from x = 708 on (where e^−x leaves the normal doubles). Our own rather than std::exp: glibc
-// picks an exp by CPU (an FMA variant where there is FMA), and the tiles must be byte-identical
-// whichever worker carves them (DESIGN §5). Cody–Waite reduction x = k ln2 + r, |r| ≤ ln2/2,
-// then a degree-13 Taylor polynomial of e^−r (truncation < 5e−18): within 2 ulp of e^−x.
+// e^−x for x ≥ 0, 0 from x = 708 on (where e^−x leaves the normal doubles). Our own rather than
+// std::exp: glibc picks an exp by CPU (an FMA variant where there is FMA), and the tiles must be
+// byte-identical whichever worker carves them (DESIGN §5). x = (32m + j)·ln2/32 + r with
+// |r| ≤ ln2/64 (Cody–Waite), e^−x = 2^−m · 2^(−j/32) · e^−r with 2^(−j/32) from a table
+// (correctly rounded) and e^−r a degree-6 Taylor polynomial (truncation < 4e−18), evaluated in
+// Estrin's order to keep the dependency chain short: within 4 ulp of e^−x.
+inline constexpr double kExp2NegJ32[32] = {
+    1.0, 0.9785720620877001, 0.9576032806985737, 0.93708381705515,
+    0.9170040432046712, 0.8973545375015536, 0.8781260801866497, 0.859309649061239,
+    0.8408964152537145, 0.8228777390769825, 0.8052451659746271, 0.7879904225539432,
+    0.7711054127039704, 0.7545822137967114, 0.7384130729697497, 0.7225904034885233,
+    0.7071067811865476, 0.691954940981916, 0.6771277734684463, 0.6626183215798707,
+    0.6484197773255048, 0.6345254785958666, 0.620928906036742, 0.6076236799902345,
+    0.5946035575013605, 0.5818624293887887, 0.5693943173783458, 0.5571933712979462,
+    0.5452538663326288, 0.5335702003384118, 0.5221368912137069, 0.5109485743270583};
+
 [[nodiscard]] inline double ExpNeg(double x) {
   if (!(x < 708.0)) return x == x ? 0.0 : x;  // NaN stays NaN
-  constexpr double kInvLn2 = 1.4426950408889634074;
-  constexpr double kLn2Hi = 6.93147180369123816490e-01;  // 32 significant bits: k·kLn2Hi exact
-  constexpr double kLn2Lo = 1.90821492927058770002e-10;
-  const int k = int(x * kInvLn2 + 0.5);  // x ≥ 0: truncation is floor
-  const double r = (x - k * kLn2Hi) - k * kLn2Lo;
-  double p = 1.0 / 6227020800.0;  // 1/13!
-  constexpr double kInvFact[] = {1.0 / 479001600.0, 1.0 / 39916800.0, 1.0 / 3628800.0,
-                                 1.0 / 362880.0,    1.0 / 40320.0,    1.0 / 5040.0,
-                                 1.0 / 720.0,       1.0 / 120.0,      1.0 / 24.0,
-                                 1.0 / 6.0,         0.5,              1.0,
-                                 1.0};
-  for (double c : kInvFact) p = p * -r + c;
-  return p * std::bit_cast<double>(uint64_t(1023 - k) << 52);  // · 2^−k, k ≤ 1021
+  constexpr double k32OverLn2 = 46.166241308446828;
+  // ln2/32 split so that k·hi is exact for k < 2^21 (hi has 32 significant bits).
+  constexpr double kHi = 6.93147180369123816490e-01 / 32, kLo = 1.90821492927058770002e-10 / 32;
+  const int k = int(x * k32OverLn2 + 0.5);  // x ≥ 0: truncation is floor
+  const double r = (x - k * kHi) - k * kLo;
+  const double r2 = r * r;
+  const double p = (1.0 - r) + r2 * ((0.5 - r * (1.0 / 6)) +
+                                     r2 * ((1.0 / 24 - r * (1.0 / 120)) + r2 * (1.0 / 720)));
+  return p * kExp2NegJ32[k & 31] * std::bit_cast<double>(uint64_t(1023 - (k >> 5)) << 52);
 }
 
 // ---- implementation of the hot path (inline so callers' loops can keep it in registers) ----

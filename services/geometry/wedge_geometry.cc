@@ -78,6 +78,15 @@ void AddSupportPlane(const PointSet& s, const Vector3d& n, double extra, WedgeHu
   hull.planes.emplace_back(n.x(), n.y(), n.z(), support + extra + n.dot(s.origin) + kSlackM);
 }
 
+// Adds the plane n·x <= support (n unit, support over the points relative to s.origin), if n
+// is new.
+void AddPlane(const PointSet& s, const Vector3d& n, double support, WedgeHull& hull) {
+  for (const Vector4d& q : hull.planes) {
+    if (q.head<3>().dot(n) > 1 - 1e-12) return;  // duplicate (the coplanar faces of a quad)
+  }
+  hull.planes.emplace_back(n.x(), n.y(), n.z(), support + n.dot(s.origin) + kSlackM);
+}
+
 void SetBox(const PointSet& s, const Vector3d& widen, WedgeHull& hull) {
   Eigen::AlignedBox3d box;
   for (int i = 0; i < s.n; ++i) box.extend(s.p[i]);
@@ -115,17 +124,25 @@ void BruteForceHull(const PointSet& s, double extent, WedgeHull& hull, double* t
         n /= len;
         const double o = n.dot(s.p[i]);
         bool above = false, below = false;
-        double lo = 0, hi = 0;
-        for (int m = 0; m < s.n; ++m) {
+        for (int m = 0; m < s.n && !(above && below); ++m) {
           const double dist = n.dot(s.p[m]) - o;
           above |= dist > tol;
           below |= dist < -tol;
+        }
+        if (above && below) continue;  // a plane through the hull, not a facet
+        double lo = 0, hi = 0;
+        for (int m = 0; m < s.n; ++m) {
+          const double dist = n.dot(s.p[m]) - o;
           lo = std::min(lo, dist);
           hi = std::max(hi, dist);
         }
-        if (above && below) continue;
         if (thinnest != nullptr) *thinnest = std::min(*thinnest, hi - lo);
-        AddSupportPlane(s, below ? n : Vector3d(-n), 0.0, hull);
+        // Outward: away from the points. The offset is the points' exact support.
+        if (below) {
+          AddPlane(s, n, o + hi, hull);
+        } else {
+          AddPlane(s, -n, -(o + lo), hull);
+        }
       }
     }
   }
