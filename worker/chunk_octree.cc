@@ -40,12 +40,13 @@ struct RayBits {
   }
 };
 
-// The fused sums of one call over the chunk's finest leaves, in 8³ bricks allocated on first
-// touch (a dense array would be 537 MB at k = 8).
+// The fused sums of one call over the chunk's finest leaves: one dense array up to k = 6
+// (262 144 leaves, 8 MiB), else 8³ bricks allocated on first touch (a dense array would be
+// 537 MB at k = 8).
 class LeafScratch {
  public:
   explicit LeafScratch(int k)
-      : shift_(std::min(k, 3)), per_side_(1 << (k - shift_)),
+      : k_(k), shift_(k <= kDenseDepth ? k : 3), per_side_(1 << (k - shift_)),
         bricks_(size_t(per_side_) * per_side_ * per_side_) {}
 
   LeafStats& At(const Eigen::Vector3i& l) {
@@ -53,13 +54,13 @@ class LeafScratch {
     const size_t b = size_t(l.x() >> shift_) +
                      size_t(per_side_) * (size_t(l.y() >> shift_) +
                                           size_t(per_side_) * size_t(l.z() >> shift_));
-    std::unique_ptr<Brick>& brick = bricks_[b];
+    std::unique_ptr<LeafStats[]>& brick = bricks_[b];
     if (!brick) {
-      brick = std::make_unique<Brick>();
+      brick = std::make_unique<LeafStats[]>(size_t{1} << (3 * shift_));
       used_.push_back(uint32_t(b));
     }
-    return brick->cells[size_t(l.x() & m) | size_t(l.y() & m) << shift_ |
-                        size_t(l.z() & m) << (2 * shift_)];
+    return brick[size_t(l.x() & m) | size_t(l.y() & m) << shift_ |
+                 size_t(l.z() & m) << (2 * shift_)];
   }
 
   // Every leaf with votes, as (local, stats).
@@ -69,24 +70,23 @@ class LeafScratch {
     for (uint32_t b : used_) {
       const Eigen::Vector3i base(int(b % per_side_), int((b / per_side_) % per_side_),
                                  int(b / (size_t(per_side_) * per_side_)));
-      const Brick& brick = *bricks_[b];
+      const LeafStats* brick = bricks_[b].get();
       for (int z = 0; z < side; ++z)
         for (int y = 0; y < side; ++y)
           for (int x = 0; x < side; ++x) {
             const LeafStats& c =
-                brick.cells[size_t(x) | size_t(y) << shift_ | size_t(z) << (2 * shift_)];
+                brick[size_t(x) | size_t(y) << shift_ | size_t(z) << (2 * shift_)];
             if (c.count > 0) f(Eigen::Vector3i(base * side + Eigen::Vector3i(x, y, z)), c);
           }
     }
   }
 
  private:
-  struct Brick {
-    std::array<LeafStats, 512> cells{};
-  };
-  int shift_;
+  static constexpr int kDenseDepth = 6;
+  int k_;
+  int shift_;  // a brick holds (2^shift)³ leaves; one brick when k ≤ kDenseDepth
   int per_side_;
-  std::vector<std::unique_ptr<Brick>> bricks_;
+  std::vector<std::unique_ptr<LeafStats[]>> bricks_;
   std::vector<uint32_t> used_;
 };
 
@@ -232,6 +232,9 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   std::vector<std::vector<LeafRun>> pool;  // emptied run lists, reused
   std::vector<LeafRun> merged;
   std::vector<std::pair<const LeafRun*, const LeafRun*>> heads;
+  // One ray's leaves: their projections on the ray, their sums, and its votes.
+  std::vector<double> par, lat_a, lat_b, vote_p, vote_w;
+  std::vector<LeafStats*> cells;
   LeafScratch scratch(grid_.chunk_depth);
   Wedge wedge;
   uint64_t updates = 0, touches = 0;
@@ -292,40 +295,55 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
       const PreparedRay& ray = *rays[r];
       Eigen::Vector3d step = Eigen::Vector3d::Zero();
       step[a] = leaf_size;
-      // Overlapping or adjacent runs of one row are one stretch of the union.
-      auto vote = [&](LeafRun run, int hi) {
-        Eigen::Vector3i local;
-        local[a] = 0;
-        local[u] = RunU(run);
-        local[v] = RunV(run);
-        // Leaf centres as NodeBox(...).center() computes them, stepped from the row's first
-        // leaf, so a leaf's value does not depend on how the runs around it were cut.
-        const Eigen::Vector3d lo = chunk_origin + local.cast<double>() * leaf_size;
-        const Eigen::Vector3d x0 = (lo + (lo + Eigen::Vector3d::Constant(leaf_size))) / 2.0;
-        ray.EvaluateAlong(x0, step, RunLo(run), hi, [&](int t, const CarveSample& s) {
-          // w = f_⊥ ∈ [0, 1] is how much the ray speaks about x_L. Tiny weights still count:
-          // a leaf in the middle of a wide wedge (sparse beams, far from the sensor) lies many
-          // σ_⊥ from all four rays, yet §4.2.1/§4.3.1 mean the wedge's interpolated volume to
-          // be carved, and every vote there is p = 0.5 + f_⊥/2 > 0.5, so the leaf is interior
-          // whatever the magnitude. With the cut at 1e-6 (x_L beyond ~5.3 σ_⊥) such leaves
-          // stayed unobserved, i.e. exterior pockets inside rooms; at 1e-15 (~8.3 σ_⊥) the
-          // office accuracy test observes 46 % more leaves at the same 98.5 % accuracy. The
-          // cut itself keeps sum_w clear of denormals.
-          if (s.w < kMinRayWeight) return;
-          local[a] = t;
-          scratch.At(local).Add(s.p, s.w);
-          ++updates;
-        });
-      };
+      const PreparedRay::Projection dp = ray.ProjectStep(step);
+      // The leaves of the union: overlapping or adjacent runs of one row are one stretch.
+      // Leaf centres as NodeBox(...).center() computes them, stepped from the row's first
+      // leaf, so a leaf's value does not depend on how the runs around it were cut.
+      par.clear();
+      lat_a.clear();
+      lat_b.clear();
+      cells.clear();
       for (size_t i = 0; i < merged.size();) {
         const LeafRun first = merged[i];
         int hi = RunHi(first);
         size_t j = i + 1;
-        for (; j < merged.size() && RunRow(merged[j]) == RunRow(first) && RunLo(merged[j]) <= hi + 1; ++j) {
+        for (; j < merged.size() && RunRow(merged[j]) == RunRow(first) &&
+               RunLo(merged[j]) <= hi + 1;
+             ++j) {
           hi = std::max(hi, RunHi(merged[j]));
         }
-        vote(first, hi);
+        Eigen::Vector3i local;
+        local[a] = 0;
+        local[u] = RunU(first);
+        local[v] = RunV(first);
+        const Eigen::Vector3d lo = chunk_origin + local.cast<double>() * leaf_size;
+        const PreparedRay::Projection p0 =
+            ray.Project((lo + (lo + Eigen::Vector3d::Constant(leaf_size))) / 2.0);
+        for (int t = RunLo(first); t <= hi; ++t) {
+          par.push_back(p0.par + t * dp.par);
+          lat_a.push_back(p0.a + t * dp.a);
+          lat_b.push_back(p0.b + t * dp.b);
+          local[a] = t;
+          cells.push_back(&scratch.At(local));
+        }
         i = j;
+      }
+      vote_p.resize(par.size());
+      vote_w.resize(par.size());
+      ray.EvaluateMany(par.data(), lat_a.data(), lat_b.data(), par.size(), vote_p.data(),
+                       vote_w.data());
+      for (size_t i = 0; i < par.size(); ++i) {
+        // w = f_⊥ ∈ [0, 1] is how much the ray speaks about x_L. Tiny weights still count:
+        // a leaf in the middle of a wide wedge (sparse beams, far from the sensor) lies many
+        // σ_⊥ from all four rays, yet §4.2.1/§4.3.1 mean the wedge's interpolated volume to
+        // be carved, and every vote there is p = 0.5 + f_⊥/2 > 0.5, so the leaf is interior
+        // whatever the magnitude. With the cut at 1e-6 (x_L beyond ~5.3 σ_⊥) such leaves
+        // stayed unobserved, i.e. exterior pockets inside rooms; at 1e-15 (~8.3 σ_⊥) the
+        // office accuracy test observes 46 % more leaves at the same 98.5 % accuracy. The
+        // cut itself keeps sum_w clear of denormals.
+        if (vote_w[i] < kMinRayWeight) continue;
+        cells[i]->Add(vote_p[i], vote_w[i]);
+        ++updates;
       }
     }
     for (uint32_t fw : freed.Row(w)) {

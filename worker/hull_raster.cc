@@ -6,6 +6,8 @@
 #include <cmath>
 #include <limits>
 
+#include "absl/container/inlined_vector.h"
+
 namespace carvemap {
 namespace {
 
@@ -18,11 +20,13 @@ constexpr double kAmbiguousM = 1e-9;
 // reaches; s·(g − a·t − b·u − c·v) is the margin in metres.
 struct IndexPlane {
   double a, b, c, g;
+  double inv_a;  // 1/a (0 when a = 0)
 };
 
 // cu·u + cv·v ≤ c0: a bound on the rows that hold any leaf.
 struct RowBound {
   double cu, cv, c0;
+  double inv_cu;  // 1/cu (0 when cu = 0)
 };
 
 class Rasterizer {
@@ -48,9 +52,9 @@ class Rasterizer {
       for (const RowBound& h : row_bounds_) {
         const double rhs = h.c0 - h.cv * v;
         if (h.cu > 0) {
-          uhi = std::min(uhi, rhs / h.cu);
+          uhi = std::min(uhi, rhs * h.inv_cu);
         } else if (h.cu < 0) {
-          ulo = std::max(ulo, rhs / h.cu);
+          ulo = std::max(ulo, rhs * h.inv_cu);
         } else if (rhs < -slack) {
           empty = true;
           break;
@@ -94,6 +98,7 @@ class Rasterizer {
       p.b = nrm[u_];
       p.c = nrm[v_];
       p.g = (q[3] - nrm.dot(origin_)) / s_ + 0.5 * (nrm.cwiseAbs().sum() - nrm.sum());
+      p.inv_a = p.a != 0 ? 1 / p.a : 0;
       double most = 0, least = 0;
       for (auto [coef, d] : {std::pair{p.a, a_}, std::pair{p.b, u_}, std::pair{p.c, v_}}) {
         most += std::max(coef * lo_[d], coef * hi_[d]);
@@ -113,27 +118,31 @@ class Rasterizer {
 
   // Fourier–Motzkin elimination of t: a row holds leaves only where every lower bound on t is
   // below every upper bound and both meet the box range.
+  void AddRowBound(double cu, double cv, double c0) {
+    row_bounds_.push_back({cu, cv, c0, cu != 0 ? 1 / cu : 0});
+  }
+
   void ProjectOnRows() {
     row_bounds_.clear();
     const double t0 = lo_[a_], t1 = hi_[a_];
     for (const IndexPlane& p : planes_) {
       if (p.a == 0) {
-        row_bounds_.push_back({p.b, p.c, p.g});
+        AddRowBound(p.b, p.c, p.g);
         continue;
       }
       // t ≤ or ≥ h(u, v) = (g − b·u − c·v)/a.
-      const double hb = p.b / p.a, hc = p.c / p.a, h0 = p.g / p.a;
+      const double hb = p.b * p.inv_a, hc = p.c * p.inv_a, h0 = p.g * p.inv_a;
       if (p.a > 0) {
-        row_bounds_.push_back({hb, hc, h0 - t0});  // h ≥ t0
+        AddRowBound(hb, hc, h0 - t0);  // h ≥ t0
       } else {
-        row_bounds_.push_back({-hb, -hc, t1 - h0});  // h ≤ t1
+        AddRowBound(-hb, -hc, t1 - h0);  // h ≤ t1
       }
       if (p.a >= 0) continue;
       for (const IndexPlane& q : planes_) {
         if (q.a <= 0) continue;
         // lower h_p ≤ upper h_q
-        const double qb = q.b / q.a, qc = q.c / q.a, q0 = q.g / q.a;
-        row_bounds_.push_back({qb - hb, qc - hc, q0 - h0});
+        const double qb = q.b * q.inv_a, qc = q.c * q.inv_a, q0 = q.g * q.inv_a;
+        AddRowBound(qb - hb, qc - hc, q0 - h0);
       }
     }
   }
@@ -169,9 +178,9 @@ class Rasterizer {
     for (const IndexPlane& p : planes_) {
       const double w = p.g - p.b * u - p.c * v;
       if (p.a > 0) {
-        hi = std::min(hi, w / p.a);
+        hi = std::min(hi, w * p.inv_a);
       } else if (p.a < 0) {
-        lo = std::max(lo, w / p.a);
+        lo = std::max(lo, w * p.inv_a);
       } else {
         flat = std::min(flat, w);
       }
@@ -235,9 +244,10 @@ class Rasterizer {
   std::vector<LeafRun>& out_;
   int n_ = 0;
   std::array<int, 3> lo_{}, hi_{};
-  std::vector<IndexPlane> planes_;
+  // Inline: one rasterizer per wedge and chunk, so no allocation in the common case.
+  absl::InlinedVector<IndexPlane, 16> planes_;
   double tol_ = 0;  // index units: closer than this to a plane's bound, the test decides
-  std::vector<RowBound> row_bounds_;
+  absl::InlinedVector<RowBound, 48> row_bounds_;
   size_t count_ = 0;
 };
 

@@ -119,17 +119,24 @@ void BruteForceHull(const PointSet& s, double extent, WedgeHull& hull, double* t
       const Vector3d eij = s.p[j] - s.p[i];
       for (int k = j + 1; k < s.n; ++k) {
         Vector3d n = eij.cross(s.p[k] - s.p[i]);
-        const double len = n.norm();
-        if (len <= min_cross) continue;
-        n /= len;
-        const double o = n.dot(s.p[i]);
-        bool above = false, below = false;
-        for (int m = 0; m < s.n && !(above && below); ++m) {
-          const double dist = n.dot(s.p[m]) - o;
-          above |= dist > tol;
-          below |= dist < -tol;
+        const double len2 = n.squaredNorm();
+        if (len2 <= min_cross * min_cross) continue;
+        // Sides first with the unnormalized normal (distances scaled by |n|): most triples
+        // are not facets, and they need no square root.
+        {
+          const double o = n.dot(s.p[i]), tol2 = tol * tol * len2;
+          bool above = false, below = false;
+          for (int m = 0; m < s.n && !(above && below); ++m) {
+            const double dist = n.dot(s.p[m]) - o;
+            above |= dist > 0 && dist * dist > tol2;
+            below |= dist < 0 && dist * dist > tol2;
+          }
+          if (above && below) continue;  // a plane through the hull, not a facet
         }
-        if (above && below) continue;  // a plane through the hull, not a facet
+        n /= std::sqrt(len2);
+        const double o = n.dot(s.p[i]);
+        bool below = false;
+        for (int m = 0; m < s.n; ++m) below |= n.dot(s.p[m]) - o < -tol;
         double lo = 0, hi = 0;
         for (int m = 0; m < s.n; ++m) {
           const double dist = n.dot(s.p[m]) - o;
