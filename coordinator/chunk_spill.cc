@@ -181,11 +181,13 @@ absl::Status ChunkSpiller::Add(const Wedge& wedge, std::span<const RayId> ids) {
       }
     }
   }
-  const std::vector<ChunkKey> chunks = ChunksOfWedge(MakeWedgeHull(wedge, options_.sigmas));
+  uint64_t facets = 0;  // sent along: the worker rebuilds the hull without a search
+  const std::vector<ChunkKey> chunks =
+      ChunksOfWedge(MakeWedgeHull(wedge, options_.sigmas, &facets));
   for (const ChunkKey& c : chunks) {
     ChunkState& state = chunks_[{c.x(), c.y(), c.z()}];
     const size_t before = state.buffer.size();
-    state.writer.Add(wedge, ids, state.buffer);
+    state.writer.Add(wedge, ids, state.buffer, facets);
     ++state.wedge_count;
     buffered_bytes_ += state.buffer.size() - before;
   }

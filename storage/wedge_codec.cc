@@ -160,6 +160,15 @@ absl::StatusOr<uint64_t> Walk(std::string_view bytes, IndexedWedges* out) {
         }
         w.ray[r] = uint32_t(num_rays - 1 - back);
       }
+      if (w.num_rays > 1) {
+        for (int shift = 0;; shift += 7) {
+          if (p >= bytes.size()) return bad(record, pos, "wedge record is truncated");
+          if (shift > 63) return bad(record, pos, "hull hint longer than 10 bytes");
+          const auto b = static_cast<unsigned char>(bytes[p++]);
+          w.facets |= uint64_t(b & 0x7f) << shift;
+          if (!(b & 0x80)) break;
+        }
+      }
       if (out != nullptr) out->wedges.push_back(w);
       ++num_wedges;
       pos = p;
@@ -238,7 +247,8 @@ WedgePayloadWriter::FrameState& WedgePayloadWriter::Frame(const RayId& id, const
   return *f;
 }
 
-void WedgePayloadWriter::Add(const Wedge& wedge, std::span<const RayId> ids, std::string& out) {
+void WedgePayloadWriter::Add(const Wedge& wedge, std::span<const RayId> ids, std::string& out,
+                             uint64_t facets) {
   if (frames_ == 0 && rays_ == 0 && wedges_ == 0) {
     out.push_back(char(kWedgePayloadMagic));
     out.push_back(char(kWedgePayloadVersion));
@@ -260,6 +270,7 @@ void WedgePayloadWriter::Add(const Wedge& wedge, std::span<const RayId> ids, std
   }
   out.push_back(char(kWedgeTag + wedge.num_rays));
   for (int r = 0; r < wedge.num_rays; ++r) PutVarint(rays_ - 1 - refs[r], out);
+  if (wedge.num_rays > 1) PutVarint(facets, out);
   ++wedges_;
 }
 

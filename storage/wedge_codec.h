@@ -38,8 +38,11 @@ class WedgePayloadWriter {
   // records ago), a ray record for each of its rays not yet written, then the wedge record.
   // `ids[r]` names wedge.rays[r] (RayId: equal ids must mean bit-identical rays). A ray whose
   // frame is older than its sensor's last two frames here is written again, as a new ray.
+  // `facets` is the hull hint the wedge's hull was built with (MakeWedgeHull; 0: none),
+  // stored with multi-ray wedges so the worker rebuilds the same hull without a search.
   // REQUIRES: ValidateWedge(wedge).ok(), ids.size() >= wedge.num_rays.
-  void Add(const Wedge& wedge, std::span<const RayId> ids, std::string& out);
+  void Add(const Wedge& wedge, std::span<const RayId> ids, std::string& out,
+           uint64_t facets = 0);
   // Appends the end record (the number of wedges): a payload is complete only with it, so a
   // truncated one is always detected. Nothing when no wedge was added (the empty payload).
   // Call once, last.

@@ -110,9 +110,9 @@ TEST(WedgeCodecTest, SharedRaysAndFramesAreWrittenOnce) {
   ASSERT_TRUE(decoded.ok()) << decoded.status();
   EXPECT_EQ(decoded->rays.size(), 6u * 40u);
   ASSERT_EQ(decoded->wedges.size(), scan.wedges.size());
-  // Header, 6 frames, 240 rays, 5·39 wedges of a tag and four 1-byte back-references, and the
-  // end record (tag, 195 as a 2-byte varint).
-  EXPECT_EQ(bytes.size(), 2 + 6 * kFrameRecordBytes + 240 * kRayRecordBytes + 195 * 5 + 3);
+  // Header, 6 frames, 240 rays, 5·39 wedges of a tag, four 1-byte back-references and a
+  // 1-byte hull hint (none), and the end record (tag, 195 as a 2-byte varint).
+  EXPECT_EQ(bytes.size(), 2 + 6 * kFrameRecordBytes + 240 * kRayRecordBytes + 195 * 6 + 3);
   for (size_t w = 0; w < scan.wedges.size(); ++w) {
     const WedgeRef& ref = decoded->wedges[w];
     ASSERT_EQ(ref.num_rays, 4);
@@ -129,6 +129,18 @@ TEST(WedgeCodecTest, SharedRaysAndFramesAreWrittenOnce) {
   std::vector<Wedge> plain;
   for (const auto& [w, ids] : scan.wedges) plain.push_back(w);
   EXPECT_EQ(DecodeWedgePayload(EncodeWedges(plain))->rays.size(), 240u);
+}
+
+TEST(WedgeCodecTest, HullHintsRoundTrip) {
+  const Strip scan = LineScan(2, 4);
+  WedgePayloadWriter writer;
+  std::string bytes;
+  const uint64_t hints[3] = {0, 0x9a5c3, uint64_t{1} << 55};
+  for (int w = 0; w < 3; ++w) writer.Add(scan.wedges[w].first, scan.wedges[w].second, bytes, hints[w]);
+  writer.Finish(bytes);
+  auto decoded = DecodeWedgePayload(bytes);
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  for (int w = 0; w < 3; ++w) EXPECT_EQ(decoded->wedges[w].facets, hints[w]);
 }
 
 TEST(WedgeCodecTest, OnlyTheLastTwoFramesOfASensorAreRemembered) {

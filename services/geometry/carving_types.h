@@ -59,6 +59,7 @@ struct RayId {
 struct WedgeRef {
   std::array<uint32_t, 4> ray{};
   uint8_t num_rays = 4;  // 4, or 1 for a single-ray wedge
+  uint64_t facets = 0;   // hull hint (HullOfWedgePoints); 0: none
 };
 struct IndexedWedges {
   std::vector<RayModel> rays;

@@ -109,18 +109,28 @@ void OrientedBoxHull(const PointSet& s, const Eigen::Matrix3d& axes, const Vecto
 
 // Convex hull of points spanning 3D: a plane through every non-degenerate triple that has all
 // points on one side is a facet plane (n ≤ 8, so ≤ 56 triples; simpler and sturdier than an
-// incremental hull for this size). `thinnest`, if given, receives the smallest width of the
-// points along a facet normal (about the hull's thickness).
-void BruteForceHull(const PointSet& s, double extent, WedgeHull& hull, double* thinnest) {
+// incremental hull for this size). `thinnest` receives the smallest width of the points along
+// a facet normal (about the hull's thickness). Triples are numbered in (i, j, k) order; the
+// facets' bits are added to *found. With a nonzero `only`, just those triples are tried (a
+// replay of an earlier search on the same points: the same planes, bit for bit); false if one
+// of them is not a facet.
+bool BruteForceHull(const PointSet& s, double extent, WedgeHull& hull, double& thinnest,
+                    uint64_t* found, uint64_t only) {
   const double tol = 1e-9 * extent;
   const double min_cross = kMinRelativeCross * extent * extent;
+  int t = -1;
   for (int i = 0; i < s.n; ++i) {
     for (int j = i + 1; j < s.n; ++j) {
       const Vector3d eij = s.p[j] - s.p[i];
       for (int k = j + 1; k < s.n; ++k) {
+        ++t;
+        if (only != 0 && !(only >> t & 1)) continue;
         Vector3d n = eij.cross(s.p[k] - s.p[i]);
         const double len2 = n.squaredNorm();
-        if (len2 <= min_cross * min_cross) continue;
+        if (len2 <= min_cross * min_cross) {
+          if (only != 0) return false;
+          continue;
+        }
         // Sides first with the unnormalized normal (distances scaled by |n|): most triples
         // are not facets, and they need no square root.
         {
@@ -131,19 +141,22 @@ void BruteForceHull(const PointSet& s, double extent, WedgeHull& hull, double* t
             above |= dist > 0 && dist * dist > tol2;
             below |= dist < 0 && dist * dist > tol2;
           }
-          if (above && below) continue;  // a plane through the hull, not a facet
+          if (above && below) {  // a plane through the hull, not a facet
+            if (only != 0) return false;
+            continue;
+          }
         }
         n /= std::sqrt(len2);
         const double o = n.dot(s.p[i]);
-        bool below = false;
-        for (int m = 0; m < s.n; ++m) below |= n.dot(s.p[m]) - o < -tol;
         double lo = 0, hi = 0;
         for (int m = 0; m < s.n; ++m) {
           const double dist = n.dot(s.p[m]) - o;
           lo = std::min(lo, dist);
           hi = std::max(hi, dist);
         }
-        if (thinnest != nullptr) *thinnest = std::min(*thinnest, hi - lo);
+        const bool below = lo < -tol;
+        thinnest = std::min(thinnest, hi - lo);
+        if (found != nullptr) *found |= uint64_t{1} << t;
         // Outward: away from the points. The offset is the points' exact support.
         if (below) {
           AddPlane(s, n, o + hi, hull);
@@ -154,6 +167,7 @@ void BruteForceHull(const PointSet& s, double extent, WedgeHull& hull, double* t
     }
   }
   SetBox(s, Vector3d::Zero(), hull);
+  return true;
 }
 
 // A flat point set (normal e3): the prism over its 2D hull in the (e1, e2) plane, half-thickness
@@ -217,20 +231,26 @@ WedgeHull SingleRayHull(const RayModel& ray, double sigmas) {
 
 }  // namespace
 
-WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas) {
+WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas, uint64_t* facets) {
   const int num_rays = std::clamp<int>(wedge.num_rays, 1, 4);
-  if (num_rays == 1) return SingleRayHull(wedge.rays[0], sigmas);
+  if (num_rays == 1) {
+    if (facets != nullptr) *facets = 0;
+    return SingleRayHull(wedge.rays[0], sigmas);
+  }
   std::array<Vector3d, 4> sensors, ends;
   for (int i = 0; i < num_rays; ++i) {
     sensors[i] = wedge.rays[i].sensor_mean.cast<double>();
     ends[i] = ExtendedPointMean(wedge.rays[i], sigmas);
   }
-  return HullOfWedgePoints(std::span(sensors.data(), num_rays), std::span(ends.data(), num_rays));
+  return HullOfWedgePoints(std::span(sensors.data(), num_rays), std::span(ends.data(), num_rays),
+                           facets);
 }
 
 WedgeHull HullOfWedgePoints(std::span<const Vector3d> sensor_means,
-                            std::span<const Vector3d> far_ends) {
+                            std::span<const Vector3d> far_ends, uint64_t* facets) {
   assert(!far_ends.empty() && sensor_means.size() + far_ends.size() <= 8);
+  const uint64_t hint = facets != nullptr ? *facets : 0;
+  if (facets != nullptr) *facets = 0;
   PointSet s;
   s.origin = far_ends[0];
   // Rays of one frame share their sensor mean: a repeated point adds no facet, only work.
@@ -250,11 +270,19 @@ WedgeHull HullOfWedgePoints(std::span<const Vector3d> sensor_means,
     Eigen::AlignedBox3d box;
     for (int i = 0; i < s.n; ++i) box.extend(s.p[i]);
     const double extent = box.diagonal().norm();
-    WedgeHull hull;
-    hull.planes.reserve(16);
-    double thinnest = std::numeric_limits<double>::infinity();
-    BruteForceHull(s, extent, hull, &thinnest);
-    if (hull.planes.size() >= 4 && thinnest >= 2 * kMinHalfThicknessM) return hull;
+    // With a hint, replay it; if it names a non-facet, search as without one.
+    for (const uint64_t only : {hint, uint64_t{0}}) {
+      WedgeHull hull;
+      hull.planes.reserve(16);
+      double thinnest = std::numeric_limits<double>::infinity();
+      uint64_t found = 0;
+      if (!BruteForceHull(s, extent, hull, thinnest, &found, only)) continue;
+      if (hull.planes.size() >= 4 && thinnest >= 2 * kMinHalfThicknessM) {
+        if (facets != nullptr) *facets = found;
+        return hull;
+      }
+      break;  // thin: principal axes below
+    }
   }
 
   // Principal axes of the points, to detect flat and collinear wedges.
@@ -288,7 +316,8 @@ WedgeHull HullOfWedgePoints(std::span<const Vector3d> sensor_means,
   } else if (extent[2] < 2 * kMinHalfThicknessM) {
     PrismHull(s, axes, kMinHalfThicknessM, hull);
   } else {
-    BruteForceHull(s, extent[0], hull, nullptr);
+    double thinnest = 0;
+    BruteForceHull(s, extent[0], hull, thinnest, nullptr, 0);
   }
   return hull;
 }
