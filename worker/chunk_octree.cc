@@ -191,8 +191,9 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   }
 
   // 2. Each ray's wedges, and the last of them: the ray votes once that wedge is listed, and a
-  //    wedge's runs are dropped once all its rays have voted, so memory follows the span of a
-  //    ray's wedges in the payload (two frames of a line sensor), not the chunk's size.
+  //    wedge's runs are dropped once all its rays have voted, so the runs held follow the span
+  //    of a ray's wedges in the payload (two frames of a line sensor), not the chunk's size
+  //    (what grows with the chunk is ~100 bytes of bookkeeping per wedge and per ray).
   Csr ray_wedges;
   ray_wedges.Build(num_rays, [&](auto&& emit) {
     for (size_t w = 0; w < num_wedges; ++w)
