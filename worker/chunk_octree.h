@@ -48,8 +48,9 @@ class ChunkOctree {
   // rays", is the SET of rays of the wedges that touch L: a ray shared by several such wedges
   // (neighbouring wedges share edges: each ray of a line or grid sensor belongs to up to 4)
   // votes once, with its carve map value at the leaf centre, LeafStats::Add(p, w), skipping
-  // w < kMinRayWeight. The set is exact within one call (the worker passes a chunk's whole
-  // payload); a ray given again in a later call votes again. A wedge that misses the chunk
+  // w < kMinRayWeight. Rays are the entries of wedges.rays (the payload stores each ray once;
+  // two equal entries would vote as two rays). The set is exact within one call (the worker
+  // passes a chunk's whole payload); a ray given again in a later call votes again. A wedge that misses the chunk
   // changes nothing; rays shorter than 1 µm carve nothing. Votes are summed in a fixed order
   // that depends only on the input, so equal input gives bit-identical sums.
   // Errors (nothing changed): InvalidArgument for num_rays outside [1, 4], a ray index out of
