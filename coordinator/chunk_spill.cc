@@ -18,7 +18,7 @@ namespace carvemap {
 namespace {
 
 constexpr char kMagic[8] = {'C', 'M', 'W', 'E', 'D', 'G', 'E', 'S'};
-constexpr uint32_t kVersion = 1;
+constexpr uint32_t kVersion = kChunkSpillVersion;
 constexpr size_t kHeaderBytes = 48;
 
 // CRC-32C (Castagnoli), as leveldb and ext4 use; table-driven, enough for spill volumes.
@@ -114,6 +114,7 @@ ChunkKey ToChunk(const std::array<int, 3>& k) { return ChunkKey(k[0], k[1], k[2]
 }  // namespace
 
 struct ChunkSpiller::ChunkState {
+  WedgePayloadWriter writer;  // which rays and frames the chunk's payload already holds
   std::string buffer;        // records not yet on disk
   uint64_t wedge_count = 0;  // all records, buffered or written
   uint64_t written_bytes = 0;
@@ -132,6 +133,8 @@ absl::Status ChunkSpillOptions::Validate() const {
   }
   return absl::OkStatus();
 }
+
+uint32_t Crc32c(std::string_view data) { return Crc32cExtend(0, data); }
 
 std::string ChunkSpillPath(std::string_view dir, const ChunkKey& chunk) {
   return absl::StrCat(std::string(dir), "/chunk_", chunk.x(), "_", chunk.y(), "_", chunk.z(), ".wedges");
@@ -153,9 +156,22 @@ ChunkSpiller::ChunkSpiller(const ChunkSpillOptions& options) : options_(options)
 ChunkSpiller::~ChunkSpiller() = default;
 
 absl::Status ChunkSpiller::Add(const Wedge& wedge) {
+  std::array<RayId, 4> ids;
+  for (RayId& id : ids) {
+    id.sensor = ~uint32_t{0};
+    id.frame = anonymous_rays_++;  // its own frame: rays of one frame share their sensor
+  }
+  return Add(wedge, ids);
+}
+
+absl::Status ChunkSpiller::Add(const Wedge& wedge, std::span<const RayId> ids) {
   if (finished_) return absl::FailedPreconditionError("chunk spill: Add after Finish");
   if (absl::Status s = ValidateWedge(wedge); !s.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("chunk spill: ", s.message()));
+  }
+  if (ids.size() < wedge.num_rays) {
+    return absl::InvalidArgumentError(absl::StrCat("chunk spill: ", ids.size(), " ray ids for ",
+                                                   int(wedge.num_rays), " rays"));
   }
   for (int r = 0; r < wedge.num_rays; ++r) {
     for (const Eigen::Vector3f& v : {wedge.rays[r].sensor_mean, wedge.rays[r].point_mean}) {
@@ -165,14 +181,15 @@ absl::Status ChunkSpiller::Add(const Wedge& wedge) {
       }
     }
   }
-  const std::vector<ChunkKey> chunks = ChunksOfWedge(MakeWedgeHull(wedge, options_.sigmas));
-  std::string record;
-  AppendWedgeRecord(wedge, record);
+  uint64_t facets = 0;  // sent along: the worker rebuilds the hull without a search
+  const std::vector<ChunkKey> chunks =
+      ChunksOfWedge(MakeWedgeHull(wedge, options_.sigmas, &facets));
   for (const ChunkKey& c : chunks) {
     ChunkState& state = chunks_[{c.x(), c.y(), c.z()}];
-    state.buffer += record;
+    const size_t before = state.buffer.size();
+    state.writer.Add(wedge, ids, state.buffer, facets);
     ++state.wedge_count;
-    buffered_bytes_ += record.size();
+    buffered_bytes_ += state.buffer.size() - before;
   }
   ++wedges_added_;
   records_ += chunks.size();
@@ -227,6 +244,7 @@ absl::StatusOr<std::vector<SpilledChunk>> ChunkSpiller::Finish() {
   std::vector<SpilledChunk> out;
   out.reserve(chunks_.size());
   for (auto& [key, state] : chunks_) {
+    state.writer.Finish(state.buffer);  // the end record: a truncated payload shows
     if (absl::Status s = FlushChunk(key, state); !s.ok()) return s;
     const ChunkKey chunk = ToChunk(key);
     const std::string path = ChunkSpillPath(options_.dir, chunk);
@@ -279,7 +297,8 @@ absl::StatusOr<ChunkSpillFile> ReadChunkSpillFile(const std::string& path) {
     return corrupt("header checksum mismatch (unfinished or corrupt)");
   }
   if (const uint32_t v = GetU32(bytes.data() + 8); v != kVersion) {
-    return corrupt("unsupported version ", v, " (this build reads ", kVersion, ")");
+    return corrupt("unsupported version ", v, " (this build reads ", kVersion,
+                   v < kVersion ? "; written by an older ingest: ingest the scan again)" : ")");
   }
   ChunkSpillFile file;
   for (int a = 0; a < 3; ++a) file.chunk[a] = int32_t(GetU32(bytes.data() + 12 + 4 * a));
@@ -294,16 +313,11 @@ absl::StatusOr<ChunkSpillFile> ReadChunkSpillFile(const std::string& path) {
   if (Crc32cExtend(0, file.payload) != GetU32(bytes.data() + 40)) {
     return corrupt("payload checksum mismatch");
   }
-  // Walk the records: sizes and counts must agree (values are checked by DecodeWedges).
-  uint64_t count = 0;
-  for (size_t pos = 0; pos < file.payload.size(); ++count) {
-    const int n = static_cast<unsigned char>(file.payload[pos]);
-    if (n < 1 || n > 4) return corrupt("record ", count, " has num_rays ", n);
-    pos += WedgeRecordBytes(n);
-    if (pos > file.payload.size()) return corrupt("record ", count, " is truncated");
-  }
-  if (count != file.wedge_count) {
-    return corrupt("holds ", count, " records, header says ", file.wedge_count);
+  // Walk the records: structure and count must agree (values are checked by the decoder).
+  absl::StatusOr<uint64_t> count = CountWedgeRecords(file.payload);
+  if (!count.ok()) return corrupt(count.status().message());
+  if (*count != file.wedge_count) {
+    return corrupt("holds ", *count, " wedge records, header says ", file.wedge_count);
   }
   return file;
 }

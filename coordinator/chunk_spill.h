@@ -1,7 +1,8 @@
 // Out-of-core chunk bins (DESIGN §5): the coordinator streams wedges in, each is binned into
-// the 2 m chunks it touches and its record (storage/wedge_codec.h) appended to a per-chunk
-// buffer; buffers go to one spill file per chunk whenever the memory budget is exceeded, so
-// memory stays bounded whatever the scan size. File layout: storage/WEDGE_FORMAT.md.
+// the 2 m chunks it touches and its records (storage/wedge_codec.h: the wedge, and its rays and
+// frame the first time the chunk needs them) appended to a per-chunk buffer; buffers go to one
+// spill file per chunk whenever the memory budget is exceeded, so memory stays bounded
+// whatever the scan size. File layout: storage/WEDGE_FORMAT.md.
 #pragma once
 
 #include <array>
@@ -9,6 +10,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -35,9 +37,10 @@ struct SpilledChunk {
   std::string path;
 };
 
-// Not thread-safe (one ingest thread owns it). Per chunk it keeps ~150 bytes of bookkeeping
-// besides the budgeted records; files are opened, appended and closed per flush, so at most
-// one is open at a time.
+// Not thread-safe (one ingest thread owns it). Per chunk it keeps ~200 bytes of bookkeeping
+// besides the budgeted records, plus the ids of the rays it holds of its sensors' last two
+// frames (8 bytes each); files are opened, appended and closed per flush, so at most one is
+// open at a time.
 class ChunkSpiller {
  public:
   static absl::StatusOr<std::unique_ptr<ChunkSpiller>> Create(const ChunkSpillOptions& options);
@@ -45,10 +48,14 @@ class ChunkSpiller {
   ChunkSpiller(const ChunkSpiller&) = delete;
   ChunkSpiller& operator=(const ChunkSpiller&) = delete;
 
-  // Bins the wedge and buffers its record for each chunk it touches (in insertion order per
-  // chunk), flushing the largest buffers first when over budget. InvalidArgument for a wedge
-  // that fails ValidateWedge or reaches beyond ±kMaxWorldCoordinateM; I/O errors name the
-  // file. A wedge touching no chunk cannot happen for a valid wedge.
+  // Bins the wedge and buffers its records for each chunk it touches (in insertion order per
+  // chunk), flushing the largest buffers first when over budget. `ids` name its rays as the
+  // wedge builder does (WedgeSink): a ray shared by several wedges of a chunk is stored once.
+  // InvalidArgument for a wedge that fails ValidateWedge or reaches beyond
+  // ±kMaxWorldCoordinateM, or too few ids; I/O errors name the file. A wedge touching no chunk
+  // cannot happen for a valid wedge.
+  absl::Status Add(const Wedge& wedge, std::span<const RayId> ids);
+  // The same for a wedge without ids: each of its rays is stored as a ray of its own.
   absl::Status Add(const Wedge& wedge);
 
   // Flushes everything, writes the headers, fsyncs and renames each file into place; returns
@@ -73,6 +80,7 @@ class ChunkSpiller {
   uint64_t wedges_added_ = 0;
   uint64_t records_ = 0;
   uint64_t flushes_ = 0;
+  uint64_t anonymous_rays_ = 0;  // ids given to rays added without one
   bool finished_ = false;
 };
 
@@ -82,11 +90,18 @@ class ChunkSpiller {
 struct ChunkSpillFile {
   ChunkKey chunk;
   uint64_t wedge_count = 0;
-  std::string payload;  // the wedge records: what is sent to the worker
+  std::string payload;  // the wedge payload: what is sent to the worker
 };
 
-// Reads and checks a spill file (magic, version, checksums, sizes, every record). NotFound for
-// a missing file, DataLoss naming the file for a corrupt or truncated one.
+// CRC-32C (Castagnoli) of `data`, as the spill file headers hold it (storage/WEDGE_FORMAT.md).
+[[nodiscard]] uint32_t Crc32c(std::string_view data);
+
+// The spill file format version this build writes and reads (storage/WEDGE_FORMAT.md).
+inline constexpr uint32_t kChunkSpillVersion = 2;
+
+// Reads and checks a spill file (magic, version, checksums, sizes, the payload's structure and
+// wedge count). NotFound for a missing file, DataLoss naming the file for a corrupt or
+// truncated one, or one of another version (an older ingest's: the job must be ingested again).
 [[nodiscard]] absl::StatusOr<ChunkSpillFile> ReadChunkSpillFile(const std::string& path);
 // The wedges of `chunk` under `dir`, in insertion order; also checks the header's chunk key.
 [[nodiscard]] absl::StatusOr<std::vector<Wedge>> ReadChunkWedges(std::string_view dir,

@@ -1,10 +1,12 @@
 #include "coordinator/chunk_spill.h"
 
 
+#include <array>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <random>
+#include <set>
 #include <sstream>
 
 #include <gmock/gmock.h>
@@ -191,6 +193,85 @@ TEST(ChunkSpillTest, CorruptFilesGiveClearErrors) {
   auto missing = ReadChunkWedges(dir.string(), ChunkKey(1000, 0, 0));
   EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
   EXPECT_THAT(missing.status().message(), HasSubstr("chunk_1000_0_0.wedges"));
+  fs::remove_all(dir);
+}
+
+// A walk's frame pairs with the wedge builder's ray ids: each ray of a chunk is stored once
+// however many of its wedges the chunk holds, and reads back as the same wedges.
+TEST(ChunkSpillTest, SharedRaysAreStoredOncePerChunk) {
+  constexpr int kFrames = 30, kBeams = 40;
+  std::vector<std::vector<RayModel>> frames;
+  for (int f = 0; f < kFrames; ++f) {
+    const Eigen::Vector3f s(0.05f * f - 1.0f, 0.3f, 1.5f);
+    std::vector<RayModel> rays;
+    for (int j = 0; j < kBeams; ++j) {
+      const float a = 0.04f * j;
+      rays.push_back(RayModel{s, s + 3.0f * Eigen::Vector3f(0.1f, std::cos(a), std::sin(a)),
+                              Iso(0.005f), Iso(0.01f + 0.001f * j)});
+    }
+    frames.push_back(rays);
+  }
+  const fs::path dir = TempDir("shared");
+  auto spiller = ChunkSpiller::Create({dir.string(), 1u << 20});
+  ASSERT_TRUE(spiller.ok());
+  std::map<std::array<int, 3>, std::vector<Wedge>> want;
+  for (int f = 0; f + 1 < kFrames; ++f) {
+    for (int j = 0; j + 1 < kBeams; ++j) {
+      Wedge w;
+      w.rays = {frames[f][j], frames[f][j + 1], frames[f + 1][j], frames[f + 1][j + 1]};
+      const std::array<RayId, 4> ids = {RayId{0, uint64_t(f), uint32_t(j)},
+                                        RayId{0, uint64_t(f), uint32_t(j + 1)},
+                                        RayId{0, uint64_t(f + 1), uint32_t(j)},
+                                        RayId{0, uint64_t(f + 1), uint32_t(j + 1)}};
+      ASSERT_TRUE((*spiller)->Add(w, ids).ok());
+      for (const ChunkKey& c : ChunksOfWedge(w)) want[{c.x(), c.y(), c.z()}].push_back(w);
+    }
+  }
+  auto chunks = (*spiller)->Finish();
+  ASSERT_TRUE(chunks.ok()) << chunks.status();
+  ASSERT_EQ(chunks->size(), want.size());
+  uint64_t bytes = 0, pairs = 0;
+  for (const SpilledChunk& c : *chunks) {
+    auto file = ReadChunkSpillFile(c.path);
+    ASSERT_TRUE(file.ok()) << file.status();
+    auto decoded = DecodeWedgePayload(file->payload);
+    ASSERT_TRUE(decoded.ok()) << decoded.status();
+    // No ray twice: as many rays as distinct rays among the chunk's wedges.
+    std::set<std::vector<float>> distinct;
+    const std::vector<Wedge>& expected = want.at({c.chunk.x(), c.chunk.y(), c.chunk.z()});
+    for (const Wedge& w : expected) {
+      for (const RayModel& r : w.rays) {
+        distinct.insert({r.point_mean.x(), r.point_mean.y(), r.point_mean.z(), r.sensor_mean.x()});
+      }
+    }
+    EXPECT_EQ(decoded->rays.size(), distinct.size());
+    auto read = ReadChunkWedges(dir.string(), c.chunk);
+    ASSERT_TRUE(read.ok());
+    EXPECT_TRUE(SameRecords(*read, expected));
+    bytes += c.file_bytes;
+    pairs += c.wedge_count;
+  }
+  // Version 1 stored 289 bytes per wedge and chunk; with each ray once it is a fifth of that.
+  EXPECT_LT(bytes, pairs * 60);
+  fs::remove_all(dir);
+}
+
+TEST(ChunkSpillTest, OlderVersionsAreRejectedByName) {
+  const fs::path dir = TempDir("version");
+  auto chunks = Spill(ScanWedges(5, 6), dir, 1u << 20);
+  ASSERT_TRUE(chunks.ok());
+  const SpilledChunk& c = chunks->front();
+  std::string bytes = ReadBytes(c.path);
+  ASSERT_EQ(bytes[8], char(kChunkSpillVersion));
+  bytes[8] = 1;  // a version-1 file, header checksum valid
+  const uint32_t crc = Crc32c(std::string_view(bytes.data(), 44));
+  for (int i = 0; i < 4; ++i) bytes[44 + i] = char(crc >> (8 * i));
+  std::ofstream(c.path, std::ios::binary | std::ios::trunc) << bytes;
+  auto r = ReadChunkSpillFile(c.path);
+  EXPECT_EQ(r.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(r.status().message(), HasSubstr("unsupported version 1 (this build reads 2"));
+  EXPECT_THAT(r.status().message(), HasSubstr("ingest the scan again"));
+  EXPECT_EQ(Crc32c("123456789"), 0xe3069283u);  // the check value WEDGE_FORMAT.md gives
   fs::remove_all(dir);
 }
 

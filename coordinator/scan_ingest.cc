@@ -62,12 +62,12 @@ absl::StatusOr<IngestResult> IngestScan(const IngestOptions& options,
 
   IngestResult result;
   result.bounds.setEmpty();
-  WedgeSink sink = [&](const Wedge& wedge) -> absl::Status {
+  WedgeSink sink = [&](const Wedge& wedge, std::span<const RayId> ids) -> absl::Status {
     for (int i = 0; i < wedge.num_rays; ++i) {
       result.bounds.extend(wedge.rays[i].sensor_mean.cast<double>());
       result.bounds.extend(wedge.rays[i].point_mean.cast<double>());
     }
-    return spill.Add(wedge);
+    return spill.Add(wedge, ids);
   };
   IngestProgress p;
   for (int s = 0; s < static_cast<int>(scan.sensors().size()); ++s) {

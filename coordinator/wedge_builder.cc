@@ -68,6 +68,7 @@ absl::StatusOr<WedgeBuilder> WedgeBuilder::Create(std::vector<SensorInfo> sensor
           absl::StrCat("wedge_builder sensor ", info.name, ": grid sensor without rows/cols"));
     }
     SensorState st;
+    st.index = uint32_t(states.size());
     st.noise = NoiseParamsOf(info);
     st.info = std::move(info);
     states.push_back(std::move(st));
@@ -111,26 +112,29 @@ bool WedgeBuilder::Continuous(float a, float b, float c, float d) const {
 }
 
 absl::Status WedgeBuilder::EmitWedge(const RayModel& a, const RayModel& b, const RayModel& c,
-                                     const RayModel& d) {
+                                     const RayModel& d, const std::array<RayId, 4>& ids) {
   wedge_.rays = {a, b, c, d};
   wedge_.num_rays = 4;
   ++stats_.wedges;
-  return sink_(wedge_);
+  return sink_(wedge_, ids);
 }
 
-absl::Status WedgeBuilder::EmitSingles(std::span<const RayModel> rays, std::span<const float> range,
+absl::Status WedgeBuilder::EmitSingles(const SensorState& s, uint64_t frame,
+                                       std::span<const RayModel> rays, std::span<const float> range,
                                        std::span<const uint8_t> covered) {
   wedge_.num_rays = 1;
   for (size_t i = 0; i < rays.size(); ++i) {
     if (std::isnan(range[i]) || covered[i]) continue;
     wedge_.rays.fill(rays[i]);
     ++stats_.single_ray_wedges;
-    if (auto st = sink_(wedge_); !st.ok()) return st;
+    const RayId id{s.index, frame, uint32_t(i)};
+    if (auto st = sink_(wedge_, {&id, 1}); !st.ok()) return st;
   }
   return absl::OkStatus();
 }
 
 absl::Status WedgeBuilder::AddLineFrame(SensorState& s, const ScanFrame& frame) {
+  const uint64_t cur = s.next_frame++, prev = cur - 1;
   if (s.has_prev && frame.t - s.prev_t <= options_.max_frame_gap_s) {
     const size_t n = std::min(s.prev_rays.size(), cur_rays_.size());
     const auto& pr = s.prev_range;
@@ -143,7 +147,11 @@ absl::Status WedgeBuilder::AddLineFrame(SensorState& s, const ScanFrame& frame) 
         ++stats_.discontinuities;
         continue;
       }
-      if (auto st = EmitWedge(s.prev_rays[j], s.prev_rays[j + 1], cur_rays_[j], cur_rays_[j + 1]);
+      const uint32_t j0 = uint32_t(j), j1 = uint32_t(j + 1);
+      if (auto st = EmitWedge(s.prev_rays[j], s.prev_rays[j + 1], cur_rays_[j],
+                              cur_rays_[j + 1],
+                              {RayId{s.index, prev, j0}, RayId{s.index, prev, j1},
+                               RayId{s.index, cur, j0}, RayId{s.index, cur, j1}});
           !st.ok()) {
         return st;
       }
@@ -153,7 +161,9 @@ absl::Status WedgeBuilder::AddLineFrame(SensorState& s, const ScanFrame& frame) 
   }
   // The previous frame has met both its neighbours now: whatever it has left carves alone.
   if (s.has_prev) {
-    if (auto st = EmitSingles(s.prev_rays, s.prev_range, s.prev_covered); !st.ok()) return st;
+    if (auto st = EmitSingles(s, prev, s.prev_rays, s.prev_range, s.prev_covered); !st.ok()) {
+      return st;
+    }
   }
   std::swap(s.prev_rays, cur_rays_);
   std::swap(s.prev_range, cur_range_);
@@ -165,6 +175,8 @@ absl::Status WedgeBuilder::AddLineFrame(SensorState& s, const ScanFrame& frame) 
 
 absl::Status WedgeBuilder::AddGridFrame(SensorState& s, const ScanFrame& frame) {
   const size_t rows = s.info.rows, cols = s.info.cols;
+  const uint64_t f = s.next_frame++;
+  auto id = [&](size_t i) { return RayId{s.index, f, uint32_t(i)}; };
   const auto& r = cur_range_;
   for (size_t y = 0; y + 1 < rows; ++y) {
     for (size_t x = 0; x + 1 < cols; ++x) {
@@ -176,14 +188,15 @@ absl::Status WedgeBuilder::AddGridFrame(SensorState& s, const ScanFrame& frame) 
         ++stats_.discontinuities;
         continue;
       }
-      if (auto st = EmitWedge(cur_rays_[i00], cur_rays_[i01], cur_rays_[i10], cur_rays_[i11]);
+      if (auto st = EmitWedge(cur_rays_[i00], cur_rays_[i01], cur_rays_[i10],
+                              cur_rays_[i11], {id(i00), id(i01), id(i10), id(i11)});
           !st.ok()) {
         return st;
       }
       cur_covered_[i00] = cur_covered_[i01] = cur_covered_[i10] = cur_covered_[i11] = 1;
     }
   }
-  return EmitSingles(cur_rays_, cur_range_, cur_covered_);
+  return EmitSingles(s, f, cur_rays_, cur_range_, cur_covered_);
 }
 
 absl::Status WedgeBuilder::AddFrame(const ScanFrame& frame, const FrameContext& context) {
@@ -208,7 +221,7 @@ absl::Status WedgeBuilder::AddFrame(const ScanFrame& frame, const FrameContext& 
     case SensorKind::kGrid:
       return AddGridFrame(s, frame);
     case SensorKind::kPoints:
-      return EmitSingles(cur_rays_, cur_range_, cur_covered_);
+      return EmitSingles(s, s.next_frame++, cur_rays_, cur_range_, cur_covered_);
   }
   return absl::InternalError("wedge_builder: unknown sensor kind");
 }
@@ -216,7 +229,10 @@ absl::Status WedgeBuilder::AddFrame(const ScanFrame& frame, const FrameContext& 
 absl::Status WedgeBuilder::Finish() {
   for (SensorState& s : sensors_) {
     if (!s.has_prev) continue;
-    if (auto st = EmitSingles(s.prev_rays, s.prev_range, s.prev_covered); !st.ok()) return st;
+    if (auto st = EmitSingles(s, s.next_frame - 1, s.prev_rays, s.prev_range, s.prev_covered);
+        !st.ok()) {
+      return st;
+    }
     s.has_prev = false;
     s.prev_rays.clear();
     s.prev_range.clear();

@@ -11,6 +11,7 @@
 // Streaming: memory holds only the previous frame of each line sensor, whatever the scan size.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <span>
@@ -73,9 +74,11 @@ struct FrameContext {
     std::span<const TimedPose> path, std::span<const PathCovariance> path_cov, double t,
     const NoiseModelOptions& options);
 
-// Receives each wedge; a non-OK status stops the builder and is returned by the caller's
-// AddFrame/Finish. The wedge reference is valid only during the call.
-using WedgeSink = std::function<absl::Status(const Wedge&)>;
+// Receives each wedge and the ids of its rays (ids[r] names wedge.rays[r]; RayId: equal ids,
+// the same ray; one frame, one sensor Gaussian), so a consumer can store each ray once. A
+// non-OK status stops the builder and is returned by the caller's AddFrame/Finish. Both
+// references are valid only during the call.
+using WedgeSink = std::function<absl::Status(const Wedge&, std::span<const RayId> ids)>;
 
 // Not thread-safe; one builder per scan.
 class WedgeBuilder {
@@ -99,6 +102,8 @@ class WedgeBuilder {
   struct SensorState {
     SensorInfo info;
     SensorNoiseParams noise;
+    uint32_t index = 0;       // the sensor's index (RayId::sensor)
+    uint64_t next_frame = 0;  // RayId::frame of its next frame
     bool has_prev = false;
     double prev_t = 0;
     // The previous frame (line sensors): its rays, ranges (NaN = no return) and whether a
@@ -115,9 +120,9 @@ class WedgeBuilder {
   void ComputeRays(const SensorState& s, const ScanFrame& frame, const FrameContext& context);
   [[nodiscard]] bool Continuous(float a, float b, float c, float d) const;
   absl::Status EmitWedge(const RayModel& a, const RayModel& b, const RayModel& c,
-                         const RayModel& d);
-  absl::Status EmitSingles(std::span<const RayModel> rays, std::span<const float> range,
-                           std::span<const uint8_t> covered);
+                         const RayModel& d, const std::array<RayId, 4>& ids);
+  absl::Status EmitSingles(const SensorState& s, uint64_t frame, std::span<const RayModel> rays,
+                           std::span<const float> range, std::span<const uint8_t> covered);
   absl::Status AddLineFrame(SensorState& s, const ScanFrame& frame);
   absl::Status AddGridFrame(SensorState& s, const ScanFrame& frame);
 

@@ -1,8 +1,13 @@
 #include "coordinator/wedge_builder.h"
 
 #include <cmath>
+#include <cstring>
 #include <limits>
+#include <map>
+#include <set>
+#include <span>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -56,9 +61,11 @@ FrameContext WalkContext(int i) {
 
 struct Collected {
   std::vector<Wedge> wedges;
+  std::vector<std::vector<RayId>> ids;
   WedgeSink Sink() {
-    return [this](const Wedge& w) {
+    return [this](const Wedge& w, std::span<const RayId> i) {
       wedges.push_back(w);
+      ids.emplace_back(i.begin(), i.end());
       return absl::OkStatus();
     };
   }
@@ -114,6 +121,53 @@ TEST(WedgeBuilderTest, LineSensorSweepingAWall) {
       }
     }
   }
+}
+
+// The ids let the spill store each ray once: equal ids are the same ray, bit for bit, and
+// rays of one frame share their sensor Gaussian.
+TEST(WedgeBuilderTest, RayIdsNameRaysAndFrames) {
+  constexpr int kRays = 9, kFrames = 6;
+  Collected out;
+  absl::StatusOr<WedgeBuilder> b =
+      WedgeBuilder::Create({VerticalLineSensor()}, WedgeBuilderOptions{}, out.Sink());
+  ASSERT_TRUE(b.ok()) << b.status();
+  for (int i = 0; i < kFrames; ++i) {
+    ScanFrame f = WallFrame(i, kRays);
+    if (i == 3) f.points_sensor[4] = Vector3f(kNaN, kNaN, kNaN);  // singles too
+    ASSERT_TRUE(b->AddFrame(f, WalkContext(i)).ok());
+  }
+  ASSERT_TRUE(b->Finish().ok());
+  ASSERT_EQ(out.ids.size(), out.wedges.size());
+  std::map<std::tuple<uint32_t, uint64_t, uint32_t>, RayModel> rays;
+  std::map<std::pair<uint32_t, uint64_t>, RayModel> frames;
+  size_t shared = 0;
+  for (size_t w = 0; w < out.wedges.size(); ++w) {
+    ASSERT_EQ(out.ids[w].size(), out.wedges[w].num_rays);
+    for (int r = 0; r < out.wedges[w].num_rays; ++r) {
+      const RayId& id = out.ids[w][r];
+      const RayModel& ray = out.wedges[w].rays[r];
+      EXPECT_EQ(id.sensor, 0u);
+      EXPECT_LT(id.frame, uint64_t{kFrames});
+      EXPECT_LT(id.index, uint32_t{kRays});
+      auto [it, inserted] = rays.try_emplace({id.sensor, id.frame, id.index}, ray);
+      if (!inserted) {
+        ++shared;
+        EXPECT_EQ(std::memcmp(&it->second, &ray, sizeof(RayModel)), 0);
+      }
+      auto [f, new_frame] = frames.try_emplace({id.sensor, id.frame}, ray);
+      EXPECT_EQ(f->second.sensor_mean, ray.sensor_mean);
+      EXPECT_EQ(f->second.sensor_cov, ray.sensor_cov);
+    }
+  }
+  EXPECT_EQ(rays.size(), size_t{kRays * kFrames - 1});  // every return, the NaN row not
+  EXPECT_EQ(frames.size(), size_t{kFrames});
+  EXPECT_GT(shared, rays.size());  // inner rays are in four wedges
+  // Distinct ids, distinct rays.
+  std::set<std::vector<float>> distinct;
+  for (const auto& [id, ray] : rays) {
+    distinct.insert({ray.point_mean.x(), ray.point_mean.y(), ray.point_mean.z()});
+  }
+  EXPECT_EQ(distinct.size(), rays.size());
 }
 
 TEST(WedgeBuilderTest, MissingReturnsLeaveIsolatedRaysAsSingles) {
@@ -289,7 +343,9 @@ TEST(WedgeBuilderTest, PointsAreCarvedOneByOne) {
 TEST(WedgeBuilderTest, SinkErrorsStopTheBuilder) {
   absl::StatusOr<WedgeBuilder> b =
       WedgeBuilder::Create({VerticalLineSensor()}, WedgeBuilderOptions{},
-                           [](const Wedge&) { return absl::ResourceExhaustedError("disk full"); });
+                           [](const Wedge&, std::span<const RayId>) {
+                             return absl::ResourceExhaustedError("disk full");
+                           });
   ASSERT_TRUE(b.ok());
   ASSERT_TRUE(b->AddFrame(WallFrame(0, 3), WalkContext(0)).ok());  // nothing emitted yet
   EXPECT_EQ(b->AddFrame(WallFrame(1, 3), WalkContext(1)).code(),

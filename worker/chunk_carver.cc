@@ -44,13 +44,13 @@ absl::StatusOr<CarveChunkResult> CarveChunkToTile(const CarveChunkRequest& reque
   if (request.tiles_dir.empty()) {
     return Prefixed(chunk, absl::InvalidArgumentError("no tiles directory"));
   }
-  absl::StatusOr<std::vector<Wedge>> wedges = DecodeWedges(request.wedge_payload);
+  absl::StatusOr<IndexedWedges> wedges = DecodeWedgePayload(request.wedge_payload);
   if (!wedges.ok()) return Prefixed(chunk, wedges.status());
 
   ChunkOctree tree(request.grid, chunk);
   if (request.region != nullptr) tree.RestrictTo(*request.region);
   // The whole payload in one call: eq 4.8's set of rays per leaf is exact within a call.
-  if (absl::Status s = tree.CarveWedges(*wedges); !s.ok()) return Prefixed(chunk, s);
+  if (absl::Status s = tree.CarveIndexed(*wedges); !s.ok()) return Prefixed(chunk, s);
   tree.Simplify();
 
   std::error_code ec;
@@ -69,6 +69,7 @@ absl::StatusOr<CarveChunkResult> CarveChunkToTile(const CarveChunkRequest& reque
   if (ec) result.tile_bytes = 0;
   result.wedges = tree.num_wedges();
   result.leaf_updates = tree.num_leaf_updates();
+  result.leaf_touches = tree.num_leaf_touches();
   result.leaves = tile.leaves.size();
   result.elapsed_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

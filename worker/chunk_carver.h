@@ -18,7 +18,7 @@ struct CarveChunkRequest {
   std::string job_id;
   ChunkKey chunk = ChunkKey::Zero();
   OctreeGrid grid;                 // resolution 2 m / 2^k
-  std::string_view wedge_payload;  // wedge records (storage/WEDGE_FORMAT.md), in spill order
+  std::string_view wedge_payload;  // wedge payload (storage/WEDGE_FORMAT.md), in spill order
   std::string tiles_dir;           // the tile is written here (atomically)
   double sigmas = 3.0;             // must match the ingest's
   // Carve only inside this part of the chunk (§5.6.1's second pass); null: the whole chunk.
@@ -29,6 +29,7 @@ struct CarveChunkResult {
   std::string tile_path;
   uint64_t tile_bytes = 0;
   uint64_t wedges = 0, leaf_updates = 0, leaves = 0;
+  uint64_t leaf_touches = 0;  // (leaf, wedge) pairs the wedge hulls touched
   double elapsed_s = 0;
 };
 

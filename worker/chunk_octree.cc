@@ -13,6 +13,7 @@
 #include "absl/strings/str_cat.h"
 #include "services/geometry/carve_map.h"
 #include "services/geometry/wedge_geometry.h"
+#include "worker/hull_raster.h"
 
 namespace carvemap {
 namespace {
@@ -24,66 +25,6 @@ bool Finite(const RayModel& ray) {
   }
   return true;
 }
-
-// Leaves are named inside a chunk by a linear index x | y << 10 | z << 20 (k ≤ 10).
-inline uint32_t LinearIndex(const Eigen::Vector3i& local) {
-  return uint32_t(local.x()) | uint32_t(local.y()) << 10 | uint32_t(local.z()) << 20;
-}
-inline Eigen::Vector3i FromLinearIndex(uint32_t i) {
-  return Eigen::Vector3i(int(i & 1023u), int((i >> 10) & 1023u), int(i >> 20));
-}
-
-// One wedge's descent through the chunk: prune nodes the hull misses, list the finest leaves
-// it touches. A plane (or the hull's box) that holds a node's whole box holds its children's
-// too, so it is not tested again below that node (frustum-culling masks): the leaves listed
-// are exactly those HullIntersectsBox accepts, at a fraction of the plane tests.
-struct LeafLister {
-  const OctreeGrid& grid;
-  const WedgeHull& hull;
-  Eigen::Vector3d chunk_origin;
-  std::vector<uint32_t>& out;
-  const ChunkRegion* region;  // null: the whole chunk
-
-  void Visit(const ChunkNode& node, uint64_t planes, bool in_box) {
-    if (region != nullptr && !region->Intersects(node)) return;
-    // NodeBox's arithmetic, inlined: chunk·2 m is exact, local·size is exact (size is a power
-    // of two, local < 2^10), so the one rounding of the sum is NodeBox's and the box is
-    // bit-identical to it — the coordinator binned this wedge with the same chunk box.
-    const double size = kChunkSizeM / (1 << node.depth);
-    const Eigen::Vector3d lo = chunk_origin + node.local.cast<double>() * size;
-    const Eigen::Vector3d hi = lo + Eigen::Vector3d::Constant(size);
-    if (!in_box) {
-      if ((lo.array() > hull.box.max().array()).any() ||
-          (hi.array() < hull.box.min().array()).any()) {
-        return;
-      }
-      in_box = (lo.array() >= hull.box.min().array()).all() &&
-               (hi.array() <= hull.box.max().array()).all();
-    }
-    if (planes != 0) {
-      const Eigen::Vector3d c = 0.5 * (lo + hi);
-      const Eigen::Vector3d h = 0.5 * (hi - lo);
-      for (uint64_t m = planes; m != 0; m &= m - 1) {
-        const int i = std::countr_zero(m);
-        const Eigen::Vector4d& q = hull.planes[i];
-        const double mid = q[0] * c[0] + q[1] * c[1] + q[2] * c[2];
-        const double r = std::abs(q[0]) * h[0] + std::abs(q[1]) * h[1] + std::abs(q[2]) * h[2];
-        if (mid - r > q[3]) return;              // wholly outside this half-space
-        if (mid + r <= q[3]) planes &= ~(uint64_t{1} << i);  // wholly inside: done with it
-      }
-    }
-    if (node.depth == grid.chunk_depth) {
-      out.push_back(LinearIndex(node.local));
-      return;
-    }
-    ChunkNode child;
-    child.depth = node.depth + 1;
-    for (int c = 0; c < 8; ++c) {
-      child.local = 2 * node.local + Eigen::Vector3i(c & 1, (c >> 1) & 1, (c >> 2) & 1);
-      Visit(child, planes, in_box);
-    }
-  }
-};
 
 // A ray's bits: copies of one ray in several wedge records compare equal.
 struct RayBits {
@@ -99,67 +40,79 @@ struct RayBits {
   }
 };
 
-// Per-call scratch over the chunk's finest leaves, in 8³ bricks allocated on first touch (a
-// dense array would be 537 MB at k = 8): the fused sums of this call and, per leaf, the last
-// ray that voted there (the set of eq 4.8).
+// The fused sums of one call over the chunk's finest leaves: one dense array up to k = 6
+// (262 144 leaves, 8 MiB), else 8³ bricks allocated on first touch (a dense array would be
+// 537 MB at k = 8).
 class LeafScratch {
  public:
   explicit LeafScratch(int k)
-      : brick_shift_(std::min(k, 3)), bricks_per_side_(1 << (k - brick_shift_)),
-        bricks_(size_t(bricks_per_side_) * bricks_per_side_ * bricks_per_side_) {}
+      : k_(k), shift_(k <= kDenseDepth ? k : 3), per_side_(1 << (k - shift_)),
+        bricks_(size_t(per_side_) * per_side_ * per_side_) {}
 
-  struct Cell {
-    LeafStats stats;
-    uint32_t last_ray = 0;  // ray id + 1 of the last vote; 0 = none
-  };
-
-  Cell& At(uint32_t linear) {
-    const Eigen::Vector3i l = FromLinearIndex(linear);
-    const int m = (1 << brick_shift_) - 1;
-    const size_t b = size_t(l.x() >> brick_shift_) +
-                     size_t(bricks_per_side_) * (size_t(l.y() >> brick_shift_) +
-                                                 size_t(bricks_per_side_) * size_t(l.z() >> brick_shift_));
-    std::unique_ptr<Brick>& brick = bricks_[b];
+  LeafStats& At(const Eigen::Vector3i& l) {
+    const int m = (1 << shift_) - 1;
+    const size_t b = size_t(l.x() >> shift_) +
+                     size_t(per_side_) * (size_t(l.y() >> shift_) +
+                                          size_t(per_side_) * size_t(l.z() >> shift_));
+    std::unique_ptr<LeafStats[]>& brick = bricks_[b];
     if (!brick) {
-      brick = std::make_unique<Brick>();
+      brick = std::make_unique<LeafStats[]>(size_t{1} << (3 * shift_));
       used_.push_back(uint32_t(b));
     }
-    const int s = brick_shift_;
-    return brick->cells[size_t(l.x() & m) | size_t(l.y() & m) << s | size_t(l.z() & m) << (2 * s)];
+    return brick[size_t(l.x() & m) | size_t(l.y() & m) << shift_ |
+                 size_t(l.z() & m) << (2 * shift_)];
   }
 
-  // Every touched leaf with votes, as (local, stats).
+  // Every leaf with votes, as (local, stats).
   template <typename F>
   void ForEach(F&& f) const {
-    const int side = 1 << brick_shift_;
+    const int side = 1 << shift_;
     for (uint32_t b : used_) {
-      const Eigen::Vector3i base(int(b % bricks_per_side_),
-                                 int((b / bricks_per_side_) % bricks_per_side_),
-                                 int(b / (size_t(bricks_per_side_) * bricks_per_side_)));
-      const Brick& brick = *bricks_[b];
+      const Eigen::Vector3i base(int(b % per_side_), int((b / per_side_) % per_side_),
+                                 int(b / (size_t(per_side_) * per_side_)));
+      const LeafStats* brick = bricks_[b].get();
       for (int z = 0; z < side; ++z)
         for (int y = 0; y < side; ++y)
           for (int x = 0; x < side; ++x) {
-            const Cell& c = brick.cells[size_t(x) | size_t(y) << brick_shift_ |
-                                        size_t(z) << (2 * brick_shift_)];
-            if (c.stats.count > 0) f(Eigen::Vector3i(base * side + Eigen::Vector3i(x, y, z)), c.stats);
+            const LeafStats& c =
+                brick[size_t(x) | size_t(y) << shift_ | size_t(z) << (2 * shift_)];
+            if (c.count > 0) f(Eigen::Vector3i(base * side + Eigen::Vector3i(x, y, z)), c);
           }
     }
   }
 
  private:
-  struct Brick {
-    std::array<Cell, 512> cells{};
-  };
-  int brick_shift_;
-  int bricks_per_side_;
-  std::vector<std::unique_ptr<Brick>> bricks_;
+  static constexpr int kDenseDepth = 6;
+  int k_;
+  int shift_;  // a brick holds (2^shift)³ leaves; one brick when k ≤ kDenseDepth
+  int per_side_;
+  std::vector<std::unique_ptr<LeafStats[]>> bricks_;
   std::vector<uint32_t> used_;
 };
 
-// Upper bound on the leaf lists held at once (4 bytes each): beyond it the wedges are carved
-// in windows, and a ray whose wedges fall in two windows votes once in each.
-constexpr size_t kMaxListedLeaves = size_t{1} << 26;
+// The axis a ray runs most along: its rasters are listed in runs along it, so a run is a
+// stretch of the ray (few, long runs) and eq 4.7 is stepped along it.
+int RunAxis(const PreparedRay& ray) {
+  const Eigen::Vector3d d = ray.direction().cwiseAbs();
+  return d.x() >= d.y() && d.x() >= d.z() ? 0 : (d.y() >= d.z() ? 1 : 2);
+}
+
+// Compressed rows: for each of n keys the values [begin[k], begin[k + 1]).
+struct Csr {
+  std::vector<uint32_t> begin, values;
+  template <typename Each>  // Each(emit) calls emit(key, value) for every pair, twice alike
+  void Build(size_t n, Each&& each) {
+    begin.assign(n + 1, 0);
+    each([&](size_t key, uint32_t) { ++begin[key + 1]; });
+    for (size_t k = 0; k < n; ++k) begin[k + 1] += begin[k];
+    values.resize(begin[n]);
+    std::vector<uint32_t> fill(begin.begin(), begin.end() - 1);
+    each([&](size_t key, uint32_t value) { values[fill[key]++] = value; });
+  }
+  [[nodiscard]] std::span<const uint32_t> Row(size_t k) const {
+    return {values.data() + begin[k], begin[k + 1] - begin[k]};
+  }
+};
 
 }  // namespace
 
@@ -169,129 +122,247 @@ ChunkOctree::ChunkOctree(const OctreeGrid& grid, const ChunkKey& chunk)
 }
 
 absl::Status ChunkOctree::CarveWedges(std::span<const Wedge> wedges) {
-  if (simplified_) {
-    return absl::FailedPreconditionError("chunk_octree: CarveWedge after Simplify");
-  }
+  IndexedWedges indexed;
+  indexed.wedges.reserve(wedges.size());
+  absl::flat_hash_map<RayBits, uint32_t> ray_ids;
   for (size_t w = 0; w < wedges.size(); ++w) {
     const Wedge& wedge = wedges[w];
     if (wedge.num_rays < 1 || wedge.num_rays > 4) {
       return absl::InvalidArgumentError(absl::StrCat("chunk_octree: wedge ", w, " with ",
                                                      wedge.num_rays, " rays (expected 1 to 4)"));
     }
+    WedgeRef ref;
+    ref.num_rays = wedge.num_rays;
     for (int r = 0; r < wedge.num_rays; ++r) {
       if (!Finite(wedge.rays[r])) {
         return absl::InvalidArgumentError(absl::StrCat(
             "chunk_octree: wedge ", w, " ray ", r, " has a non-finite mean or covariance"));
       }
+      auto [it, inserted] =
+          ray_ids.try_emplace(RayBits(wedge.rays[r]), uint32_t(indexed.rays.size()));
+      if (inserted) indexed.rays.push_back(wedge.rays[r]);
+      ref.ray[r] = it->second;
+    }
+    indexed.wedges.push_back(ref);
+  }
+  return CarveIndexed(indexed);
+}
+
+absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
+  if (simplified_) {
+    return absl::FailedPreconditionError("chunk_octree: CarveWedge after Simplify");
+  }
+  const size_t num_rays = in.rays.size(), num_wedges = in.wedges.size();
+  for (size_t w = 0; w < num_wedges; ++w) {
+    const WedgeRef& wedge = in.wedges[w];
+    if (wedge.num_rays < 1 || wedge.num_rays > 4) {
+      return absl::InvalidArgumentError(absl::StrCat("chunk_octree: wedge ", w, " with ",
+                                                     wedge.num_rays, " rays (expected 1 to 4)"));
+    }
+    for (int r = 0; r < wedge.num_rays; ++r) {
+      if (wedge.ray[r] >= num_rays) {
+        return absl::InvalidArgumentError(absl::StrCat("chunk_octree: wedge ", w, " ray ", r,
+                                                       " has index ", wedge.ray[r], " of ",
+                                                       num_rays, " rays"));
+      }
     }
   }
-  num_wedges_ += wedges.size();
+  for (size_t r = 0; r < num_rays; ++r) {
+    if (!Finite(in.rays[r])) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("chunk_octree: ray ", r, " has a non-finite mean or covariance"));
+    }
+  }
+  num_wedges_ += num_wedges;
 
+  // 1. Every ray prepared once (eq 4.7's constants) with its run axis; a ray shorter than 1 µm
+  //    (the only way Make fails on finite input) has no direction and no vote.
+  std::vector<std::optional<PreparedRay>> rays(num_rays);
+  std::vector<int8_t> axis(num_rays, -1);
+  // The wedge hulls' points, once per ray rather than once per wedge.
+  std::vector<Eigen::Vector3d> sensor_means(num_rays), far_ends(num_rays);
+  for (size_t r = 0; r < num_rays; ++r) {
+    sensor_means[r] = in.rays[r].sensor_mean.cast<double>();
+    far_ends[r] = ExtendedPointMean(in.rays[r], kWedgeHullSigmas);
+    absl::StatusOr<PreparedRay> p = PreparedRay::Make(in.rays[r]);
+    if (!p.ok()) continue;
+    rays[r] = *p;
+    axis[r] = int8_t(RunAxis(*p));
+  }
+
+  // 2. Each ray's wedges, and the last of them: the ray votes once that wedge is listed, and a
+  //    wedge's runs are dropped once all its rays have voted, so the runs held follow the span
+  //    of a ray's wedges in the payload (two frames of a line sensor), not the chunk's size
+  //    (what grows with the chunk is ~100 bytes of bookkeeping per wedge and per ray).
+  Csr ray_wedges;
+  ray_wedges.Build(num_rays, [&](auto&& emit) {
+    for (size_t w = 0; w < num_wedges; ++w)
+      for (int r = 0; r < in.wedges[w].num_rays; ++r) emit(in.wedges[w].ray[r], uint32_t(w));
+  });
+  std::vector<uint32_t> last_wedge(num_rays, 0);
+  for (size_t r = 0; r < num_rays; ++r) {
+    const auto row = ray_wedges.Row(r);
+    if (!row.empty()) last_wedge[r] = row.back();
+  }
+  Csr voters;  // rays by the wedge after which they vote
+  voters.Build(num_wedges, [&](auto&& emit) {
+    for (size_t r = 0; r < num_rays; ++r)
+      if (!ray_wedges.Row(r).empty()) emit(last_wedge[r], uint32_t(r));
+  });
+  std::vector<uint32_t> free_after(num_wedges, 0);
+  std::vector<uint8_t> axes_needed(num_wedges, 0);
+  for (size_t w = 0; w < num_wedges; ++w) {
+    for (int r = 0; r < in.wedges[w].num_rays; ++r) {
+      const uint32_t id = in.wedges[w].ray[r];
+      free_after[w] = std::max(free_after[w], last_wedge[id]);
+      if (axis[id] >= 0) axes_needed[w] |= uint8_t(1 << axis[id]);
+    }
+  }
+  Csr freed;  // wedges by the wedge after which their runs are no longer needed
+  freed.Build(num_wedges, [&](auto&& emit) {
+    for (size_t w = 0; w < num_wedges; ++w) emit(free_after[w], uint32_t(w));
+  });
+
+  // 3. Wedge by wedge: list its leaves as runs along the axes its rays need; then every ray
+  //    whose wedges are all listed votes once in each leaf of the union of their runs (eq 4.8
+  //    with S(L) a set), in a fixed order, so the sums depend only on the input.
   const Eigen::Vector3d chunk_origin = chunk_.cast<double>() * kChunkSizeM;
   const double leaf_size = grid_.resolution_m();
-  size_t begin = 0;
-  while (begin < wedges.size()) {
-    // 1. The distinct rays of this window, numbered in order of first appearance, and for each
-    //    wedge the finest leaves its hull touches.
-    absl::flat_hash_map<RayBits, uint32_t> ray_ids;
-    std::vector<const RayModel*> rays;
-    std::vector<std::array<int32_t, 4>> wedge_rays;  // ray ids, −1 = none
-    std::vector<uint32_t> leaves;
-    std::vector<size_t> leaf_begin{0};
-    size_t end = begin;
-    for (; end < wedges.size() && (end == begin || leaves.size() < kMaxListedLeaves); ++end) {
-      const Wedge& wedge = wedges[end];
-      std::array<int32_t, 4> ids = {-1, -1, -1, -1};
-      for (int r = 0; r < wedge.num_rays; ++r) {
-        auto [it, inserted] = ray_ids.try_emplace(RayBits(wedge.rays[r]), uint32_t(rays.size()));
-        if (inserted) rays.push_back(&wedge.rays[r]);
-        ids[r] = int32_t(it->second);
+  const ChunkRegion* region = region_ ? &*region_ : nullptr;
+  std::vector<std::array<std::vector<LeafRun>, 3>> runs(num_wedges);
+  std::vector<std::vector<LeafRun>> pool;  // emptied run lists, reused
+  std::vector<LeafRun> merged;
+  std::vector<std::pair<const LeafRun*, const LeafRun*>> heads;
+  // One ray's leaves: their projections on the ray, their sums, and its votes.
+  std::vector<double> par, lat_a, lat_b, vote_p, vote_w;
+  std::vector<LeafStats*> cells;
+  LeafScratch scratch(grid_.chunk_depth);
+  Wedge wedge;
+  uint64_t updates = 0, touches = 0;
+  for (size_t w = 0; w < num_wedges; ++w) {
+    const WedgeRef& ref = in.wedges[w];
+    if (axes_needed[w] != 0) {
+      WedgeHull hull;
+      if (ref.num_rays == 1) {
+        wedge.num_rays = 1;
+        wedge.rays[0] = in.rays[ref.ray[0]];
+        hull = MakeWedgeHull(wedge, kWedgeHullSigmas);
+      } else {
+        std::array<Eigen::Vector3d, 4> s, e;
+        for (int r = 0; r < ref.num_rays; ++r) {
+          s[r] = sensor_means[ref.ray[r]];
+          e[r] = far_ends[ref.ray[r]];
+        }
+        uint64_t facets = ref.facets;  // the coordinator's: no search for facets
+        hull = HullOfWedgePoints({s.data(), ref.num_rays}, {e.data(), ref.num_rays}, &facets);
       }
-      wedge_rays.push_back(ids);
-      const WedgeHull hull = MakeWedgeHull(wedge, kWedgeHullSigmas);
-      LeafLister lister{grid_, hull, chunk_origin, leaves, region_ ? &*region_ : nullptr};
-      // ≤ 56 planes: the brute-force hull has one per triple of its ≤ 8 points (C(8,3) = 56),
-      // prisms ≤ 18, boxes 6; so every plane has a bit.
-      assert(hull.planes.size() <= 64);
-      const uint64_t planes =
-          hull.planes.size() >= 64 ? ~uint64_t{0} : (uint64_t{1} << hull.planes.size()) - 1;
-      // Start at the deepest node that holds the hull's box (widened by a leaf against
-      // rounding): nothing outside it can be touched, and the levels above cost a thin
-      // wedge as much as the leaves.
-      const int n = grid_.leaves_per_side();
-      Eigen::Vector3i i0, i1;
+      bool counted = false;
       for (int a = 0; a < 3; ++a) {
-        i0[a] = std::clamp(int(std::floor((hull.box.min()[a] - chunk_origin[a]) / leaf_size)) - 1, 0, n - 1);
-        i1[a] = std::clamp(int(std::floor((hull.box.max()[a] - chunk_origin[a]) / leaf_size)) + 1, 0, n - 1);
+        if (!(axes_needed[w] & (1 << a))) continue;
+        std::vector<LeafRun>& list = runs[w][a];
+        if (!pool.empty()) {
+          list.swap(pool.back());
+          pool.pop_back();
+        }
+        const size_t n = RasterizeHull(hull, grid_, chunk_, a, region, list);
+        if (!counted) touches += n;
+        counted = true;
       }
-      ChunkNode start;
-      start.depth = grid_.chunk_depth;
-      auto shifted = [&](const Eigen::Vector3i& v, int d) {
-        const int sh = grid_.chunk_depth - d;
-        return Eigen::Vector3i(v.x() >> sh, v.y() >> sh, v.z() >> sh);
-      };
-      while (start.depth > 0 && shifted(i0, start.depth) != shifted(i1, start.depth)) --start.depth;
-      start.local = shifted(i0, start.depth);
-      lister.Visit(start, planes, false);
-      leaf_begin.push_back(leaves.size());
     }
-    num_leaf_touches_ += leaves.size();
-
-    // 2. Which wedges hold each ray (compressed rows).
-    std::vector<uint32_t> ray_wedge_begin(rays.size() + 1, 0);
-    for (const auto& ids : wedge_rays)
-      for (int32_t id : ids)
-        if (id >= 0) ++ray_wedge_begin[size_t(id) + 1];
-    for (size_t i = 0; i < rays.size(); ++i) ray_wedge_begin[i + 1] += ray_wedge_begin[i];
-    std::vector<uint32_t> ray_wedges(ray_wedge_begin.back());
-    {
-      std::vector<uint32_t> fill(ray_wedge_begin.begin(), ray_wedge_begin.end() - 1);
-      for (size_t w = 0; w < wedge_rays.size(); ++w)
-        for (int32_t id : wedge_rays[w])
-          if (id >= 0) ray_wedges[fill[size_t(id)]++] = uint32_t(w);
-    }
-
-    // 3. Each ray votes once in every leaf of the union of its wedges' leaves (eq 4.8 with S a
-    //    set), in ray order, so the sums are deterministic for a given payload.
-    LeafScratch scratch(grid_.chunk_depth);
-    uint64_t updates = 0;
-    for (size_t id = 0; id < rays.size(); ++id) {
-      // With finite input, Make only fails for a ray shorter than 1 µm: no direction, no vote.
-      absl::StatusOr<PreparedRay> ray = PreparedRay::Make(*rays[id]);
-      if (!ray.ok()) continue;
-      const uint32_t stamp = uint32_t(id) + 1;
-      for (uint32_t k = ray_wedge_begin[id]; k < ray_wedge_begin[id + 1]; ++k) {
-        const uint32_t w = ray_wedges[k];
-        for (size_t i = leaf_begin[w]; i < leaf_begin[w + 1]; ++i) {
-          LeafScratch::Cell& cell = scratch.At(leaves[i]);
-          if (cell.last_ray == stamp) continue;
-          cell.last_ray = stamp;
-          // The leaf centre as NodeBox(...).center() computes it.
-          const Eigen::Vector3d lo =
-              chunk_origin + FromLinearIndex(leaves[i]).cast<double>() * leaf_size;
-          const Eigen::Vector3d x_leaf = 0.5 * (lo + (lo + Eigen::Vector3d::Constant(leaf_size)));
-          const CarveSample s = ray->Evaluate(x_leaf);
-          // w = f_⊥ ∈ [0, 1] is how much the ray speaks about x_L. Tiny weights still count:
-          // a leaf in the middle of a wide wedge (sparse beams, far from the sensor) lies many
-          // σ_⊥ from all four rays, yet §4.2.1/§4.3.1 mean the wedge's interpolated volume to
-          // be carved, and every vote there is p = 0.5 + f_⊥/2 > 0.5, so the leaf is interior
-          // whatever the magnitude. With the cut at 1e-6 (x_L beyond ~5.3 σ_⊥) such leaves
-          // stayed unobserved, i.e. exterior pockets inside rooms; at 1e-15 (~8.3 σ_⊥) the
-          // office accuracy test observes 46 % more leaves at the same 98.5 % accuracy. The cut
-          // itself keeps sum_w clear of denormals.
-          if (s.w < kMinRayWeight) continue;
-          cell.stats.Add(s.p, s.w);
-          ++updates;
+    for (uint32_t r : voters.Row(w)) {
+      if (axis[r] < 0) continue;
+      const int a = axis[r], u = (a + 1) % 3, v = (a + 2) % 3;
+      // The union of the ray's wedges' runs, sorted: a merge of their sorted lists.
+      merged.clear();
+      heads.clear();
+      for (uint32_t rw : ray_wedges.Row(r)) {
+        const std::vector<LeafRun>& list = runs[rw][a];
+        if (!list.empty()) heads.push_back({list.data(), list.data() + list.size()});
+      }
+      if (heads.size() == 1) {
+        merged.assign(heads[0].first, heads[0].second);
+      } else {
+        while (!heads.empty()) {
+          size_t best = 0;
+          for (size_t h = 1; h < heads.size(); ++h) {
+            if (*heads[h].first < *heads[best].first) best = h;
+          }
+          merged.push_back(*heads[best].first++);
+          if (heads[best].first == heads[best].second) {
+            heads[best] = heads.back();
+            heads.pop_back();
+          }
         }
       }
+      const PreparedRay& ray = *rays[r];
+      Eigen::Vector3d step = Eigen::Vector3d::Zero();
+      step[a] = leaf_size;
+      const PreparedRay::Projection dp = ray.ProjectStep(step);
+      // The leaves of the union: overlapping or adjacent runs of one row are one stretch.
+      // Leaf centres as NodeBox(...).center() computes them, stepped from the row's first
+      // leaf, so a leaf's value does not depend on how the runs around it were cut.
+      par.clear();
+      lat_a.clear();
+      lat_b.clear();
+      cells.clear();
+      for (size_t i = 0; i < merged.size();) {
+        const LeafRun first = merged[i];
+        int hi = RunHi(first);
+        size_t j = i + 1;
+        for (; j < merged.size() && RunRow(merged[j]) == RunRow(first) &&
+               RunLo(merged[j]) <= hi + 1;
+             ++j) {
+          hi = std::max(hi, RunHi(merged[j]));
+        }
+        Eigen::Vector3i local;
+        local[a] = 0;
+        local[u] = RunU(first);
+        local[v] = RunV(first);
+        const Eigen::Vector3d lo = chunk_origin + local.cast<double>() * leaf_size;
+        const PreparedRay::Projection p0 =
+            ray.Project((lo + (lo + Eigen::Vector3d::Constant(leaf_size))) / 2.0);
+        for (int t = RunLo(first); t <= hi; ++t) {
+          par.push_back(p0.par + t * dp.par);
+          lat_a.push_back(p0.a + t * dp.a);
+          lat_b.push_back(p0.b + t * dp.b);
+          local[a] = t;
+          cells.push_back(&scratch.At(local));
+        }
+        i = j;
+      }
+      vote_p.resize(par.size());
+      vote_w.resize(par.size());
+      ray.EvaluateMany(par.data(), lat_a.data(), lat_b.data(), par.size(), vote_p.data(),
+                       vote_w.data());
+      for (size_t i = 0; i < par.size(); ++i) {
+        // w = f_⊥ ∈ [0, 1] is how much the ray speaks about x_L. Tiny weights still count:
+        // a leaf in the middle of a wide wedge (sparse beams, far from the sensor) lies many
+        // σ_⊥ from all four rays, yet §4.2.1/§4.3.1 mean the wedge's interpolated volume to
+        // be carved, and every vote there is p = 0.5 + f_⊥/2 > 0.5, so the leaf is interior
+        // whatever the magnitude. With the cut at 1e-6 (x_L beyond ~5.3 σ_⊥) such leaves
+        // stayed unobserved, i.e. exterior pockets inside rooms; at 1e-15 (~8.3 σ_⊥) the
+        // office accuracy test observes 46 % more leaves at the same 98.5 % accuracy. The
+        // cut itself keeps sum_w clear of denormals.
+        if (vote_w[i] < kMinRayWeight) continue;
+        cells[i]->Add(vote_p[i], vote_w[i]);
+        ++updates;
+      }
     }
-    num_leaf_updates_ += updates;
-    Level& finest = levels_[grid_.chunk_depth];
-    scratch.ForEach([&](const Eigen::Vector3i& local, const LeafStats& stats) {
-      finest[MortonCode(local)].Merge(stats);
-    });
-    begin = end;
+    for (uint32_t fw : freed.Row(w)) {
+      for (std::vector<LeafRun>& list : runs[fw]) {
+        if (list.capacity() == 0) continue;
+        list.clear();
+        pool.push_back(std::move(list));
+        list = {};
+      }
+    }
   }
+  num_leaf_touches_ += touches;
+  num_leaf_updates_ += updates;
+  Level& finest = levels_[grid_.chunk_depth];
+  scratch.ForEach([&](const Eigen::Vector3i& local, const LeafStats& stats) {
+    finest[MortonCode(local)].Merge(stats);
+  });
   return absl::OkStatus();
 }
 

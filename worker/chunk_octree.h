@@ -48,12 +48,17 @@ class ChunkOctree {
   // rays", is the SET of rays of the wedges that touch L: a ray shared by several such wedges
   // (neighbouring wedges share edges: each ray of a line or grid sensor belongs to up to 4)
   // votes once, with its carve map value at the leaf centre, LeafStats::Add(p, w), skipping
-  // w < kMinRayWeight. Rays are the same when their RayModels are bit-identical, as copies of
-  // one ray in several wedge records are. The set is exact within one call (the worker passes a
-  // chunk's whole payload); a ray given again in a later call votes again. A wedge that misses
-  // the chunk changes nothing; rays shorter than 1 µm carve nothing.
-  // Errors (nothing changed): InvalidArgument for num_rays outside [1, 4] or a non-finite
-  // mean/covariance (naming the wedge); FailedPrecondition after Simplify().
+  // w < kMinRayWeight. Rays are the entries of wedges.rays (the payload stores each ray once;
+  // two equal entries would vote as two rays). The set is exact within one call (the worker
+  // passes a chunk's whole payload); a ray given again in a later call votes again. A wedge that misses the chunk
+  // changes nothing; rays shorter than 1 µm carve nothing. Votes are summed in a fixed order
+  // that depends only on the input, so equal input gives bit-identical sums.
+  // Errors (nothing changed): InvalidArgument for num_rays outside [1, 4], a ray index out of
+  // range or a non-finite mean/covariance (naming the wedge or ray); FailedPrecondition after
+  // Simplify().
+  absl::Status CarveIndexed(const IndexedWedges& wedges);
+  // The same for wedges that carry copies of their rays: rays are the same when their
+  // RayModels are bit-identical, as copies of one ray in several wedge records are.
   absl::Status CarveWedges(std::span<const Wedge> wedges);
   absl::Status CarveWedge(const Wedge& wedge) { return CarveWedges({&wedge, 1}); }
   // Later carving touches only the leaves inside `region` (§5.6.1: a second, finer pass over
@@ -82,7 +87,7 @@ class ChunkOctree {
   [[nodiscard]] bool simplified() const { return simplified_; }
   [[nodiscard]] uint64_t num_wedges() const { return num_wedges_; }  // carved, incl. misses
   [[nodiscard]] uint64_t num_leaf_updates() const { return num_leaf_updates_; }  // Add() calls
-  // (leaf, wedge) pairs the wedge hulls touched: leaf updates / this ≈ distinct rays per touch.
+  // (leaf, wedge) pairs the wedge hulls touched.
   [[nodiscard]] uint64_t num_leaf_touches() const { return num_leaf_touches_; }
 
  private:

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <random>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
@@ -220,6 +221,85 @@ TEST(CarveMapTest, FusionIsTheWeightedMean) {
   FuseInto(leaf, b);
   EXPECT_EQ(leaf.count, 2u);
   EXPECT_NEAR(leaf.p(), (a.p * a.w + b.p * b.w) / (a.w + b.w), 1e-12);
+}
+
+TEST(CarveMapTest, ExpNegIsExpToFourUlp) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0, 40);
+  for (int i = 0; i < 200000; ++i) {
+    const double x = i < 100 ? i * 0.5 : u(rng);
+    const double want = std::exp(-x);
+    EXPECT_NEAR(ExpNeg(x), want, 9e-16 * want) << x;
+  }
+  EXPECT_EQ(ExpNeg(0.0), 1.0);
+  EXPECT_EQ(ExpNeg(800.0), 0.0);
+  EXPECT_EQ(ExpNeg(720.0), 0.0);  // subnormal range: flushed
+  EXPECT_TRUE(std::isnan(ExpNeg(NAN)));
+}
+
+TEST(CarveMapTest, EvaluateAlongARowIsEvaluateAtEachPoint) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(-1, 1);
+  int with_weight = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    const RayModel ray = RandomRay(rng);
+    const absl::StatusOr<PreparedRay> pr = PreparedRay::Make(ray);
+    ASSERT_TRUE(pr.ok());
+    // A row crossing the ray near its middle, along one axis, 0.05 m apart.
+    const Vector3d mid = 0.5 * (ray.sensor_mean + ray.point_mean).cast<double>();
+    const int axis = trial % 3;
+    Vector3d step = Vector3d::Zero();
+    step[axis] = 0.05;
+    const Vector3d x0 = mid - 20 * step + Vector3d(u(rng), u(rng), u(rng)) * 0.05;
+    pr->EvaluateAlong(x0, step, 0, 39, [&](int i, const CarveSample& s) {
+      const CarveSample e = pr->Evaluate(x0 + i * step);
+      EXPECT_NEAR(s.p, e.p, 1e-13);
+      EXPECT_NEAR(s.w, e.w, 1e-13);
+      with_weight += e.w > 1e-6;
+    });
+  }
+  EXPECT_GT(with_weight, 500);
+}
+
+// The carver's batch: bit for bit what Evaluate gives, near the sensor and the point (erfc),
+// on the ray (f_⊥ = 1), far from it (no weight) and in between.
+TEST(CarveMapTest, EvaluateManyIsEvaluateBitForBit) {
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<double> u(-1, 1), t(-0.2, 1.2);
+  size_t weighted = 0, erfc_region = 0, far = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const RayModel ray = trial % 3 == 0 ? AxisRay() : RandomRay(rng);
+    const absl::StatusOr<PreparedRay> pr = PreparedRay::Make(ray);
+    ASSERT_TRUE(pr.ok());
+    const Vector3d s = ray.sensor_mean.cast<double>(), e = ray.point_mean.cast<double>();
+    std::vector<Vector3d> xs;
+    for (int i = 0; i < 37; ++i) {  // odd: the scalar tail too
+      const double lateral = std::pow(10.0, -4 + 4 * (u(rng) + 1) / 2);
+      Vector3d x = s + t(rng) * (e - s) + lateral * Vector3d(u(rng), u(rng), u(rng));
+      if (i == 5) x = s + 0.5 * (e - s);  // on the ray
+      xs.push_back(x);
+    }
+    std::vector<double> par, a, b;
+    for (const Vector3d& x : xs) {
+      const PreparedRay::Projection pj = pr->Project(x);
+      par.push_back(pj.par);
+      a.push_back(pj.a);
+      b.push_back(pj.b);
+    }
+    std::vector<double> p(xs.size()), w(xs.size());
+    pr->EvaluateMany(par.data(), a.data(), b.data(), xs.size(), p.data(), w.data());
+    for (size_t i = 0; i < xs.size(); ++i) {
+      const CarveSample want = pr->Evaluate(xs[i]);
+      EXPECT_EQ(p[i], want.p) << trial << " " << i;
+      EXPECT_EQ(w[i], want.w) << trial << " " << i;
+      weighted += want.w > 1e-6;
+      far += want.w == 0;
+      erfc_region += want.w > 1e-6 && std::abs(want.p - 0.5 * (1 + want.w)) > 1e-6;
+    }
+  }
+  EXPECT_GT(weighted, 1000u);
+  EXPECT_GT(far, 300u);
+  EXPECT_GT(erfc_region, 200u);
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -40,6 +41,29 @@ struct RayModel {
 struct Wedge {
   std::array<RayModel, 4> rays;
   uint8_t num_rays = 4;  // 4, or 1 for `points` sensors
+};
+
+// Where a ray comes from, as the wedge builder numbers them: rays with equal ids are the same
+// ray (bit-identical RayModels), and rays of one frame (sensor, frame) share their sensor
+// Gaussian. Frames count up from 0 per sensor; index is the ray's place in its frame.
+struct RayId {
+  uint32_t sensor = 0;
+  uint64_t frame = 0;
+  uint32_t index = 0;
+  bool operator==(const RayId&) const = default;
+};
+
+// Wedges that share rays, each distinct ray stored once: the form the wedge payload decodes to
+// (storage/WEDGE_FORMAT.md). Wedge w joins rays[wedges[w].ray[0 … num_rays)]; neighbouring
+// wedges of a line or grid sensor share edges, so each ray belongs to up to four of them.
+struct WedgeRef {
+  std::array<uint32_t, 4> ray{};
+  uint8_t num_rays = 4;  // 4, or 1 for a single-ray wedge
+  uint64_t facets = 0;   // hull hint (HullOfWedgePoints); 0: none
+};
+struct IndexedWedges {
+  std::vector<RayModel> rays;
+  std::vector<WedgeRef> wedges;
 };
 
 // The fused statistics of one octree leaf (eq 4.8), kept as sums so that fusion is a plain

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cassert>
 #include <cmath>
 #include <limits>
 
@@ -77,6 +78,15 @@ void AddSupportPlane(const PointSet& s, const Vector3d& n, double extra, WedgeHu
   hull.planes.emplace_back(n.x(), n.y(), n.z(), support + extra + n.dot(s.origin) + kSlackM);
 }
 
+// Adds the plane n·x <= support (n unit, support over the points relative to s.origin), if n
+// is new.
+void AddPlane(const PointSet& s, const Vector3d& n, double support, WedgeHull& hull) {
+  for (const Vector4d& q : hull.planes) {
+    if (q.head<3>().dot(n) > 1 - 1e-12) return;  // duplicate (the coplanar faces of a quad)
+  }
+  hull.planes.emplace_back(n.x(), n.y(), n.z(), support + n.dot(s.origin) + kSlackM);
+}
+
 void SetBox(const PointSet& s, const Vector3d& widen, WedgeHull& hull) {
   Eigen::AlignedBox3d box;
   for (int i = 0; i < s.n; ++i) box.extend(s.p[i]);
@@ -98,30 +108,66 @@ void OrientedBoxHull(const PointSet& s, const Eigen::Matrix3d& axes, const Vecto
 }
 
 // Convex hull of points spanning 3D: a plane through every non-degenerate triple that has all
-// points on one side is a facet plane (n ≤ 8, so 56 triples; simpler and sturdier than an
-// incremental hull for this size).
-void BruteForceHull(const PointSet& s, double extent, WedgeHull& hull) {
+// points on one side is a facet plane (n ≤ 8, so ≤ 56 triples; simpler and sturdier than an
+// incremental hull for this size). `thinnest` receives the smallest width of the points along
+// a facet normal (about the hull's thickness). Triples are numbered in (i, j, k) order; the
+// facets' bits are added to *found. With a nonzero `only`, just those triples are tried (a
+// replay of an earlier search on the same points: the same planes, bit for bit); false if one
+// of them is not a facet.
+bool BruteForceHull(const PointSet& s, double extent, WedgeHull& hull, double& thinnest,
+                    uint64_t* found, uint64_t only) {
   const double tol = 1e-9 * extent;
+  const double min_cross = kMinRelativeCross * extent * extent;
+  int t = -1;
   for (int i = 0; i < s.n; ++i) {
     for (int j = i + 1; j < s.n; ++j) {
+      const Vector3d eij = s.p[j] - s.p[i];
       for (int k = j + 1; k < s.n; ++k) {
-        Vector3d n = (s.p[j] - s.p[i]).cross(s.p[k] - s.p[i]);
-        const double len = n.norm();
-        if (len <= kMinRelativeCross * extent * extent) continue;
-        n /= len;
+        ++t;
+        if (only != 0 && !(only >> t & 1)) continue;
+        Vector3d n = eij.cross(s.p[k] - s.p[i]);
+        const double len2 = n.squaredNorm();
+        if (len2 <= min_cross * min_cross) {
+          if (only != 0) return false;
+          continue;
+        }
+        // Sides first with the unnormalized normal (distances scaled by |n|): most triples
+        // are not facets, and they need no square root.
+        {
+          const double o = n.dot(s.p[i]), tol2 = tol * tol * len2;
+          bool above = false, below = false;
+          for (int m = 0; m < s.n && !(above && below); ++m) {
+            const double dist = n.dot(s.p[m]) - o;
+            above |= dist > 0 && dist * dist > tol2;
+            below |= dist < 0 && dist * dist > tol2;
+          }
+          if (above && below) {  // a plane through the hull, not a facet
+            if (only != 0) return false;
+            continue;
+          }
+        }
+        n /= std::sqrt(len2);
         const double o = n.dot(s.p[i]);
-        bool above = false, below = false;
+        double lo = 0, hi = 0;
         for (int m = 0; m < s.n; ++m) {
           const double dist = n.dot(s.p[m]) - o;
-          above |= dist > tol;
-          below |= dist < -tol;
+          lo = std::min(lo, dist);
+          hi = std::max(hi, dist);
         }
-        if (above && below) continue;
-        AddSupportPlane(s, below ? n : Vector3d(-n), 0.0, hull);
+        const bool below = lo < -tol;
+        thinnest = std::min(thinnest, hi - lo);
+        if (found != nullptr) *found |= uint64_t{1} << t;
+        // Outward: away from the points. The offset is the points' exact support.
+        if (below) {
+          AddPlane(s, n, o + hi, hull);
+        } else {
+          AddPlane(s, -n, -(o + lo), hull);
+        }
       }
     }
   }
   SetBox(s, Vector3d::Zero(), hull);
+  return true;
 }
 
 // A flat point set (normal e3): the prism over its 2D hull in the (e1, e2) plane, half-thickness
@@ -185,16 +231,58 @@ WedgeHull SingleRayHull(const RayModel& ray, double sigmas) {
 
 }  // namespace
 
-WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas) {
+WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas, uint64_t* facets) {
   const int num_rays = std::clamp<int>(wedge.num_rays, 1, 4);
-  if (num_rays == 1) return SingleRayHull(wedge.rays[0], sigmas);
-
-  PointSet s;
-  s.origin = wedge.rays[0].point_mean.cast<double>();
+  if (num_rays == 1) {
+    if (facets != nullptr) *facets = 0;
+    return SingleRayHull(wedge.rays[0], sigmas);
+  }
+  std::array<Vector3d, 4> sensors, ends;
   for (int i = 0; i < num_rays; ++i) {
-    const RayModel& ray = wedge.rays[i];
-    s.Add(ray.sensor_mean.cast<double>());
-    s.Add(ExtendedPointMean(ray, sigmas));
+    sensors[i] = wedge.rays[i].sensor_mean.cast<double>();
+    ends[i] = ExtendedPointMean(wedge.rays[i], sigmas);
+  }
+  return HullOfWedgePoints(std::span(sensors.data(), num_rays), std::span(ends.data(), num_rays),
+                           facets);
+}
+
+WedgeHull HullOfWedgePoints(std::span<const Vector3d> sensor_means,
+                            std::span<const Vector3d> far_ends, uint64_t* facets) {
+  assert(!far_ends.empty() && sensor_means.size() + far_ends.size() <= 8);
+  const uint64_t hint = facets != nullptr ? *facets : 0;
+  if (facets != nullptr) *facets = 0;
+  PointSet s;
+  s.origin = far_ends[0];
+  // Rays of one frame share their sensor mean: a repeated point adds no facet, only work.
+  auto add = [&s](const Vector3d& x) {
+    const Vector3d rel = x - s.origin;
+    for (int i = 0; i < s.n; ++i) {
+      if (s.p[i] == rel) return;
+    }
+    s.p[s.n++] = rel;
+  };
+  for (const Vector3d& x : sensor_means) add(x);
+  for (const Vector3d& x : far_ends) add(x);
+
+  // The usual wedge spans 3D well: its facets are the planes through triples of points with
+  // every point on one side. Only a thin (flat or collinear) set needs the principal axes.
+  if (s.n >= 4) {
+    Eigen::AlignedBox3d box;
+    for (int i = 0; i < s.n; ++i) box.extend(s.p[i]);
+    const double extent = box.diagonal().norm();
+    // With a hint, replay it; if it names a non-facet, search as without one.
+    for (const uint64_t only : {hint, uint64_t{0}}) {
+      WedgeHull hull;
+      hull.planes.reserve(16);
+      double thinnest = std::numeric_limits<double>::infinity();
+      uint64_t found = 0;
+      if (!BruteForceHull(s, extent, hull, thinnest, &found, only)) continue;
+      if (hull.planes.size() >= 4 && thinnest >= 2 * kMinHalfThicknessM) {
+        if (facets != nullptr) *facets = found;
+        return hull;
+      }
+      break;  // thin: principal axes below
+    }
   }
 
   // Principal axes of the points, to detect flat and collinear wedges.
@@ -228,7 +316,8 @@ WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas) {
   } else if (extent[2] < 2 * kMinHalfThicknessM) {
     PrismHull(s, axes, kMinHalfThicknessM, hull);
   } else {
-    BruteForceHull(s, extent[0], hull);
+    double thinnest = 0;
+    BruteForceHull(s, extent[0], hull, thinnest, nullptr, 0);
   }
   return hull;
 }

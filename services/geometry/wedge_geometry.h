@@ -3,6 +3,8 @@
 // touch, and the workers, which find the leaves they touch: both must agree.
 #pragma once
 
+#include <cstdint>
+#include <span>
 #include <vector>
 
 #include <Eigen/Core>
@@ -21,7 +23,19 @@ struct WedgeHull {
 // The hull of the wedge's sensor means and its point means extended `sigmas` standard
 // deviations (of the point Gaussian, along the ray) past the point (§4.3.1: 3σ). A single-ray
 // wedge is that segment dilated laterally by `sigmas` of the ray's lateral spread.
-[[nodiscard]] WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas = 3.0);
+// `facets`, if given, receives a hint for rebuilding the same hull faster (the facet triples of
+// the points, 0 when the hull is not made of them): see HullOfWedgePoints.
+[[nodiscard]] WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas = 3.0,
+                                      uint64_t* facets = nullptr);
+// The same hull from a multi-ray wedge's points, for callers that computed them once per ray:
+// the rays' sensor means and their ExtendedPointMean (same order, 2 to 4 rays). `facets`, if
+// given, is a hint in and out: in, a nonzero hint from an earlier call on the same points
+// (the coordinator's, sent with the wedge) skips the search for facets and gives the same
+// hull bit for bit (a hint naming a non-facet is ignored; one missing a facet would give a
+// larger hull); out, the hint for this hull.
+[[nodiscard]] WedgeHull HullOfWedgePoints(std::span<const Eigen::Vector3d> sensor_means,
+                                          std::span<const Eigen::Vector3d> far_ends,
+                                          uint64_t* facets = nullptr);
 
 // Conservative: true whenever the hull and the box intersect (it may also say true for a box
 // that only comes near the hull, never false for one that touches it).

@@ -267,6 +267,42 @@ INSTANTIATE_TEST_SUITE_P(Kinds, WedgeHullFuzzTest,
                                            Kind::kCollinear, Kind::kSingle, Kind::kTwoRays,
                                            Kind::kZeroLength));
 
+// The coordinator sends each wedge's facet triples; the worker's hull from them is the same,
+// plane for plane. A hint naming a non-facet is ignored; one missing a facet only loosens.
+TEST(WedgeHullTest, FacetHintRebuildsTheSameHull) {
+  std::mt19937_64 rng(42);
+  int hinted = 0;
+  for (int iter = 0; iter < 300; ++iter) {
+    const Wedge w = RandomWedge(rng, iter % 2 ? Kind::kGeneric : Kind::kSharedSensor);
+    uint64_t facets = 0;
+    const WedgeHull searched = MakeWedgeHull(w, 3.0, &facets);
+    if (facets == 0) continue;
+    ++hinted;
+    uint64_t hint = facets;
+    const WedgeHull replayed = MakeWedgeHull(w, 3.0, &hint);
+    EXPECT_EQ(hint, facets);
+    ASSERT_EQ(replayed.planes.size(), searched.planes.size());
+    for (size_t i = 0; i < searched.planes.size(); ++i) {
+      EXPECT_EQ(replayed.planes[i], searched.planes[i]);
+    }
+    EXPECT_EQ(replayed.box.min(), searched.box.min());
+    EXPECT_EQ(replayed.box.max(), searched.box.max());
+    // A bit for a triple that is not a facet: the hint is dropped, the hull searched.
+    for (int t = 0; t < 56; ++t) {
+      if (facets >> t & 1) continue;
+      uint64_t bad = facets | uint64_t{1} << t;
+      const WedgeHull h = MakeWedgeHull(w, 3.0, &bad);
+      EXPECT_EQ(h.planes.size(), searched.planes.size());
+      break;
+    }
+    // A facet missing: still every point of the wedge inside.
+    uint64_t fewer = facets & (facets - 1);
+    const WedgeHull loose = MakeWedgeHull(w, 3.0, &fewer);
+    for (const Vector3d& c : Corners(w, 3.0)) EXPECT_TRUE(HullContainsPoint(loose, c));
+  }
+  EXPECT_GT(hinted, 250);
+}
+
 TEST(WedgeHullTest, Timing) {
   std::mt19937_64 rng(5);
   std::vector<Wedge> wedges;
