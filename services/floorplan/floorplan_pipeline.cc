@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <string>
 
 #include "absl/strings/str_cat.h"
 #include "services/floorplan/extrusion.h"
@@ -21,8 +22,22 @@ absl::Status InStage(const char* stage, const absl::Status& s) {
 
 }  // namespace
 
+std::string_view FloorPlanMethodName(FloorPlanMethod method) {
+  return method == FloorPlanMethod::kEigencrust ? "eigencrust" : "rooms";
+}
+
+absl::StatusOr<FloorPlanMethod> ParseFloorPlanMethod(std::string_view name) {
+  if (name == "rooms") return FloorPlanMethod::kRooms;
+  if (name == "eigencrust") return FloorPlanMethod::kEigencrust;
+  return absl::InvalidArgumentError(absl::StrCat(
+      "floor plan: unknown method '", std::string(name), "' (rooms: §3.3 room partitioning; eigencrust: §3.2)"));
+}
+
 absl::Status FloorPlanOptions::Validate() const {
   if (absl::Status s = rooms.Validate(); !s.ok()) return s;
+  if (method == FloorPlanMethod::kEigencrust) {
+    if (absl::Status s = eigencrust.Validate(); !s.ok()) return s;
+  }
   if (!std::isfinite(simplify_error_m) || simplify_error_m < 0) {
     return absl::InvalidArgumentError(absl::StrCat(
         "floor plan: simplify_error_m must be finite and ≥ 0, got ", simplify_error_m));
@@ -36,8 +51,13 @@ absl::StatusOr<LevelFloorPlan> BuildLevelFloorPlan(const WallSampleSet& samples,
   LevelFloorPlan out;
   out.wall_samples = samples.samples.size();
 
+  out.method = options.method;
   Clock::time_point t0 = Clock::now();
-  absl::StatusOr<FloorPlan> plan = LabelRooms(samples, options.rooms, &out.labeling);
+  absl::StatusOr<FloorPlan> plan =
+      options.method == FloorPlanMethod::kEigencrust
+          ? EigencrustFloorPlan(samples, options.eigencrust, options.rooms, &out.labeling,
+                                &out.eigencrust)
+          : LabelRooms(samples, options.rooms, &out.labeling);
   if (!plan.ok()) return InStage("rooms", plan.status());
   out.plan = *std::move(plan);
   out.plan.level = level;
@@ -49,7 +69,11 @@ absl::StatusOr<LevelFloorPlan> BuildLevelFloorPlan(const WallSampleSet& samples,
   t0 = Clock::now();
   if (options.simplify) {
     FloorPlanSimplifyOptions so;
-    so.max_error_m = options.simplify_error_m > 0 ? options.simplify_error_m : samples.spacing_m;
+    // With Eigencrust the curve fitting has straightened the walls (§3.2.4): only the vertices
+    // left collinear on a line go (error ~0), not §3.3.3's r = d_s.
+    const double default_error =
+        options.method == FloorPlanMethod::kEigencrust ? 1e-6 : samples.spacing_m;
+    so.max_error_m = options.simplify_error_m > 0 ? options.simplify_error_m : default_error;
     if (absl::Status s = SimplifyFloorPlan(out.plan, so, &out.simplify); !s.ok()) {
       return InStage("simplification", s);
     }

@@ -743,6 +743,13 @@ absl::Status RoomLabelingOptions::Validate() const {
 absl::StatusOr<FloorPlan> LabelRooms(const WallSampleSet& samples,
                                      const RoomLabelingOptions& options,
                                      RoomLabelingReport* report) {
+  return LabelRoomsOfInterior(samples, nullptr, options, report);
+}
+
+absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
+                                               const InteriorTest& interior_test,
+                                               const RoomLabelingOptions& options,
+                                               RoomLabelingReport* report) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   if (absl::Status s = samples.Validate(); !s.ok()) return s;
   RoomLabelingReport rep;
@@ -897,7 +904,7 @@ absl::StatusOr<FloorPlan> LabelRooms(const WallSampleSet& samples,
       Walk(m, m.pts[occluder], s, {Start::kVertex, occluder, -1}, mark);
     }
   };
-  {
+  if (!interior_test) {
     std::vector<std::vector<int>> seen_from(np);
     for (size_t vid = 0; vid < m.pts.size(); ++vid) {
       for (uint32_t pi : vposes[vid]) seen_from[pi].push_back(static_cast<int>(vid));
@@ -939,9 +946,14 @@ absl::StatusOr<FloorPlan> LabelRooms(const WallSampleSet& samples,
       }
       if (start.kind == Start::kNone) continue;
       Walk(m, a, b, start, [&](int f) {
-        interior[f] = 1;
+        if (!interior_test) interior[f] = 1;
         entered[f] = 1;
       });
+    }
+  }
+  if (interior_test) {  // the interior decided elsewhere (§3.2's Eigencrust labelling)
+    for (int f = 0; f < nf; ++f) {
+      interior[f] = interior_test(m.pts[m.fv[f][0]], m.pts[m.fv[f][1]], m.pts[m.fv[f][2]]) ? 1 : 0;
     }
   }
   for (char c : interior) rep.interior_triangles += c ? 1 : 0;

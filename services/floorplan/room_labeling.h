@@ -27,6 +27,10 @@
 // Plain function over plain data: no files, no logging. Thread-compatible.
 #pragma once
 
+#include <functional>
+
+#include <Eigen/Core>
+
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "services/floorplan/floor_plan.h"
@@ -96,5 +100,16 @@ struct RoomLabelingReport {
 [[nodiscard]] absl::StatusOr<FloorPlan> LabelRooms(const WallSampleSet& samples,
                                                    const RoomLabelingOptions& options,
                                                    RoomLabelingReport* report = nullptr);
+
+// Steps 1 and 3–6 on an interior decided elsewhere: `interior_test` is asked, for each Delaunay
+// triangle (its corners, counter-clockwise), whether it is interior, and replaces the carving of
+// step 2 (the Eigencrust floor plan, §3.2, eigencrust_floorplan.h, gets its rooms this way). The
+// path still decides which rooms were entered. Errors as LabelRooms'.
+using InteriorTest = std::function<bool(const Eigen::Vector2d&, const Eigen::Vector2d&,
+                                        const Eigen::Vector2d&)>;
+[[nodiscard]] absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
+                                                             const InteriorTest& interior_test,
+                                                             const RoomLabelingOptions& options,
+                                                             RoomLabelingReport* report = nullptr);
 
 }  // namespace carvemap
