@@ -26,7 +26,8 @@ struct MergeFlags {
 
 absl::Status RunMergeCommand(MergeFlags& flags) {
   flags.options.cache_budget_bytes = static_cast<uint64_t>(flags.cache_mb * (1 << 20));
-  flags.options.job = {{"command", "carvemap merge"}};
+  flags.options.job = {{"command", "carvemap merge"},
+                       {"params", {{"floorplan", flags.options.floorplan_method}}}};
   ProgressLine line(!flags.quiet);
   auto progress = [&line](const MergeProgress& p) {
     line.Update("merge: %s %llu/%llu", p.stage.c_str(),
@@ -79,6 +80,11 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
                   "The job's scan.h5: its path gives the floor plans their lines of sight "
                   "(without it: no floor plans)")
       ->check(CLI::ExistingFile);
+  cmd->add_option("--floorplan", flags->options.floorplan_method,
+                  "Floor-plan method with --scan: rooms (§3.3 room partitioning) or eigencrust "
+                  "(§3.2, with §3.3's rooms on its interior)")
+      ->check(CLI::IsMember({"rooms", "eigencrust"}))
+      ->capture_default_str();
   cmd->add_option("--resolution", flags->options.resolution_m,
                   "Octree resolution in m (2 m / 2^k); default: the tiles'");
   cmd->add_option("--cache-mb", flags->cache_mb, "Decoded-tile cache budget in MiB")

@@ -48,6 +48,9 @@ struct MergeOptions {
   // plans their scanner positions (§3.3.1 lines of sight, §3.3.2 unentered rooms). Empty: no
   // floor plans (job.json says why under "warnings").
   std::string scan_path;
+  // RunMerge only: the floor-plan method, "rooms" (§3.3) or "eigencrust" (§3.2); another name
+  // is InvalidArgument before any work.
+  std::string floorplan_method = "rooms";
   // RunMerge only, §5.6.1 (Fig 5.17): the chunks that hold objects are carved again at this
   // finer resolution (2 m / 2^k, below resolution_m), so that the furniture's boards, legs and
   // rods, thinner than a cell, survive; the objects are then segmented and meshed from those

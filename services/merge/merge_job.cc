@@ -111,8 +111,10 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
     seconds_samples += SecondsSince(t0);
     total_samples += samples->samples.size();
     t0 = Clock::now();
+    FloorPlanOptions plan_options;
+    plan_options.method = *ParseFloorPlanMethod(options.floorplan_method);  // checked by RunMerge
     absl::StatusOr<LevelFloorPlan> plan =
-        BuildLevelFloorPlan(*samples, static_cast<int>(k), FloorPlanOptions{});
+        BuildLevelFloorPlan(*samples, static_cast<int>(k), plan_options);
     seconds_plan += SecondsSince(t0);
     if (!plan.ok()) {
       warnings.push_back(absl::StrCat("floorplan level ", k, ": ", plan.status().message()));
@@ -429,6 +431,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
 absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
                                       const MergeProgressCallback& progress) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
+  if (absl::Status s = ParseFloorPlanMethod(options.floorplan_method).status(); !s.ok()) return s;
   if (!options.meshes) return MergeFirstOutputs(options, progress);
   const Clock::time_point t_start = Clock::now();
 

@@ -138,6 +138,18 @@ TEST(RunMerge, CancelledMidwayWritesNoJobJson) {
   EXPECT_FALSE(fs::exists(options.output_dir + "/mesh/dense.ply"));
 }
 
+TEST(RunMerge, UnknownFloorPlanMethodIsRefusedBeforeAnyOutput) {
+  const std::string root = FreshDir();
+  MergeOptions options;
+  options.tiles_dir = WriteBoxRoom(root + "/tiles", LeafKey(0, 0, 0), LeafKey(16, 16, 16));
+  options.output_dir = root + "/out";
+  options.floorplan_method = "powercrust";
+  absl::StatusOr<MergeSummary> s = RunMerge(options);
+  EXPECT_EQ(s.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(s.status().message().find("powercrust"), std::string::npos) << s.status();
+  EXPECT_FALSE(fs::exists(options.output_dir + "/job.json"));
+}
+
 TEST(RunMerge, NoMeshesGivesTheFirstOutputsOnly) {
   const std::string root = FreshDir();
   MergeOptions options;
