@@ -60,4 +60,23 @@ struct PlanarMesh {
                                                          const OctreeGrid& grid,
                                                          const PlanarMeshOptions& options = {});
 
+// The last step of BuildPlanarMesh, on the mesh as it is written (float positions: what
+// CheckMesh and any reader see), public for its tests. `mesh` must be closed and manifold;
+// it stays so. (1) Closed pieces of at most 16 vertices that enclose less than one grid cell
+// (res³) are dropped: a one-cell pocket whose corners eq 4.9 put onto (nearly) one plane, down
+// to two triangles on the same three vertices. (2) Triangles of less than `min_area_m2` (three
+// vertices on a line: eq 4.9 moved a chain vertex onto its neighbours' line, or float rounding
+// did) are removed by flipping their longest edge within their region, else by collapsing
+// their shortest edge (a region border moves by that edge), else by moving one of their
+// vertices a hundredth of a cell off the line; none of these folds a triangle over. Unused
+// vertices are dropped.
+struct PlanarMeshRepair {
+  int dropped_pieces = 0;
+  int flips = 0;
+  int collapses = 0;
+  int nudges = 0;
+  int left = 0;  // triangles still below min_area_m2 (0 unless every repair was blocked)
+};
+PlanarMeshRepair RepairPlanarMesh(PlanarMesh& mesh, double res, double min_area_m2 = 1e-10);
+
 }  // namespace carvemap

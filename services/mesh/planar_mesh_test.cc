@@ -16,9 +16,12 @@
 #include "services/mesh/mesh_checks.h"
 #include "services/mesh/planar_regions.h"
 #ifdef CARVEMAP_PLANAR_CARVED_ONLY
-#include "services/mesh/dual_contouring.h"
-#include "storage/tile_store.h"
+#include "services/building/building.h"
+#include "services/building/building_presets.h"
+#include "services/merge/dense_mesh.h"
+#include "services/merge/tile_set.h"
 #include "tests/support/carved_preset.h"
+#include "tests/support/truth_distance.h"
 #endif
 
 namespace carvemap {
@@ -570,10 +573,8 @@ TEST_P(NoisyRoomTest, Watertight) {
   RecordProperty("folded", folded);
 }
 
-// Seed 4 is left out: it ends with 4 triangles of (float) zero area near a bump at a region
-// border, so BuildPlanarMesh returns Internal ("not watertight: … 4 degenerate"). Known bug.
 INSTANTIATE_TEST_SUITE_P(Seeds, NoisyRoomTest,
-                         ::testing::Combine(::testing::Values(1, 2, 3, 5), ::testing::Values(1, 4)));
+                         ::testing::Combine(::testing::Range(1, 13), ::testing::Values(1, 4)));
 
 #ifdef CARVEMAP_HAVE_MESH_REGIONS
 // The same synthetic octrees with the regions of the real stage (FitPlanarRegions, §4.2.4).
@@ -633,6 +634,52 @@ TEST_P(FittedRegionsTest, WatertightWithFitPlanarRegions) {
 
 INSTANTIATE_TEST_SUITE_P(Worlds, FittedRegionsTest,
                          ::testing::Combine(::testing::Values(0, 1, 2, 3), ::testing::Values(1, 4)));
+
+// Robustness (issue 4: "always watertight, no degenerate triangles"): rooms with seeded carving
+// noise of every kind the carved scans show, through the real region fitting. Bumps and dents
+// on the shell, specks of solid in the room, one-cell pockets of free space inside the walls,
+// a slanted wall, and isosurface points jittered by up to 0.45 cell (Fig 4.9's clamp).
+class NoisyFittedRoomTest : public ::testing::TestWithParam<std::tuple<int, int>> {};
+
+TEST_P(NoisyFittedRoomTest, AlwaysWatertight) {
+  const auto [seed, leaf] = GetParam();
+  const OctreeGrid grid = Grid();
+  const double res = grid.resolution_m();
+  VoxelWorld world({40, 36, 24});
+  world.Fill({4, 4, 4}, {36, 32, 20}, true);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int z = 3; z < 21; ++z)
+    for (int y = 3; y < 33; ++y)
+      for (int x = 3; x < 37; ++x) {
+        const Eigen::Vector3i c(x, y, z);
+        const bool wall = x < 5 || x > 34 || y < 5 || y > 30 || z < 5 || z > 18;
+        if (x + y > 60) world.interior[world.Index(c)] = 0;  // a slanted wall (45°, zig-zag)
+        if (wall && u(rng) < 0.2) world.interior[world.Index(c)] = !world.At(c);
+        if (!wall && u(rng) < 0.003) world.interior[world.Index(c)] = 0;  // specks
+      }
+  for (int k = 0; k < 6; ++k) {  // pockets: lone free cells two cells inside the walls
+    const int x = 1 + int(u(rng) * 38), y = 1 + int(u(rng) * 34);
+    world.interior[world.Index({x, y, 1 + int(u(rng) * 2)})] = 1;
+  }
+  std::vector<BoundaryFace> faces = FacesOf(world, grid, leaf);
+  for (BoundaryFace& f : faces) {
+    f.isosurface[f.axis] += (u(rng) - 0.5) * 0.9 * std::min(f.size_m, res);
+  }
+  absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(faces, grid, PlanarRegionOptions{});
+  ASSERT_TRUE(regions.ok()) << regions.status();
+  absl::StatusOr<PlanarMesh> pm = BuildPlanarMesh(faces, *regions, grid);
+  ASSERT_TRUE(pm.ok()) << pm.status();
+  const MeshCheck check = CheckMesh(pm->mesh);
+  EXPECT_TRUE(check.watertight()) << check.ToString();
+  EXPECT_EQ(pm->triangle_region.size(), pm->mesh.triangles.size());
+  RecordProperty("faces", static_cast<int>(faces.size()));
+  RecordProperty("regions", static_cast<int>(regions->regions.size()));
+  RecordProperty("triangles", static_cast<int>(pm->mesh.triangles.size()));
+}
+
+INSTANTIATE_TEST_SUITE_P(Seeds, NoisyFittedRoomTest,
+                         ::testing::Combine(::testing::Range(1, 31), ::testing::Values(1, 4)));
 #endif  // CARVEMAP_HAVE_MESH_REGIONS
 
 TEST(PlanarMeshTest, Deterministic) {
@@ -688,71 +735,343 @@ TEST(PlanarMeshTest, RejectsBadInput) {
   EXPECT_FALSE(bad.Validate().ok());
 }
 
+// ---------------------------------------------------------------------------------------------
+// RepairPlanarMesh on hand-made closed meshes.
+
+// The unit cube [0, 1]³ (12 triangles, counter-clockwise from outside), its front face (y = 0)
+// split at M = (0.5, 0, 0) on the edge A–B: the triangle (A, B, M) has no area, and the front
+// face is region 1, the rest region 0 (so no flip within a region can remove it).
+PlanarMesh CubeWithFlatTriangle(float m_x = 0.5f) {
+  PlanarMesh m;
+  auto& v = m.mesh.vertices;
+  for (int i = 0; i < 8; ++i) v.emplace_back(float(i & 1), float((i >> 1) & 1), float(i >> 2));
+  v.emplace_back(m_x, 0.f, 0.f);  // 8: M
+  auto quad = [&](int a, int b, int c, int d, int region) {
+    m.mesh.triangles.emplace_back(a, b, c);
+    m.mesh.triangles.emplace_back(a, c, d);
+    m.triangle_region.insert(m.triangle_region.end(), {region, region});
+  };
+  auto tri = [&](int a, int b, int c, int region) {
+    m.mesh.triangles.emplace_back(a, b, c);
+    m.triangle_region.push_back(region);
+  };
+  quad(0, 2, 3, 1, 0);  // bottom z = 0, normal −z
+  quad(4, 5, 7, 6, 0);  // top
+  quad(0, 4, 6, 2, 0);  // x = 0
+  quad(1, 3, 7, 5, 0);  // x = 1
+  quad(2, 6, 7, 3, 0);  // y = 1
+  // Front y = 0 (normal −y): A = 0, B = 1, E = 5, F = 4, through M.
+  tri(0, 8, 4, 1);
+  tri(8, 5, 4, 1);
+  tri(8, 1, 5, 1);
+  tri(0, 1, 8, 1);  // flat: A, B, M on one line
+  return m;
+}
+
+// M in the middle of A–B gets nudged off the line (a collapse would move it half a metre); M
+// a millimetre from A is collapsed into A.
+class RepairFlatTriangleTest : public ::testing::TestWithParam<float> {};
+
+TEST_P(RepairFlatTriangleTest, RemovesItAndStaysClosed) {
+  PlanarMesh m = CubeWithFlatTriangle(GetParam());
+  ASSERT_EQ(CheckMesh(m.mesh).degenerate_triangles, 1u);
+  ASSERT_EQ(CheckMesh(m.mesh).boundary_edges, 0u);
+  const PlanarMeshRepair r = RepairPlanarMesh(m, 0.0625);
+  EXPECT_EQ(r.left, 0);
+  EXPECT_EQ(r.flips, 0);
+  EXPECT_EQ(r.nudges, GetParam() == 0.5f ? 1 : 0);
+  EXPECT_EQ(r.collapses, GetParam() == 0.5f ? 0 : 1);
+  EXPECT_EQ(m.mesh.triangles.size(), GetParam() == 0.5f ? 14u : 12u);
+  const MeshCheck check = CheckMesh(m.mesh);
+  EXPECT_TRUE(check.watertight()) << check.ToString();
+  EXPECT_EQ(m.triangle_region.size(), m.mesh.triangles.size());
+  double volume = 0;
+  for (const Eigen::Vector3i& t : m.mesh.triangles) {
+    const Eigen::Vector3d a = m.mesh.vertices[t[0]].cast<double>();
+    const Eigen::Vector3d b = m.mesh.vertices[t[1]].cast<double>();
+    const Eigen::Vector3d c = m.mesh.vertices[t[2]].cast<double>();
+    volume += a.dot(b.cross(c)) / 6;
+  }
+  EXPECT_NEAR(volume, 1.0, 1e-3) << "the cube is still the cube";
+}
+
+INSTANTIATE_TEST_SUITE_P(MPositions, RepairFlatTriangleTest, ::testing::Values(0.5f, 0.001f));
+
+// A flip is tried first: with the front face in the bottom's region, the flat triangle's
+// longest edge (A–B) flips with the bottom triangle across it.
+TEST(RepairPlanarMeshTest, FlipsWithinARegion) {
+  PlanarMesh m = CubeWithFlatTriangle();
+  for (int& r : m.triangle_region) r = 0;
+  const PlanarMeshRepair r = RepairPlanarMesh(m, 0.0625);
+  EXPECT_EQ(r.flips, 1);
+  EXPECT_EQ(r.left, 0);
+  EXPECT_TRUE(CheckMesh(m.mesh).watertight()) << CheckMesh(m.mesh).ToString();
+  EXPECT_EQ(m.mesh.triangles.size(), 14u);
+}
+
+// Closed pieces with less than a grid cell of volume go (two triangles on one triangle's
+// vertices: the "pillow" of a squashed one-cell pocket; a flat tetrahedron), bigger ones stay.
+TEST(RepairPlanarMeshTest, DropsTinyPiecesWithoutVolume) {
+  PlanarMesh m = CubeWithFlatTriangle();
+  for (int& r : m.triangle_region) r = 0;
+  const int base = static_cast<int>(m.mesh.vertices.size());
+  auto add = [&](const std::vector<Eigen::Vector3f>& pts,
+                 const std::vector<Eigen::Vector3i>& tris) {
+    const int b = static_cast<int>(m.mesh.vertices.size());
+    for (const auto& p : pts) m.mesh.vertices.push_back(p);
+    for (const auto& t : tris) {
+      m.mesh.triangles.push_back(t + Eigen::Vector3i::Constant(b));
+      m.triangle_region.push_back(7);
+    }
+  };
+  add({{3, 0, 0}, {3.1f, 0, 0}, {3, 0.1f, 0}}, {{0, 1, 2}, {0, 2, 1}});  // pillow
+  // A tetrahedron of 0.0001 m³ (< 0.0625³ = 0.000244) and one of 0.01 m³.
+  const std::vector<Eigen::Vector3i> tet = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}};
+  add({{5, 0, 0}, {5.06f, 0, 0}, {5, 0.1f, 0}, {5, 0, 0.1f}}, tet);
+  add({{7, 0, 0}, {7.3f, 0, 0}, {7, 0.2f, 0}, {7, 0, 1}}, tet);
+  ASSERT_GT(CheckMesh(m.mesh).duplicate_triangles, 0u);
+  const PlanarMeshRepair r = RepairPlanarMesh(m, 0.0625);
+  EXPECT_EQ(r.dropped_pieces, 2);
+  EXPECT_EQ(r.left, 0);
+  EXPECT_TRUE(CheckMesh(m.mesh).watertight()) << CheckMesh(m.mesh).ToString();
+  EXPECT_EQ(std::count(m.triangle_region.begin(), m.triangle_region.end(), 7), 4);
+  EXPECT_EQ(m.mesh.vertices.size(), size_t(base) + 4) << "unused vertices are dropped";
+}
+
 #endif  // CARVEMAP_PLANAR_CARVED_ONLY
 
 #ifdef CARVEMAP_PLANAR_CARVED_ONLY
-// Real carved data: the simulated `room` preset carved to tiles in this process, its boundary
-// faces found chunk by chunk (27-tile neighbourhoods), regions fitted, planar mesh built.
-TEST(PlanarMeshCarvedTest, RoomPresetIsWatertightAndSmall) {
-  absl::StatusOr<testing::CarvedPreset> preset =
-      testing::CarvePreset(testing::CarvedPresetOptions{}, ::testing::TempDir() + "/planar_carved");
-  ASSERT_TRUE(preset.ok()) << preset.status();
-  const OctreeGrid grid = preset->grid;
-  std::map<ChunkKey, TileData, ChunkKeyLess> tiles;
-  for (const std::string& path : preset->tile_paths) {
-    absl::StatusOr<TileData> tile = ReadTile(path);
-    ASSERT_TRUE(tile.ok()) << tile.status();
-    tiles[tile->chunk] = *std::move(tile);
-  }
-  auto hood_of = [&](const ChunkKey& chunk) {
-    ChunkNeighbourhood hood;
-    hood.grid = grid;
-    hood.chunk = chunk;
-    for (int dz = -1; dz <= 1; ++dz)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-          auto it = tiles.find(chunk + ChunkKey(dx, dy, dz));
-          hood.tiles[ChunkNeighbourhood::Index(dx, dy, dz)] = it == tiles.end() ? nullptr : &it->second;
-        }
-    return hood;
-  };
+// ---------------------------------------------------------------------------------------------
+// Real carved data: a simulated preset carved to tiles in this process (tests/support), its
+// boundary faces and dense mesh found out of core through a TileSet (as the merge does),
+// regions fitted, planar mesh built.
+
+struct CarvedMeshes {
+  testing::CarvedPreset preset;
+  std::unique_ptr<TileSet> tiles;
   std::vector<BoundaryFace> faces;
-  std::vector<ChunkKey> keys;
-  for (const auto& [chunk, tile] : tiles) {
-    keys.push_back(chunk);
-    absl::StatusOr<std::vector<BoundaryFace>> f = ChunkBoundaryFaces(hood_of(chunk));
-    ASSERT_TRUE(f.ok()) << f.status();
-    faces.insert(faces.end(), f->begin(), f->end());
-  }
-  std::vector<ChunkMesh> chunk_meshes;
-  for (const ChunkKey& chunk : DenseMeshChunks(keys)) {
-    absl::StatusOr<ChunkMesh> cm = DualContourChunk(hood_of(chunk));
-    ASSERT_TRUE(cm.ok()) << cm.status();
-    chunk_meshes.push_back(*std::move(cm));
-  }
-  const TriangleMesh dense = WeldChunkMeshes(chunk_meshes);
-  absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(faces, grid, PlanarRegionOptions{});
-  ASSERT_TRUE(regions.ok()) << regions.status();
+  PlanarRegionSet regions;
+  TriangleMesh dense;
+  PlanarMesh planar;
+  double planar_s = 0;  // regions + planar mesh, wall seconds
+};
+
+absl::StatusOr<CarvedMeshes> CarveAndMesh(const testing::CarvedPresetOptions& options,
+                                          const std::string& root) {
+  CarvedMeshes out;
+  absl::StatusOr<testing::CarvedPreset> preset = testing::CarvePreset(options, root);
+  if (!preset.ok()) return preset.status();
+  out.preset = *std::move(preset);
+  absl::StatusOr<std::unique_ptr<TileSet>> tiles =
+      TileSet::Open(out.preset.tiles_dir, options.resolution_m, uint64_t{1} << 30);
+  if (!tiles.ok()) return tiles.status();
+  out.tiles = *std::move(tiles);
+  absl::StatusOr<std::vector<BoundaryFace>> faces = CollectBoundaryFaces(*out.tiles);
+  if (!faces.ok()) return faces.status();
+  out.faces = *std::move(faces);
+  absl::StatusOr<DenseMeshResult> dense = BuildDenseMesh(*out.tiles);
+  if (!dense.ok()) return dense.status();
+  out.dense = std::move(dense->mesh);
   const auto start = std::chrono::steady_clock::now();
-  absl::StatusOr<PlanarMesh> pm = BuildPlanarMesh(faces, *regions, grid);
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::cout << "carved room: " << faces.size() << " faces, " << regions->regions.size()
-            << " regions, dense " << dense.triangles.size() << " triangles, planar meshing "
-            << seconds << " s\n";
-  ASSERT_TRUE(pm.ok()) << pm.status();
-  const MeshCheck check = CheckMesh(pm->mesh);
-  EXPECT_TRUE(check.watertight()) << check.ToString();
-  // Issue 4 asks for ≤ 10 % of the dense mesh's triangles. Each region costs at least one
-  // triangle per boundary vertex or so, so that only holds when regions are planes, not
-  // fragments: checked when the regions average ≥ 20 faces (today FitPlanarRegions returns
-  // ~5 faces per region on this scan, and the planar mesh is ~41 % of the dense one).
-  if (regions->regions.size() * 20 <= faces.size()) {
-    EXPECT_LE(pm->mesh.triangles.size() * 10, dense.triangles.size());
+  absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(out.faces, out.preset.grid, {});
+  if (!regions.ok()) return regions.status();
+  out.regions = *std::move(regions);
+  absl::StatusOr<PlanarMesh> pm = BuildPlanarMesh(out.faces, out.regions, out.preset.grid);
+  if (!pm.ok()) return pm.status();
+  out.planar = *std::move(pm);
+  out.planar_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf(
+      "%s at %.4f m: %zu faces, %zu regions (flood fill %zu, grown %zu), dense %zu "
+      "triangles, planar %zu triangles (%.2f %%), regions + planar mesh %.1f s\n",
+      options.preset.c_str(), options.resolution_m, out.faces.size(), out.regions.regions.size(),
+      out.regions.flood_fill_groups, out.regions.grown_regions, out.dense.triangles.size(),
+      out.planar.mesh.triangles.size(),
+      100.0 * double(out.planar.mesh.triangles.size()) / double(out.dense.triangles.size()),
+      out.planar_s);
+  return out;
+}
+
+// Issue 4: both meshes watertight, and the planar one at most `max_ratio` of the dense one's
+// triangles (the issue asks 10 %: the seed's planar building meshes are thousands of triangles
+// where the dense ones are millions, §4.3.3, Fig 4.12 vs 4.13).
+void CheckWatertightAndSmall(const CarvedMeshes& m, double max_ratio) {
+  const MeshCheck dense = CheckMesh(m.dense);
+  EXPECT_TRUE(dense.watertight()) << "dense: " << dense.ToString();
+  const MeshCheck planar = CheckMesh(m.planar.mesh);
+  EXPECT_TRUE(planar.watertight()) << "planar: " << planar.ToString();
+  EXPECT_EQ(m.planar.triangle_region.size(), m.planar.mesh.triangles.size());
+  EXPECT_LE(double(m.planar.mesh.triangles.size()), max_ratio * double(m.dense.triangles.size()));
+  ::testing::Test::RecordProperty("planar_triangles", static_cast<int>(planar.triangles));
+  ::testing::Test::RecordProperty("dense_triangles", static_cast<int>(dense.triangles));
+}
+
+TEST(PlanarMeshCarvedTest, RoomIsWatertightAndSmall) {
+  absl::StatusOr<CarvedMeshes> m =
+      CarveAndMesh(testing::CarvedPresetOptions{}, ::testing::TempDir() + "/planar_carved");
+  ASSERT_TRUE(m.ok()) << m.status();
+  // NOT issue 4's 10 %: on 2026-11-26 the planar mesh is 29 % of the dense one here (166 k of
+  // 573 k triangles). planar_mesh_bench --gt puts 684 of the faces' 866 m² on no true surface
+  // with their exterior unobserved: the carved volume's noisy closure against unobserved space
+  // (§4.3.2: unobserved is exterior), where regions stay small; the room's own observed
+  // surfaces are 93 % in regions of ≥ 1 m². Held here so it does not get worse.
+  CheckWatertightAndSmall(*m, 0.35);
+  // The room's six sides (truth: 5.85 × 4.85 × 2.7 m, walls 7.5 cm from the origin) are six
+  // regions that hold nearly all of their faces: growing is not stopped by the carving noise.
+  // The walls' planes lean 1–2.3° (normals tilted up): the dense mesh puts a wall ~3 cm
+  // inside the truth below 1.5 m (seen at grazing angles) and ~1 cm at the scanners' height,
+  // and PCA over the whole wall follows that within §4.2.4's one-cell tolerance.
+  int sides = 0;
+  for (const PlanarRegion& r : m->regions.regions) {
+    if (r.area_m2 < 10) continue;
+    ++sides;
+    EXPECT_GT(r.normal.cwiseAbs().maxCoeff(), std::cos(3 * M_PI / 180)) << "region " << r.id;
   }
-  RecordProperty("planar_triangles", static_cast<int>(pm->mesh.triangles.size()));
-  RecordProperty("dense_triangles", static_cast<int>(dense.triangles.size()));
-  std::cout << "planar: " << check.ToString() << "\n";
-  ASSERT_TRUE(WritePly(::testing::TempDir() + "/planar_carved/building.ply", pm->mesh, &pm->triangle_region, "region").ok());
+  EXPECT_EQ(sides, 6);
+  ASSERT_TRUE(WritePly(::testing::TempDir() + "/planar_carved/building.ply", m->planar.mesh,
+                       &m->planar.triangle_region, "region")
+                  .ok());
+}
+
+// Points on the surface of a mesh, about one per spacing² of area (seeded), with the
+// triangle's unit normal (into free space for the meshes and the truth solids' outside).
+struct SurfaceSample {
+  Eigen::Vector3d x, n;
+};
+std::vector<SurfaceSample> SampleSurface(const TriangleMesh& mesh, double spacing_m,
+                                         uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<SurfaceSample> out;
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>();
+    const Eigen::Vector3d b = mesh.vertices[t[1]].cast<double>();
+    const Eigen::Vector3d c = mesh.vertices[t[2]].cast<double>();
+    const Eigen::Vector3d cr = (b - a).cross(c - a);
+    const double area = 0.5 * cr.norm();
+    if (!(area > 0)) continue;
+    const int count = static_cast<int>(std::floor(area / (spacing_m * spacing_m) + u(rng)));
+    for (int k = 0; k < count; ++k) {
+      double s1 = u(rng), s2 = u(rng);
+      if (s1 + s2 > 1) s1 = 1 - s1, s2 = 1 - s2;
+      out.push_back({a + s1 * (b - a) + s2 * (c - a), cr.normalized()});
+    }
+  }
+  return out;
+}
+
+// The building's solids (walls, slabs, steps, object parts): convex prisms.
+bool InsideAnySolid(const std::vector<Prism>& solids, const Eigen::Vector3d& x) {
+  for (const Prism& p : solids) {
+    if (!(x.z() > p.z0 && x.z() < p.z1)) continue;
+    bool inside = true;
+    const size_t n = p.footprint.size();
+    for (size_t e = 0; e < n && inside; ++e) {
+      const Eigen::Vector2d a = p.footprint[e], b = p.footprint[(e + 1) % n];
+      inside = (b - a).x() * (x.y() - a.y()) - (b - a).y() * (x.x() - a.x()) > 0;
+    }
+    if (inside) return true;
+  }
+  return false;
+}
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return NAN;
+  const size_t k = static_cast<size_t>(q * double(v.size() - 1));
+  std::nth_element(v.begin(), v.begin() + k, v.end());
+  return v[k];
+}
+
+// Issue 4's accuracy on `office` at 3.125 cm against gt/surfaces.ply + gt/objects.ply:
+// mesh to truth median ≤ 1.5 cm and 90th percentile ≤ 4 cm, over the mesh where its exterior
+// side was observed (elsewhere the mesh closes the carved volume against unobserved space,
+// which no truth describes); completeness: ≥ 95 % of the observed truth (samples whose free
+// side one cell out was observed, minus faces where two solids touch) within 5 cm of the
+// mesh. A short walk (the hallway and first rooms) keeps it affordable in CI; both meshes are
+// held to it, and to watertightness and the 10 % rule.
+// DISABLED: issue 4's numbers are NOT MET, by the dense mesh either, and the default carve is
+// too big for CI (run it with --gtest_also_run_disabled_tests). Measured 2026-11-26, the 30 s
+// walk at 3.125 cm, both meshes watertight every time:
+// - as here (the simulator's /path_cov rotation std-dev 1e-4 rad): 8.51 M faces over 8406 m²,
+//   7720 m² of them on no true surface with their exterior unobserved (the closure of a
+//   speckled carve, planar_mesh_bench --gt); dense 19.5 M triangles, planar 3.96 M (20 %),
+//   planar meshing 462 s CPU; the test passed 6 GB RSS and was killed by the OOM killer.
+// - with a rotation std-dev of 0.1° (0.5°) written into /path_cov, before the carve-speed
+//   merge (c30cc03): 2.06 M (1.84 M) faces; planar 5.0 % (4.2 %) of dense; dense median
+//   1.39 (1.78) cm, p90 11.1 (17.9) cm, completeness 83.5 (64.8) %; planar median 1.35
+//   (2.65) cm, p90 29.7 (24.9) cm, completeness 82.3 (63.6) %.
+TEST(PlanarMeshCarvedTest, DISABLED_OfficeMeshesAgainstTruth) {
+  testing::CarvedPresetOptions options;
+  options.preset = "office";
+  options.resolution_m = 0.03125;
+  const char* walk = std::getenv("PLANAR_OFFICE_WALK_S");
+  options.walk_s = walk != nullptr ? std::atof(walk) : 30;
+  const auto t0 = std::chrono::steady_clock::now();
+  absl::StatusOr<CarvedMeshes> m = CarveAndMesh(options, ::testing::TempDir() + "/planar_office");
+  ASSERT_TRUE(m.ok()) << m.status();
+  std::printf("office carved and meshed in %.0f s\n",
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  CheckWatertightAndSmall(*m, 0.10);
+
+  absl::StatusOr<Building> building = MakePresetBuilding("office", options.seed);
+  ASSERT_TRUE(building.ok()) << building.status();
+  std::vector<Prism> solids = building->structure;
+  for (const ObjectTruth& o : building->objects) {
+    solids.insert(solids.end(), o.parts.begin(), o.parts.end());
+  }
+  TriangleMesh truth = StructureMesh(*building);
+  truth.Append(ObjectsMesh(*building));
+  const double r = options.resolution_m;
+  TileSet& tiles = *m->tiles;
+  auto observed = [&](const Eigen::Vector3d& x) {
+    absl::StatusOr<LeafQuery> q = tiles.Query(x);
+    return q.ok() && q->stored && q->stats.observed();
+  };
+  auto carved = [&](const Eigen::Vector3d& x) {
+    absl::StatusOr<LeafQuery> q = tiles.Query(x);
+    return q.ok() && q->stored && q->stats.observed() && q->stats.p() > 0.5;
+  };
+  // Observed truth: samples whose free side one cell out was carved (seen as free space by
+  // the scans). Observed exterior there does not count: the 3σ tails of rays that hit a wall
+  // (§4.3.1) make the space behind it observed, and no scan saw the wall's back.
+  std::vector<Eigen::Vector3d> seen_truth;
+  for (const SurfaceSample& s : SampleSurface(truth, 0.03, 7)) {
+    if (InsideAnySolid(solids, s.x + 2e-3 * s.n)) continue;  // two solids touching
+    if (carved(s.x + r * s.n)) seen_truth.push_back(s.x);
+  }
+  ASSERT_GT(seen_truth.size(), 10000u);
+  std::vector<std::array<Eigen::Vector3d, 3>> truth_tris;
+  for (const Eigen::Vector3i& t : truth.triangles) {
+    truth_tris.push_back({truth.vertices[t[0]].cast<double>(), truth.vertices[t[1]].cast<double>(),
+                          truth.vertices[t[2]].cast<double>()});
+  }
+  const testing::TruthDistance to_truth(truth_tris, 0.25, 0.5);
+  for (const auto& [name, mesh] : {std::pair<const char*, const TriangleMesh*>{"dense", &m->dense},
+                                   {"planar", &m->planar.mesh}}) {
+    SCOPED_TRACE(name);
+    std::vector<double> d;
+    size_t samples = 0;
+    for (const SurfaceSample& s : SampleSurface(*mesh, 0.03, 11)) {
+      ++samples;
+      if (observed(s.x - r * s.n)) d.push_back(to_truth(s.x));
+    }
+    std::vector<std::array<Eigen::Vector3d, 3>> tris;
+    for (const Eigen::Vector3i& t : mesh->triangles) {
+      tris.push_back({mesh->vertices[t[0]].cast<double>(), mesh->vertices[t[1]].cast<double>(),
+                      mesh->vertices[t[2]].cast<double>()});
+    }
+    const testing::TruthDistance to_mesh(std::move(tris), 0.25, 0.05);
+    size_t near = 0;
+    for (const Eigen::Vector3d& x : seen_truth) near += to_mesh(x) < 0.05;
+    const double median = Percentile(d, 0.5), p90 = Percentile(d, 0.9);
+    const double completeness = double(near) / double(seen_truth.size());
+    std::printf(
+        "%s: mesh to truth over %zu of %zu samples (exterior observed): median %.4f m, "
+        "p90 %.4f m; %.1f %% of %zu observed truth samples within 5 cm\n",
+        name, d.size(), samples, median, p90, 100 * completeness, seen_truth.size());
+    EXPECT_LE(median, 0.015);
+    EXPECT_LE(p90, 0.04);
+    EXPECT_GE(completeness, 0.95);
+  }
 }
 #endif  // CARVEMAP_PLANAR_CARVED_ONLY
 
