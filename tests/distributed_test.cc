@@ -91,12 +91,14 @@ class DistributedTest : public ::testing::Test {
 };
 
 TEST_F(DistributedTest, SubmitValidates) {
-  auto submit = [&](const std::string& path, double resolution, double object_resolution = 0) {
+  auto submit = [&](const std::string& path, double resolution, double object_resolution = 0,
+                    const std::string& floorplan = "") {
     grpc::ClientContext ctx;
     pb::SubmitJobRequest req;
     req.set_input_path(path);
     req.mutable_params()->set_resolution_m(resolution);
     req.mutable_params()->set_object_resolution_m(object_resolution);
+    req.mutable_params()->set_floorplan_method(floorplan);
     pb::SubmitJobResponse resp;
     return jobs_->SubmitJob(&ctx, req, &resp).error_code();
   };
@@ -108,6 +110,9 @@ TEST_F(DistributedTest, SubmitValidates) {
   EXPECT_EQ(submit("missing.h5", 0.03125, 0.0625), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(submit("missing.h5", 0, 0.02), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(submit("missing.h5", 0, 0.00390625), grpc::StatusCode::INVALID_ARGUMENT);
+  // The floor-plan method is checked at submit, not after the carving (§3.2 / §3.3 names).
+  EXPECT_EQ(submit("missing.h5", 0, 0, "graphcut"), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(submit("missing.h5", 0, 0, "eigencrust"), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(submit("missing.h5", 0, 0.0625), grpc::StatusCode::NOT_FOUND);  // = no second pass
 
   grpc::ClientContext ctx;

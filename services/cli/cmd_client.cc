@@ -116,6 +116,10 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
   submit->add_option("--object-resolution", flags->submit.object_resolution_m,
                      "Leaf size the object chunks are carved again at (seed §5.6.1); 0: a "
                      "quarter of --resolution, equal to it: no re-carving");
+  submit->add_option("--floorplan", flags->submit.floorplan_method,
+                     "Floor-plan method of the merge: rooms (§3.3 room partitioning, the "
+                     "default) or eigencrust (§3.2, with §3.3's rooms on its interior)")
+      ->check(CLI::IsMember({"rooms", "eigencrust"}));
   submit->add_option("--idempotency-key", flags->submit.idempotency_key,
                      "Submitting twice with the same key returns the first job");
   submit->add_flag("--watch", flags->watch, "Watch the job until it ends");

@@ -41,6 +41,7 @@ struct RunFlags {
   int workers = 2;
   double resolution_m = 0.0625;
   double object_resolution_m = 0;  // 0 = resolution / 4
+  std::string floorplan_method = "rooms";
   std::string storage_root;
   // Short defaults on one machine: a killed worker's chunks come back within seconds.
   double heartbeat_interval_s = 1.0;
@@ -220,10 +221,14 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   submit.output_name = out.filename().string();
   submit.resolution_m = flags.resolution_m;
   submit.object_resolution_m = flags.object_resolution_m;
+  submit.floorplan_method = flags.floorplan_method;
   // The job id follows from the key (and tiles record it), so repeated runs of the same scan
-  // and resolutions give byte-identical tiles whatever the number of workers.
-  submit.idempotency_key = absl::StrCat("carvemap run ", scan.filename().string(), " ",
-                                        flags.resolution_m, " ", flags.object_resolution_m);
+  // and resolutions give byte-identical tiles whatever the number of workers. The method is in
+  // the key only when it is not the default, so the default's job ids stay as they were.
+  submit.idempotency_key = absl::StrCat(
+      "carvemap run ", scan.filename().string(), " ", flags.resolution_m, " ",
+      flags.object_resolution_m,
+      flags.floorplan_method == "rooms" ? "" : absl::StrCat(" ", flags.floorplan_method));
   absl::StatusOr<JobInfo> job = state.client->Submit(submit);
   if (!job.ok()) return job.status();
   {
@@ -283,6 +288,11 @@ void RegisterRun(CLI::App& app, int& exit_code) {
                   "Leaf size the chunks holding furniture are carved again at before the "
                   "objects are meshed (seed §5.6.1); 0 = a quarter of --resolution (at least "
                   "0.0078125), equal to --resolution = no re-carving")
+      ->capture_default_str();
+  cmd->add_option("--floorplan", flags->floorplan_method,
+                  "Floor-plan method of the merge: rooms (§3.3 room partitioning) or "
+                  "eigencrust (§3.2, with §3.3's rooms on its interior)")
+      ->check(CLI::IsMember({"rooms", "eigencrust"}))
       ->capture_default_str();
   cmd->add_option("--storage-root", flags->storage_root,
                   "Keep tiles under <storage-root>/<job>/tiles instead of OUT/tiles");

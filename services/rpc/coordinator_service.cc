@@ -31,6 +31,7 @@
 #include "coordinator/scan_ingest.h"
 #include "proto/carvemap/v1/carve.grpc.pb.h"
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
+#include "services/floorplan/floorplan_pipeline.h"  // FloorPlanMethod names
 #include "services/geometry/octree_keys.h"
 #include "services/grpc_server_common.h"
 #include "services/grpc_status.h"
@@ -59,6 +60,7 @@ struct ResolvedParams {
   int method = pb::CARVE_METHOD_PROBABILISTIC;
   int workers_hint = 0;
   double object_resolution_m = kDefaultResolutionM;  // = resolution_m: no re-carving
+  std::string floorplan_method = "rooms";               // §3.3 rooms or §3.2 eigencrust
 };
 
 std::string ParamsToJson(const ResolvedParams& p) {
@@ -66,7 +68,8 @@ std::string ParamsToJson(const ResolvedParams& p) {
       {"resolution_m", p.resolution_m},
       {"method", p.method},
       {"workers_hint", p.workers_hint},
-      {"object_resolution_m", p.object_resolution_m}};
+      {"object_resolution_m", p.object_resolution_m},
+      {"floorplan_method", p.floorplan_method}};
   return j.dump();
 }
 
@@ -79,6 +82,7 @@ ResolvedParams ParamsFromJson(const std::string& text) {
     p.workers_hint = j.value("workers_hint", 0);
     // Jobs stored before §5.6.1's re-carving existed merge as they were submitted.
     p.object_resolution_m = j.value("object_resolution_m", p.resolution_m);
+    p.floorplan_method = j.value("floorplan_method", std::string("rooms"));
   }
   return p;
 }
@@ -118,6 +122,13 @@ absl::StatusOr<ResolvedParams> ResolveParams(const pb::JobParams& in) {
     }
     p.object_resolution_m = fine->resolution_m();
   }
+  // Checked here so a bad name fails the submit, not the merge after the carving.
+  absl::StatusOr<FloorPlanMethod> plan = ParseFloorPlanMethod(
+      in.floorplan_method().empty() ? std::string_view("rooms") : in.floorplan_method());
+  if (!plan.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("floorplan_method: ", plan.status().message()));
+  }
+  p.floorplan_method = std::string(FloorPlanMethodName(*plan));
   return p;
 }
 
@@ -132,6 +143,7 @@ void ToProto(const JobRecord& r, pb::Job& out) {
   out.mutable_params()->set_method(static_cast<pb::CarveMethod>(p.method));
   out.mutable_params()->set_workers_hint(p.workers_hint);
   out.mutable_params()->set_object_resolution_m(p.object_resolution_m);
+  out.mutable_params()->set_floorplan_method(p.floorplan_method);
   out.set_error(r.error);
   out.set_created_unix_ms(r.created_unix_ms);
   out.set_updated_unix_ms(r.updated_unix_ms);
@@ -1114,6 +1126,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       // Filled in below, through a confined descriptor as in the ingest.
       req.resolution_m = rt.params.resolution_m;
       req.object_resolution_m = rt.params.object_resolution_m;
+      req.floorplan_method = rt.params.floorplan_method;
       nlohmann::json doc = {{"job_id", job_id},
                             {"input_path", job->input_path},
                             {"output_name", job->output_name},

@@ -98,6 +98,7 @@ absl::StatusOr<JobInfo> JobClient::Submit(const SubmitParams& params) {
   req.set_output_name(params.output_name);
   req.mutable_params()->set_resolution_m(params.resolution_m);
   req.mutable_params()->set_object_resolution_m(params.object_resolution_m);
+  req.mutable_params()->set_floorplan_method(params.floorplan_method);
   req.set_idempotency_key(params.idempotency_key);
   pb::SubmitJobResponse resp;
   if (!impl_->init.ok()) return impl_->init;

@@ -43,6 +43,7 @@ struct SubmitParams {
   std::string output_name;  // "" = the job id
   double resolution_m = 0;  // 0 = default
   double object_resolution_m = 0;  // §5.6.1 re-carving of the object chunks; 0 = default
+  std::string floorplan_method;    // "rooms" (§3.3) or "eigencrust" (§3.2); "" = rooms
   std::string idempotency_key;
 };
 

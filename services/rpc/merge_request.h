@@ -35,6 +35,7 @@ struct MergeJobRequest {
   // coordinator leases them to its workers once more, each limited to its region, and returns
   // the directory of their tiles). Equal to resolution_m, or no `recarve`: no re-carving.
   double object_resolution_m = 0.0625;
+  std::string floorplan_method = "rooms";  // §3.3 "rooms" or §3.2 "eigencrust"
   std::function<absl::StatusOr<std::string>(const std::vector<RecarveChunk>& chunks,
                                             double resolution_m)>
       recarve;

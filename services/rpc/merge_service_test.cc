@@ -68,6 +68,7 @@ MergeJobRequest Request(const fs::path& out, Recorder* recorder = nullptr) {
   req.output_dir = out.string();
   req.resolution_m = 0.0625;
   req.object_resolution_m = 0.03125;
+  req.floorplan_method = "eigencrust";
   req.job_json = R"({"job_id": "j-test"})";
   if (recorder != nullptr) {
     req.progress = [recorder](const std::string& stage, uint64_t, uint64_t) {
@@ -272,6 +273,7 @@ TEST_F(MergeServiceTest, ProgressFlowsAndTheMergesOwnFailureIsFinal) {
   EXPECT_EQ(seen.scan_input, "sim/scan.h5");
   EXPECT_DOUBLE_EQ(seen.resolution_m, 0.0625);
   EXPECT_DOUBLE_EQ(seen.object_resolution_m, 0.03125);
+  EXPECT_EQ(seen.floorplan_method, "eigencrust");
   EXPECT_EQ(seen.job_json, req.job_json);
   EXPECT_EQ(seen.attempt, 1);
   EXPECT_FALSE(seen.recarve);  // the request offered none
