@@ -39,7 +39,9 @@ case "${1:-}" in
     rm -rf "$work"
     mkdir -p "$work" "$artifacts"
     status=0
-    "$build/${target}_fuzzer" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2560 \
+    # libFuzzer's -timeout is wall time: on a loaded machine a niced input that runs in 0.15 s
+    # waited > 10 s for a core and was reported as a hang, so 60 s (any real hang still shows).
+    "$build/${target}_fuzzer" -max_total_time="$seconds" -timeout=60 -rss_limit_mb=2560 \
       -print_final_stats=1 -artifact_prefix="$artifacts/" "$@" "$work" "$here/corpus/$target" \
       2>&1 | grep -v -E '^#[0-9]+.*(NEW|REDUCE|pulse)|NEW_FUNC' || status=${PIPESTATUS[0]}
     if [ "$status" -ne 0 ]; then
