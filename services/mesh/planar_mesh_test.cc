@@ -909,24 +909,27 @@ TEST(PlanarMeshCarvedTest, RoomIsWatertightAndSmall) {
   absl::StatusOr<CarvedMeshes> m =
       CarveAndMesh(testing::CarvedPresetOptions{}, ::testing::TempDir() + "/planar_carved");
   ASSERT_TRUE(m.ok()) << m.status();
-  // NOT issue 4's 10 %: on 2026-11-26 the planar mesh is 29 % of the dense one here (166 k of
-  // 573 k triangles). planar_mesh_bench --gt puts 684 of the faces' 866 m² on no true surface
-  // with their exterior unobserved: the carved volume's noisy closure against unobserved space
-  // (§4.3.2: unobserved is exterior), where regions stay small; the room's own observed
-  // surfaces are 93 % in regions of ≥ 1 m². Held here so it does not get worse.
-  CheckWatertightAndSmall(*m, 0.35);
-  // The room's six sides (truth: 5.85 × 4.85 × 2.7 m, walls 7.5 cm from the origin) are six
-  // regions that hold nearly all of their faces: growing is not stopped by the carving noise.
-  // The walls' planes lean 1–2.3° (normals tilted up): the dense mesh puts a wall ~3 cm
-  // inside the truth below 1.5 m (seen at grazing angles) and ~1 cm at the scanners' height,
-  // and PCA over the whole wall follows that within §4.2.4's one-cell tolerance.
+  // NOT issue 4's 10 %: on 2026-11-26 the planar mesh is 38 % of the dense one here (215 k of
+  // 573 k triangles; 45 k regions, 29 k of one face). planar_mesh_bench --gt puts 684 of the
+  // faces' 866 m² on no true surface with their exterior unobserved: the carved volume's noisy
+  // closure against unobserved space (§4.3.2: unobserved is exterior), where regions stay
+  // small. Letting groups at ~90° join a region (zig-zag risers) brought it to 29 % but cost
+  // the office's floor plans (object_segmentation_test found 19 % of objects instead of 25 %),
+  // so it was not kept. Held here so it does not get worse.
+  CheckWatertightAndSmall(*m, 0.40);
+  // The room's four walls and its ceiling (truth: 5.85 × 4.85 × 2.7 m, walls 7.5 cm from the
+  // origin) are one region of ≥ 10 m² each. The floor is not: under and between the furniture
+  // its largest region is ~9 m² of the mesh's 28 m² (not asserted). The walls' planes lean up
+  // to 2° (normals tilted up): the dense mesh puts a wall ~3 cm inside the truth below 1.5 m
+  // (seen at grazing angles) and ~1 cm at the scanners' height, and PCA over the whole wall
+  // follows that within §4.2.4's one-cell tolerance.
   int sides = 0;
   for (const PlanarRegion& r : m->regions.regions) {
     if (r.area_m2 < 10) continue;
     ++sides;
     EXPECT_GT(r.normal.cwiseAbs().maxCoeff(), std::cos(3 * M_PI / 180)) << "region " << r.id;
   }
-  EXPECT_EQ(sides, 6);
+  EXPECT_EQ(sides, 5);
   ASSERT_TRUE(WritePly(::testing::TempDir() + "/planar_carved/building.ply", m->planar.mesh,
                        &m->planar.triangle_region, "region")
                   .ok());
@@ -991,12 +994,13 @@ double Percentile(std::vector<double> v, double q) {
 // DISABLED: issue 4's numbers are NOT MET, by the dense mesh either, and the default carve is
 // too big for CI (run it with --gtest_also_run_disabled_tests). Measured 2026-11-26, the 30 s
 // walk at 3.125 cm, both meshes watertight every time:
-// - as here (the simulator's /path_cov rotation std-dev 1e-4 rad): 8.51 M faces over 8406 m²,
+// - as here (the simulator's /path_cov rotation std-dev 1e-4 rad), with the region fitting
+//   variant of 5e48a08 (since reverted): 8.51 M faces over 8406 m²,
 //   7720 m² of them on no true surface with their exterior unobserved (the closure of a
 //   speckled carve, planar_mesh_bench --gt); dense 19.5 M triangles, planar 3.96 M (20 %),
 //   planar meshing 462 s CPU; the test passed 6 GB RSS and was killed by the OOM killer.
-// - with a rotation std-dev of 0.1° (0.5°) written into /path_cov, before the carve-speed
-//   merge (c30cc03): 2.06 M (1.84 M) faces; planar 5.0 % (4.2 %) of dense; dense median
+// - the variant, with a rotation std-dev of 0.1° (0.5°) written into /path_cov, before the
+//   carve-speed merge (c30cc03): 2.06 M (1.84 M) faces; planar 5.0 % (4.2 %) of dense; dense median
 //   1.39 (1.78) cm, p90 11.1 (17.9) cm, completeness 83.5 (64.8) %; planar median 1.35
 //   (2.65) cm, p90 29.7 (24.9) cm, completeness 82.3 (63.6) %.
 TEST(PlanarMeshCarvedTest, DISABLED_OfficeMeshesAgainstTruth) {

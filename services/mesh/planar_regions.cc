@@ -11,9 +11,6 @@
 
 #include <Eigen/Eigenvalues>
 
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
-#include <CGAL/convex_hull_3.h>
-
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
 
@@ -165,14 +162,7 @@ struct Group {
   std::vector<uint32_t> faces;
   Vector3d box_min = Vector3d::Constant(INFINITY), box_max = Vector3d::Constant(-INFINITY);
   double max_dist = 0;  // max |distance| of the isosurface points from `plane`
-  // Grown regions: how far their points may lie from the plane, max(tolerance, the seed
-  // group's own max_dist) (see Grow).
-  double limit = 0;
   Vector3d axis_normal = Vector3d::Zero();  // flood-fill groups: their common face normal
-  // The vertices of the convex hull of the points of faces[0, hull_of) (built lazily; see
-  // Fitter::MaxDist): the farthest point from any plane is one of them.
-  std::vector<Vector3d> hull;
-  size_t hull_of = 0;
 };
 
 class Fitter {
@@ -325,39 +315,9 @@ class Fitter {
     g.box_max = g.box_max.cwiseMax(points_[i]);
   }
 
-  // max |distance| from `plane` of the group's isosurface points, exactly. §4.2.4 tests every
-  // tentative union against this; scanning all points each time would make growing quadratic
-  // on big regions (a 400 m² floor absorbs thousands of groups), and capping those scans
-  // leaves regions in fragments once the cap is reached (~15 % of the office's observed
-  // walls). A linear function peaks at a vertex of the convex hull, so big groups keep the
-  // hull of their points (CGAL's extreme_points_3: ~100 vertices for 90 000 noisy points of a
-  // plane) plus the faces added since, rebuilt when those outnumber the hull twice: amortized
-  // O(n log n) in all.
-  double MaxDist(Group& g, const Plane& plane) const {
-    constexpr size_t kSmall = 48;
+  double ExactMaxDist(const Group& g, const Plane& plane) const {
     double m = 0;
-    if (g.faces.size() <= kSmall) {
-      for (uint32_t i : g.faces) m = std::max(m, std::abs(plane.Distance(points_[i])));
-      return m;
-    }
-    if (g.faces.size() - g.hull_of > std::max(kSmall, 2 * g.hull.size())) {
-      using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-      std::vector<K::Point_3> in, out;
-      in.reserve(g.hull.size() + g.faces.size() - g.hull_of);
-      for (const Vector3d& x : g.hull) in.emplace_back(x.x(), x.y(), x.z());
-      for (size_t k = g.hull_of; k < g.faces.size(); ++k) {
-        const Vector3d& x = points_[g.faces[k]];
-        in.emplace_back(x.x(), x.y(), x.z());
-      }
-      CGAL::extreme_points_3(in, std::back_inserter(out));
-      g.hull.clear();
-      for (const K::Point_3& q : out) g.hull.emplace_back(q.x(), q.y(), q.z());
-      g.hull_of = g.faces.size();
-    }
-    for (const Vector3d& x : g.hull) m = std::max(m, std::abs(plane.Distance(x)));
-    for (size_t k = g.hull_of; k < g.faces.size(); ++k) {
-      m = std::max(m, std::abs(plane.Distance(points_[g.faces[k]])));
-    }
+    for (uint32_t i : g.faces) m = std::max(m, std::abs(plane.Distance(points_[i])));
     return m;
   }
 
@@ -397,7 +357,7 @@ class Fitter {
     }
     for (Group& g : comps_) {
       g.plane = FitPlane(g.moments);
-      g.max_dist = MaxDist(g, g.plane);
+      g.max_dist = ExactMaxDist(g, g.plane);
     }
     std::vector<Link> links;
     for (const Link& l : face_links_) {
@@ -418,44 +378,34 @@ class Fitter {
   // Seeds are the flood-fill groups by decreasing area; a region absorbs a neighbouring group
   // when the PCA plane of their union keeps every isosurface point of the group within the
   // tolerance ("the maximum distance of V from the plane is at most the grid size") and keeps
-  // the region's own points within max(tolerance, the seed group's own maximum): a flood-fill
-  // group is one lattice plane and is accepted as the seed says even where its isosurface
-  // points spread wider (faces of big leaves against unobserved space are offset up to 0.45 of
-  // their size, Fig 4.9's clamp), and growing keeps its points within that fixed bound. (A
-  // bound that followed the region's current maximum instead would refuse any absorption
-  // that tilts the plane by a hair once a point sits at the limit: 24 000 refusals on the
-  // office, the floor keeping one-face bumps it fits within 2 cm as separate regions.)
+  // the region's own points as close as before (within max(tolerance, their current maximum):
+  // a noisy flood-fill group is accepted as the seed says, but growing may not make it worse).
   // The union plane comes from the summed moments in O(1); the candidate's points are checked
   // exactly (after an O(1) rejection by its centroid); the region's points by a bound over its
-  // bounding box, and exactly (MaxDist) only when the bound is not enough.
-  // A group "faces away" from a region when its axis normal is more than ~105° from the
-  // region's normal (cos = −0.25). Perpendicular groups must be allowed: the risers of a
-  // zig-zag (§4.2.4, Fig 4.7a) and the one-cell steps of a carved wall that is axis-aligned
-  // are at 90° to its plane, give or take the fit's tilt, and they are what connects the
-  // wall's terraces (refusing them leaves ~70 % of a carved room's regions single faces). The
-  // opposite side of a thin slab is at 180° and stays out.
-  static constexpr double kFacingMin = -0.25;
-  bool TryAbsorb(Group& r, Group& c) {
-    if (c.axis_normal.dot(r.plane.normal) <= kFacingMin) return false;
+  // bounding box, recomputed exactly (within a budget) only when the bound is not enough.
+  bool TryAbsorb(Group& r, const Group& c) {
+    if (c.axis_normal.dot(r.plane.normal) <= 0) return false;  // faces must look the same way
     Moments u = r.moments;
     u.Add(c.moments);
     const Plane p = FitPlane(u);
-    if (c.axis_normal.dot(p.normal) <= kFacingMin) return false;
+    if (c.axis_normal.dot(p.normal) <= 0) return false;
     // The mean of the candidate's points is within the tolerance if all of them are.
     if (std::abs(p.Distance(c.plane.centroid)) > tol_) return false;
     double cand = 0;
     if (BoxMaxAbs(c, p.normal, p.centroid) <= tol_) {
       cand = BoxMaxAbs(c, p.normal, p.centroid);
     } else {
-      cand = MaxDist(c, p);
+      cand = ExactMaxDist(c, p);
       if (cand > tol_) return false;
     }
-    const double allowed = r.limit;
+    const double allowed = std::max(tol_, r.max_dist);
     // |n'·(x − c')| ≤ |n·(x − c)| + |(n' − n)·(x − c)| + |n'·(c − c')| for the region's points.
     double old = r.max_dist + BoxMaxAbs(r, p.normal - r.plane.normal, r.plane.centroid) +
                  std::abs(p.normal.dot(r.plane.centroid - p.centroid));
     if (old > allowed) {
-      old = MaxDist(r, p);
+      if (recompute_budget_ < double(r.faces.size())) return false;
+      recompute_budget_ -= double(r.faces.size());
+      old = ExactMaxDist(r, p);
       if (old > allowed) return false;
     }
     r.moments = u;
@@ -477,11 +427,13 @@ class Fitter {
     comp_region_.assign(nc, -1);
     std::vector<int64_t> tested_region(nc, -1);
     std::vector<double> tested_weight(nc, 0);
+    // Exact rechecks of a region's points are bounded by a few passes over all faces in
+    // total, so growth stays near-linear whatever the input.
+    recompute_budget_ = 8.0 * double(faces_.size()) + 1e5;
     for (uint32_t seed : order) {
       if (comp_region_[seed] >= 0) continue;
       const int64_t rid = int64_t(regions_.size());
       Group r = comps_[seed];
-      r.limit = std::max(tol_, r.max_dist);
       std::vector<uint32_t> members = {seed};
       comp_region_[seed] = rid;
       std::deque<uint32_t> queue(comp_adj_[seed].begin(), comp_adj_[seed].end());
@@ -659,6 +611,7 @@ class Fitter {
   std::vector<std::vector<uint32_t>> comp_adj_;
   std::vector<int64_t> comp_region_;
   std::vector<Group> regions_;
+  double recompute_budget_ = 0;
   size_t grown_regions_ = 0;
 };
 

@@ -13,9 +13,8 @@
 //  (c) relaxation: adjacent regions within merge_angle_deg merge, smallest angle first, when
 //      their planes also meet where the regions touch (boundary_tolerance_factor) and the
 //      union's normal is within the angle of both. (b) never adds a group facing away from
-//      the region's normal (more than ~105°; perpendicular risers and steps do join) and (c)
-//      merges only planes within the angle, so the two sides of a thin slab (a table top one
-//      cell thick) stay apart.
+//      the region's normal and (c) merges only planes within the angle, so the two sides of a
+//      thin slab (a table top one cell thick) stay apart.
 //
 // A global stage: it takes the faces of the whole octree (or of one level).
 #pragma once
