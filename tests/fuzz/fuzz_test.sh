@@ -44,6 +44,13 @@ case "${1:-}" in
     "$build/${target}_fuzzer" -max_total_time="$seconds" -timeout=60 -rss_limit_mb=2560 \
       -print_final_stats=1 -artifact_prefix="$artifacts/" "$@" "$work" "$here/corpus/$target" \
       2>&1 | grep -v -E '^#[0-9]+.*(NEW|REDUCE|pulse)|NEW_FUNC' || status=${PIPESTATUS[0]}
+    # A target's scratch dir (fuzz_util.h ScratchDir) is removed at a normal exit only; a
+    # timeout, crash or fork-mode child leaves it on tmpfs (once a 13 GB scan.h5 in /dev/shm).
+    # Remove those of processes that are gone (other targets may be running beside this one).
+    for d in /dev/shm/carvemap_fuzz_* "${TMPDIR:-/tmp}"/carvemap_fuzz_*; do
+      [ -d "$d" ] || continue
+      kill -0 "${d##*_}" 2>/dev/null || rm -rf "$d"
+    done
     if [ "$status" -ne 0 ]; then
       echo "fuzz: $target failed (exit $status). Inputs that failed:" >&2
       ls -1 "$artifacts" >&2
