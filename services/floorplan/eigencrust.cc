@@ -25,6 +25,8 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "services/floorplan/orient_2d.h"
+#include "services/floorplan/union_find.h"
 
 namespace carvemap {
 namespace {
@@ -37,19 +39,7 @@ using Delaunay = CGAL::Delaunay_triangulation_2<K, Tds>;
 using CPoint = K::Point_2;
 using Eigen::Vector2d;
 
-// Sign of the turn a→b→c: +1 left, −1 right, 0 collinear. A static filter on doubles
-// (Shewchuk's ccwerrboundA) decides almost every case; CGAL's exact predicate the rest, so the
-// walks see consistent signs.
-int Orient(const Vector2d& a, const Vector2d& b, const Vector2d& c) {
-  const double detl = (b.x() - a.x()) * (c.y() - a.y());
-  const double detr = (b.y() - a.y()) * (c.x() - a.x());
-  const double det = detl - detr;
-  const double bound = 3.3306690738754716e-16 * (std::abs(detl) + std::abs(detr));
-  if (det > bound) return 1;
-  if (-det > bound) return -1;
-  return static_cast<int>(
-      CGAL::orientation(CPoint(a.x(), a.y()), CPoint(b.x(), b.y()), CPoint(c.x(), c.y())));
-}
+using floorplan_internal::Orient;
 
 struct Circle {
   Vector2d c = Vector2d::Zero();
@@ -148,16 +138,7 @@ struct Mesh {
   }
 };
 
-// Union-find over n items.
-struct UnionFind {
-  std::vector<int> parent;
-  explicit UnionFind(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
-  int Find(int x) {
-    while (parent[x] != x) x = parent[x] = parent[parent[x]];
-    return x;
-  }
-  void Join(int a, int b) { parent[Find(a)] = Find(b); }
-};
+using floorplan_internal::UnionFind;
 
 // Spectra operator y = (L − σD)⁻¹ x by Eigen's sparse LDLᵀ: L − σD is positive definite for
 // σ < 0 (L = D − W is a signed graph Laplacian, positive semi-definite), so Cholesky-type

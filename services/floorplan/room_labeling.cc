@@ -23,6 +23,7 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "services/floorplan/orient_2d.h"
 
 namespace carvemap {
 namespace {
@@ -35,19 +36,7 @@ using Delaunay = CGAL::Delaunay_triangulation_2<K, Tds>;
 using CPoint = K::Point_2;
 using Eigen::Vector2d;
 
-// Sign of the turn a→b→c: +1 left, −1 right, 0 collinear. A Shewchuk-style static filter on
-// doubles (ccwerrboundA), falling back to CGAL's exact Epick predicate when uncertain: the walks
-// below rely on consistent signs (a vertex exactly on the segment must be seen as such).
-int Orient(const Vector2d& a, const Vector2d& b, const Vector2d& c) {
-  const double detl = (b.x() - a.x()) * (c.y() - a.y());
-  const double detr = (b.y() - a.y()) * (c.x() - a.x());
-  const double det = detl - detr;
-  const double bound = 3.3306690738754716e-16 * (std::abs(detl) + std::abs(detr));
-  if (det > bound) return 1;
-  if (-det > bound) return -1;
-  return static_cast<int>(
-      CGAL::orientation(CPoint(a.x(), a.y()), CPoint(b.x(), b.y()), CPoint(c.x(), c.y())));
-}
+using floorplan_internal::Orient;
 
 // The finite faces of the Delaunay triangulation as flat arrays (faster to walk than handles).
 // fv: CCW vertex ids; fn[f][i]: the face across the edge opposite fv[f][i], −1 outside the hull.

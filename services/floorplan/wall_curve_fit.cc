@@ -11,6 +11,7 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "services/floorplan/union_find.h"
 
 namespace carvemap {
 namespace {
@@ -159,15 +160,7 @@ class Grid {
   std::vector<Vector2d> centres_;
 };
 
-struct UnionFind {
-  std::vector<int> parent;
-  explicit UnionFind(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
-  int Find(int x) {
-    while (parent[x] != x) x = parent[x] = parent[parent[x]];
-    return x;
-  }
-  void Join(int a, int b) { parent[Find(a)] = Find(b); }
-};
+using floorplan_internal::UnionFind;
 
 }  // namespace
 
