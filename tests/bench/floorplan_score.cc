@@ -1,0 +1,196 @@
+// Scores a floor plan the 3D route wrote (OUT/level_<k>/floorplan.geojson, DESIGN §7) against a
+// real map's ground-truth rooms (../shared/data/floormaps/*_gt_segmentation.png, SOURCES.md),
+// with the same metrics as the 2D route's evaluation (services/floorplan/room_scoring.h: room F1
+// at IoU > 0.5, one-to-one; Bormann et al.'s overlap recall / precision). Used by
+// tests/bench/floorplan_3d_eval.sh.
+//
+//   floorplan_score --geojson OUT/level_0/floorplan.geojson --gt MAP_gt_segmentation.png
+//                   [--resolution 0.05] [--origin-x 0] [--origin-y 0]
+//
+// Frames: `carvemap simulate --floormap` extrudes pixel (row, col) of an H-row map to
+// x = col·res, y = (H−1−row)·res (DESIGN §4, lower-left origin), the frame RasterizeFloorPlan
+// uses with origin (0, 0); the plan's polygons are in the world frame of the scan, so a map
+// simulated with defaults needs no offset.
+//
+// Prints one line of key=value pairs (truth_rooms, predicted_rooms, matched, precision, recall,
+// f1, bormann_recall, bormann_precision, plan_rooms = room features in the file).
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "CLI/CLI.hpp"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/str_cat.h"
+#include "nlohmann/json.hpp"
+#include "services/floorplan/room_scoring.h"
+#include "storage/png_io.h"
+
+namespace carvemap {
+namespace {
+
+using Ring = std::vector<Eigen::Vector2d>;
+// One polygon: outer ring then holes (GeoJSON order).
+using Polygon = std::vector<Ring>;
+
+struct PlanRoom {
+  int label = 0;
+  std::vector<Polygon> polygons;
+};
+
+absl::StatusOr<Ring> ParseRing(const nlohmann::json& j, const std::string& where) {
+  if (!j.is_array()) return absl::InvalidArgumentError(where + ": a ring is not an array");
+  Ring ring;
+  for (const nlohmann::json& p : j) {
+    if (!p.is_array() || p.size() < 2 || !p[0].is_number() || !p[1].is_number()) {
+      return absl::InvalidArgumentError(where + ": a position is not [x, y]");
+    }
+    ring.emplace_back(p[0].get<double>(), p[1].get<double>());
+    if (!ring.back().allFinite()) {
+      return absl::InvalidArgumentError(where + ": a position is not finite");
+    }
+  }
+  return ring;
+}
+
+absl::StatusOr<Polygon> ParsePolygon(const nlohmann::json& j, const std::string& where) {
+  if (!j.is_array()) return absl::InvalidArgumentError(where + ": a polygon is not an array");
+  Polygon polygon;
+  for (const nlohmann::json& r : j) {
+    absl::StatusOr<Ring> ring = ParseRing(r, where);
+    if (!ring.ok()) return ring.status();
+    polygon.push_back(*std::move(ring));
+  }
+  return polygon;
+}
+
+// The room features (Polygon / MultiPolygon with a "room" property) of a floorplan.geojson;
+// walls (LineStrings) are skipped.
+absl::StatusOr<std::vector<PlanRoom>> ReadPlanRooms(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open"));
+  nlohmann::json doc = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+  if (doc.is_discarded()) return absl::InvalidArgumentError(path + ": not valid JSON");
+  if (!doc.contains("features") || !doc["features"].is_array()) {
+    return absl::InvalidArgumentError(path + ": no \"features\" array (not a FeatureCollection)");
+  }
+  std::vector<PlanRoom> rooms;
+  int index = 0;
+  for (const nlohmann::json& f : doc["features"]) {
+    const std::string where = absl::StrCat(path, ": feature ", index++);
+    if (!f.is_object() || !f.contains("geometry") || !f["geometry"].is_object()) {
+      return absl::InvalidArgumentError(where + ": no geometry object");
+    }
+    const nlohmann::json& g = f["geometry"];
+    const std::string type = g.value("type", "");
+    if (type != "Polygon" && type != "MultiPolygon") continue;
+    if (!g.contains("coordinates")) return absl::InvalidArgumentError(where + ": no coordinates");
+    PlanRoom room;
+    room.label = static_cast<int>(rooms.size());
+    if (type == "Polygon") {
+      absl::StatusOr<Polygon> p = ParsePolygon(g["coordinates"], where);
+      if (!p.ok()) return p.status();
+      room.polygons.push_back(*std::move(p));
+    } else {
+      if (!g["coordinates"].is_array()) {
+        return absl::InvalidArgumentError(where + ": MultiPolygon coordinates not an array");
+      }
+      for (const nlohmann::json& pj : g["coordinates"]) {
+        absl::StatusOr<Polygon> p = ParsePolygon(pj, where);
+        if (!p.ok()) return p.status();
+        room.polygons.push_back(*std::move(p));
+      }
+    }
+    rooms.push_back(std::move(room));
+  }
+  return rooms;
+}
+
+// Labels every pixel whose centre is inside the polygon (even-odd over its outer ring and its
+// holes), pixel centres as in RasterizeFloorPlan. Hand-written: the plan's rooms come back as
+// polygons here, not as the triangulation RasterizeFloorPlan takes, and a scanline fill of a
+// few hundred rings is a few lines (no library call needed for pixel-centre point-in-polygon).
+// Crossings are half-open in y (an edge holds y0 ≤ y < y1) so a centre on a shared vertex
+// counts once.
+void FillPolygon(const Polygon& polygon, int label, double res, double ox, double oy,
+                 LabelImage& image) {
+  double ymin = INFINITY, ymax = -INFINITY;
+  for (const Ring& ring : polygon)
+    for (const Eigen::Vector2d& p : ring) ymin = std::min(ymin, p.y()), ymax = std::max(ymax, p.y());
+  if (!(ymin <= ymax)) return;
+  const int H = image.height, W = image.width;
+  // Row of centre y: y = oy + (H − 1 − row + 0.5)·res.
+  const int row_lo = std::max(0, static_cast<int>(std::floor(H - 1 + 0.5 - (ymax - oy) / res)));
+  const int row_hi = std::min(H - 1, static_cast<int>(std::ceil(H - 1 + 0.5 - (ymin - oy) / res)));
+  std::vector<double> xs;
+  for (int row = row_lo; row <= row_hi; ++row) {
+    const double y = oy + (H - 1 - row + 0.5) * res;
+    xs.clear();
+    for (const Ring& ring : polygon) {
+      const size_t n = ring.size();
+      for (size_t i = 0; i < n; ++i) {
+        const Eigen::Vector2d& a = ring[i];
+        const Eigen::Vector2d& b = ring[(i + 1) % n];
+        if ((a.y() <= y) == (b.y() <= y)) continue;  // not crossing, or horizontal
+        xs.push_back(a.x() + (y - a.y()) * (b.x() - a.x()) / (b.y() - a.y()));
+      }
+    }
+    std::sort(xs.begin(), xs.end());
+    for (size_t k = 0; k + 1 < xs.size(); k += 2) {
+      // Columns whose centre x = ox + (col + 0.5)·res lies in [xs[k], xs[k+1]).
+      const int c0 = std::max(0, static_cast<int>(std::ceil((xs[k] - ox) / res - 0.5)));
+      const int c1 = std::min(W - 1, static_cast<int>(std::ceil((xs[k + 1] - ox) / res - 0.5)) - 1);
+      for (int col = c0; col <= c1; ++col) image.labels[size_t(row) * W + col] = label;
+    }
+  }
+}
+
+int Main(int argc, char** argv) {
+  CLI::App app{"Score a floorplan.geojson against a ground-truth room segmentation PNG"};
+  std::string geojson, gt_path;
+  double res = 0.05, ox = 0, oy = 0;
+  app.add_option("--geojson", geojson, "level_<k>/floorplan.geojson")->required();
+  app.add_option("--gt", gt_path, "*_gt_segmentation.png")->required();
+  app.add_option("--resolution", res, "Metres per pixel of the map")->check(CLI::PositiveNumber);
+  app.add_option("--origin-x", ox, "x of the map's lower-left corner, m");
+  app.add_option("--origin-y", oy, "y of the map's lower-left corner, m");
+  CLI11_PARSE(app, argc, argv);
+
+  absl::StatusOr<Image<uint8_t>> gt = ReadPngGray8(gt_path);
+  if (!gt.ok()) {
+    std::fprintf(stderr, "floorplan_score: %s\n", std::string(gt.status().message()).c_str());
+    return 1;
+  }
+  absl::StatusOr<std::vector<PlanRoom>> rooms = ReadPlanRooms(geojson);
+  if (!rooms.ok()) {
+    std::fprintf(stderr, "floorplan_score: %s\n", std::string(rooms.status().message()).c_str());
+    return 1;
+  }
+  const LabelImage truth = LabelsFromSegmentation(*gt);
+  LabelImage predicted{gt->width, gt->height,
+                       std::vector<int32_t>(size_t(gt->width) * gt->height, -1)};
+  for (const PlanRoom& room : *rooms)
+    for (const Polygon& polygon : room.polygons)
+      FillPolygon(polygon, room.label, res, ox, oy, predicted);
+  absl::StatusOr<RoomScores> s = ScoreRooms(truth, predicted);
+  if (!s.ok()) {
+    std::fprintf(stderr, "floorplan_score: %s\n", std::string(s.status().message()).c_str());
+    return 1;
+  }
+  std::printf(
+      "truth_rooms=%d predicted_rooms=%d matched=%d precision=%.3f recall=%.3f f1=%.3f "
+      "bormann_recall=%.3f bormann_precision=%.3f plan_rooms=%zu\n",
+      s->truth_rooms, s->predicted_rooms, s->matched, s->precision, s->recall, s->f1,
+      s->bormann_recall, s->bormann_precision, rooms->size());
+  return 0;
+}
+
+}  // namespace
+}  // namespace carvemap
+
+int main(int argc, char** argv) { return carvemap::Main(argc, argv); }
