@@ -37,7 +37,7 @@ struct RayModel {
 // A wedge (§4.2.1, §4.3.1): the volume between up to four neighbouring rays — rays j, j+1 of
 // frames i, i+1 of a line sensor, or four neighbouring pixels of a grid sensor — or a single
 // ray of a points sensor. Its volume is the convex hull of the sensor means and the point means
-// extended 3σ along each ray (for a single ray: that segment dilated by 3σ laterally).
+// extended 3σ along each ray (for a single ray: that segment widened by 1σ across the ray).
 struct Wedge {
   std::array<RayModel, 4> rays;
   uint8_t num_rays = 4;  // 4, or 1 for `points` sensors

@@ -21,6 +21,16 @@ using Eigen::Vector4d;
 // only place the plane to about a millimetre, and a zero-thickness slab would make "touches the
 // box" hinge on rounding. 1 mm is well below the finest leaf (7.8 mm).
 constexpr double kMinHalfThicknessM = 1e-3;
+// A single-ray wedge (§4.3.1 defines wedges between neighbouring rays; a lone ray is ours) has
+// no neighbours to bound it across the ray, so it is widened by 1σ of its lateral spread, not
+// 3σ. Its eq 4.7 value beside the ray is 0.5 + f_⊥·(F_s(1 − F_p) − 0.5): above 0.5 wherever
+// the leaf lies before the point, whatever is between them. 3σ let the long grazing rays that
+// fail the discontinuity test (a horizontal scanner's rays meeting the ceiling 20–30 m away,
+// σ_⊥ 8–23 cm there) mark as interior, with nothing to contradict them, a layer 0.25–0.9 m
+// above the ceiling, through a 0.2 m roof: the spurious level at 2.85–2.93 m on the simulated
+// floor maps (docs/BENCHMARKS.md). Along the ray it ends where every wedge does: at the sensor
+// mean and `sigmas`·σ_∥ past the point (behind the sensor eq 4.7 says exterior, F_s ≈ 0).
+constexpr double kSingleRayLateralSigmas = 1.0;
 // Every plane offset and the bounding box are widened by this, so that rounding in the dot
 // products of HullIntersectsBox can never turn a touching box into a separated one.
 constexpr double kSlackM = 1e-7;
@@ -53,18 +63,32 @@ double SigmaAlong(const RayModel& ray, const Vector3d& d) {
   return std::sqrt(std::max(0.0, d.dot(c * d)));
 }
 
-// Largest σ across the ray (of the point and the sensor Gaussians): sqrt of the largest
-// eigenvalue of P C P with P = I − ddᵀ.
-double SigmaLateral(const RayModel& ray, const Vector3d& d) {
+// Principal axes across the ray (unit, ⊥ d) of the point Gaussian's lateral spread P C_p P,
+// P = I − ddᵀ, and along each the larger σ of the point and the sensor Gaussians. A box with
+// these half-widths contains both 1σ ellipses across the ray (an ellipse's support along a unit
+// e is sqrt(eᵀ C e)), while a round tube of the largest σ would reach as far in every direction.
+struct LateralSpread {
+  Vector3d axis[2];
+  double sigma[2];
+};
+LateralSpread LateralSigmas(const RayModel& ray, const Vector3d& d) {
   const Eigen::Matrix3d p = Eigen::Matrix3d::Identity() - d * d.transpose();
-  double var = 0;
-  for (const SymCov3f& cov : {ray.point_cov, ray.sensor_cov}) {
-    const Eigen::Matrix3d m = p * ToMatrix(cov) * p;
-    var = std::max(var, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(m, Eigen::EigenvaluesOnly)
-                            .eigenvalues()
-                            .maxCoeff());
+  const Eigen::Matrix3d cp = ToMatrix(ray.point_cov);
+  const Eigen::Matrix3d cs = ToMatrix(ray.sensor_cov);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(p * cp * p);
+  // The eigenvector of the smallest eigenvalue is d itself (P d = 0); the other two span ⊥ d.
+  // An isotropic (or zero) lateral spread leaves them arbitrary: any orthonormal pair ⊥ d.
+  Vector3d a = eig.eigenvectors().col(2);
+  if (std::abs(a.dot(d)) > 1e-6 || !a.allFinite()) a = d.unitOrthogonal();
+  a = (a - a.dot(d) * d).normalized();
+  LateralSpread out;
+  out.axis[0] = a;
+  out.axis[1] = d.cross(a);
+  for (int i = 0; i < 2; ++i) {
+    const Vector3d& e = out.axis[i];
+    out.sigma[i] = std::sqrt(std::max({0.0, e.dot(cp * e), e.dot(cs * e)}));
   }
-  return std::sqrt(std::max(0.0, var));
+  return out;
 }
 
 // Adds the plane n·x <= max over the points, if n is new. Offsets are the exact support of the
@@ -207,7 +231,6 @@ void PrismHull(const PointSet& s, const Eigen::Matrix3d& axes, double t, WedgeHu
 
 WedgeHull SingleRayHull(const RayModel& ray, double sigmas) {
   const Vector3d d = RayDirection(ray);
-  const double r = std::max(kMinHalfThicknessM, sigmas * SigmaLateral(ray, d));
   PointSet s;
   s.origin = ray.sensor_mean.cast<double>();
   s.Add(ray.sensor_mean.cast<double>());
@@ -216,16 +239,21 @@ WedgeHull SingleRayHull(const RayModel& ray, double sigmas) {
   hull.planes.reserve(6);
   if (d.isZero()) {
     // No direction: a cube of half-width sigmas·σ_max around the point.
-    const double half = std::max(r, sigmas * SigmaAlong(ray, d));
+    const double half = std::max(kMinHalfThicknessM, sigmas * SigmaAlong(ray, d));
     OrientedBoxHull(s, Eigen::Matrix3d::Identity(), Vector3d::Constant(half), hull);
     return hull;
   }
-  // The segment dilated by r is a capsule; the oriented box around it (r also past both ends).
+  // The segment from the sensor to the point extended `sigmas`·σ_∥ (as for every wedge), widened
+  // across the ray by kSingleRayLateralSigmas·σ along each lateral principal axis.
+  const LateralSpread lateral = LateralSigmas(ray, d);
   Eigen::Matrix3d axes;
   axes.col(0) = d;
-  axes.col(1) = d.unitOrthogonal();
-  axes.col(2) = d.cross(axes.col(1));
-  OrientedBoxHull(s, axes, Vector3d::Constant(r), hull);
+  axes.col(1) = lateral.axis[0];
+  axes.col(2) = lateral.axis[1];
+  const Vector3d half(kMinHalfThicknessM,
+                      std::max(kMinHalfThicknessM, kSingleRayLateralSigmas * lateral.sigma[0]),
+                      std::max(kMinHalfThicknessM, kSingleRayLateralSigmas * lateral.sigma[1]));
+  OrientedBoxHull(s, axes, half, hull);
   return hull;
 }
 

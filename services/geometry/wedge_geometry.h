@@ -22,7 +22,8 @@ struct WedgeHull {
 
 // The hull of the wedge's sensor means and its point means extended `sigmas` standard
 // deviations (of the point Gaussian, along the ray) past the point (§4.3.1: 3σ). A single-ray
-// wedge is that segment dilated laterally by `sigmas` of the ray's lateral spread.
+// wedge is that segment in a box 1σ wide across the ray along the principal axes of its lateral
+// spread (not `sigmas`: see kSingleRayLateralSigmas in the .cc).
 // `facets`, if given, receives a hint for rebuilding the same hull faster (the facet triples of
 // the points, 0 when the hull is not made of them): see HullOfWedgePoints.
 [[nodiscard]] WedgeHull MakeWedgeHull(const Wedge& wedge, double sigmas = 3.0,

@@ -142,26 +142,46 @@ TEST(WedgeHullTest, ExtendsThreeSigmaAlongTheRay) {
   EXPECT_FALSE(HullContainsPoint(h, {10.32, 0.001, 0.001}));
 }
 
-TEST(WedgeHullTest, SingleRayIsDilatedSegment) {
+TEST(WedgeHullTest, SingleRayIsSegmentWidenedByOneSigmaPerLateralAxis) {
   RayModel r = Ray({1, 2, 3}, {1, 2, 13}, 0.01, 0.0);
-  r.point_cov = {0.04f, 0, 0, 0.01f, 0, 0.0001f};  // σ_⊥ = 0.2 (x), σ_∥ = 0.01
+  r.point_cov = {0.04f, 0, 0, 0.01f, 0, 0.0001f};  // σ_⊥ = 0.2 (x) and 0.1 (y), σ_∥ = 0.01
   Wedge w;
   w.rays[0] = r;
   w.num_rays = 1;
   const WedgeHull h = MakeWedgeHull(w);
   EXPECT_EQ(h.planes.size(), 6u);
-  const double r3 = 0.6;
   for (double t : {0.0, 0.5, 1.0}) {
     const Vector3d c(1, 2, 3 + t * 10.03);
-    for (double a = 0; a < 6.3; a += 0.3) {
-      const Vector3d lateral(std::cos(a), std::sin(a), 0);
-      EXPECT_TRUE(HullContainsPoint(h, c + 0.99 * r3 * lateral)) << t << " " << a;
-      EXPECT_FALSE(HullContainsPoint(h, c + 1.5 * r3 * lateral)) << t << " " << a;
-    }
+    EXPECT_TRUE(HullContainsPoint(h, c + Vector3d(0.199, 0.099, 0))) << t;
+    EXPECT_TRUE(HullContainsPoint(h, c + Vector3d(-0.199, -0.099, 0))) << t;
+    EXPECT_FALSE(HullContainsPoint(h, c + Vector3d(0.21, 0, 0))) << t;
+    EXPECT_FALSE(HullContainsPoint(h, c + Vector3d(0, -0.11, 0))) << t;
   }
-  EXPECT_TRUE(HullContainsPoint(h, {1, 2, 13.02}));
-  EXPECT_FALSE(HullContainsPoint(h, {1, 2, 13.7}));
-  EXPECT_FALSE(HullContainsPoint(h, {1, 2, 2.3}));
+  EXPECT_TRUE(HullContainsPoint(h, {1, 2, 13.02}));   // within 3σ_∥ past the point
+  EXPECT_FALSE(HullContainsPoint(h, {1, 2, 13.05}));  // beyond it
+  EXPECT_FALSE(HullContainsPoint(h, {1, 2, 2.99}));   // behind the sensor
+  // A wider sensor Gaussian widens the box along both axes.
+  w.rays[0].sensor_cov = Iso(0.3);
+  const WedgeHull wide = MakeWedgeHull(w);
+  EXPECT_TRUE(HullContainsPoint(wide, {1.29, 2.29, 8}));
+  EXPECT_FALSE(HullContainsPoint(wide, {1.31, 2, 8}));
+}
+
+TEST(WedgeHullTest, GrazingSingleRayStaysBelowTheSlabAboveIt) {
+  // A horizontal scanner 1.85 m up whose ray, pitched 1.5° by pose noise, meets a ceiling at
+  // 2.61 m 28 m away: the point covariance of the simulated Freiburg101 walk (σ 9.5 cm along x,
+  // 22 cm across in y, 9 cm in z), the sensor's 10 cm / 3 cm. A 3σ tube reached 3.3 m, through a
+  // 0.2 m roof slab, and carved a false level above it; the hull must stay inside the slab.
+  RayModel r = Ray({12.4, 25.1, 1.85}, {40.15, 20.05, 2.61});
+  r.point_cov = {0.0090f, 0, 0, 0.0434f, 0, 0.0067f};
+  r.sensor_cov = {0.0063f, 0, 0, 0.0063f, 0, 0.0006f};
+  Wedge w;
+  w.rays[0] = r;
+  w.num_rays = 1;
+  const WedgeHull h = MakeWedgeHull(w);
+  EXPECT_LT(h.box.max().z(), 2.80);
+  EXPECT_GT(h.box.max().z(), 2.61);  // it still reaches past the point
+  EXPECT_TRUE(HullContainsPoint(h, {40.15, 20.05, 2.60}));
 }
 
 TEST(WedgeHullTest, FlatWedgeGetsAMillimetre) {
