@@ -146,6 +146,68 @@ TEST_F(GrpcServerCommonTest, UnimplementedMethodAnswersUnimplemented) {
   EXPECT_EQ(status.code(), absl::StatusCode::kUnimplemented);
 }
 
+// GetJob answers NOT_FOUND, so a call tells which server it reached (an unknown service is
+// UNIMPLEMENTED).
+class NotFoundJobs final : public carvemap::v1::JobService::Service {
+  grpc::Status GetJob(grpc::ServerContext*, const carvemap::v1::GetJobRequest*,
+                      carvemap::v1::Job*) override {
+    return grpc::Status(grpc::StatusCode::NOT_FOUND, "no job");
+  }
+};
+
+// StartGrpcServer: the services on the main port; health alone on the plaintext health port;
+// MarkServing and Shutdown reach both.
+TEST(StartGrpcServerTest, ServesAndStopsBothPorts) {
+  NotFoundJobs jobs;
+  GrpcServerSpec spec;
+  spec.component = "test";
+  spec.listen_address = "localhost:0";
+  spec.credentials = grpc::InsecureServerCredentials();
+  spec.services = {&jobs};
+  spec.health_listen_address = "localhost:0";
+  absl::StatusOr<GrpcServers> servers = StartGrpcServer(spec);
+  ASSERT_TRUE(servers.ok()) << servers.status();
+  ASSERT_GT(servers->port, 0);
+  ASSERT_GT(servers->health_port, 0);
+  ASSERT_NE(servers->port, servers->health_port);
+  servers->MarkServing({"carvemap.v1.JobService"});
+  for (int port : {servers->port, servers->health_port}) {
+    grpc::GenericStub stub(grpc::CreateChannel("localhost:" + std::to_string(port),
+                                               grpc::InsecureChannelCredentials()));
+    EXPECT_EQ(HealthCheck(stub, "").second, kServing) << port;
+    EXPECT_EQ(HealthCheck(stub, "carvemap.v1.JobService").second, kServing) << port;
+  }
+  // The job API is on the main port only.
+  for (auto [port, code] : {std::pair{servers->port, absl::StatusCode::kNotFound},
+                            std::pair{servers->health_port, absl::StatusCode::kUnimplemented}}) {
+    auto stub = carvemap::v1::JobService::NewStub(grpc::CreateChannel(
+        "localhost:" + std::to_string(port), grpc::InsecureChannelCredentials()));
+    grpc::ClientContext context;
+    carvemap::v1::GetJobRequest request;
+    carvemap::v1::Job job;
+    EXPECT_EQ(FromGrpcStatus(stub->GetJob(&context, request, &job)).code(), code) << port;
+  }
+  servers->Shutdown(std::chrono::milliseconds(100));
+  grpc::GenericStub stub(grpc::CreateChannel("localhost:" + std::to_string(servers->port),
+                                             grpc::InsecureChannelCredentials()));
+  EXPECT_FALSE(HealthCheck(stub, "").first.ok());
+}
+
+TEST(StartGrpcServerTest, AnAddressThatCannotBeBoundIsUnavailable) {
+  GrpcServerSpec spec;
+  spec.component = "test";
+  spec.listen_address = "192.0.2.1:0";  // TEST-NET-1: no interface of this machine has it
+  spec.credentials = grpc::InsecureServerCredentials();
+  absl::StatusOr<GrpcServers> servers = StartGrpcServer(spec);
+  EXPECT_EQ(servers.status().code(), absl::StatusCode::kUnavailable);
+  EXPECT_EQ(servers.status().message(), "test: cannot listen on 192.0.2.1:0");
+  spec.listen_address = "localhost:0";
+  spec.health_listen_address = "192.0.2.1:0";
+  servers = StartGrpcServer(spec);
+  EXPECT_EQ(servers.status().code(), absl::StatusCode::kUnavailable);
+  EXPECT_EQ(servers.status().message(), "test: cannot listen on 192.0.2.1:0 (health)");
+}
+
 TEST(GrpcStatusTest, RoundTripsEveryCode) {
   for (int code = 0; code <= 16; ++code) {
     absl::Status in(static_cast<absl::StatusCode>(code), code == 0 ? "" : "chunk (1,2,3): x");

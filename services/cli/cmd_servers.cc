@@ -9,10 +9,12 @@
 #include <fstream>
 #include <memory>
 #include <string>
+#include <type_traits>
 
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
+#include "absl/functional/function_ref.h"
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "services/cli/commands.h"
@@ -85,6 +87,64 @@ void LogResourceUsage(const char* who) {
                cpu_s);
 }
 
+// Runs a server of services/rpc/ (CoordinatorServer, WorkerServer, MergeServer) until SIGINT
+// or SIGTERM, or until it ends by itself (a worker whose coordinator is gone). The signal
+// handler comes first, before any thread exists (gRPC starts threads: process_util.h); then
+// `start()` makes the server and `serving(server)` tells where it listens. A signal that
+// arrives before the server exists stops it as soon as it does. Returns the first error, else
+// what the server's Wait() returns (OK where Wait() returns nothing).
+template <typename Server>
+absl::Status ServeUntilSignal(const char* who,
+                              absl::FunctionRef<absl::StatusOr<std::unique_ptr<Server>>()> start,
+                              absl::FunctionRef<absl::Status(Server&)> serving) {
+  auto stop = std::make_shared<std::atomic<Server*>>(nullptr);
+  auto stop_requested = std::make_shared<std::atomic<bool>>(false);
+  HandleTerminationSignals([who, stop, stop_requested](int signo) {
+    spdlog::info("{}: signal {}, shutting down", who, signo);
+    stop_requested->store(true);
+    if (Server* s = stop->load()) s->Shutdown();
+  });
+  absl::StatusOr<std::unique_ptr<Server>> server = start();
+  if (!server.ok()) return server.status();
+  if (absl::Status s = serving(**server); !s.ok()) return s;
+  stop->store(server->get());
+  if (stop_requested->load()) (*server)->Shutdown();
+  absl::Status ended = absl::OkStatus();
+  if constexpr (std::is_void_v<decltype((*server)->Wait())>) {
+    (*server)->Wait();
+  } else {
+    ended = (*server)->Wait();
+  }
+  (*server)->Shutdown();  // waits for a Shutdown still running on the signal thread
+  stop->store(nullptr);
+  LogResourceUsage(who);
+  return ended;
+}
+
+// "listening on HOST:PORT" on stdout (text logs only: in JSON the logged "listening on" line
+// says it) and in the port file, if any.
+absl::Status AnnounceAddress(const std::string& listen_address, int port, LogFormat log_format,
+                             const std::string& port_file) {
+  const std::string address = absl::StrCat(HostOf(listen_address), ":", port);
+  if (log_format == LogFormat::kText) {
+    std::printf("listening on %s\n", address.c_str());
+    std::fflush(stdout);
+  }
+  if (!port_file.empty()) return WritePortFile(port_file, address);
+  return absl::OkStatus();
+}
+
+// The cluster secret from its file, or else from the CARVEMAP_CLUSTER_SECRET variable (the
+// coordinator, the merge services and the workers read it alike); "" if neither is given.
+absl::StatusOr<std::string> LoadClusterSecret(const std::string& secret_file) {
+  if (!secret_file.empty()) return ReadSecretFile(secret_file, "cluster secret file");
+  if (const char* env = std::getenv("CARVEMAP_CLUSTER_SECRET"); env && *env) {
+    if (absl::Status s = ValidateSecret(env, "CARVEMAP_CLUSTER_SECRET"); !s.ok()) return s;
+    return std::string(env);
+  }
+  return std::string();
+}
+
 struct CoordinatorFlags {
   CoordinatorSpec spec;
   std::string port_file;
@@ -110,65 +170,42 @@ absl::Status LoadSecrets(CoordinatorFlags& flags) {
     if (!tokens.ok()) return tokens.status();
     flags.spec.tokens = *std::move(tokens);
   }
-  if (!flags.secret_file.empty()) {
-    absl::StatusOr<std::string> secret = ReadSecretFile(flags.secret_file, "cluster secret file");
-    if (!secret.ok()) return secret.status();
-    flags.spec.cluster_secret = *secret;
-  } else if (const char* env = std::getenv("CARVEMAP_CLUSTER_SECRET"); env && *env) {
-    flags.spec.cluster_secret = env;
-    if (absl::Status s = ValidateSecret(env, "CARVEMAP_CLUSTER_SECRET"); !s.ok()) return s;
-  }
+  absl::StatusOr<std::string> secret = LoadClusterSecret(flags.secret_file);
+  if (!secret.ok()) return secret.status();
+  flags.spec.cluster_secret = *std::move(secret);
   return absl::OkStatus();
 }
 
 absl::Status RunCoordinator(CoordinatorFlags flags, LogFormat log_format) {
   if (absl::Status s = LoadSecrets(flags); !s.ok()) return s;
-  // Set up before any thread exists (gRPC starts threads).
-  auto stop = std::make_shared<std::atomic<CoordinatorServer*>>(nullptr);
-  auto stop_requested = std::make_shared<std::atomic<bool>>(false);
-  HandleTerminationSignals([stop, stop_requested](int signo) {
-    spdlog::info("coordinator: signal {}, shutting down", signo);
-    stop_requested->store(true);
-    if (CoordinatorServer* s = stop->load()) s->Shutdown();
-  });
-  // The server's own rules first (an open service off loopback, bad TLS files): their
-  // messages say more than a missing merge service.
-  if (absl::Status s = flags.spec.Validate(); !s.ok()) return s;
-  if (flags.no_merge) {
-    if (!flags.merge.addresses.empty()) {
-      return absl::InvalidArgumentError("--no-merge and --merge-server exclude each other");
-    }
-  } else {
-    if (flags.merge.addresses.empty()) {
-      return absl::InvalidArgumentError(
-          "no merge service: give --merge-server HOST:PORT (a `carvemap merger`; DESIGN §8 runs "
-          "the merge as its own service), or --no-merge for tiles only");
-    }
-    flags.merge.security.bearer = flags.spec.cluster_secret;
-    absl::StatusOr<MergeFunction> merge = RemoteMerge(flags.merge);
-    if (!merge.ok()) return merge.status();
-    flags.spec.merge = *std::move(merge);
-    flags.spec.merge_in_process = false;
-  }
-  absl::StatusOr<std::unique_ptr<CoordinatorServer>> server =
-      CoordinatorServer::Start(flags.spec);
-  if (!server.ok()) return server.status();
-  const std::string address =
-      absl::StrCat(HostOf(flags.spec.listen_address), ":", (*server)->port());
-  if (log_format == LogFormat::kText) {  // JSON: the logged "listening on" line says it
-    std::printf("listening on %s\n", address.c_str());
-    std::fflush(stdout);
-  }
-  if (!flags.port_file.empty()) {
-    if (absl::Status s = WritePortFile(flags.port_file, address); !s.ok()) return s;
-  }
-  stop->store(server->get());
-  if (stop_requested->load()) (*server)->Shutdown();
-  (*server)->Wait();
-  (*server)->Shutdown();  // waits for a Shutdown still running on the signal thread
-  stop->store(nullptr);
-  LogResourceUsage("coordinator");
-  return absl::OkStatus();
+  return ServeUntilSignal<CoordinatorServer>(
+      "coordinator",
+      [&]() -> absl::StatusOr<std::unique_ptr<CoordinatorServer>> {
+        // The server's own rules first (an open service off loopback, bad TLS files): their
+        // messages say more than a missing merge service.
+        if (absl::Status s = flags.spec.Validate(); !s.ok()) return s;
+        if (flags.no_merge) {
+          if (!flags.merge.addresses.empty()) {
+            return absl::InvalidArgumentError("--no-merge and --merge-server exclude each other");
+          }
+        } else {
+          if (flags.merge.addresses.empty()) {
+            return absl::InvalidArgumentError(
+                "no merge service: give --merge-server HOST:PORT (a `carvemap merger`; DESIGN §8 "
+                "runs the merge as its own service), or --no-merge for tiles only");
+          }
+          flags.merge.security.bearer = flags.spec.cluster_secret;
+          absl::StatusOr<MergeFunction> merge = RemoteMerge(flags.merge);
+          if (!merge.ok()) return merge.status();
+          flags.spec.merge = *std::move(merge);
+          flags.spec.merge_in_process = false;
+        }
+        return CoordinatorServer::Start(flags.spec);
+      },
+      [&](CoordinatorServer& server) {
+        return AnnounceAddress(flags.spec.listen_address, server.port(), log_format,
+                               flags.port_file);
+      });
 }
 
 void RegisterCoordinator(CLI::App& app, int& exit_code) {
@@ -289,22 +326,9 @@ absl::Status RunWorker(WorkerFlags flags) {
   absl::StatusOr<ChannelSecurity> security = ResolveSecurity(flags.security, /*worker=*/true);
   if (!security.ok()) return security.status();
   flags.spec.security = *std::move(security);
-  auto stop = std::make_shared<std::atomic<WorkerServer*>>(nullptr);
-  auto stop_requested = std::make_shared<std::atomic<bool>>(false);
-  HandleTerminationSignals([stop, stop_requested](int signo) {
-    spdlog::info("worker: signal {}, shutting down", signo);
-    stop_requested->store(true);
-    if (WorkerServer* s = stop->load()) s->Shutdown();
-  });
-  absl::StatusOr<std::unique_ptr<WorkerServer>> worker = WorkerServer::Start(flags.spec);
-  if (!worker.ok()) return worker.status();
-  stop->store(worker->get());
-  if (stop_requested->load()) (*worker)->Shutdown();
-  absl::Status ended = (*worker)->Wait();
-  (*worker)->Shutdown();
-  stop->store(nullptr);
-  LogResourceUsage("worker");
-  return ended;
+  return ServeUntilSignal<WorkerServer>(
+      "worker", [&] { return WorkerServer::Start(flags.spec); },
+      [](WorkerServer&) { return absl::OkStatus(); });
 }
 
 void RegisterWorker(CLI::App& app, int& exit_code) {
@@ -339,41 +363,16 @@ struct MergerFlags {
 };
 
 absl::Status RunMerger(MergerFlags flags, LogFormat log_format) {
-  // The cluster secret the coordinator presents, from its file or else the variable (as the
-  // coordinator and the workers read it).
-  if (!flags.secret_file.empty()) {
-    absl::StatusOr<std::string> secret = ReadSecretFile(flags.secret_file, "cluster secret file");
-    if (!secret.ok()) return secret.status();
-    flags.spec.cluster_secret = *secret;
-  } else if (const char* env = std::getenv("CARVEMAP_CLUSTER_SECRET"); env && *env) {
-    flags.spec.cluster_secret = env;
-    if (absl::Status s = ValidateSecret(env, "CARVEMAP_CLUSTER_SECRET"); !s.ok()) return s;
-  }
-  auto stop = std::make_shared<std::atomic<MergeServer*>>(nullptr);
-  auto stop_requested = std::make_shared<std::atomic<bool>>(false);
-  HandleTerminationSignals([stop, stop_requested](int signo) {
-    spdlog::info("merger: signal {}, shutting down", signo);
-    stop_requested->store(true);
-    if (MergeServer* s = stop->load()) s->Shutdown();
-  });
-  absl::StatusOr<std::unique_ptr<MergeServer>> server = MergeServer::Start(flags.spec);
-  if (!server.ok()) return server.status();
-  const std::string address =
-      absl::StrCat(HostOf(flags.spec.listen_address), ":", (*server)->port());
-  if (log_format == LogFormat::kText) {
-    std::printf("listening on %s\n", address.c_str());
-    std::fflush(stdout);
-  }
-  if (!flags.port_file.empty()) {
-    if (absl::Status s = WritePortFile(flags.port_file, address); !s.ok()) return s;
-  }
-  stop->store(server->get());
-  if (stop_requested->load()) (*server)->Shutdown();
-  (*server)->Wait();
-  (*server)->Shutdown();
-  stop->store(nullptr);
-  LogResourceUsage("merger");
-  return absl::OkStatus();
+  // The cluster secret the coordinator presents.
+  absl::StatusOr<std::string> secret = LoadClusterSecret(flags.secret_file);
+  if (!secret.ok()) return secret.status();
+  flags.spec.cluster_secret = *std::move(secret);
+  return ServeUntilSignal<MergeServer>(
+      "merger", [&] { return MergeServer::Start(flags.spec); },
+      [&](MergeServer& server) {
+        return AnnounceAddress(flags.spec.listen_address, server.port(), log_format,
+                               flags.port_file);
+      });
 }
 
 void RegisterMerger(CLI::App& app, int& exit_code) {

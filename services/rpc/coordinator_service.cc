@@ -282,8 +282,8 @@ class CoordinatorServer::Impl {
   absl::Status Start();
   void Shutdown();
   void Wait() { shutdown_done_.WaitForNotification(); }
-  int port() const { return port_; }
-  int health_port() const { return health_port_; }
+  int port() const { return servers_.port; }
+  int health_port() const { return servers_.health_port; }
   int metrics_port() const { return metrics_port_; }
   CoordinatorMetrics& metrics() { return metrics_; }
 
@@ -410,13 +410,10 @@ class CoordinatorServer::Impl {
   const CoordinatorSpec spec_;
   std::string work_dir_;
   std::unique_ptr<JobStore> store_;
-  std::unique_ptr<grpc::Server> server_;
-  std::unique_ptr<grpc::Server> health_server_;  // spec_.health_listen_address
+  GrpcServers servers_;  // the two APIs; the plaintext health port if asked for
   TokenTable tokens_;
   std::unique_ptr<grpc::Service> job_service_;
   std::unique_ptr<grpc::Service> carve_service_;
-  int port_ = 0;
-  int health_port_ = 0;
   int metrics_port_ = 0;
   CoordinatorMetrics metrics_;
   std::unique_ptr<prometheus::Exposer> exposer_;  // spec_.metrics_listen_address
@@ -560,13 +557,9 @@ absl::Status CoordinatorServer::Impl::Start() {
   absl::StatusOr<TokenTable> tokens = TokenTable::Build(spec_.tokens);
   if (!tokens.ok()) return tokens.status();
   tokens_ = *std::move(tokens);
-  std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
-  if (!spec_.tls_cert_file.empty()) {
-    absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> tls = MakeServerCredentials(
-        spec_.tls_cert_file, spec_.tls_key_file, spec_.tls_client_ca_file);
-    if (!tls.ok()) return tls.status();
-    credentials = *std::move(tls);
-  }
+  absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =
+      ServerCredentialsFor(spec_.tls_cert_file, spec_.tls_key_file, spec_.tls_client_ca_file);
+  if (!credentials.ok()) return credentials.status();
   work_dir_ = spec_.work_dir.empty()
                   ? (fs::path(spec_.storage_root.empty() ? spec_.output_root : spec_.storage_root) /
                      ".carvemap")
@@ -586,32 +579,19 @@ absl::Status CoordinatorServer::Impl::Start() {
     table_ = std::make_unique<LeaseTable>(*store_, LeaseTable::Clock::System(), options);
   }
 
-  EnableHealthAndReflection();
   job_service_ = std::make_unique<JobServiceAdapter>(*this);
   carve_service_ = std::make_unique<CarveServiceAdapter>(*this);
-  grpc::ServerBuilder builder;
-  builder.AddListeningPort(spec_.listen_address, credentials, &port_);
+  GrpcServerSpec server;
+  server.component = "coordinator";
+  server.listen_address = spec_.listen_address;
+  server.credentials = *std::move(credentials);
   // Oversize requests are refused by gRPC itself (RESOURCE_EXHAUSTED) before any handler.
-  builder.SetMaxReceiveMessageSize(spec_.max_request_bytes);
-  builder.RegisterService(job_service_.get());
-  builder.RegisterService(carve_service_.get());
-  server_ = builder.BuildAndStart();
-  if (server_ == nullptr || port_ == 0) {
-    return absl::UnavailableError(
-        absl::StrCat("coordinator: cannot listen on ", spec_.listen_address));
-  }
-  if (!spec_.health_listen_address.empty()) {
-    // Health (and reflection) only: the default health service comes with every server.
-    grpc::ServerBuilder health;
-    health.AddListeningPort(spec_.health_listen_address, grpc::InsecureServerCredentials(),
-                            &health_port_);
-    health.SetMaxReceiveMessageSize(4096);
-    health_server_ = health.BuildAndStart();
-    if (health_server_ == nullptr || health_port_ == 0) {
-      return absl::UnavailableError(absl::StrCat("coordinator: cannot listen on ",
-                                                 spec_.health_listen_address, " (health)"));
-    }
-  }
+  server.max_receive_message_bytes = spec_.max_request_bytes;
+  server.services = {job_service_.get(), carve_service_.get()};
+  server.health_listen_address = spec_.health_listen_address;
+  absl::StatusOr<GrpcServers> servers = StartGrpcServer(server);
+  if (!servers.ok()) return servers.status();
+  servers_ = *std::move(servers);
   if (!spec_.metrics_listen_address.empty()) {
     try {
       exposer_ = std::make_unique<prometheus::Exposer>(spec_.metrics_listen_address, 1);
@@ -626,12 +606,7 @@ absl::Status CoordinatorServer::Impl::Start() {
                  spec_.metrics_listen_address.substr(0, spec_.metrics_listen_address.rfind(':')),
                  metrics_port_);
   }
-  for (grpc::Server* server : {server_.get(), health_server_.get()}) {
-    if (server == nullptr) continue;
-    SetServing(*server, "", true);
-    SetServing(*server, "carvemap.v1.JobService", true);
-    SetServing(*server, "carvemap.v1.CarveTaskService", true);
-  }
+  servers_.MarkServing({"carvemap.v1.JobService", "carvemap.v1.CarveTaskService"});
   const bool loopback = IsLoopbackAddress(spec_.listen_address);
   if (tokens_.empty()) {
     spdlog::warn("coordinator: no bearer tokens: the job API is open, every caller is tenant "
@@ -672,7 +647,7 @@ absl::Status CoordinatorServer::Impl::Start() {
     }
   }
   spdlog::info("coordinator: listening on {}:{} (outputs {}, work dir {})",
-               spec_.listen_address.substr(0, spec_.listen_address.rfind(':')), port_,
+               spec_.listen_address.substr(0, spec_.listen_address.rfind(':')), servers_.port,
                spec_.output_root, work_dir_);
   return absl::OkStatus();
 }
@@ -681,15 +656,8 @@ void CoordinatorServer::Impl::Shutdown() {
   absl::MutexLock shutdown_lock(&shutdown_mu_);
   if (shutdown_done_.HasBeenNotified()) return;
   stopping_ = true;
-  if (health_server_ != nullptr) {
-    SetServing(*health_server_, "", false);
-    health_server_->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(100));
-  }
-  if (server_ != nullptr) {
-    SetServing(*server_, "", false);
-    // Streams and long polls see stopping_ within a poll interval; the deadline bounds the wait.
-    server_->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(500));
-  }
+  // Streams and long polls see stopping_ within a poll interval; the deadline bounds the wait.
+  servers_.Shutdown(std::chrono::milliseconds(500));
   if (sweeper_.joinable()) sweeper_.join();
   std::vector<std::thread> threads;
   {
@@ -770,17 +738,8 @@ absl::StatusOr<CoordinatorServer::Impl::Caller> CoordinatorServer::Impl::Authent
 }
 
 absl::Status CoordinatorServer::Impl::AuthenticatePeer(const grpc::ServerContext& ctx) {
-  if (spec_.cluster_secret.empty() && spec_.tls_client_ca_file.empty()) {
-    return absl::OkStatus();  // open: loopback only, or --insecure (Validate)
-  }
-  if (!spec_.tls_client_ca_file.empty() && HasVerifiedClientCertificate(ctx)) {
+  if (IsClusterPeer(ctx, spec_.cluster_secret, spec_.tls_client_ca_file)) {
     return absl::OkStatus();
-  }
-  if (!spec_.cluster_secret.empty()) {
-    const CallerBearer bearer = BearerOf(ctx);
-    if (bearer.token && SecretEquals(*bearer.token, spec_.cluster_secret)) {
-      return absl::OkStatus();
-    }
   }
   metrics_.CallRefused("carve");
   spdlog::warn("coordinator: carve-task call from {} refused: no cluster secret or client "

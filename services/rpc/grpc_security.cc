@@ -160,6 +160,13 @@ absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeServerCredentials(
   return grpc::SslServerCredentials(options);
 }
 
+absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ServerCredentialsFor(
+    const std::string& cert_file, const std::string& key_file,
+    const std::string& client_ca_file) {
+  if (cert_file.empty()) return grpc::InsecureServerCredentials();
+  return MakeServerCredentials(cert_file, key_file, client_ca_file);
+}
+
 CallerBearer BearerOf(const grpc::ServerContext& ctx) {
   CallerBearer out;
   const auto& md = ctx.client_metadata();
@@ -183,6 +190,17 @@ bool HasVerifiedClientCertificate(const grpc::ServerContext& ctx) {
     ssl = ssl || std::string(v.data(), v.size()) == "ssl";
   }
   return ssl && auth->IsPeerAuthenticated();
+}
+
+bool IsClusterPeer(const grpc::ServerContext& ctx, const std::string& cluster_secret,
+                   const std::string& client_ca_file) {
+  if (cluster_secret.empty() && client_ca_file.empty()) return true;
+  if (!client_ca_file.empty() && HasVerifiedClientCertificate(ctx)) return true;
+  if (!cluster_secret.empty()) {
+    const CallerBearer bearer = BearerOf(ctx);
+    if (bearer.token && SecretEquals(*bearer.token, cluster_secret)) return true;
+  }
+  return false;
 }
 
 }  // namespace carvemap

@@ -35,6 +35,10 @@ void AttachBearer(grpc::ClientContext& ctx, const std::string& bearer);
 // without one still connect and authenticate with a token). Errors name the file.
 absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeServerCredentials(
     const std::string& cert_file, const std::string& key_file, const std::string& client_ca_file);
+// Plaintext when `cert_file` is empty, else MakeServerCredentials: what a server's --tls-cert,
+// --tls-key and --tls-client-ca flags ask for.
+absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ServerCredentialsFor(
+    const std::string& cert_file, const std::string& key_file, const std::string& client_ca_file);
 
 // The caller's "authorization" metadata: absent, not a bearer token, or the token.
 struct CallerBearer {
@@ -46,6 +50,13 @@ struct CallerBearer {
 // True when the caller presented a client certificate that the server verified against its
 // client CA (MakeServerCredentials' client_ca_file).
 [[nodiscard]] bool HasVerifiedClientCertificate(const grpc::ServerContext& ctx);
+
+// The rule of the internal APIs (carve-task, merge): open when the server has neither a cluster
+// secret nor a client CA (loopback only, or --insecure: the specs' Validate); else the caller
+// needs a client certificate verified against `client_ca_file`, or `cluster_secret` as its
+// bearer token.
+[[nodiscard]] bool IsClusterPeer(const grpc::ServerContext& ctx, const std::string& cluster_secret,
+                                 const std::string& client_ca_file);
 
 }  // namespace carvemap
 

@@ -97,8 +97,8 @@ class MergeServer::Impl {
   absl::Status Start();
   void Shutdown();
   void Wait() { shutdown_done_.WaitForNotification(); }
-  int port() const { return port_; }
-  int health_port() const { return health_port_; }
+  int port() const { return servers_.port; }
+  int health_port() const { return servers_.health_port; }
 
   absl::Status Authenticate(const grpc::ServerContext& ctx);
   // One call: the job, the merge, the verdict. Errors are the call's own (the merge's
@@ -119,10 +119,7 @@ class MergeServer::Impl {
 
   MergeServerSpec spec_;
   std::unique_ptr<grpc::Service> service_;
-  std::unique_ptr<grpc::Server> server_;
-  std::unique_ptr<grpc::Server> health_server_;
-  int port_ = 0;
-  int health_port_ = 0;
+  GrpcServers servers_;  // the merge API; the plaintext health port if asked for
   std::atomic<bool> stopping_{false};
   absl::Mutex shutdown_mu_;
   absl::Notification shutdown_done_;
@@ -148,46 +145,28 @@ class MergeServiceAdapter final : public pb::MergeService::Service {
 
 absl::Status MergeServer::Impl::Start() {
   if (absl::Status s = spec_.Validate(); !s.ok()) return s;
-  std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
-  if (!spec_.tls_cert_file.empty()) {
-    absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> tls = MakeServerCredentials(
-        spec_.tls_cert_file, spec_.tls_key_file, spec_.tls_client_ca_file);
-    if (!tls.ok()) return tls.status();
-    credentials = *std::move(tls);
-  }
-  EnableHealthAndReflection();
+  absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =
+      ServerCredentialsFor(spec_.tls_cert_file, spec_.tls_key_file, spec_.tls_client_ca_file);
+  if (!credentials.ok()) return credentials.status();
   service_ = std::make_unique<MergeServiceAdapter>(*this);
-  grpc::ServerBuilder builder;
-  builder.AddListeningPort(spec_.listen_address, credentials, &port_);
-  builder.SetMaxReceiveMessageSize(spec_.max_request_bytes);
+  GrpcServerSpec server;
+  server.component = "merger";
+  server.listen_address = spec_.listen_address;
+  server.credentials = *std::move(credentials);
+  server.max_receive_message_bytes = spec_.max_request_bytes;
+  server.services = {service_.get()};
   // A merge stage can run for minutes without a message either way; keepalive pings find a
   // coordinator that is gone (host lost, network cut) so the merge stops, and the server
   // accepts the coordinator's own pings (RemoteMerge sends one every 10 s).
-  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, 10000);
-  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 10000);
-  builder.AddChannelArgument(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
-  builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS, 5000);
-  builder.RegisterService(service_.get());
-  server_ = builder.BuildAndStart();
-  if (server_ == nullptr || port_ == 0) {
-    return absl::UnavailableError(absl::StrCat("merger: cannot listen on ", spec_.listen_address));
-  }
-  if (!spec_.health_listen_address.empty()) {
-    grpc::ServerBuilder health;
-    health.AddListeningPort(spec_.health_listen_address, grpc::InsecureServerCredentials(),
-                            &health_port_);
-    health.SetMaxReceiveMessageSize(4096);
-    health_server_ = health.BuildAndStart();
-    if (health_server_ == nullptr || health_port_ == 0) {
-      return absl::UnavailableError(absl::StrCat("merger: cannot listen on ",
-                                                 spec_.health_listen_address, " (health)"));
-    }
-  }
-  for (grpc::Server* server : {server_.get(), health_server_.get()}) {
-    if (server == nullptr) continue;
-    SetServing(*server, "", true);
-    SetServing(*server, "carvemap.v1.MergeService", true);
-  }
+  server.channel_args = {{GRPC_ARG_KEEPALIVE_TIME_MS, 10000},
+                         {GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 10000},
+                         {GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0},
+                         {GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS, 5000}};
+  server.health_listen_address = spec_.health_listen_address;
+  absl::StatusOr<GrpcServers> servers = StartGrpcServer(server);
+  if (!servers.ok()) return servers.status();
+  servers_ = *std::move(servers);
+  servers_.MarkServing({"carvemap.v1.MergeService"});
   const bool loopback = IsLoopbackAddress(spec_.listen_address);
   if (!spec_.cluster_secret.empty() || !spec_.tls_client_ca_file.empty()) {
     spdlog::info("merger: merge API needs {}",
@@ -199,7 +178,7 @@ absl::Status MergeServer::Impl::Start() {
                  loopback ? " (loopback only)" : " (--insecure, NOT loopback)");
   }
   spdlog::info("merger: listening on {}:{}",
-               spec_.listen_address.substr(0, spec_.listen_address.rfind(':')), port_);
+               spec_.listen_address.substr(0, spec_.listen_address.rfind(':')), servers_.port);
   return absl::OkStatus();
 }
 
@@ -207,32 +186,16 @@ void MergeServer::Impl::Shutdown() {
   absl::MutexLock shutdown_lock(&shutdown_mu_);
   if (shutdown_done_.HasBeenNotified()) return;
   stopping_ = true;
-  if (health_server_ != nullptr) {
-    SetServing(*health_server_, "", false);
-    health_server_->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(100));
-  }
-  if (server_ != nullptr) {
-    SetServing(*server_, "", false);
-    // A running merge sees stopping_ at its next progress step and its call ends UNAVAILABLE
-    // (the coordinator runs it again); the deadline cancels calls still waiting.
-    server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
-  }
+  // A running merge sees stopping_ at its next progress step and its call ends UNAVAILABLE
+  // (the coordinator runs it again); the deadline cancels calls still waiting.
+  servers_.Shutdown(std::chrono::seconds(2));
   spdlog::info("merger: stopped");
   shutdown_done_.Notify();
 }
 
 absl::Status MergeServer::Impl::Authenticate(const grpc::ServerContext& ctx) {
-  if (spec_.cluster_secret.empty() && spec_.tls_client_ca_file.empty()) {
-    return absl::OkStatus();  // open: loopback only, or --insecure (Validate)
-  }
-  if (!spec_.tls_client_ca_file.empty() && HasVerifiedClientCertificate(ctx)) {
+  if (IsClusterPeer(ctx, spec_.cluster_secret, spec_.tls_client_ca_file)) {
     return absl::OkStatus();
-  }
-  if (!spec_.cluster_secret.empty()) {
-    const CallerBearer bearer = BearerOf(ctx);
-    if (bearer.token && SecretEquals(*bearer.token, spec_.cluster_secret)) {
-      return absl::OkStatus();
-    }
   }
   // The reason goes to the log with the peer, never the token.
   spdlog::warn("merger: merge call from {} refused: no cluster secret or client certificate",
