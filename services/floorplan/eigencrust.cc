@@ -9,14 +9,6 @@
 #include <tuple>
 #include <utility>
 
-#include <CGAL/Delaunay_triangulation_2.h>
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
-#include <CGAL/Hilbert_policy_tags.h>
-#include <CGAL/Hilbert_sort_2.h>
-#include <CGAL/Spatial_sort_traits_adapter_2.h>
-#include <CGAL/Triangulation_face_base_with_info_2.h>
-#include <CGAL/Triangulation_vertex_base_with_info_2.h>
-#include <CGAL/property_map.h>
 #include <Eigen/Eigenvalues>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
@@ -25,18 +17,13 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "services/floorplan/delaunay_mesh.h"
 #include "services/floorplan/orient_2d.h"
 #include "services/floorplan/union_find.h"
 
 namespace carvemap {
 namespace {
 
-using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-using Vb = CGAL::Triangulation_vertex_base_with_info_2<uint32_t, K>;
-using Fb = CGAL::Triangulation_face_base_with_info_2<int, K>;
-using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
-using Delaunay = CGAL::Delaunay_triangulation_2<K, Tds>;
-using CPoint = K::Point_2;
 using Eigen::Vector2d;
 
 using floorplan_internal::Orient;
@@ -473,51 +460,24 @@ absl::StatusOr<EigencrustLabeling> LabelEigencrust(const WallSampleSet& samples,
     out.normals.push_back(Vector2d::Zero());
   }
 
-  Delaunay dt;
-  try {
-    // Hilbert order and one-by-one insertion with a hint: deterministic (as room_labeling.cc).
-    std::vector<uint32_t> ins(out.vertices.size());
-    std::iota(ins.begin(), ins.end(), 0u);
-    std::vector<CPoint> cpts;
-    cpts.reserve(out.vertices.size());
-    for (const Vector2d& p : out.vertices) cpts.emplace_back(p.x(), p.y());
-    auto pmap = CGAL::make_property_map(cpts);
-    using SortTraits = CGAL::Spatial_sort_traits_adapter_2<K, decltype(pmap)>;
-    CGAL::Hilbert_sort_2<SortTraits, CGAL::Hilbert_sort_median_policy> sort(SortTraits{pmap});
-    sort(ins.begin(), ins.end());
-    Delaunay::Face_handle hint;
-    for (uint32_t i : ins) {
-      const Delaunay::Vertex_handle vh = dt.insert(cpts[i], hint);
-      vh->info() = i;
-      hint = vh->face();
-    }
-  } catch (const std::exception& e) {
-    return absl::InternalError(absl::StrCat("eigencrust: CGAL triangulation failed: ", e.what()));
+  {
+    absl::StatusOr<floorplan_internal::DelaunayMesh> dt =
+        floorplan_internal::DelaunayMesh::Build(out.vertices, "eigencrust");
+    if (!dt.ok()) return dt.status();
+    out.triangles = dt->triangles();
+    out.neighbours = dt->neighbours();
   }
-  int nf = 0;
-  for (auto f = dt.finite_faces_begin(); f != dt.finite_faces_end(); ++f) f->info() = nf++;
-  for (auto f = dt.all_faces_begin(); f != dt.all_faces_end(); ++f) {
-    if (dt.is_infinite(f)) f->info() = -1;
-  }
-  out.triangles.resize(nf);
-  out.neighbours.resize(nf);
-  for (auto f = dt.finite_faces_begin(); f != dt.finite_faces_end(); ++f) {
-    for (int i = 0; i < 3; ++i) {
-      out.triangles[f->info()][i] = static_cast<int>(f->vertex(i)->info());
-      out.neighbours[f->info()][i] = f->neighbor(i)->info();
-    }
-  }
+  const int nf = static_cast<int>(out.triangles.size());
   rep.triangles = static_cast<size_t>(nf);
   const Mesh mesh{&out.vertices, &out.triangles, &out.neighbours};
 
   std::vector<Circle> circle(nf);
-  for (int f = 0; f < nf; ++f) {
-    const auto& t = out.triangles[f];
-    const Vector2d &a = out.vertices[t[0]], &b = out.vertices[t[1]], &c = out.vertices[t[2]];
-    const CPoint cc = CGAL::circumcenter(CPoint(a.x(), a.y()), CPoint(b.x(), b.y()),
-                                         CPoint(c.x(), c.y()));
-    circle[f].c = Vector2d(cc.x(), cc.y());
-    circle[f].r = (a - circle[f].c).norm();
+  {
+    const std::vector<Vector2d> centres = floorplan_internal::Circumcentres(out.vertices, out.triangles);
+    for (int f = 0; f < nf; ++f) {
+      circle[f].c = centres[f];
+      circle[f].r = (out.vertices[out.triangles[f][0]] - circle[f].c).norm();
+    }
   }
 
   lap(rep.seconds_triangulation);

@@ -4,7 +4,6 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <exception>
 #include <limits>
 #include <numeric>
 #include <queue>
@@ -12,30 +11,17 @@
 #include <utility>
 #include <vector>
 
-#include <CGAL/Delaunay_triangulation_2.h>
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
-#include <CGAL/Triangulation_face_base_with_info_2.h>
-#include <CGAL/Triangulation_vertex_base_with_info_2.h>
-#include <CGAL/Spatial_sort_traits_adapter_2.h>
-#include <CGAL/Hilbert_sort_2.h>
-#include <CGAL/Hilbert_policy_tags.h>
-#include <CGAL/property_map.h>
-
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "services/floorplan/delaunay_mesh.h"
 #include "services/floorplan/orient_2d.h"
 
 namespace carvemap {
 namespace {
 
-using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-using Vb = CGAL::Triangulation_vertex_base_with_info_2<uint32_t, K>;
-using Fb = CGAL::Triangulation_face_base_with_info_2<int, K>;
-using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
-using Delaunay = CGAL::Delaunay_triangulation_2<K, Tds>;
-using CPoint = K::Point_2;
 using Eigen::Vector2d;
 
+using floorplan_internal::DelaunayMesh;
 using floorplan_internal::Orient;
 
 // The finite faces of the Delaunay triangulation as flat arrays (faster to walk than handles).
@@ -70,11 +56,7 @@ struct Mesh {
 };
 
 // Where a walk starts: at a vertex, inside a face, on an edge (face, opposite index), or nowhere.
-struct Start {
-  enum Kind { kNone, kVertex, kFace, kEdge } kind = kNone;
-  int id = -1;
-  int edge = -1;
-};
+using Start = floorplan_internal::PointLocation;
 
 bool InClosedFace(const Mesh& m, int f, const Vector2d& b) {
   const auto& v = m.fv[f];
@@ -173,39 +155,6 @@ void Walk(const Mesh& m, const Vector2d& a, const Vector2d& b, Start start, OnFa
     kind = Start::kVertex;
     cur = on_line;
   }
-}
-
-// Where pose q lies in the mesh (CGAL point location).
-Start LocatePose(const Delaunay& dt, const Vector2d& q, Delaunay::Face_handle* hint) {
-  Delaunay::Locate_type lt;
-  int li = -1;
-  const Delaunay::Face_handle fh = dt.locate(CPoint(q.x(), q.y()), lt, li, *hint);
-  Start s;
-  switch (lt) {
-    case Delaunay::VERTEX:
-      s.kind = Start::kVertex;
-      s.id = static_cast<int>(fh->vertex(li)->info());
-      break;
-    case Delaunay::EDGE:
-      s.kind = Start::kEdge;
-      if (dt.is_infinite(fh)) {
-        const Delaunay::Face_handle other = fh->neighbor(li);
-        s.id = other->info();
-        s.edge = other->index(fh);
-      } else {
-        s.id = fh->info();
-        s.edge = li;
-      }
-      break;
-    case Delaunay::FACE:
-      s.kind = Start::kFace;
-      s.id = fh->info();
-      break;
-    default:
-      break;  // outside the convex hull
-  }
-  if (!dt.is_infinite(fh)) *hint = fh;
-  return s;
 }
 
 // Where segment (a, b), a outside the hull, enters it; kNone if it misses the hull.
@@ -786,49 +735,21 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
         "room labeling: need at least 3 distinct wall samples, got ", m.pts.size()));
   }
 
-  Delaunay dt;
-  try {
-    // Hilbert order (deterministic, unlike spatial_sort's shuffle) and one-by-one insertion
-    // with the previous vertex as hint: the same triangulation for the same positions, even
-    // where four samples are cocircular.
-    std::vector<uint32_t> ins(m.pts.size());
-    std::iota(ins.begin(), ins.end(), 0u);
-    std::vector<CPoint> cpts;
-    cpts.reserve(m.pts.size());
-    for (const Vector2d& p : m.pts) cpts.emplace_back(p.x(), p.y());
-    auto pmap = CGAL::make_property_map(cpts);
-    using SortTraits = CGAL::Spatial_sort_traits_adapter_2<K, decltype(pmap)>;
-    CGAL::Hilbert_sort_2<SortTraits, CGAL::Hilbert_sort_median_policy> sort(SortTraits{pmap});
-    sort(ins.begin(), ins.end());
-    Delaunay::Face_handle hint;
-    for (uint32_t i : ins) {
-      const Delaunay::Vertex_handle vh = dt.insert(cpts[i], hint);
-      vh->info() = i;
-      hint = vh->face();
-    }
-  } catch (const std::exception& e) {
-    return absl::InternalError(absl::StrCat("room labeling: CGAL triangulation failed: ", e.what()));
-  }
-  if (dt.dimension() < 2) {
+  absl::StatusOr<DelaunayMesh> dt = DelaunayMesh::Build(m.pts, "room labeling");
+  if (!dt.ok()) return dt.status();
+  if (dt->dimension() < 2) {
     return absl::InvalidArgumentError(absl::StrCat(
         "room labeling: the ", m.pts.size(), " distinct wall samples are collinear"));
   }
 
-  // Flat face arrays.
-  int nf = 0;
-  for (auto fit = dt.finite_faces_begin(); fit != dt.finite_faces_end(); ++fit) fit->info() = nf++;
-  for (auto fit = dt.all_faces_begin(); fit != dt.all_faces_end(); ++fit) {
-    if (dt.is_infinite(fit)) fit->info() = -1;
-  }
-  m.fv.resize(nf);
-  m.fn.resize(nf);
+  // Flat face arrays, with one face per vertex and the hull edges.
+  m.fv = dt->triangles();
+  m.fn = dt->neighbours();
+  const int nf = static_cast<int>(m.fv.size());
   m.vface.assign(m.pts.size(), -1);
-  for (auto fit = dt.finite_faces_begin(); fit != dt.finite_faces_end(); ++fit) {
-    const int f = fit->info();
+  for (int f = 0; f < nf; ++f) {
     for (int i = 0; i < 3; ++i) {
-      const int v = static_cast<int>(fit->vertex(i)->info());
-      m.fv[f][i] = v;
-      m.fn[f][i] = fit->neighbor(i)->info();
+      const int v = m.fv[f][i];
       if (m.vface[v] < 0) m.vface[v] = f;
       if (m.fn[f][i] < 0) m.hull_edges.emplace_back(f, i);
     }
@@ -842,8 +763,8 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
   const size_t np = samples.poses.size();
   std::vector<Start> pose_at(np);
   {
-    Delaunay::Face_handle hint;
-    for (size_t i = 0; i < np; ++i) pose_at[i] = LocatePose(dt, samples.poses[i], &hint);
+    int hint = -1;
+    for (size_t i = 0; i < np; ++i) pose_at[i] = dt->Locate(samples.poses[i], &hint);
   }
   // §3.3.2: a room is entered if the path crosses one of its triangles or a pose lies in one.
   for (const Start& s : pose_at) {
@@ -954,13 +875,12 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
 
   // Circumcircles (§3.3.2).
   std::vector<Circle> circles(nf);
+  const std::vector<Vector2d> centres = floorplan_internal::Circumcentres(m.pts, m.fv);
   for (int f = 0; f < nf; ++f) {
     const Vector2d &a = m.pts[m.fv[f][0]], &b = m.pts[m.fv[f][1]], &c = m.pts[m.fv[f][2]];
-    const CPoint cc = CGAL::circumcenter(CPoint(a.x(), a.y()), CPoint(b.x(), b.y()),
-                                         CPoint(c.x(), c.y()));
     Circle& k = circles[f];
-    k.cx = cc.x();
-    k.cy = cc.y();
+    k.cx = centres[f].x();
+    k.cy = centres[f].y();
     k.r = std::hypot(a.x() - k.cx, a.y() - k.cy);
     k.gx = (a.x() + b.x() + c.x()) / 3;
     k.gy = (a.y() + b.y() + c.y()) / 3;
