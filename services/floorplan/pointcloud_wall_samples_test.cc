@@ -19,7 +19,9 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "services/building/building.h"
 #include "services/floorplan/scan_cloud_stream.h"
+#include "services/floorplan/wall_samples_test_util.h"
 #include "services/levels/level_split.h"
 #include "services/sim/simulator.h"
 
@@ -28,6 +30,7 @@ namespace {
 
 using Eigen::Vector2d;
 using Eigen::Vector3d;
+using testing::TruthRoom;
 
 constexpr double kDs = 0.05;
 
@@ -383,31 +386,6 @@ TEST(PointCloudWallSamples, HeightHistogramSplitsFloorAndCeiling) {
 
 // ---------------------------------------------------------------- simulated buildings
 
-double SegmentDistance(const Vector2d& p, const Vector2d& a, const Vector2d& b) {
-  const Vector2d ab = b - a;
-  const double l2 = ab.squaredNorm();
-  const double t = l2 > 0 ? std::clamp((p - a).dot(ab) / l2, 0.0, 1.0) : 0.0;
-  return (a + t * ab - p).norm();
-}
-
-bool RingContains(const std::vector<Vector2d>& ring, const Vector2d& p) {
-  bool in = false;
-  for (size_t i = 0, j = ring.size() - 1; i < ring.size(); j = i++) {
-    if ((ring[i].y() > p.y()) != (ring[j].y() > p.y()) &&
-        p.x() < (ring[j].x() - ring[i].x()) * (p.y() - ring[i].y()) /
-                        (ring[j].y() - ring[i].y()) +
-                    ring[i].x()) {
-      in = !in;
-    }
-  }
-  return in;
-}
-
-struct TruthRoom {
-  std::vector<std::vector<Vector2d>> rings;  // polygon, then holes
-  double floor_z = 0, ceiling_z = 0;
-};
-
 struct PresetCase {
   const char* preset;
   double walk_s;  // 0 = the whole walk
@@ -466,24 +444,7 @@ TEST_P(SimulatedPointCloudWallSamples, SamplesLieOnTheTrueWalls) {
   ASSERT_TRUE(set.Validate().ok()) << set.Validate();
   const PointCloudWallSampleReport& rep = reports[0];
 
-  std::vector<TruthRoom> rooms;
-  for (const auto& r : truth.at("rooms")) {
-    if (r.at("level").get<int>() != 0) continue;
-    TruthRoom t;
-    for (const auto* key : {"polygon"}) {
-      std::vector<Vector2d> ring;
-      for (const auto& p : r.at(key)) ring.emplace_back(p.at(0).get<double>(), p.at(1).get<double>());
-      t.rings.push_back(std::move(ring));
-    }
-    for (const auto& h : r.at("holes")) {
-      std::vector<Vector2d> ring;
-      for (const auto& p : h) ring.emplace_back(p.at(0).get<double>(), p.at(1).get<double>());
-      t.rings.push_back(std::move(ring));
-    }
-    t.floor_z = r.at("floor_z").get<double>();
-    t.ceiling_z = r.at("ceiling_z").get<double>();
-    rooms.push_back(std::move(t));
-  }
+  const std::vector<TruthRoom> rooms = testing::TruthRoomsOfLevel(truth, 0);
   ASSERT_FALSE(rooms.empty());
 
   const size_t n = set.samples.size();
@@ -500,20 +461,9 @@ TEST_P(SimulatedPointCloudWallSamples, SamplesLieOnTheTrueWalls) {
                     .second)
         << "two samples in one d_s cell";
     EXPECT_GE(w.ceiling_z - w.floor_z, 2.0);  // H
-    double best = std::numeric_limits<double>::infinity();
-    Vector2d wall_dir = Vector2d::UnitX();
-    for (const TruthRoom& r : rooms) {
-      for (const auto& ring : r.rings) {
-        for (size_t i = 0; i < ring.size(); ++i) {
-          const Vector2d &a = ring[i], &b = ring[(i + 1) % ring.size()];
-          const double d = SegmentDistance(w.position, a, b);
-          if (d < best) {
-            best = d;
-            wall_dir = (b - a).normalized();
-          }
-        }
-      }
-    }
+    const testing::NearestWall wall = testing::NearestTrueWall(rooms, w.position);
+    const double best = wall.distance_m;
+    const Vector2d& wall_dir = wall.direction;
     dist.push_back(best);
     within_5cm += best <= 0.05;
     with_poses += !w.poses.empty();
