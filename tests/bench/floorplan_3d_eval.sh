@@ -20,6 +20,9 @@
 #                  line is already in DIR/results.txt is not run again (delete it to redo)
 #   --keep         keep scans and run outputs (default: only job.json, level_*/floorplan.* and
 #                  logs are kept)
+#   --fresh        forget DIR/results.txt first (run every map again)
+#   --min-f1 F     as a test: exit 1 unless every map run has room F1 >= F
+#   --levels N     as a test: exit 1 unless every map run has N levels in levels.json
 # Environment: CARVEMAP, FLOORPLAN_SCORE (binaries), MAPS (floor map folder), NICE (default 15).
 # Build first: /work/tools/nb carvemap floorplan_score (or scripts/build.sh).
 set -euo pipefail
@@ -30,7 +33,7 @@ score=${FLOORPLAN_SCORE:-$here/build/tests/bench/floorplan_score}
 maps_dir=${MAPS:-$here/../shared/data/floormaps}
 nice_level=${NICE:-15}
 variants=furnished rate=4 beam=2 res=0.0625 workers=2 stop_at="" work=/tmp/carvemap-floorplan-3d
-keep=0
+keep=0 fresh=0 min_f1="" want_levels=""
 names=()
 while (($#)); do
   case $1 in
@@ -42,6 +45,9 @@ while (($#)); do
     --stop-at) stop_at=$2; shift 2 ;;
     --work) work=$2; shift 2 ;;
     --keep) keep=1; shift ;;
+    --fresh) fresh=1; shift ;;
+    --min-f1) min_f1=$2; shift 2 ;;
+    --levels) want_levels=$2; shift 2 ;;
     -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     -*) echo "floorplan_3d_eval: unknown option $1" >&2; exit 2 ;;
     *) names+=("$1"); shift ;;
@@ -67,6 +73,7 @@ stop_epoch=""
 
 mkdir -p "$work"
 results=$work/results.txt  # one line per map and variant: name variant key=value…
+((fresh)) && rm -f "$results"
 touch "$results"
 
 run_one() {  # name variant
@@ -147,3 +154,33 @@ for variant in variants:
           f"{m('bormann_recall'):.3f} / {m('bormann_precision'):.3f} | | | | "
           f"{sum(float(d['run_cpu_s']) for d in sel):.0f} / {sum(float(d['run_wall_s']) for d in sel):.0f} (sum) |")
 PY
+
+# As a test (ctest e2e_floorplan_3d_*): every requested map and variant has a result line and
+# meets the floors.
+if [[ -n $min_f1 || -n $want_levels ]]; then
+  python3 - "$results" "${min_f1:-0}" "${want_levels:-any}" "${variant_list[@]}" -- "${names[@]}" <<'PY'
+import sys
+results, min_f1, want_levels = sys.argv[1], float(sys.argv[2]), sys.argv[3]
+sep = sys.argv.index("--")
+variants, names = sys.argv[4:sep], sys.argv[sep + 1:]
+got = {}
+for line in open(results):
+    f = line.split()
+    if len(f) >= 3:
+        got[(f[0], f[1])] = dict(kv.split("=", 1) for kv in f[2:])
+bad = []
+for v in variants:
+    for n in names:
+        d = got.get((n, v))
+        if d is None:
+            bad.append(f"{n} ({v}): no result (the run failed; see its .run.log)")
+            continue
+        if float(d["f1"]) < min_f1:
+            bad.append(f"{n} ({v}): room F1 {float(d['f1']):.3f} < {min_f1}")
+        if want_levels != "any" and d["levels"] != want_levels:
+            bad.append(f"{n} ({v}): {d['levels']} levels in levels.json, expected {want_levels}")
+for b in bad:
+    print("floorplan_3d_eval: FAIL " + b, file=sys.stderr)
+sys.exit(1 if bad else 0)
+PY
+fi
