@@ -3,11 +3,19 @@
 // building tiles), with the counts and CPU seconds of each stage. For docs/BENCHMARKS.md and
 // for tuning on kept carves without re-running the whole merge.
 //
-//   planar_mesh_bench TILES_DIR [--no-dense] [--out DIR] [--gt GT_DIR]
+//   planar_mesh_bench TILES_DIR [--mesh-growth] [--no-dense] [--out DIR] [--gt GT_DIR]
 //
+// --mesh-growth fits the regions as the merge does for mesh/building.ply
+// (PlanarRegionOptions::mesh_growth); without it, as for the levels and floor plans.
 // --out writes DIR/building.ply (face property `region`) and DIR/dense.ply. --gt (a simulated
 // building's gt/) splits the faces by what they lie on (building surfaces, objects, neither:
-// the closure against unobserved space) and reports how whole the regions of each are.
+// the closure against unobserved space) and reports how whole the regions of each are, and
+// (with the dense mesh) the wall cover of the planar mesh as object_segmentation_test measures
+// it on building.ply: points on the true walls within 20 cm of the dense mesh, and the share
+// of them within 5 / 10 cm of the planar mesh.
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <string>
@@ -30,15 +38,20 @@ double CpuSeconds() { return double(std::clock()) / CLOCKS_PER_SEC; }
 int main(int argc, char** argv) {
   using namespace carvemap;
   if (argc < 2) {
-    std::fprintf(stderr, "usage: %s TILES_DIR [--no-dense] [--out DIR] [--gt GT_DIR]\n", argv[0]);
+    std::fprintf(stderr,
+                 "usage: %s TILES_DIR [--mesh-growth] [--no-dense] [--out DIR] [--gt GT_DIR]\n",
+                 argv[0]);
     return 2;
   }
   const std::string dir = argv[1];
   bool dense = true;
   std::string out, gt;
+  PlanarRegionOptions region_options;
   for (int i = 2; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--no-dense") {
+    if (a == "--mesh-growth") {
+      region_options.mesh_growth = true;
+    } else if (a == "--no-dense") {
       dense = false;
     } else if (a == "--out" && i + 1 < argc) {
       out = argv[++i];
@@ -66,7 +79,7 @@ int main(int argc, char** argv) {
               grid.resolution_m(), faces->size(), faces_s);
   std::fflush(stdout);
   t = CpuSeconds();
-  absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(*faces, grid, {});
+  absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(*faces, grid, region_options);
   if (!regions.ok()) {
     std::fprintf(stderr, "regions: %s\n", std::string(regions.status().message()).c_str());
     return 1;
@@ -82,9 +95,11 @@ int main(int argc, char** argv) {
     if (r.faces.size() == 1) ++single;
   }
   std::printf("faces' area %.1f m2\n", total);
-  std::printf("regions: flood fill %zu, grown %zu, relaxed %zu (%zu of one face) in %.2f s cpu\n",
-              regions->flood_fill_groups, regions->grown_regions, regions->regions.size(), single,
-              regions_s);
+  std::printf(
+      "regions (%s growth): flood fill %zu, grown %zu, relaxed %zu (%zu of one face) in %.2f s "
+      "cpu\n",
+      region_options.mesh_growth ? "mesh" : "default", regions->flood_fill_groups,
+      regions->grown_regions, regions->regions.size(), single, regions_s);
   std::printf("area in regions >= 1 m2: %.1f %%, >= 0.25 m2: %.1f %%\n", 100 * big1 / total,
               100 * big025 / total);
   if (!gt.empty()) {
@@ -152,6 +167,43 @@ int main(int argc, char** argv) {
     }
     std::printf("dense mesh %zu triangles in %.2f s cpu: %s\n", d->mesh.triangles.size(),
                 CpuSeconds() - t, CheckMesh(d->mesh).ToString().c_str());
+    if (!gt.empty() && planar.ok()) {
+      auto triangles = [](const TriangleMesh& m) {
+        std::vector<std::array<Eigen::Vector3d, 3>> out;
+        for (const Eigen::Vector3i& f : m.triangles) {
+          out.push_back({m.vertices[f[0]].cast<double>(), m.vertices[f[1]].cast<double>(),
+                         m.vertices[f[2]].cast<double>()});
+        }
+        return out;
+      };
+      const testing::TruthDistance to_planar(triangles(planar->mesh), 0.25, 0.2);
+      const testing::TruthDistance to_dense(triangles(d->mesh), 0.25, 0.2);
+      size_t wall_points = 0, covered5 = 0, covered10 = 0, dense5 = 0;
+      for (const auto& tri : testing::ReadPlyTriangles(gt + "/surfaces.ply")) {
+        const Eigen::Vector3d n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+        const double area2 = n.norm();
+        if (area2 < 1e-9 || std::abs(n.z()) > 0.1 * area2) continue;  // walls only
+        const int k = std::max(1, static_cast<int>(std::sqrt(area2 / 2) / 0.1));
+        for (int i = 0; i < k; ++i) {
+          for (int j = 0; i + j < k; ++j) {
+            const Eigen::Vector3d p = tri[0] + (i + 1.0 / 3) / k * (tri[1] - tri[0]) +
+                                      (j + 1.0 / 3) / k * (tri[2] - tri[0]);
+            const double dd = to_dense(p);
+            if (dd >= 0.2) continue;
+            ++wall_points;
+            dense5 += dd <= 0.05;
+            const double dp = to_planar(p);
+            covered5 += dp <= 0.05;
+            covered10 += dp <= 0.10;
+          }
+        }
+      }
+      std::printf("wall cover of the planar mesh: within 5 cm %.1f %%, 10 cm %.1f %% of %zu "
+                  "true wall points (the dense mesh: within 5 cm %.1f %%)\n",
+                  100.0 * double(covered5) / double(wall_points),
+                  100.0 * double(covered10) / double(wall_points), wall_points,
+                  100.0 * double(dense5) / double(wall_points));
+    }
     if (planar_triangles > 0) {
       std::printf("planar / dense = %.2f %%\n",
                   100.0 * double(planar_triangles) / double(d->mesh.triangles.size()));

@@ -618,18 +618,27 @@ TEST_P(FittedRegionsTest, WatertightWithFitPlanarRegions) {
   const auto [which, leaf] = GetParam();
   const OctreeGrid grid = Grid();
   const std::vector<BoundaryFace> faces = FacesOf(FittedWorld(which), grid, leaf, 0.2);
-  absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(faces, grid, PlanarRegionOptions{});
-  ASSERT_TRUE(regions.ok()) << regions.status();
-  const int64_t euler = which == 1 ? 0 : 2;
-  for (const PlanarMeshOptions& options : {NoQuadtree(), PlanarMeshOptions{}}) {
-    const PlanarMesh pm = MeshAndCheck(faces, *regions, options, euler);
-    RecordProperty(options.quadtree_points ? "triangles_quadtree" : "triangles", static_cast<int>(pm.mesh.triangles.size()));
-    if (which == 0 && !options.quadtree_points) {
-      EXPECT_EQ(pm.mesh.triangles.size(), 12u);
+  // Both growths: the levels' and floor plans' (default) and the building mesh's (mesh_growth).
+  for (const bool mesh_growth : {false, true}) {
+    SCOPED_TRACE(mesh_growth ? "mesh_growth" : "default growth");
+    PlanarRegionOptions region_options;
+    region_options.mesh_growth = mesh_growth;
+    absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(faces, grid, region_options);
+    ASSERT_TRUE(regions.ok()) << regions.status();
+    const int64_t euler = which == 1 ? 0 : 2;
+    for (const PlanarMeshOptions& options : {NoQuadtree(), PlanarMeshOptions{}}) {
+      const PlanarMesh pm = MeshAndCheck(faces, *regions, options, euler);
+      if (!mesh_growth) {
+        RecordProperty(options.quadtree_points ? "triangles_quadtree" : "triangles",
+                       static_cast<int>(pm.mesh.triangles.size()));
+      }
+      if (which == 0 && !options.quadtree_points) {
+        EXPECT_EQ(pm.mesh.triangles.size(), 12u);
+      }
     }
+    if (!mesh_growth) RecordProperty("regions", static_cast<int>(regions->regions.size()));
   }
   RecordProperty("faces", static_cast<int>(faces.size()));
-  RecordProperty("regions", static_cast<int>(regions->regions.size()));
 }
 
 INSTANTIATE_TEST_SUITE_P(Worlds, FittedRegionsTest,
@@ -666,16 +675,22 @@ TEST_P(NoisyFittedRoomTest, AlwaysWatertight) {
   for (BoundaryFace& f : faces) {
     f.isosurface[f.axis] += (u(rng) - 0.5) * 0.9 * std::min(f.size_m, res);
   }
-  absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(faces, grid, PlanarRegionOptions{});
-  ASSERT_TRUE(regions.ok()) << regions.status();
-  absl::StatusOr<PlanarMesh> pm = BuildPlanarMesh(faces, *regions, grid);
-  ASSERT_TRUE(pm.ok()) << pm.status();
-  const MeshCheck check = CheckMesh(pm->mesh);
-  EXPECT_TRUE(check.watertight()) << check.ToString();
-  EXPECT_EQ(pm->triangle_region.size(), pm->mesh.triangles.size());
   RecordProperty("faces", static_cast<int>(faces.size()));
-  RecordProperty("regions", static_cast<int>(regions->regions.size()));
-  RecordProperty("triangles", static_cast<int>(pm->mesh.triangles.size()));
+  for (const bool mesh_growth : {false, true}) {
+    SCOPED_TRACE(mesh_growth ? "mesh_growth" : "default growth");
+    PlanarRegionOptions region_options;
+    region_options.mesh_growth = mesh_growth;
+    absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(faces, grid, region_options);
+    ASSERT_TRUE(regions.ok()) << regions.status();
+    absl::StatusOr<PlanarMesh> pm = BuildPlanarMesh(faces, *regions, grid);
+    ASSERT_TRUE(pm.ok()) << pm.status();
+    const MeshCheck check = CheckMesh(pm->mesh);
+    EXPECT_TRUE(check.watertight()) << check.ToString();
+    EXPECT_EQ(pm->triangle_region.size(), pm->mesh.triangles.size());
+    const std::string suffix = mesh_growth ? "_mesh_growth" : "";
+    RecordProperty("regions" + suffix, static_cast<int>(regions->regions.size()));
+    RecordProperty("triangles" + suffix, static_cast<int>(pm->mesh.triangles.size()));
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Seeds, NoisyFittedRoomTest,
@@ -857,7 +872,8 @@ struct CarvedMeshes {
 };
 
 absl::StatusOr<CarvedMeshes> CarveAndMesh(const testing::CarvedPresetOptions& options,
-                                          const std::string& root) {
+                                          const std::string& root,
+                                          const PlanarRegionOptions& region_options = {}) {
   CarvedMeshes out;
   absl::StatusOr<testing::CarvedPreset> preset = testing::CarvePreset(options, root);
   if (!preset.ok()) return preset.status();
@@ -873,7 +889,8 @@ absl::StatusOr<CarvedMeshes> CarveAndMesh(const testing::CarvedPresetOptions& op
   if (!dense.ok()) return dense.status();
   out.dense = std::move(dense->mesh);
   const auto start = std::chrono::steady_clock::now();
-  absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(out.faces, out.preset.grid, {});
+  absl::StatusOr<PlanarRegionSet> regions =
+      FitPlanarRegions(out.faces, out.preset.grid, region_options);
   if (!regions.ok()) return regions.status();
   out.regions = *std::move(regions);
   absl::StatusOr<PlanarMesh> pm = BuildPlanarMesh(out.faces, out.regions, out.preset.grid);
@@ -881,9 +898,10 @@ absl::StatusOr<CarvedMeshes> CarveAndMesh(const testing::CarvedPresetOptions& op
   out.planar = *std::move(pm);
   out.planar_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::printf(
-      "%s at %.4f m: %zu faces, %zu regions (flood fill %zu, grown %zu), dense %zu "
+      "%s at %.4f m: %zu faces, %zu regions (%s growth; flood fill %zu, grown %zu), dense %zu "
       "triangles, planar %zu triangles (%.2f %%), regions + planar mesh %.1f s\n",
-      options.preset.c_str(), options.resolution_m, out.faces.size(), out.regions.regions.size(),
+      options.preset.c_str(), options.resolution_m, out.faces.size(),
+      out.regions.regions.size(), region_options.mesh_growth ? "mesh" : "default",
       out.regions.flood_fill_groups, out.regions.grown_regions, out.dense.triangles.size(),
       out.planar.mesh.triangles.size(),
       100.0 * double(out.planar.mesh.triangles.size()) / double(out.dense.triangles.size()),
@@ -905,31 +923,59 @@ void CheckWatertightAndSmall(const CarvedMeshes& m, double max_ratio) {
   ::testing::Test::RecordProperty("dense_triangles", static_cast<int>(dense.triangles));
 }
 
-TEST(PlanarMeshCarvedTest, RoomIsWatertightAndSmall) {
-  absl::StatusOr<CarvedMeshes> m =
-      CarveAndMesh(testing::CarvedPresetOptions{}, ::testing::TempDir() + "/planar_carved");
-  ASSERT_TRUE(m.ok()) << m.status();
-  // NOT issue 4's 10 %: on 2026-11-26 the planar mesh is 38 % of the dense one here (215 k of
-  // 573 k triangles; 45 k regions, 29 k of one face). planar_mesh_bench --gt puts 684 of the
-  // faces' 866 m² on no true surface with their exterior unobserved: the carved volume's noisy
-  // closure against unobserved space (§4.3.2: unobserved is exterior), where regions stay
-  // small. Letting groups at ~90° join a region (zig-zag risers) brought it to 29 % but cost
-  // the office's floor plans (object_segmentation_test found 19 % of objects instead of 25 %),
-  // so it was not kept. Held here so it does not get worse.
-  CheckWatertightAndSmall(*m, 0.40);
-  // The room's four walls and its ceiling (truth: 5.85 × 4.85 × 2.7 m, walls 7.5 cm from the
-  // origin) are one region of ≥ 10 m² each. The floor is not: under and between the furniture
-  // its largest region is ~9 m² of the mesh's 28 m² (not asserted). The walls' planes lean up
-  // to 2° (normals tilted up): the dense mesh puts a wall ~3 cm inside the truth below 1.5 m
-  // (seen at grazing angles) and ~1 cm at the scanners' height, and PCA over the whole wall
-  // follows that within §4.2.4's one-cell tolerance.
+// The room's sides: regions of ≥ 10 m², each within 3° of an axis.
+int BigAxisRegions(const PlanarRegionSet& regions) {
   int sides = 0;
-  for (const PlanarRegion& r : m->regions.regions) {
+  for (const PlanarRegion& r : regions.regions) {
     if (r.area_m2 < 10) continue;
     ++sides;
     EXPECT_GT(r.normal.cwiseAbs().maxCoeff(), std::cos(3 * M_PI / 180)) << "region " << r.id;
   }
-  EXPECT_EQ(sides, 5);
+  return sides;
+}
+
+TEST(PlanarMeshCarvedTest, RoomIsWatertightAndSmall) {
+  absl::StatusOr<CarvedMeshes> m =
+      CarveAndMesh(testing::CarvedPresetOptions{}, ::testing::TempDir() + "/planar_carved");
+  ASSERT_TRUE(m.ok()) << m.status();
+  {
+    SCOPED_TRACE("default growth (levels, floor plans)");
+    // NOT issue 4's 10 %: on 2026-11-26 the planar mesh of the default regions is 38 % of the
+    // dense one here (215 k of 573 k triangles; 45 k regions, 29 k of one face).
+    // planar_mesh_bench --gt puts 684 of the faces' 866 m² on no true surface with their
+    // exterior unobserved: the carved volume's noisy closure against unobserved space (§4.3.2:
+    // unobserved is exterior), where regions stay small. Held here so it does not get worse.
+    CheckWatertightAndSmall(*m, 0.40);
+    // The room's four walls and its ceiling (truth: 5.85 × 4.85 × 2.7 m, walls 7.5 cm from
+    // the origin) are one region of ≥ 10 m² each. The floor is not: under and between the
+    // furniture its largest region is ~9 m² of the mesh's 28 m² (not asserted). The walls'
+    // planes lean up to 2° (normals tilted up): the dense mesh puts a wall ~3 cm inside the
+    // truth below 1.5 m (seen at grazing angles) and ~1 cm at the scanners' height, and PCA
+    // over the whole wall follows that within §4.2.4's one-cell tolerance.
+    EXPECT_EQ(BigAxisRegions(m->regions), 5);
+  }
+  {
+    SCOPED_TRACE("mesh_growth (mesh/building.ply)");
+    // The regions the merge meshes mesh/building.ply from. Still NOT issue 4's 10 % here
+    // (29 % on 2026-11-26, 167 k of 572 k triangles: the same closure against unobserved
+    // space), but the floor is now one region too: six sides.
+    PlanarRegionOptions region_options;
+    region_options.mesh_growth = true;
+    absl::StatusOr<PlanarRegionSet> regions =
+        FitPlanarRegions(m->faces, m->preset.grid, region_options);
+    ASSERT_TRUE(regions.ok()) << regions.status();
+    m->regions = *std::move(regions);
+    absl::StatusOr<PlanarMesh> pm = BuildPlanarMesh(m->faces, m->regions, m->preset.grid);
+    ASSERT_TRUE(pm.ok()) << pm.status();
+    m->planar = *std::move(pm);
+    std::printf("room, mesh_growth: %zu regions (grown %zu), planar %zu triangles (%.2f %%)\n",
+                m->regions.regions.size(), m->regions.grown_regions,
+                m->planar.mesh.triangles.size(),
+                100.0 * double(m->planar.mesh.triangles.size()) /
+                    double(m->dense.triangles.size()));
+    CheckWatertightAndSmall(*m, 0.33);
+    EXPECT_EQ(BigAxisRegions(m->regions), 6);
+  }
   ASSERT_TRUE(WritePly(::testing::TempDir() + "/planar_carved/building.ply", m->planar.mesh,
                        &m->planar.triangle_region, "region")
                   .ok());
@@ -994,12 +1040,12 @@ double Percentile(std::vector<double> v, double q) {
 // DISABLED: issue 4's numbers are NOT MET, by the dense mesh either, and the default carve is
 // too big for CI (run it with --gtest_also_run_disabled_tests). Measured 2026-11-26, the 30 s
 // walk at 3.125 cm, both meshes watertight every time:
-// - as here (the simulator's /path_cov rotation std-dev 1e-4 rad), with the region fitting
-//   variant of 5e48a08 (since reverted): 8.51 M faces over 8406 m²,
+// - as here (the simulator's /path_cov rotation std-dev 1e-4 rad; regions with mesh_growth,
+//   as then in the tree for everything): 8.51 M faces over 8406 m²,
 //   7720 m² of them on no true surface with their exterior unobserved (the closure of a
 //   speckled carve, planar_mesh_bench --gt); dense 19.5 M triangles, planar 3.96 M (20 %),
 //   planar meshing 462 s CPU; the test passed 6 GB RSS and was killed by the OOM killer.
-// - the variant, with a rotation std-dev of 0.1° (0.5°) written into /path_cov, before the
+// - mesh_growth, with a rotation std-dev of 0.1° (0.5°) written into /path_cov, before the
 //   carve-speed merge (c30cc03): 2.06 M (1.84 M) faces; planar 5.0 % (4.2 %) of dense; dense median
 //   1.39 (1.78) cm, p90 11.1 (17.9) cm, completeness 83.5 (64.8) %; planar median 1.35
 //   (2.65) cm, p90 29.7 (24.9) cm, completeness 82.3 (63.6) %.
@@ -1010,7 +1056,10 @@ TEST(PlanarMeshCarvedTest, DISABLED_OfficeMeshesAgainstTruth) {
   const char* walk = std::getenv("PLANAR_OFFICE_WALK_S");
   options.walk_s = walk != nullptr ? std::atof(walk) : 30;
   const auto t0 = std::chrono::steady_clock::now();
-  absl::StatusOr<CarvedMeshes> m = CarveAndMesh(options, ::testing::TempDir() + "/planar_office");
+  PlanarRegionOptions region_options;  // as the merge fits them for mesh/building.ply
+  region_options.mesh_growth = true;
+  absl::StatusOr<CarvedMeshes> m =
+      CarveAndMesh(options, ::testing::TempDir() + "/planar_office", region_options);
   ASSERT_TRUE(m.ok()) << m.status();
   std::printf("office carved and meshed in %.0f s\n",
               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());

@@ -8,13 +8,15 @@
 //  (b) PCA region growing over those groups, largest first (the seed merges "adjacent regions
 //      of voxel faces", Fig 4.6c): a group joins a region when every isosurface point of the
 //      group is within the tolerance of the union's plane and the region's own points stay
-//      within max(tolerance, their previous maximum). Whole groups, not single faces, so a
-//      lattice plane (a stair riser, one side of a step) is never split between two regions;
+//      within max(tolerance, their previous maximum) (with mesh_growth: within max(tolerance,
+//      the seed group's spread)). Whole groups, not single faces, so a lattice plane (a stair
+//      riser, one side of a step) is never split between two regions;
 //  (c) relaxation: adjacent regions within merge_angle_deg merge, smallest angle first, when
 //      their planes also meet where the regions touch (boundary_tolerance_factor) and the
 //      union's normal is within the angle of both. (b) never adds a group facing away from
-//      the region's normal and (c) merges only planes within the angle, so the two sides of a
-//      thin slab (a table top one cell thick) stay apart.
+//      the region's normal (with mesh_growth: more than ~105° away; perpendicular risers and
+//      steps do join) and (c) merges only planes within the angle, so the two sides of a thin
+//      slab (a table top one cell thick) stay apart.
 //
 // A global stage: it takes the faces of the whole octree (or of one level).
 #pragma once
@@ -42,6 +44,20 @@ struct PlanarRegionOptions {
   // shared face edges lies within this many tolerances of both planes (so parallel planes with
   // a step between them, e.g. a floor and a stair tread, stay apart).
   double boundary_tolerance_factor = 2.0;
+  // Growth (b) for the planar mesh (§4.3.3) rather than for the floor plans. Off (the
+  // default): a region's own points may not get farther from its plane than before (within
+  // max(tolerance, their current maximum), checked exactly within a budget of a few passes
+  // over all faces), and only groups facing the region's side (< 90°) join; the wall samples
+  // of the floor plans (§5.3.1) and the levels (§5.2) are built from these. On: the region's
+  // points stay within max(tolerance, its seed group's spread), checked exactly without a
+  // budget (through a convex hull of the points), and groups up to ~105° from the region's
+  // normal join (the risers of a zig-zag, Fig 4.7a, and the one-cell steps of a carved wall;
+  // those more than 45° off join without a say in the plane): far fewer, bigger regions, so
+  // less than half the planar mesh's triangles on the simulated office. Its vertical regions
+  // give worse wall samples, and its planes lie a little farther from the true walls
+  // (docs/BENCHMARKS.md "Dense vs planar meshes"). The merge fits the default for the levels
+  // and floor plans and this for mesh/building.ply.
+  bool mesh_growth = false;
 
   // InvalidArgument for a negative or non-finite tolerance or factor, or a merge angle outside
   // [0, 90].

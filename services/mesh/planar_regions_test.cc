@@ -263,6 +263,108 @@ TEST(PlanarRegions, OppositeFacesOfAThinSlabStayApart) {
   EXPECT_EQ(down, 1);
 }
 
+PlanarRegionOptions MeshGrowth() {
+  PlanarRegionOptions o;
+  o.mesh_growth = true;
+  return o;
+}
+
+// The same slab with mesh_growth: its one-cell sides (at 90°) may join either side, but no
+// region holds faces looking against its normal, and the two sides stay apart.
+TEST(PlanarRegions, MeshGrowthKeepsTheSidesOfAThinSlabApart) {
+  const Field field = [](const Vector3d& p) {
+    const bool slab = p.x() > 0.5 && p.x() < 1.5 && p.y() > 0.5 && p.y() < 1.5 &&
+                      p.z() > 0.75 && p.z() < 0.8125;
+    return slab ? -1.0 : 1.0;
+  };
+  const std::vector<BoundaryFace> faces =
+      VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(32, 32, 32), field);
+  absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(faces, Grid(), MeshGrowth());
+  ASSERT_TRUE(set.ok()) << set.status();
+  int up = 0, down = 0;
+  for (const PlanarRegion& r : set->regions) {
+    int ups = 0, downs = 0;
+    for (uint32_t f : r.faces) {
+      EXPECT_GT(faces[f].normal.cast<double>().dot(r.normal), -0.5) << "region " << r.id;
+      ups += faces[f].normal.z() > 0.5;
+      downs += faces[f].normal.z() < -0.5;
+    }
+    EXPECT_TRUE(ups == 0 || downs == 0) << "region " << r.id;
+    // Each side holds its whole 1 m² face, plus at most the 0.25 m² ring of one-cell sides.
+    if (Deg(r.normal, Vector3d::UnitZ()) < 1) {
+      ++up;
+      EXPECT_EQ(ups, 256);
+      EXPECT_LE(r.area_m2, 1.25 + 1e-9);
+    }
+    if (Deg(r.normal, -Vector3d::UnitZ()) < 1) {
+      ++down;
+      EXPECT_EQ(downs, 256);
+      EXPECT_LE(r.area_m2, 1.25 + 1e-9);
+    }
+  }
+  EXPECT_EQ(up, 1);
+  EXPECT_EQ(down, 1);
+}
+
+// A floor with one-cell bumps (carving speckle): each bump's four sides are at exactly 90° to
+// the floor. The default growth keeps them out (they do not face the floor's side), so every
+// bump leaves small regions behind; mesh_growth takes them in (the risers and steps of
+// §4.2.4's zig-zags): the floor is one region of all the faces, with the true plane.
+TEST(PlanarRegions, MeshGrowthTakesInOneCellBumps) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::set<std::pair<int, int>> bumps;
+  for (int x = 2; x < 46; x += 3) {
+    for (int y = 2; y < 46; y += 3) {
+      if (u(rng) < 0.3) bumps.insert({x, y});
+    }
+  }
+  const Field field = [&](const Vector3d& p) {
+    const std::pair<int, int> c(int(std::floor(p.x() / kRes)), int(std::floor(p.y() / kRes)));
+    return p.z() - (bumps.count(c) ? 0.5625 : 0.5);
+  };
+  const std::vector<BoundaryFace> faces =
+      VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(48, 48, 16), field);
+  ASSERT_GT(bumps.size(), 20u);
+  absl::StatusOr<PlanarRegionSet> plain = FitPlanarRegions(faces, Grid(), {});
+  ASSERT_TRUE(plain.ok()) << plain.status();
+  EXPECT_GT(plain->regions.size(), bumps.size());
+  absl::StatusOr<PlanarRegionSet> mesh = FitPlanarRegions(faces, Grid(), MeshGrowth());
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  ASSERT_EQ(mesh->regions.size(), 1u);
+  const PlanarRegion& r = mesh->regions[0];
+  EXPECT_NEAR(r.area_m2, TotalArea(faces), 1e-9);
+  EXPECT_LT(Deg(r.normal, Vector3d::UnitZ()), 0.5);
+  std::printf("floor with %zu bumps: %zu regions (default growth), %zu (mesh_growth)\n",
+              bumps.size(), plain->regions.size(), mesh->regions.size());
+}
+
+// mesh_growth changes growing only: the exact rooms and planes above come out the same.
+TEST(PlanarRegions, MeshGrowthKeepsExactRoomsAndPlanes) {
+  const std::vector<BoundaryFace> faces = BoxRoomFaces();
+  absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(faces, Grid(), MeshGrowth());
+  ASSERT_TRUE(set.ok()) << set.status();
+  EXPECT_EQ(set->regions.size(), 6u);
+  for (const double jitter : {0.0, 0.3}) {
+    const Field field = [](const Vector3d& p) { return std::min(p.x() - 1.0, p.y() - 1.0); };
+    const std::vector<BoundaryFace> l =
+        VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(48, 48, 32), field, jitter, 3);
+    absl::StatusOr<PlanarRegionSet> ls = FitPlanarRegions(l, Grid(), MeshGrowth());
+    ASSERT_TRUE(ls.ok()) << ls.status();
+    EXPECT_EQ(ls->regions.size(), 2u) << "jitter " << jitter;
+  }
+  for (const double slope_deg : {3.0, 7.0}) {
+    const double t = std::tan(slope_deg * M_PI / 180);
+    const Field field = [t](const Vector3d& p) { return p.z() - (0.53 + t * p.x()); };
+    const std::vector<BoundaryFace> sl =
+        VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(48, 48, 24), field, 0.4, 7);
+    absl::StatusOr<PlanarRegionSet> ss = FitPlanarRegions(sl, Grid(), MeshGrowth());
+    ASSERT_TRUE(ss.ok()) << ss.status();
+    ASSERT_EQ(ss->regions.size(), 1u) << "slope " << slope_deg;
+    EXPECT_LT(Deg(ss->regions[0].normal, Vector3d(-t, 0, 1)), 0.5);
+  }
+}
+
 // Same faces in another order → the same partition (as sets of faces).
 std::set<std::set<uint32_t>> Partition(const PlanarRegionSet& set,
                                        const std::vector<uint32_t>& original_index) {
@@ -286,7 +388,11 @@ TEST(PlanarRegions, DeterministicUnderShuffledInput) {
       VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(48, 48, 40), field, 0.45, 11);
   std::vector<uint32_t> identity(faces.size());
   std::iota(identity.begin(), identity.end(), 0u);
-  absl::StatusOr<PlanarRegionSet> base = FitPlanarRegions(faces, Grid(), {});
+  for (const bool mesh_growth : {false, true}) {
+  SCOPED_TRACE(mesh_growth ? "mesh_growth" : "default growth");
+  PlanarRegionOptions options;
+  options.mesh_growth = mesh_growth;
+  absl::StatusOr<PlanarRegionSet> base = FitPlanarRegions(faces, Grid(), options);
   ASSERT_TRUE(base.ok()) << base.status();
   const auto expected = Partition(*base, identity);
   EXPECT_GT(expected.size(), 5u);
@@ -296,13 +402,14 @@ TEST(PlanarRegions, DeterministicUnderShuffledInput) {
     std::shuffle(perm.begin(), perm.end(), rng);
     std::vector<BoundaryFace> shuffled;
     for (uint32_t i : perm) shuffled.push_back(faces[i]);
-    absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(shuffled, Grid(), {});
+    absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(shuffled, Grid(), options);
     ASSERT_TRUE(set.ok()) << set.status();
     EXPECT_EQ(Partition(*set, perm), expected) << "trial " << trial;
     // Region order follows the smallest face index of the given order.
     for (size_t i = 1; i < set->regions.size(); ++i) {
       EXPECT_LT(set->regions[i - 1].faces.front(), set->regions[i].faces.front());
     }
+  }
   }
 }
 
@@ -342,6 +449,12 @@ TEST(PlanarRegions, OfficeSizedInputIsFast) {
   std::printf("%zu faces -> %zu regions in %.2f s\n", faces.size(), set->regions.size(), seconds);
   EXPECT_EQ(set->regions.size(), 6u);
   EXPECT_LT(seconds, 20.0);
+  // mesh_growth's exact checks (convex hulls, no budget) on the same input: the same room.
+  PlanarRegionOptions mesh_growth;
+  mesh_growth.mesh_growth = true;
+  absl::StatusOr<PlanarRegionSet> mesh = FitPlanarRegions(faces, OctreeGrid{6}, mesh_growth);
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  EXPECT_EQ(mesh->regions.size(), 6u);
 }
 
 }  // namespace
