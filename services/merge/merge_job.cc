@@ -157,6 +157,16 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
   return absl::OkStatus();
 }
 
+// Regions for the planar mesh only (§4.3.3): mesh_growth gives less than half the triangles
+// of the default growth on the simulated office (issue 4's ≤ 10 % of dense), but its vertical
+// regions make worse wall samples (§5.3.1), so the levels and floor plans keep the default.
+// Its bigger planes also sit a little farther from the true walls (object_segmentation_test:
+// wall cover within 5 cm 63.1 → 59.5 %; docs/BENCHMARKS.md "Dense vs planar meshes").
+PlanarRegionOptions MeshRegionOptions() {
+  PlanarRegionOptions o;
+  o.mesh_growth = true;
+  return o;
+}
 
 // The planar mesh (§4.3.3, eq 4.9, §4.2.5) of `faces` ➜ mesh/building.ply with face property
 // `region`. A mesh that cannot be built is not fatal: nullopt, and job.json says why.
@@ -311,8 +321,10 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
         CollectBoundaryFaces(**btiles, StageProgress(progress, "building_faces"));
     if (!bfaces.ok()) return bfaces.status();
     if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
+    // These regions only shape the planar mesh, so they are grown for it (mesh_growth:
+    // fewer, bigger regions, §4.3.3); the floor plans were made from the job's own regions.
     absl::StatusOr<PlanarRegionSet> bregions =
-        FitPlanarRegions(*bfaces, grid, PlanarRegionOptions{});
+        FitPlanarRegions(*bfaces, grid, MeshRegionOptions());
     if (!bregions.ok()) return bregions.status();
     counts["building_planar_regions"] = bregions->regions.size();
     absl::StatusOr<std::optional<TriangleMesh>> planar =
@@ -539,8 +551,14 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
       fs::remove_all(out / "mesh" / stale, ec);
     }
     if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
+    // The regions above made the levels (and would have made the floor plans); the planar
+    // mesh gets its own, grown for it (mesh_growth, §4.3.3).
+    absl::StatusOr<PlanarRegionSet> mesh_regions =
+        FitPlanarRegions(*faces, grid, MeshRegionOptions());
+    if (!mesh_regions.ok()) return InStage("planar_mesh", mesh_regions.status());
+    counts["building_planar_regions"] = mesh_regions->regions.size();
     absl::StatusOr<std::optional<TriangleMesh>> building =
-        PlanarBuildingMesh(*faces, *regions, grid, out, counts, outputs, warnings);
+        PlanarBuildingMesh(*faces, *mesh_regions, grid, out, counts, outputs, warnings);
     if (!building.ok()) return InStage("planar_mesh", building.status());
     if (*building) building_triangles = (*building)->triangles.size();
     timings["merge.planar_mesh"] = SecondsSince(t0);

@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 
 #include <gtest/gtest.h>
@@ -23,9 +24,10 @@ using carvemap::testing::StatsWithP;
 
 constexpr int kDepth = 4;  // 12.5 cm leaves, 16 per chunk side
 
-// Interior finest cells [lo, hi) (global leaf keys), wrapped in a one-cell exterior shell;
-// written as one tile per chunk. Returns the tiles dir.
-std::string WriteBoxRoom(const std::string& dir, const LeafKey& lo, const LeafKey& hi) {
+// Interior finest cells [lo, hi) (global leaf keys) except those `solid` picks, wrapped in a
+// one-cell exterior shell; written as one tile per chunk. Returns the tiles dir.
+std::string WriteBoxRoom(const std::string& dir, const LeafKey& lo, const LeafKey& hi,
+                         const std::function<bool(const LeafKey&)>& solid = nullptr) {
   OctreeGrid grid;
   grid.chunk_depth = kDepth;
   const int n = grid.leaves_per_side();
@@ -34,7 +36,8 @@ std::string WriteBoxRoom(const std::string& dir, const LeafKey& lo, const LeafKe
     for (int y = lo.y() - 1; y < hi.y() + 1; ++y)
       for (int z = lo.z() - 1; z < hi.z() + 1; ++z) {
         const LeafKey key(x, y, z);
-        const bool inside = (key.array() >= lo.array()).all() && (key.array() < hi.array()).all();
+        const bool inside = (key.array() >= lo.array()).all() &&
+                            (key.array() < hi.array()).all() && !(solid && solid(key));
         const ChunkKey chunk = ChunkOfLeaf(grid, key);
         TileData& tile = tiles[chunk];
         tile.chunk = chunk;
@@ -124,6 +127,38 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
   EXPECT_EQ(job["levels_source"], "regions");
   const nlohmann::json topdown = ReadJson(options.output_dir + "/level_0/topdown.json");
   EXPECT_TRUE(topdown.contains("z_range"));
+}
+
+// The levels (and floor plans) and mesh/building.ply get regions grown their own way: a floor
+// with one-leaf bumps (carving speckle) keeps each bump's four sides as regions of their own
+// for the levels, while the building mesh's regions (PlanarRegionOptions::mesh_growth) take
+// them into the floor: six regions, the box's sides, and fewer triangles.
+TEST(RunMerge, BuildingMeshRegionsTakeInOneLeafBumps) {
+  const std::string root = FreshDir();
+  const LeafKey lo(-8, -4, 0), hi(24, 20, 20);
+  size_t bumps = 0;
+  auto bump = [&](const LeafKey& k) {
+    return k.z() == lo.z() && (k.x() - lo.x()) % 5 == 2 && (k.y() - lo.y()) % 5 == 2;
+  };
+  for (int x = lo.x(); x < hi.x(); ++x)
+    for (int y = lo.y(); y < hi.y(); ++y) bumps += bump(LeafKey(x, y, lo.z()));
+  ASSERT_GT(bumps, 20u);
+  MergeOptions options;
+  options.tiles_dir = WriteBoxRoom(root + "/tiles", lo, hi, bump);
+  options.output_dir = root + "/out";
+  absl::StatusOr<MergeSummary> s = RunMerge(options);
+  ASSERT_TRUE(s.ok()) << s.status();
+  const nlohmann::json job = ReadJson(options.output_dir + "/job.json");
+  // Default growth: the bumps' sides are at 90° to the floor and stay out of it.
+  EXPECT_GT(job["counts"]["planar_regions"].get<size_t>(), 6 + bumps);
+  EXPECT_EQ(s->num_levels, 1u);
+  EXPECT_EQ(job["counts"]["building_planar_regions"], 6);
+  EXPECT_EQ(job["counts"]["building_watertight"], true);
+  absl::StatusOr<PlyMesh> building = ReadPly(options.output_dir + "/mesh/building.ply");
+  ASSERT_TRUE(building.ok()) << building.status();
+  EXPECT_TRUE(CheckMesh(building->mesh).watertight()) << CheckMesh(building->mesh).ToString();
+  EXPECT_EQ(building->mesh.triangles.size(), s->building_triangles);
+  EXPECT_LE(10 * building->mesh.triangles.size(), s->dense_triangles);
 }
 
 TEST(RunMerge, CancelledMidwayWritesNoJobJson) {
