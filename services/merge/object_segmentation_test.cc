@@ -77,8 +77,10 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   testing::CarvedPresetOptions o;
   o.preset = pc.preset;
   o.walk_s = EnvOr("CARVEMAP_SEG_WALK_S", pc.walk_s);
-  o.rate_hz = 10;
-  o.beam_step_deg = 1.0;
+  // Exploring only: CARVEMAP_SEG_RATE_HZ / CARVEMAP_SEG_BEAM_DEG (the simulator's defaults are
+  // 40 Hz / 0.25°, 16× the rays of this test's 10 Hz / 1°).
+  o.rate_hz = EnvOr("CARVEMAP_SEG_RATE_HZ", 10);
+  o.beam_step_deg = EnvOr("CARVEMAP_SEG_BEAM_DEG", 1.0);
   o.threads = 2;
   o.keep_spill = true;  // for §5.6.1's re-carving of the object chunks
   const std::string root = testing::FreshDir();
