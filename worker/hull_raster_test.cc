@@ -99,7 +99,8 @@ TEST(HullRasterTest, ListsExactlyTheLeavesHullIntersectsBoxAccepts) {
     }
     total += expected.size();
   }
-  EXPECT_GT(total, 5000u);  // the wedges do reach into their chunks
+  // The wedges do reach into their chunks (4764 leaves since single rays are 1σ wide, 1ec8c95).
+  EXPECT_GT(total, 4000u);
 }
 
 TEST(HullRasterTest, RegionKeepsOnlyItsLeaves) {
