@@ -208,27 +208,19 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   const testing::TruthDistance to_dense(testing::ReadPlyTriangles(out + "/mesh/dense.ply"), 0.25,
                                         0.2);
   size_t wall_points = 0, covered5 = 0, covered10 = 0, hidden = 0, hidden_covered = 0;
-  for (const auto& t : testing::ReadPlyTriangles(carved->gt_dir + "/surfaces.ply")) {
-    const Eigen::Vector3d n = (t[1] - t[0]).cross(t[2] - t[0]);
-    const double area2 = n.norm();
-    if (area2 < 1e-9 || std::abs(n.z()) > 0.1 * area2) continue;  // walls only
-    const int k = std::max(1, static_cast<int>(std::sqrt(area2 / 2) / 0.1));
-    for (int i = 0; i < k; ++i)
-      for (int j = 0; i + j < k; ++j) {
-        const Eigen::Vector3d p =
-            t[0] + (i + 1.0 / 3) / k * (t[1] - t[0]) + (j + 1.0 / 3) / k * (t[2] - t[0]);
-        if (to_dense(p) >= 0.2) continue;
-        ++wall_points;
-        const double db = to_building(p);
-        covered5 += db <= 0.05;
-        covered10 += db <= 0.10;
-        bool behind = false;
-        for (const Box& o : true_boxes) behind = behind || o.exteriorDistance(p) <= 0.1;
-        if (behind) {
-          ++hidden;
-          hidden_covered += db <= 0.10;
-        }
-      }
+  for (const Eigen::Vector3d& p :
+       testing::WallPoints(testing::ReadPlyTriangles(carved->gt_dir + "/surfaces.ply"), 0.1)) {
+    if (to_dense(p) >= 0.2) continue;
+    ++wall_points;
+    const double db = to_building(p);
+    covered5 += db <= 0.05;
+    covered10 += db <= 0.10;
+    bool behind = false;
+    for (const Box& o : true_boxes) behind = behind || o.exteriorDistance(p) <= 0.1;
+    if (behind) {
+      ++hidden;
+      hidden_covered += db <= 0.10;
+    }
   }
   ASSERT_GT(wall_points, 1000u);
   const double cover = double(covered10) / wall_points;

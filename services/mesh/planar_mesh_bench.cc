@@ -168,35 +168,18 @@ int main(int argc, char** argv) {
     std::printf("dense mesh %zu triangles in %.2f s cpu: %s\n", d->mesh.triangles.size(),
                 CpuSeconds() - t, CheckMesh(d->mesh).ToString().c_str());
     if (!gt.empty() && planar.ok()) {
-      auto triangles = [](const TriangleMesh& m) {
-        std::vector<std::array<Eigen::Vector3d, 3>> out;
-        for (const Eigen::Vector3i& f : m.triangles) {
-          out.push_back({m.vertices[f[0]].cast<double>(), m.vertices[f[1]].cast<double>(),
-                         m.vertices[f[2]].cast<double>()});
-        }
-        return out;
-      };
-      const testing::TruthDistance to_planar(triangles(planar->mesh), 0.25, 0.2);
-      const testing::TruthDistance to_dense(triangles(d->mesh), 0.25, 0.2);
+      const testing::TruthDistance to_planar(testing::MeshTriangles(planar->mesh), 0.25, 0.2);
+      const testing::TruthDistance to_dense(testing::MeshTriangles(d->mesh), 0.25, 0.2);
       size_t wall_points = 0, covered5 = 0, covered10 = 0, dense5 = 0;
-      for (const auto& tri : testing::ReadPlyTriangles(gt + "/surfaces.ply")) {
-        const Eigen::Vector3d n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
-        const double area2 = n.norm();
-        if (area2 < 1e-9 || std::abs(n.z()) > 0.1 * area2) continue;  // walls only
-        const int k = std::max(1, static_cast<int>(std::sqrt(area2 / 2) / 0.1));
-        for (int i = 0; i < k; ++i) {
-          for (int j = 0; i + j < k; ++j) {
-            const Eigen::Vector3d p = tri[0] + (i + 1.0 / 3) / k * (tri[1] - tri[0]) +
-                                      (j + 1.0 / 3) / k * (tri[2] - tri[0]);
-            const double dd = to_dense(p);
-            if (dd >= 0.2) continue;
-            ++wall_points;
-            dense5 += dd <= 0.05;
-            const double dp = to_planar(p);
-            covered5 += dp <= 0.05;
-            covered10 += dp <= 0.10;
-          }
-        }
+      for (const Eigen::Vector3d& p :
+           testing::WallPoints(testing::ReadPlyTriangles(gt + "/surfaces.ply"), 0.1)) {
+        const double dd = to_dense(p);
+        if (dd >= 0.2) continue;
+        ++wall_points;
+        dense5 += dd <= 0.05;
+        const double dp = to_planar(p);
+        covered5 += dp <= 0.05;
+        covered10 += dp <= 0.10;
       }
       std::printf("wall cover of the planar mesh: within 5 cm %.1f %%, 10 cm %.1f %% of %zu "
                   "true wall points (the dense mesh: within 5 cm %.1f %%)\n",

@@ -612,6 +612,14 @@ VoxelWorld FittedWorld(int which) {
   }
 }
 
+// FitPlanarRegions with the default growth (levels, floor plans) or mesh_growth (building.ply).
+absl::StatusOr<PlanarRegionSet> FitRegions(const std::vector<BoundaryFace>& faces,
+                                           const OctreeGrid& grid, bool mesh_growth) {
+  PlanarRegionOptions options;
+  options.mesh_growth = mesh_growth;
+  return FitPlanarRegions(faces, grid, options);
+}
+
 class FittedRegionsTest : public ::testing::TestWithParam<std::tuple<int, int>> {};
 
 TEST_P(FittedRegionsTest, WatertightWithFitPlanarRegions) {
@@ -621,9 +629,7 @@ TEST_P(FittedRegionsTest, WatertightWithFitPlanarRegions) {
   // Both growths: the levels' and floor plans' (default) and the building mesh's (mesh_growth).
   for (const bool mesh_growth : {false, true}) {
     SCOPED_TRACE(mesh_growth ? "mesh_growth" : "default growth");
-    PlanarRegionOptions region_options;
-    region_options.mesh_growth = mesh_growth;
-    absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(faces, grid, region_options);
+    absl::StatusOr<PlanarRegionSet> regions = FitRegions(faces, grid, mesh_growth);
     ASSERT_TRUE(regions.ok()) << regions.status();
     const int64_t euler = which == 1 ? 0 : 2;
     for (const PlanarMeshOptions& options : {NoQuadtree(), PlanarMeshOptions{}}) {
@@ -678,9 +684,7 @@ TEST_P(NoisyFittedRoomTest, AlwaysWatertight) {
   RecordProperty("faces", static_cast<int>(faces.size()));
   for (const bool mesh_growth : {false, true}) {
     SCOPED_TRACE(mesh_growth ? "mesh_growth" : "default growth");
-    PlanarRegionOptions region_options;
-    region_options.mesh_growth = mesh_growth;
-    absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(faces, grid, region_options);
+    absl::StatusOr<PlanarRegionSet> regions = FitRegions(faces, grid, mesh_growth);
     ASSERT_TRUE(regions.ok()) << regions.status();
     absl::StatusOr<PlanarMesh> pm = BuildPlanarMesh(faces, *regions, grid);
     ASSERT_TRUE(pm.ok()) << pm.status();
@@ -1111,12 +1115,7 @@ TEST(PlanarMeshCarvedTest, DISABLED_OfficeMeshesAgainstTruth) {
       ++samples;
       if (observed(s.x - r * s.n)) d.push_back(to_truth(s.x));
     }
-    std::vector<std::array<Eigen::Vector3d, 3>> tris;
-    for (const Eigen::Vector3i& t : mesh->triangles) {
-      tris.push_back({mesh->vertices[t[0]].cast<double>(), mesh->vertices[t[1]].cast<double>(),
-                      mesh->vertices[t[2]].cast<double>()});
-    }
-    const testing::TruthDistance to_mesh(std::move(tris), 0.25, 0.05);
+    const testing::TruthDistance to_mesh(testing::MeshTriangles(*mesh), 0.25, 0.05);
     size_t near = 0;
     for (const Eigen::Vector3d& x : seen_truth) near += to_mesh(x) < 0.05;
     const double median = Percentile(d, 0.5), p90 = Percentile(d, 0.9);

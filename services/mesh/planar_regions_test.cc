@@ -233,16 +233,20 @@ TEST(PlanarRegions, LShapedWallPairStaysTwoRegions) {
   }
 }
 
-// A thin slab (a table top one cell thick) has faces up and down within a cell of each
-// other: they must never share a region (faces of a region look the same way).
-TEST(PlanarRegions, OppositeFacesOfAThinSlabStayApart) {
+// A thin slab (a table top one cell thick, 1 m × 1 m) and its boundary faces.
+std::vector<BoundaryFace> ThinSlabFaces() {
   const Field field = [](const Vector3d& p) {
     const bool slab = p.x() > 0.5 && p.x() < 1.5 && p.y() > 0.5 && p.y() < 1.5 &&
                       p.z() > 0.75 && p.z() < 0.8125;
     return slab ? -1.0 : 1.0;
   };
-  const std::vector<BoundaryFace> faces =
-      VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(32, 32, 32), field);
+  return VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(32, 32, 32), field);
+}
+
+// A thin slab (a table top one cell thick) has faces up and down within a cell of each
+// other: they must never share a region (faces of a region look the same way).
+TEST(PlanarRegions, OppositeFacesOfAThinSlabStayApart) {
+  const std::vector<BoundaryFace> faces = ThinSlabFaces();
   absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(faces, Grid(), {});
   ASSERT_TRUE(set.ok()) << set.status();
   int up = 0, down = 0;
@@ -272,13 +276,7 @@ PlanarRegionOptions MeshGrowth() {
 // The same slab with mesh_growth: its one-cell sides (at 90°) may join either side, but no
 // region holds faces looking against its normal, and the two sides stay apart.
 TEST(PlanarRegions, MeshGrowthKeepsTheSidesOfAThinSlabApart) {
-  const Field field = [](const Vector3d& p) {
-    const bool slab = p.x() > 0.5 && p.x() < 1.5 && p.y() > 0.5 && p.y() < 1.5 &&
-                      p.z() > 0.75 && p.z() < 0.8125;
-    return slab ? -1.0 : 1.0;
-  };
-  const std::vector<BoundaryFace> faces =
-      VoxelFaces(kRes, Vector3i(0, 0, 0), Vector3i(32, 32, 32), field);
+  const std::vector<BoundaryFace> faces = ThinSlabFaces();
   absl::StatusOr<PlanarRegionSet> set = FitPlanarRegions(faces, Grid(), MeshGrowth());
   ASSERT_TRUE(set.ok()) << set.status();
   int up = 0, down = 0;

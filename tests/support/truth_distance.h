@@ -16,14 +16,41 @@
 
 namespace carvemap::testing {
 
+// A mesh's triangles as vertex triples (the form TruthDistance takes).
+inline std::vector<std::array<Eigen::Vector3d, 3>> MeshTriangles(const TriangleMesh& mesh) {
+  std::vector<std::array<Eigen::Vector3d, 3>> out;
+  out.reserve(mesh.triangles.size());
+  const auto& v = mesh.vertices;
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    out.push_back({v[t[0]].cast<double>(), v[t[1]].cast<double>(), v[t[2]].cast<double>()});
+  }
+  return out;
+}
+
 // The triangles of a PLY (the simulator's truth meshes) as vertex triples.
 inline std::vector<std::array<Eigen::Vector3d, 3>> ReadPlyTriangles(const std::string& path) {
-  std::vector<std::array<Eigen::Vector3d, 3>> out;
   absl::StatusOr<PlyMesh> ply = ReadPly(path);
-  if (!ply.ok()) return out;  // callers check for an empty result
-  const auto& v = ply->mesh.vertices;
-  for (const Eigen::Vector3i& t : ply->mesh.triangles) {
-    out.push_back({v[t[0]].cast<double>(), v[t[1]].cast<double>(), v[t[2]].cast<double>()});
+  if (!ply.ok()) return {};  // callers check for an empty result
+  return MeshTriangles(ply->mesh);
+}
+
+// Points on the vertical triangles (walls: |n_z| ≤ 0.1) of a truth soup, about `spacing_m`
+// apart: each triangle split into k² sub-triangles, one point at each one's centroid. What the
+// wall-cover measures (object_segmentation_test, planar_mesh_bench) sample.
+inline std::vector<Eigen::Vector3d> WallPoints(
+    const std::vector<std::array<Eigen::Vector3d, 3>>& tris, double spacing_m) {
+  std::vector<Eigen::Vector3d> out;
+  for (const auto& t : tris) {
+    const Eigen::Vector3d n = (t[1] - t[0]).cross(t[2] - t[0]);
+    const double area2 = n.norm();
+    if (area2 < 1e-9 || std::abs(n.z()) > 0.1 * area2) continue;  // walls only
+    const int k = std::max(1, static_cast<int>(std::sqrt(area2 / 2) / spacing_m));
+    for (int i = 0; i < k; ++i) {
+      for (int j = 0; i + j < k; ++j) {
+        out.push_back(t[0] + (i + 1.0 / 3) / k * (t[1] - t[0]) +
+                      (j + 1.0 / 3) / k * (t[2] - t[0]));
+      }
+    }
   }
   return out;
 }
