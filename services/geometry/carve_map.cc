@@ -26,6 +26,23 @@ bool AllFinite(const SymCov3f& c) {
 
 }  // namespace
 
+RangeGivenLateral PointRangeGivenLateral(const Eigen::Matrix3d& c, const Eigen::Vector3d& d) {
+  const double marginal = std::max(d.dot(c * d), 0.0);
+  // Invertible relative to its size: float covariances carry ~7 digits, so a direction with
+  // less than 1e-12 of the mean variance cubed in the determinant is no spread at all.
+  const double scale = c.trace() / 3;
+  const double det = c.determinant();
+  if (!(scale > 0) || !(det > 1e-12 * scale * scale * scale)) {
+    return {Eigen::Vector3d::Zero(), std::sqrt(marginal)};
+  }
+  const Eigen::Vector3d lambda_d = c.inverse() * d;
+  const double precision = d.dot(lambda_d);
+  if (!(precision > 0) || !std::isfinite(precision)) return {Eigen::Vector3d::Zero(), std::sqrt(marginal)};
+  const double var = 1.0 / precision;
+  // Never wider than the marginal (rounding could make it so).
+  return {d - var * lambda_d, std::sqrt(std::min(var, marginal))};
+}
+
 absl::StatusOr<PreparedRay> PreparedRay::Make(const RayModel& ray) {
   if (!ray.sensor_mean.allFinite() || !ray.point_mean.allFinite() || !AllFinite(ray.sensor_cov) ||
       !AllFinite(ray.point_cov)) {
@@ -41,7 +58,7 @@ absl::StatusOr<PreparedRay> PreparedRay::Make(const RayModel& ray) {
   }
   pr.inv_length_ = 1.0 / pr.length_;
   pr.dir_ = axis * pr.inv_length_;
-  // Any orthonormal completion works: σ_⊥² = uᵀC*u does not depend on the basis.
+  // Any orthonormal completion works: f_⊥ and k·x_⊥ do not depend on the basis.
   const Eigen::Vector3d helper =
       std::abs(pr.dir_.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
   pr.e1_ = pr.dir_.cross(helper).normalized();
@@ -50,7 +67,10 @@ absl::StatusOr<PreparedRay> PreparedRay::Make(const RayModel& ray) {
   const Eigen::Matrix3d Cs = ToMatrix(ray.sensor_cov);
   const Eigen::Matrix3d Cp = ToMatrix(ray.point_cov);
   pr.sigma_s_par_ = std::sqrt(std::max(pr.dir_.dot(Cs * pr.dir_), 0.0));
-  pr.sigma_p_par_ = std::sqrt(std::max(pr.dir_.dot(Cp * pr.dir_), 0.0));
+  const RangeGivenLateral range = PointRangeGivenLateral(Cp, pr.dir_);
+  pr.sigma_p_par_ = range.sigma;
+  pr.kp1_ = range.k.dot(pr.e1_);
+  pr.kp2_ = range.k.dot(pr.e2_);
   pr.inv_sqrt2_sigma_s_ = 1.0 / (std::sqrt(2.0) * std::max(pr.sigma_s_par_, kMinSigma_m));
   pr.inv_sqrt2_sigma_p_ = 1.0 / (std::sqrt(2.0) * std::max(pr.sigma_p_par_, kMinSigma_m));
 
@@ -82,13 +102,14 @@ void PreparedRay::EvaluateMany(const double* par, const double* a, const double*
     const __m128d c12 = _mm_add_pd(_mm_set1_pd(ls12_), _mm_mul_pd(f, _mm_set1_pd(ld12_)));
     const __m128d c22 = _mm_add_pd(_mm_set1_pd(ls22_), _mm_mul_pd(f, _mm_set1_pd(ld22_)));
     const __m128d q = _mm_add_pd(
-        _mm_add_pd(_mm_mul_pd(_mm_mul_pd(c11, va), va),
+        _mm_sub_pd(_mm_mul_pd(_mm_mul_pd(c22, va), va),
                    _mm_mul_pd(_mm_mul_pd(_mm_mul_pd(_mm_set1_pd(2.0), c12), va), vb)),
-        _mm_mul_pd(_mm_mul_pd(c22, vb), vb));
-    __m128d e = _mm_div_pd(_mm_mul_pd(_mm_mul_pd(half, perp2), perp2), q);
-    // q ≤ 0: no weight; |x_⊥| ≈ 0: on the ray, f_⊥ = 1.
-    e = _mm_or_pd(_mm_and_pd(_mm_cmpgt_pd(q, zero), e),
-                  _mm_andnot_pd(_mm_cmpgt_pd(q, zero), _mm_set1_pd(kNoWeightExponent + 1)));
+        _mm_mul_pd(_mm_mul_pd(c11, vb), vb));
+    const __m128d det = _mm_sub_pd(_mm_mul_pd(c11, c22), _mm_mul_pd(c12, c12));
+    __m128d e = _mm_div_pd(_mm_mul_pd(half, q), det);
+    // det ≤ 0: no weight; |x_⊥| ≈ 0: on the ray, f_⊥ = 1.
+    e = _mm_or_pd(_mm_and_pd(_mm_cmpgt_pd(det, zero), e),
+                  _mm_andnot_pd(_mm_cmpgt_pd(det, zero), _mm_set1_pd(kNoWeightExponent + 1)));
     const __m128d on_ray = _mm_cmple_pd(perp2, _mm_set1_pd(1e-24));
     e = _mm_andnot_pd(on_ray, e);
     // ExpNeg(min(e, 40)) lane by lane: past 39 the weight is dropped below anyway.
@@ -125,7 +146,7 @@ void PreparedRay::EvaluateMany(const double* par, const double* a, const double*
       // e = 0 exactly (on the ray) gives ExpNeg(0) = 1, as EvaluateProjected's f_⊥ = 1.
       const double fp = fv[l];
       const double z_s = -par[j] * inv_sqrt2_sigma_s_;
-      const double z_p = (par[j] - length_) * inv_sqrt2_sigma_p_;
+      const double z_p = ((par[j] - length_) - (kp1_ * a[j] + kp2_ * b[j])) * inv_sqrt2_sigma_p_;
       const double F_s = z_s <= -6.0 ? 1.0 : 0.5 * std::erfc(z_s);
       const double one_minus_F_p = z_p <= -6.0 ? 1.0 : 0.5 * std::erfc(z_p);
       p[j] = F_s * fp * one_minus_F_p + 0.5 * (1.0 - fp);

@@ -4,9 +4,21 @@
 // and x_⊥ (the rest). Then
 //   p(x) = F_s(x_∥) f_⊥(x_⊥) (1 − F_p(x_∥)) + 0.5 (1 − f_⊥(x_⊥))          (eq 4.7)
 // with F_s the CDF of the sensor Gaussian's marginal along d (mean 0, σ² = dᵀC_s d), F_p that of
-// the point Gaussian (mean L, σ² = dᵀC_p d), and
-//   f_⊥(x_⊥) = exp(−|x_⊥|² / (2 σ_⊥²)),  σ_⊥² = uᵀC*u,  u = x_⊥/|x_⊥|,
+// the point Gaussian's range along d given the lateral offset x_⊥ (PointRangeGivenLateral:
+// mean L + k·x_⊥, σ² = 1/(dᵀC_p⁻¹d)), and
+//   f_⊥(x_⊥) = exp(−½ x_⊥ᵀ C*⊥⁻¹ x_⊥),  C*⊥ the 2×2 block of C* across the ray,
 //   C* = (1 − f) C_s + f C_p,  f = clamp(x_∥ / L, 0, 1).
+// The seed takes F_p as the marginal along d (mean L, σ² = dᵀC_p d). When C_p is round, or
+// spread only along d, the conditional is the same. When C_p is spread along a surface the ray
+// meets obliquely (the sampling term, SamplingCovariance), the marginal would put the surface
+// at range L beside the ray too, so the ray would carve behind the surface on one side and
+// leave free space uncarved on the other; the conditional follows the surface.
+// The seed calls f_⊥ "the marginal along the direction x_⊥" of N(x_∥, C*). We take the lateral
+// Gaussian's density at x_⊥ (its slice along u = x_⊥/|x_⊥|), not the density of the projection
+// onto u (exp(−|x_⊥|²/(2 uᵀC*u))). The two agree when C* is round across the ray; when it is
+// flat (a ray spread along a surface by its sampling share, SamplingCovariance) the projection
+// form gives a point 25 σ off the narrow axis a weight of ~0.1 whenever it is also off the wide
+// axis, and the ray votes "interior" behind the surface.
 // The dissertation calls f_⊥ the "PMF" of the lateral marginal. We take it unnormalised (peak 1
 // on the ray): a density normalised by 1/(σ_⊥√(2π)) would exceed 1 for σ_⊥ < 0.4 m, making
 // 0.5(1 − f_⊥) negative and p leave [0, 1], which contradicts p: ℝ³ → [0, 1]. Unnormalised,
@@ -27,6 +39,17 @@
 #include "services/geometry/carving_types.h"
 
 namespace carvemap {
+
+// The range of a point Gaussian N(μ, C) along the unit direction d given its offset x_⊥ across
+// d: N(k·x_⊥, σ²) about μ's range, with σ² = 1/(dᵀC⁻¹d) and k = d − σ²C⁻¹d (k ⊥ d, so k·x_⊥
+// only sees the offset across d). A C with no inverse (no spread in some direction) gives
+// the marginal: σ² = dᵀCd, k = 0.
+struct RangeGivenLateral {
+  Eigen::Vector3d k;
+  double sigma;  // m
+};
+[[nodiscard]] RangeGivenLateral PointRangeGivenLateral(const Eigen::Matrix3d& c,
+                                                       const Eigen::Vector3d& d);
 
 // One ray's vote about one location: p (eq 4.7) and its weight w = f_⊥ (eq 4.8).
 struct CarveSample {
@@ -72,6 +95,7 @@ class PreparedRay {
   [[nodiscard]] const Eigen::Vector3d& direction() const { return dir_; }    // d, unit
   [[nodiscard]] double length() const { return length_; }                    // L, m
   [[nodiscard]] double sensor_sigma_along() const { return sigma_s_par_; }   // m
+  // σ of F_p: the point's range given the lateral offset (PointRangeGivenLateral).
   [[nodiscard]] double point_sigma_along() const { return sigma_p_par_; }    // m
 
  private:
@@ -88,6 +112,8 @@ class PreparedRay {
   double inv_length_ = 0;
   double sigma_s_par_ = 0, sigma_p_par_ = 0;
   double inv_sqrt2_sigma_s_ = 0, inv_sqrt2_sigma_p_ = 0;  // 1/(σ√2), for erfc
+  // F_p's mean moves by kp1·a + kp2·b at lateral offset (a, b): k of PointRangeGivenLateral.
+  double kp1_ = 0, kp2_ = 0;
   // Lateral covariance blocks (e1e1, e1e2, e2e2) of C_s and of C_p − C_s (C* = C_s + f(C_p − C_s)).
   double ls11_ = 0, ls12_ = 0, ls22_ = 0;
   double ld11_ = 0, ld12_ = 0, ld22_ = 0;
@@ -139,12 +165,12 @@ inline CarveSample PreparedRay::EvaluateProjected(double x_par, double a, double
   // |x_⊥| ≈ 0 means x is on the ray: f_⊥ = 1 (the limit of the formula below).
   if (perp2 > 1e-24) {
     const double f = std::clamp(x_par * inv_length_, 0.0, 1.0);
-    // x_⊥ᵀ C* x_⊥ = |x_⊥|² σ_⊥², so |x_⊥|²/(2σ_⊥²) = |x_⊥|⁴ / (2 x_⊥ᵀC*x_⊥): no sqrt, no divide
-    // by |x_⊥|.
-    const double q = (ls11_ + f * ld11_) * a * a + 2.0 * (ls12_ + f * ld12_) * a * b +
-                     (ls22_ + f * ld22_) * b * b;
+    const double c11 = ls11_ + f * ld11_, c12 = ls12_ + f * ld12_, c22 = ls22_ + f * ld22_;
+    // ½ x_⊥ᵀ C*⊥⁻¹ x_⊥ with the 2×2 inverse written out: adj(C*⊥) quadratic form over det.
+    const double q = c22 * a * a - 2.0 * c12 * a * b + c11 * b * b;
+    const double det = c11 * c22 - c12 * c12;
     // Past this f_⊥ < 1e-17 and p = 0.5 to double precision: skip the two erfc calls.
-    const double exponent = q > 0 ? 0.5 * perp2 * perp2 / q : kNoWeightExponent + 1;
+    const double exponent = det > 0 ? 0.5 * q / det : kNoWeightExponent + 1;
     if (exponent > kNoWeightExponent) return CarveSample{0.5, 0.0};
     f_perp = ExpNeg(exponent);
   }
@@ -152,7 +178,7 @@ inline CarveSample PreparedRay::EvaluateProjected(double x_par, double a, double
   // erfc(z) rounds to exactly 2 for z ≤ −6 (2 − 2e−17): skip the call there, which is most
   // of the ray (x_∥ well past the sensor and well short of the point), bit-identically.
   const double z_s = -x_par * inv_sqrt2_sigma_s_;
-  const double z_p = (x_par - length_) * inv_sqrt2_sigma_p_;
+  const double z_p = ((x_par - length_) - (kp1_ * a + kp2_ * b)) * inv_sqrt2_sigma_p_;
   const double F_s = z_s <= -6.0 ? 1.0 : 0.5 * std::erfc(z_s);
   const double one_minus_F_p = z_p <= -6.0 ? 1.0 : 0.5 * std::erfc(z_p);
   return CarveSample{F_s * f_perp * one_minus_F_p + 0.5 * (1.0 - f_perp), f_perp};

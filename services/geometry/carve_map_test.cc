@@ -106,10 +106,67 @@ TEST(CarveMapTest, AnisotropicLateralCovariance) {
   ASSERT_TRUE(pr.ok());
   EXPECT_NEAR(pr->Evaluate(Vector3d(1, 0.2, 0)).w, std::exp(-0.5), 1e-6);
   EXPECT_NEAR(pr->Evaluate(Vector3d(1, 0, 0.01)).w, std::exp(-0.5), 1e-5);
-  // Along the diagonal u = (0, 1, 1)/√2: σ_⊥² = (0.04 + 0.0001)/2.
-  const double s = std::sqrt((0.04 + 0.0001) / 2);
-  EXPECT_NEAR(pr->Evaluate(Vector3d(1, s / std::sqrt(2), s / std::sqrt(2))).w, std::exp(-0.5),
-              1e-6);
+  // f_⊥ is the lateral Gaussian's density: e^(−1/2) on its whole 1σ ellipse, not only on the
+  // axes (the density of the projection onto u would give (0.04 + 0.0001)/2 on the diagonal).
+  for (double phi = 0; phi < 6.3; phi += 0.3) {
+    EXPECT_NEAR(pr->Evaluate(Vector3d(1, 0.2 * std::cos(phi), 0.01 * std::sin(phi))).w,
+                std::exp(-0.5), 1e-5)
+        << phi;
+  }
+  // Half a σ along the wide axis and 25 σ off the narrow one: no weight (the projection form
+  // would give e^(−0.13...) ≈ 0.9 at (0.1, 0.01) and ~0.3 here).
+  EXPECT_LT(pr->Evaluate(Vector3d(1, 0.1, 0.25)).w, 1e-100);
+  EXPECT_NEAR(pr->Evaluate(Vector3d(1, 0.1, 0.01)).w, std::exp(-0.5 * (0.25 + 1)), 1e-5);
+}
+
+// A ray meets the plane x + z = 5 at 45° (the point (5, 0, 0)), with the point spread along that
+// plane as the sampling term spreads it (SamplingCovariance): σ 10 cm within the plane, 1 mm
+// across it.
+RayModel RayOntoTiltedPlane() {
+  RayModel r = AxisRay();
+  const Vector3d n = Vector3d(1, 0, 1).normalized();
+  const Matrix3d in_plane = Matrix3d::Identity() - n * n.transpose();
+  r.sensor_cov = ToSymCov(Matrix3d::Identity() * 1e-6);
+  r.point_cov = ToSymCov(0.01 * in_plane + 1e-6 * Matrix3d::Identity());
+  return r;
+}
+
+TEST(CarveMapTest, RangeGivenLateralFollowsTheSurface) {
+  const RayModel r = RayOntoTiltedPlane();
+  const RangeGivenLateral g = PointRangeGivenLateral(ToMatrix(r.point_cov), Vector3d::UnitX());
+  // On the plane x = 5 − z: an offset z across the ray moves the surface's range by −z.
+  EXPECT_NEAR(g.k.x(), 0, 1e-9);
+  EXPECT_NEAR(g.k.y(), 0, 1e-6);
+  EXPECT_NEAR(g.k.z(), -1, 1e-3);
+  // Across the plane σ is 1 mm; along the ray that is 1 mm / cos 45°.
+  EXPECT_NEAR(g.sigma, 0.001 * std::sqrt(2.0), 1e-5);
+  // The marginal along the ray would be 7 cm.
+  EXPECT_GT(std::sqrt(ToMatrix(r.point_cov)(0, 0)), 0.07);
+  // No inverse: the marginal.
+  Matrix3d along = Matrix3d::Zero();
+  along(0, 0) = 0.04;
+  const RangeGivenLateral m = PointRangeGivenLateral(along, Vector3d::UnitX());
+  EXPECT_EQ(m.k, Vector3d::Zero());
+  EXPECT_NEAR(m.sigma, 0.2, 1e-12);
+}
+
+TEST(CarveMapTest, SpreadRayCarvesUpToTheSurfaceBesideIt) {
+  const absl::StatusOr<PreparedRay> pr = PreparedRay::Make(RayOntoTiltedPlane());
+  ASSERT_TRUE(pr.ok());
+  // 5 cm beside the ray across the plane's trace (where the spread, seen across the ray, is
+  // 10 cm·cos 45° = 7 cm), 3 cm in front of and behind the plane: the plane is at x = 4.95 for
+  // z = 0.05 and at x = 5.05 for z = −0.05.
+  for (const double z : {0.05, -0.05}) {
+    const double surface_x = 5 - z;
+    const CarveSample front = pr->Evaluate(Vector3d(surface_x - 0.03, 0, z));
+    const CarveSample behind = pr->Evaluate(Vector3d(surface_x + 0.03, 0, z));
+    EXPECT_GT(front.p, 0.75) << z;
+    EXPECT_LT(behind.p, 0.25) << z;
+    EXPECT_NEAR(front.w, std::exp(-0.5 * 0.05 * 0.05 / 0.005), 0.02) << z;
+  }
+  // Along y the plane does not move: the surface stays at x = 5.
+  EXPECT_GT(pr->Evaluate(Vector3d(4.97, 0.1, 0)).p, 0.75);
+  EXPECT_LT(pr->Evaluate(Vector3d(5.03, 0.1, 0)).p, 0.25);
 }
 
 TEST(CarveMapTest, WeightFallsOffMonotonicallyLaterally) {

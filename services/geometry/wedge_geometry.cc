@@ -8,6 +8,8 @@
 
 #include <Eigen/Eigenvalues>
 
+#include "services/geometry/carve_map.h"
+
 namespace carvemap {
 namespace {
 
@@ -51,7 +53,7 @@ Vector3d RayDirection(const RayModel& ray) {
   return len > 1e-9 ? Vector3d(d / len) : Vector3d::Zero();
 }
 
-// σ along the ray of the point Gaussian (σ_∥² = dᵀ C_p d); for a zero-length ray, the largest σ.
+// σ of the point's range along the ray; for a zero-length ray, the largest σ.
 double SigmaAlong(const RayModel& ray, const Vector3d& d) {
   const Eigen::Matrix3d c = ToMatrix(ray.point_cov);
   if (d.isZero()) {
@@ -60,7 +62,9 @@ double SigmaAlong(const RayModel& ray, const Vector3d& d) {
                                        .eigenvalues()
                                        .maxCoeff()));
   }
-  return std::sqrt(std::max(0.0, d.dot(c * d)));
+  // F_p's σ (the range given the lateral offset, carve_map.h): past 3 of those the ray says
+  // nothing more, whatever its spread along a surface it meets obliquely.
+  return PointRangeGivenLateral(c, d).sigma;
 }
 
 // Principal axes across the ray (unit, ⊥ d) of the point Gaussian's lateral spread P C_p P,

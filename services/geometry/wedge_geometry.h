@@ -21,7 +21,8 @@ struct WedgeHull {
 };
 
 // The hull of the wedge's sensor means and its point means extended `sigmas` standard
-// deviations (of the point Gaussian, along the ray) past the point (§4.3.1: 3σ). A single-ray
+// deviations (F_p's: the point's range given its offset across the ray, carve_map.h) past the
+// point (§4.3.1: 3σ). A single-ray
 // wedge is that segment in a box 1σ wide across the ray along the principal axes of its lateral
 // spread (not `sigmas`: see kSingleRayLateralSigmas in the .cc).
 // `facets`, if given, receives a hint for rebuilding the same hull faster (the facet triples of
@@ -42,9 +43,9 @@ struct WedgeHull {
 // that only comes near the hull, never false for one that touches it).
 [[nodiscard]] bool HullIntersectsBox(const WedgeHull& hull, const Eigen::AlignedBox3d& box);
 
-// The ray's point mean moved `sigmas`·σ_∥ further along the ray (σ_∥² = dᵀ C_p d, d the unit
-// direction from sensor to point): the far end of the wedge's volume. A zero-length ray is
-// not moved.
+// The ray's point mean moved `sigmas`·σ_∥ further along the ray (σ_∥ of F_p, the range given the
+// offset across the ray, PointRangeGivenLateral; d the unit direction from sensor to point): the
+// far end of the wedge's volume. A zero-length ray is not moved.
 [[nodiscard]] Eigen::Vector3d ExtendedPointMean(const RayModel& ray, double sigmas = 3.0);
 
 // Whether x satisfies every half-space of the hull (and lies in its box).
