@@ -12,6 +12,9 @@ namespace carvemap {
 namespace {
 
 constexpr float kNoReturn = std::numeric_limits<float>::quiet_NaN();
+// The sampling spread joins a neighbour whose point lies at most this many times the rays'
+// spacing away: a surface met up to 1/cos θ = 4, θ = 75.5° from head-on.
+constexpr double kMaxSamplingObliquity = 4.0;
 
 SensorNoiseParams NoiseParamsOf(const SensorInfo& info) {
   SensorNoiseParams p;
@@ -37,7 +40,8 @@ absl::Status WedgeBuilderOptions::Validate() const {
         absl::StrCat("wedge_builder options: max_range_ratio must be >= 1, got ", max_range_ratio));
   }
   for (auto [name, v] : {std::pair{"min_jump_m", min_jump_m}, std::pair{"min_range_m", min_range_m},
-                         std::pair{"max_frame_gap_s", max_frame_gap_s}}) {
+                         std::pair{"max_frame_gap_s", max_frame_gap_s},
+                         std::pair{"sampling_share", sampling_share}}) {
     if (!std::isfinite(v) || v < 0) {
       return absl::InvalidArgumentError(
           absl::StrCat("wedge_builder options: ", name, " must be finite and >= 0, got ", v));
@@ -101,7 +105,68 @@ void WedgeBuilder::ComputeRays(const SensorState& s, const ScanFrame& frame,
       continue;
     }
     cur_range_[i] = range;
-    cur_rays_[i] = model.Ray(p.cast<double>());
+    RayModel& ray = cur_rays_[i];
+    ray = model.Ray(p.cast<double>());
+    // The pose terms' cross terms would tilt F_p (AlongAndAcross); the sampling term's are kept.
+    const Eigen::Vector3d d =
+        (ray.point_mean.cast<double>() - ray.sensor_mean.cast<double>()).normalized();
+    ray.point_cov = ToSymCov(AlongAndAcross(ToMatrix(ray.point_cov), d));
+  }
+}
+
+void WedgeBuilder::AddSamplingCovariance(const SensorState& s, const SensorState* prev) {
+  if (options_.sampling_share == 0) return;
+  const size_t n = cur_rays_.size();
+  const bool grid = s.info.kind == SensorKind::kGrid;
+  const size_t cols = grid ? s.info.cols : n;
+  // From the means only (which this does not change), so the order of updates does not matter.
+  std::vector<SymCov3f> added(n);
+  std::vector<uint8_t> has(n, 0);
+  for (size_t i = 0; i < n; ++i) {
+    const float range = cur_range_[i];
+    if (std::isnan(range)) continue;
+    const RayModel& r = cur_rays_[i];
+    const Eigen::Vector3d p = r.point_mean.cast<double>();
+    // Only neighbours on the same surface: the wedges' discontinuity rule, and a surface met
+    // within kMaxSamplingObliquity of head-on. A step from a desk's edge to the floor behind it
+    // passes the range rule at a glance but is many times the rays' spacing long; spread along
+    // it, the ray's surface would tilt into the free space in front of the edge.
+    const auto joins = [&](std::span<const float> ranges, std::span<const RayModel> rays,
+                           size_t k) {
+      if (k >= ranges.size() || std::isnan(ranges[k]) ||
+          !Continuous(range, range, ranges[k], ranges[k])) {
+        return false;
+      }
+      const Eigen::Vector3d s_k = rays[k].sensor_mean.cast<double>();
+      const Eigen::Vector3d u = (rays[k].point_mean.cast<double>() - s_k).normalized();
+      const Eigen::Vector3d to_p = p - s_k;
+      const double spacing = (to_p - to_p.dot(u) * u).norm();
+      return (rays[k].point_mean.cast<double>() - p).norm() <= kMaxSamplingObliquity * spacing;
+    };
+    std::array<Eigen::Vector3d, 2> a, b;
+    size_t na = 0, nb = 0;
+    const size_t x = i % cols;
+    const std::span<const RayModel> cur(cur_rays_);
+    if (x > 0 && joins(cur_range_, cur, i - 1)) a[na++] = cur[i - 1].point_mean.cast<double>();
+    if (x + 1 < cols && joins(cur_range_, cur, i + 1)) {
+      a[na++] = cur[i + 1].point_mean.cast<double>();
+    }
+    if (grid) {
+      if (i >= cols && joins(cur_range_, cur, i - cols)) {
+        b[nb++] = cur[i - cols].point_mean.cast<double>();
+      }
+      if (joins(cur_range_, cur, i + cols)) b[nb++] = cur[i + cols].point_mean.cast<double>();
+    } else if (prev != nullptr && joins(prev->prev_range, prev->prev_rays, i)) {
+      b[nb++] = prev->prev_rays[i].point_mean.cast<double>();
+    }
+    if (na + nb == 0) continue;
+    added[i] = ToSymCov(ToMatrix(r.point_cov) + SamplingCovariance(p, {a.data(), na},
+                                                                   {b.data(), nb},
+                                                                   options_.sampling_share));
+    has[i] = 1;
+  }
+  for (size_t i = 0; i < n; ++i) {
+    if (has[i]) cur_rays_[i].point_cov = added[i];
   }
 }
 
@@ -135,7 +200,9 @@ absl::Status WedgeBuilder::EmitSingles(const SensorState& s, uint64_t frame,
 
 absl::Status WedgeBuilder::AddLineFrame(SensorState& s, const ScanFrame& frame) {
   const uint64_t cur = s.next_frame++, prev = cur - 1;
-  if (s.has_prev && frame.t - s.prev_t <= options_.max_frame_gap_s) {
+  const bool joined = s.has_prev && frame.t - s.prev_t <= options_.max_frame_gap_s;
+  AddSamplingCovariance(s, joined ? &s : nullptr);
+  if (joined) {
     const size_t n = std::min(s.prev_rays.size(), cur_rays_.size());
     const auto& pr = s.prev_range;
     const auto& cr = cur_range_;
@@ -176,6 +243,7 @@ absl::Status WedgeBuilder::AddLineFrame(SensorState& s, const ScanFrame& frame) 
 absl::Status WedgeBuilder::AddGridFrame(SensorState& s, const ScanFrame& frame) {
   const size_t rows = s.info.rows, cols = s.info.cols;
   const uint64_t f = s.next_frame++;
+  AddSamplingCovariance(s, nullptr);
   auto id = [&](size_t i) { return RayId{s.index, f, uint32_t(i)}; };
   const auto& r = cur_range_;
   for (size_t y = 0; y + 1 < rows; ++y) {

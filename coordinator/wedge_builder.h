@@ -46,6 +46,11 @@ struct WedgeBuilderOptions {
   // Line sensors: frames further apart than this are not joined (a pause in the recording or
   // many dropped frames; 0.5 s is 20 frames of a 40 Hz scanner).
   double max_frame_gap_s = 0.5;
+  // The sampling term of each ray's point covariance (SamplingCovariance, §4.2.1): the variance
+  // across the ray as a fraction of the squared gap to its neighbours, in-frame and
+  // frame-to-frame (grid: along rows and along columns). 1/12, a uniform spread over the gap;
+  // 0 leaves rays as wide as the localization covariance alone.
+  double sampling_share = 1.0 / 12;
 
   [[nodiscard]] absl::Status Validate() const;
 };
@@ -118,6 +123,10 @@ class WedgeBuilder {
 
   // Fills cur_rays_/cur_range_/cur_covered_ for `frame`.
   void ComputeRays(const SensorState& s, const ScanFrame& frame, const FrameContext& context);
+  // Adds the sampling covariance to cur_rays_' point covariances: neighbours along the frame
+  // (line: j ± 1) or along rows and columns (grid); for a line sensor, also the previous
+  // frame's ray of the same index when `prev` is given.
+  void AddSamplingCovariance(const SensorState& s, const SensorState* prev);
   [[nodiscard]] bool Continuous(float a, float b, float c, float d) const;
   absl::Status EmitWedge(const RayModel& a, const RayModel& b, const RayModel& c,
                          const RayModel& d, const std::array<RayId, 4>& ids);

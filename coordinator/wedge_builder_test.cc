@@ -250,6 +250,58 @@ TEST(WedgeBuilderTest, SmallRangeChangesAndNoiseAreJoined) {
   EXPECT_EQ(out.Count(4), 1);
 }
 
+// The point covariance of every ray carved, by (frame, ray).
+std::map<std::pair<uint64_t, uint32_t>, Eigen::Matrix3d> PointCovariances(const Collected& out) {
+  std::map<std::pair<uint64_t, uint32_t>, Eigen::Matrix3d> cov;
+  for (size_t w = 0; w < out.wedges.size(); ++w) {
+    for (size_t r = 0; r < out.ids[w].size(); ++r) {
+      cov[{out.ids[w][r].frame, out.ids[w][r].index}] = ToMatrix(out.wedges[w].rays[r].point_cov);
+    }
+  }
+  return cov;
+}
+
+// §4.2.1's sampling term: each ray's point is spread over its share of the surface up to its
+// neighbours' points (in-frame and the previous frame's), within the surface, and not across
+// an edge to a surface the range rule still joins.
+TEST(WedgeBuilderTest, PointsAreSpreadOverTheirShareOfTheSurface) {
+  constexpr int kRays = 61, kFrames = 4;  // 1° apart
+  // Rays 40 and up meet a nearer surface x = 4: ray 39 ends at 5.06 m, ray 40 at 4.06 m, which
+  // the range rule joins (1 m ≤ 25 % of 4.06 m), 1 m apart against 9 cm between the rays there.
+  std::vector<double> range_x(kRays, kWallX);
+  for (int j = 40; j < kRays; ++j) range_x[j] = 4.0;
+  auto build = [&](double share) {
+    WedgeBuilderOptions o;
+    o.sampling_share = share;
+    Collected out;
+    absl::StatusOr<WedgeBuilder> b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
+    EXPECT_TRUE(b.ok());
+    for (int i = 0; i < kFrames; ++i) {
+      EXPECT_TRUE(b->AddFrame(WallFrame(i, kRays, range_x), WalkContext(i)).ok());
+    }
+    EXPECT_TRUE(b->Finish().ok());
+    EXPECT_EQ(b->stats().discontinuities, 0u);
+    return PointCovariances(out);
+  };
+  const auto spread = build(1.0 / 12), plain = build(0);
+  ASSERT_EQ(spread.size(), size_t{kRays * kFrames});
+  auto z = [](int j) { return kWallX * std::tan(RayAngle(j, kRays)); };
+
+  // Ray 20 of frame 2: along z half the two in-frame gaps' squares, along y the 10 cm step from
+  // frame 1; nothing along the wall's normal x.
+  const Eigen::Matrix3d d = spread.at({2, 20}) - plain.at({2, 20});
+  const double dz_lo = z(20) - z(19), dz_hi = z(21) - z(20);
+  EXPECT_NEAR(d(2, 2), (dz_lo * dz_lo + dz_hi * dz_hi) / 2 / 12, 1e-8);
+  EXPECT_NEAR(d(1, 1), 0.1 * 0.1 / 12, 1e-8);
+  EXPECT_NEAR(d(0, 0), 0, 1e-9);
+  // The first frame has no previous one: only the in-frame spread.
+  EXPECT_NEAR((spread.at({0, 20}) - plain.at({0, 20}))(1, 1), 0, 1e-9);
+  // Ray 39 is not spread towards ray 40's surface: one side only, and still nothing along x.
+  const Eigen::Matrix3d edge = spread.at({2, 39}) - plain.at({2, 39});
+  EXPECT_NEAR(edge(2, 2), (z(39) - z(38)) * (z(39) - z(38)) / 12, 1e-8);
+  EXPECT_NEAR(edge(0, 0), 0, 1e-9);
+}
+
 TEST(WedgeBuilderTest, FramesFarApartAreNotJoined) {
   Collected out;
   absl::StatusOr<WedgeBuilder> b =

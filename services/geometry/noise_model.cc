@@ -148,6 +148,25 @@ Gaussian3d FrameNoiseModel::PointGaussian(const Eigen::Vector3d& point_sensor) c
   return g;
 }
 
+Eigen::Matrix3d AlongAndAcross(const Eigen::Matrix3d& c, const Eigen::Vector3d& d) {
+  const Eigen::Matrix3d along = d * d.transpose();
+  const Eigen::Matrix3d across = Eigen::Matrix3d::Identity() - along;
+  return along * c * along + across * c * across;
+}
+
+Eigen::Matrix3d SamplingCovariance(const Eigen::Vector3d& point,
+                                   std::span<const Eigen::Vector3d> axis_a,
+                                   std::span<const Eigen::Vector3d> axis_b, double share) {
+  Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
+  for (std::span<const Eigen::Vector3d> axis : {axis_a, axis_b}) {
+    if (axis.empty()) continue;
+    Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+    for (const Eigen::Vector3d& q : axis) sum += (q - point) * (q - point).transpose();
+    c += sum / double(axis.size());
+  }
+  return share * c;
+}
+
 RayModel FrameNoiseModel::Ray(const Eigen::Vector3d& point_sensor) const {
   const Gaussian3d p = PointGaussian(point_sensor);
   RayModel r;

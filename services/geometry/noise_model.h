@@ -71,6 +71,32 @@ struct Gaussian3d {
 [[nodiscard]] Eigen::Matrix3d RangeCovariance(const Eigen::Vector3d& unit_dir_world,
                                               double sigma_r_m);
 
+// The sampling term of a ray's point covariance (§4.2.1): a wedge's rays stand for the surface
+// between them, so each ray's point is spread over its share of the surface up to its
+// neighbours' points. Without it a ray is only as wide as its pose covariance: with noiseless or
+// well-localized data (1 mm) and rays 5–10 cm apart, eq 4.8's weights between the rays of a
+// wedge vanish and the carve is a speckle of unobserved leaves.
+//   C = share · Σ_axes mean_{k ∈ axis} (p_k − p)(p_k − p)ᵀ
+// over the neighbours' points p_k along each scan axis (in-frame, frame-to-frame); share = 1/12
+// is the variance of a uniform spread over the gap. The spread lies in the surface through the
+// points (it is not made lateral to the ray): eq 4.7's F_p, taken conditional on the lateral
+// offset (carve_map.h), then follows that surface, so the spread carves beside the ray up to
+// the surface and not behind it, even at grazing incidence. Empty axes contribute nothing.
+[[nodiscard]] Eigen::Matrix3d SamplingCovariance(const Eigen::Vector3d& point,
+                                                 std::span<const Eigen::Vector3d> axis_a,
+                                                 std::span<const Eigen::Vector3d> axis_b,
+                                                 double share);
+
+// C without its covariances between the unit direction d and the directions across it:
+// (ddᵀ) C (ddᵀ) + P C P, P = I − ddᵀ. Eq 4.7 reads the point Gaussian of eqs 4.1–4.6 through
+// its marginal along the ray (F_p) and its block across it (f_⊥). Taken conditional on the
+// lateral offset (carve_map.h), F_p would also read the cross terms, and those of the pose
+// terms do not describe the surface the ray meets: a rotation error moves the point across the
+// lever arm from the system origin, which leans away from the ray by up to the sensor's height
+// over the range, and tilted so, grazing rays carve above a ceiling. Only the sampling term
+// (SamplingCovariance), added after this, tilts F_p along the surface.
+[[nodiscard]] Eigen::Matrix3d AlongAndAcross(const Eigen::Matrix3d& c, const Eigen::Vector3d& d);
+
 // The world-frame angular velocity at time t along a path sorted by ascending t, from the
 // rotation log of the two poses around t: ω = Log(R_b·R_aᵀ)/(t_b − t_a). Times outside the
 // path use its first/last segment; a path of fewer than two poses gives zero.

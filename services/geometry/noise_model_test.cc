@@ -153,6 +153,41 @@ TEST(NoiseModelTest, RangeNoiseIsAlongTheRayOnly) {
   EXPECT_NEAR(across.dot(g.cov * across), 0.0, 1e-18);
 }
 
+TEST(NoiseModelTest, SamplingCovarianceIsTheShareOfTheGapsToTheNeighbours) {
+  const Vector3d p(5, 0, 0);
+  // In-frame neighbours 8 cm to either side along y; the previous frame's point 10 cm along z
+  // and 2 cm further along x (the surface is tilted).
+  const std::vector<Vector3d> along{{5, -0.08, 0}, {5, 0.08, 0}};
+  const std::vector<Vector3d> across{{5.02, 0, 0.1}};
+  const Matrix3d c = SamplingCovariance(p, along, across, 1.0 / 12);
+  Matrix3d expected = Matrix3d::Zero();
+  expected(1, 1) = 0.08 * 0.08 / 12;  // the mean of the two sides, not their sum
+  const Vector3d o(0.02, 0, 0.1);
+  expected += o * o.transpose() / 12;
+  ExpectMatrixNear(c, expected, 1e-15);
+  // It lies in the surface through the points: nothing along that surface's normal.
+  const Vector3d normal = Vector3d(0, 1, 0).cross(o).normalized();
+  EXPECT_NEAR(normal.dot(c * normal), 0.0, 1e-15);
+  // No neighbours, no spread; share 0, no spread.
+  ExpectMatrixNear(SamplingCovariance(p, {}, {}, 1.0 / 12), Matrix3d::Zero(), 0);
+  ExpectMatrixNear(SamplingCovariance(p, along, across, 0), Matrix3d::Zero(), 0);
+}
+
+TEST(NoiseModelTest, AlongAndAcrossKeepsTheMarginalAndTheLateralBlock) {
+  Matrix3d a;
+  a << 1, 2, 0.5, -1, 3, 1, 0.2, 0.4, 2;
+  const Matrix3d c = a * a.transpose();  // SPD, with cross terms in every direction
+  const Vector3d d = Vector3d(1, 2, -1).normalized();
+  const Matrix3d b = AlongAndAcross(c, d);
+  EXPECT_NEAR(d.dot(b * d), d.dot(c * d), 1e-12);
+  const Vector3d e1 = d.cross(Vector3d::UnitX()).normalized(), e2 = d.cross(e1);
+  for (const Vector3d& u : {e1, e2}) {
+    for (const Vector3d& v : {e1, e2}) EXPECT_NEAR(u.dot(b * v), u.dot(c * v), 1e-12);
+    EXPECT_NEAR(d.dot(b * u), 0.0, 1e-12);
+  }
+  ExpectMatrixNear(b, b.transpose(), 1e-12);
+}
+
 TEST(NoiseModelTest, FloorKeepsNoiselessCovariancesPositiveDefinite) {
   NoiseModelOptions o;  // floor 1 mm
   FrameNoiseModel model(Pose{}, PoseCovariance{}, Vector3d::Zero(), SensorNoiseParams{}, o);
