@@ -49,8 +49,12 @@ struct OctreeWallSampleOptions {
   double max_tilt_deg = 5;
   // §5.3.1: smaller regions (area of their faces on this level) are not walls.
   double min_area_m2 = 0.05;
-  // §5.3.1: regions whose faces on this level span less height than this are not walls.
-  double min_height_m = 1.0;
+  // §5.3.1: regions whose faces on this level span less height than this are not walls. The
+  // seed says 1 m; filing cabinets and sideboards are 1.0–1.1 m (the simulator's 1.05 m), and
+  // once a cabinet's front is carved whole (rays carrying their share of the gaps between them)
+  // it passes 1 m and the plan cuts the cabinet out of its room: on the whole office walk,
+  // 1.2 m finds 28 % of the objects against 19 % at 1 m, with the same 15 rooms.
+  double min_height_m = 1.2;
   // d_s (§3.1.1), m: the sampling grid along each wall and the result's spacing. 0 = the octree
   // resolution.
   double spacing_m = 0;
