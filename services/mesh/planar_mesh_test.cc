@@ -1037,9 +1037,10 @@ double Percentile(std::vector<double> v, double q) {
 // side one cell out was observed, minus faces where two solids touch) within 5 cm of the
 // mesh. A short walk (the hallway and first rooms) keeps it affordable in CI; both meshes are
 // held to it, and to watertightness and the 10 % rule.
-// DISABLED: issue 4's numbers are NOT MET, by the dense mesh either, and the default carve is
-// too big for CI (run it with --gtest_also_run_disabled_tests). Measured 2026-11-26, the 30 s
-// walk at 3.125 cm, both meshes watertight every time:
+// DISABLED_OfficeMeshesAgainstTruth asserts all of it and is NOT MET (run it with
+// --gtest_also_run_disabled_tests); OfficeMeshesAgainstTruthWhatIsMet, in CI, asserts what is
+// met and regression bounds for the rest. Measured 2026-11-26, the 30 s walk at 3.125 cm, both
+// meshes watertight every time:
 // - as here (the simulator's /path_cov rotation std-dev 1e-4 rad; regions with mesh_growth,
 //   as then in the tree for everything): 8.51 M faces over 8406 m²,
 //   7720 m² of them on no true surface with their exterior unobserved (the closure of a
@@ -1053,7 +1054,13 @@ double Percentile(std::vector<double> v, double q) {
 //   triangles, planar 4.31 M (21.3 %); dense median 42 cm, p90 ≥ 50 cm over the 2.24 M of 8.79 M
 //   samples whose exterior was observed (the speckle's faces dominate), completeness 100 %;
 //   planar median 46 cm, completeness 84.8 %; 906 s to carve and mesh, 6.8 GB peak RSS.
-TEST(PlanarMeshCarvedTest, DISABLED_OfficeMeshesAgainstTruth) {
+// - since rays carry their share of the gaps between them (SamplingCovariance, fef5e6f):
+//   1.70 M faces, dense 4.34 M triangles, planar 255 k (5.9 %); dense median 1.15 cm, p90
+//   18.3 cm, completeness 97.4 %; planar median 0.97 cm, p90 29.6 cm, completeness 94.75 %;
+//   77 s, 1.3 GB peak RSS. Only the p90s and the planar completeness are not met: the samples
+//   more than 10 cm from any truth cluster at 1.5–2.5 m (the scanners' height and the lights')
+//   along the corridor (x 8–16 m, y 4–8 m). OfficeMeshesAgainstTruthWhatIsMet holds the rest.
+void CheckOfficeMeshes(bool all_of_issue_4) {
   testing::CarvedPresetOptions options;
   options.preset = "office";
   options.resolution_m = 0.03125;
@@ -1121,10 +1128,19 @@ TEST(PlanarMeshCarvedTest, DISABLED_OfficeMeshesAgainstTruth) {
         "p90 %.4f m; %.1f %% of %zu observed truth samples within 5 cm\n",
         name, d.size(), samples, median, p90, 100 * completeness, seen_truth.size());
     EXPECT_LE(median, 0.015);
-    EXPECT_LE(p90, 0.04);
-    EXPECT_GE(completeness, 0.95);
+    if (all_of_issue_4) {
+      EXPECT_LE(p90, 0.04);
+      EXPECT_GE(completeness, 0.95);
+    } else {
+      // Regression bounds below the measured values (p90 18 / 30 cm, completeness 97.4 / 94.75 %).
+      EXPECT_LE(p90, name == std::string("dense") ? 0.25 : 0.35);
+      EXPECT_GE(completeness, name == std::string("dense") ? 0.95 : 0.93);
+    }
   }
 }
+
+TEST(PlanarMeshCarvedTest, DISABLED_OfficeMeshesAgainstTruth) { CheckOfficeMeshes(true); }
+TEST(PlanarMeshCarvedTest, OfficeMeshesAgainstTruthWhatIsMet) { CheckOfficeMeshes(false); }
 #endif  // CARVEMAP_PLANAR_CARVED_ONLY
 
 }  // namespace
