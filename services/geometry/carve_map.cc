@@ -37,7 +37,9 @@ RangeGivenLateral PointRangeGivenLateral(const Eigen::Matrix3d& c, const Eigen::
   }
   const Eigen::Vector3d lambda_d = c.inverse() * d;
   const double precision = d.dot(lambda_d);
-  if (!(precision > 0) || !std::isfinite(precision)) return {Eigen::Vector3d::Zero(), std::sqrt(marginal)};
+  if (!(precision > 0) || !std::isfinite(precision)) {
+    return {Eigen::Vector3d::Zero(), std::sqrt(marginal)};
+  }
   const double var = 1.0 / precision;
   // Never wider than the marginal (rounding could make it so).
   return {d - var * lambda_d, std::sqrt(std::min(var, marginal))};
@@ -146,7 +148,8 @@ void PreparedRay::EvaluateMany(const double* par, const double* a, const double*
       // e = 0 exactly (on the ray) gives ExpNeg(0) = 1, as EvaluateProjected's f_⊥ = 1.
       const double fp = fv[l];
       const double z_s = -par[j] * inv_sqrt2_sigma_s_;
-      const double z_p = ((par[j] - length_) - (kp1_ * a[j] + kp2_ * b[j])) * inv_sqrt2_sigma_p_;
+      const double z_p =
+          ((par[j] - length_) - (kp1_ * a[j] + kp2_ * b[j])) * inv_sqrt2_sigma_p_;
       const double F_s = z_s <= -6.0 ? 1.0 : 0.5 * std::erfc(z_s);
       const double one_minus_F_p = z_p <= -6.0 ? 1.0 : 0.5 * std::erfc(z_p);
       p[j] = F_s * fp * one_minus_F_p + 0.5 * (1.0 - fp);
