@@ -17,8 +17,9 @@
 // Gaussian's density at x_⊥ (its slice along u = x_⊥/|x_⊥|), not the density of the projection
 // onto u (exp(−|x_⊥|²/(2 uᵀC*u))). The two agree when C* is round across the ray; when it is
 // flat (a ray spread along a surface by its sampling share, SamplingCovariance) the projection
-// form gives a point 25 σ off the narrow axis a weight of ~0.1 whenever it is also off the wide
-// axis, and the ray votes "interior" behind the surface.
+// form leaks along the narrow axis: k σ_n off it and as far along the wide axis, the weight is
+// e^(−2k²σ_n²/σ_w²), so for a 2.5 cm spread over the 1 mm floor a point 25 σ_n behind the
+// surface still weighs e^−2 ≈ 0.14, and the ray votes "interior" there.
 // The dissertation calls f_⊥ the "PMF" of the lateral marginal. We take it unnormalised (peak 1
 // on the ray): a density normalised by 1/(σ_⊥√(2π)) would exceed 1 for σ_⊥ < 0.4 m, making
 // 0.5(1 − f_⊥) negative and p leave [0, 1], which contradicts p: ℝ³ → [0, 1]. Unnormalised,

@@ -114,7 +114,7 @@ TEST(CarveMapTest, AnisotropicLateralCovariance) {
         << phi;
   }
   // Half a σ along the wide axis and 25 σ off the narrow one: no weight (the projection form
-  // would give e^(−0.13...) ≈ 0.9 at (0.1, 0.01) and ~0.3 here).
+  // gives e^(−6.5) here, and e^(−0.13) ≈ 0.88 at (0.1, 0.01)).
   EXPECT_LT(pr->Evaluate(Vector3d(1, 0.1, 0.25)).w, 1e-100);
   EXPECT_NEAR(pr->Evaluate(Vector3d(1, 0.1, 0.01)).w, std::exp(-0.5 * (0.25 + 1)), 1e-5);
 }
