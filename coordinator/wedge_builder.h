@@ -47,9 +47,9 @@ struct WedgeBuilderOptions {
   // many dropped frames; 0.5 s is 20 frames of a 40 Hz scanner).
   double max_frame_gap_s = 0.5;
   // The sampling term of each ray's point covariance (SamplingCovariance, §4.2.1): the variance
-  // across the ray as a fraction of the squared gap to its neighbours, in-frame and
-  // frame-to-frame (grid: along rows and along columns). 1/12, a uniform spread over the gap;
-  // 0 leaves rays as wide as the localization covariance alone.
+  // of the point towards each neighbour's point, as a fraction of their squared distance, in
+  // frame and frame to frame (grid: along rows and along columns). 1/12, a uniform spread over
+  // the gap; 0 leaves rays as wide as the localization covariance alone.
   double sampling_share = 1.0 / 12;
 
   [[nodiscard]] absl::Status Validate() const;

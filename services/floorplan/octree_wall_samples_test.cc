@@ -305,10 +305,10 @@ TEST(OctreeWallSamples, RejectsBadInput) {
 // within 5 cm, heights 100 %, 95 % with a pose). The office on a 20 s walk does not, for
 // reasons upstream of this stage, so its bounds are the measured values less a margin, to
 // catch regressions: the walk sees the 32 m corridor's walls only at grazing angles, where the
-// carved boundary faces themselves lie 5–7 cm inside the walls (measured 90.5 % within 5 cm,
-// median 1.0 cm, of 1461 samples); it sees few ceilings, and a sample's wall top is often a
-// ceiling light's underside or a shelf (ceiling within 3 cm: 53.9 %); floors 100 %. Since rays
-// carry their share of the gaps between them (SamplingCovariance) the carve has 2.6× the
+// carved boundary faces themselves lie 5–7 cm inside the walls (measured 92.8 % within 5 cm,
+// median 1.0 cm, of 1382 samples); it sees few ceilings, and a sample's wall top is often a
+// ceiling light's underside or a shelf (ceiling within 3 cm: 55.7 %); floors 100 %. Since rays
+// carry their share of the gaps between them (SamplingCovariance) the carve has 2.5× the
 // samples of before (561: 99.3 % within 5 cm, ceilings 57.2 %), more of them on the grazing
 // walls and under the lights.
 struct PresetCase {
