@@ -119,13 +119,12 @@ void WedgeBuilder::AddSamplingCovariance(const SensorState& s, const SensorState
   const size_t n = cur_rays_.size();
   const bool grid = s.info.kind == SensorKind::kGrid;
   const size_t cols = grid ? s.info.cols : n;
-  // From the means only (which this does not change), so the order of updates does not matter.
-  std::vector<SymCov3f> added(n);
-  std::vector<uint8_t> has(n, 0);
+  // Reads only ranges and means, which this does not change: each ray's covariance is updated
+  // in place, in any order.
   for (size_t i = 0; i < n; ++i) {
     const float range = cur_range_[i];
     if (std::isnan(range)) continue;
-    const RayModel& r = cur_rays_[i];
+    RayModel& r = cur_rays_[i];
     const Eigen::Vector3d p = r.point_mean.cast<double>();
     // Only neighbours on the same surface: the wedges' discontinuity rule, and a surface met
     // within kMaxSamplingObliquity of head-on. A step from a desk's edge to the floor behind it
@@ -160,13 +159,9 @@ void WedgeBuilder::AddSamplingCovariance(const SensorState& s, const SensorState
       b[nb++] = prev->prev_rays[i].point_mean.cast<double>();
     }
     if (na + nb == 0) continue;
-    added[i] = ToSymCov(ToMatrix(r.point_cov) + SamplingCovariance(p, {a.data(), na},
-                                                                   {b.data(), nb},
-                                                                   options_.sampling_share));
-    has[i] = 1;
-  }
-  for (size_t i = 0; i < n; ++i) {
-    if (has[i]) cur_rays_[i].point_cov = added[i];
+    r.point_cov = ToSymCov(ToMatrix(r.point_cov) + SamplingCovariance(p, {a.data(), na},
+                                                                      {b.data(), nb},
+                                                                      options_.sampling_share));
   }
 }
 
