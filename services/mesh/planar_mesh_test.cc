@@ -1,8 +1,10 @@
 #include "services/mesh/planar_mesh.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <iostream>
+#include <limits>
 #include <cmath>
 #include <map>
 #include <random>
@@ -871,6 +873,7 @@ struct CarvedMeshes {
   std::vector<BoundaryFace> faces;
   PlanarRegionSet regions;
   TriangleMesh dense;
+  std::vector<uint8_t> dense_vertex_observed;  // DenseMeshResult::vertex_observed
   PlanarMesh planar;
   double planar_s = 0;  // regions + planar mesh, wall seconds
 };
@@ -892,6 +895,7 @@ absl::StatusOr<CarvedMeshes> CarveAndMesh(const testing::CarvedPresetOptions& op
   absl::StatusOr<DenseMeshResult> dense = BuildDenseMesh(*out.tiles);
   if (!dense.ok()) return dense.status();
   out.dense = std::move(dense->mesh);
+  out.dense_vertex_observed = std::move(dense->vertex_observed);
   const auto start = std::chrono::steady_clock::now();
   absl::StatusOr<PlanarRegionSet> regions =
       FitPlanarRegions(out.faces, out.preset.grid, region_options);
@@ -985,13 +989,15 @@ TEST(PlanarMeshCarvedTest, RoomIsWatertightAndSmall) {
 // triangle's unit normal (into free space for the meshes and the truth solids' outside).
 struct SurfaceSample {
   Eigen::Vector3d x, n;
+  size_t triangle = 0;  // index in mesh.triangles
 };
 std::vector<SurfaceSample> SampleSurface(const TriangleMesh& mesh, double spacing_m,
                                          uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(0, 1);
   std::vector<SurfaceSample> out;
-  for (const Eigen::Vector3i& t : mesh.triangles) {
+  for (size_t ti = 0; ti < mesh.triangles.size(); ++ti) {
+    const Eigen::Vector3i& t = mesh.triangles[ti];
     const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>();
     const Eigen::Vector3d b = mesh.vertices[t[1]].cast<double>();
     const Eigen::Vector3d c = mesh.vertices[t[2]].cast<double>();
@@ -1002,7 +1008,7 @@ std::vector<SurfaceSample> SampleSurface(const TriangleMesh& mesh, double spacin
     for (int k = 0; k < count; ++k) {
       double s1 = u(rng), s2 = u(rng);
       if (s1 + s2 > 1) s1 = 1 - s1, s2 = 1 - s2;
-      out.push_back({a + s1 * (b - a) + s2 * (c - a), cr.normalized()});
+      out.push_back({a + s1 * (b - a) + s2 * (c - a), cr.normalized(), ti});
     }
   }
   return out;
@@ -1023,6 +1029,53 @@ bool InsideAnySolid(const std::vector<Prism>& solids, const Eigen::Vector3d& x) 
   return false;
 }
 
+// Whether a planar-mesh point of region `region` lies on observed exterior: the flag of the
+// nearest boundary face of that region (its exterior leaf observed, i.e. scan points stand
+// behind it), searched in buckets of 4 cells out to 3 buckets (0.375 m at 3.125 cm); a point
+// with no face of its region that near counts as observed, so geometry eq 4.9 moved far from
+// its faces is held against the mesh.
+class RegionFaceObserved {
+ public:
+  RegionFaceObserved(const std::vector<BoundaryFace>& faces, const PlanarRegionSet& regions,
+                     double res)
+      : bucket_m_(4 * res) {
+    for (size_t i = 0; i < faces.size(); ++i) {
+      buckets_[Key(regions.face_region[i], faces[i].center)].push_back(
+          {faces[i].center, faces[i].exterior.stats.observed()});
+    }
+  }
+  [[nodiscard]] bool operator()(int region, const Eigen::Vector3d& x) const {
+    const Key4 k = Key(region, x);
+    for (int reach : {1, 3}) {
+      double best = std::numeric_limits<double>::infinity();
+      bool observed = true;
+      for (int dx = -reach; dx <= reach; ++dx) {
+        for (int dy = -reach; dy <= reach; ++dy) {
+          for (int dz = -reach; dz <= reach; ++dz) {
+            auto it = buckets_.find(Key4{region, k[1] + dx, k[2] + dy, k[3] + dz});
+            if (it == buckets_.end()) continue;
+            for (const auto& [c, o] : it->second) {
+              const double d = (c - x).squaredNorm();
+              if (d < best) best = d, observed = o;
+            }
+          }
+        }
+      }
+      if (best < std::numeric_limits<double>::infinity()) return observed;
+    }
+    return true;
+  }
+
+ private:
+  using Key4 = std::array<int, 4>;
+  [[nodiscard]] Key4 Key(int region, const Eigen::Vector3d& x) const {
+    return {region, int(std::floor(x.x() / bucket_m_)), int(std::floor(x.y() / bucket_m_)),
+            int(std::floor(x.z() / bucket_m_))};
+  }
+  double bucket_m_;
+  std::map<Key4, std::vector<std::pair<Eigen::Vector3d, bool>>> buckets_;
+};
+
 double Percentile(std::vector<double> v, double q) {
   if (v.empty()) return NAN;
   const size_t k = static_cast<size_t>(q * double(v.size() - 1));
@@ -1033,7 +1086,8 @@ double Percentile(std::vector<double> v, double q) {
 // Issue 4's accuracy on `office` at 3.125 cm against gt/surfaces.ply + gt/objects.ply:
 // mesh to truth median ≤ 1.5 cm and 90th percentile ≤ 4 cm, over the mesh where its exterior
 // side was observed (elsewhere the mesh closes the carved volume against unobserved space,
-// which no truth describes); completeness: ≥ 95 % of the observed truth (samples whose free
+// which no truth describes), as the meshes record it (dense: vertex_observed; planar: the
+// nearest boundary face of the sample's region, RegionFaceObserved); completeness: ≥ 95 % of the observed truth (samples whose free
 // side one cell out was observed, minus faces where two solids touch) within 5 cm of the
 // mesh. A short walk (the hallway and first rooms) keeps it affordable in CI; both meshes are
 // held to it, and to watertightness and the 10 % rule.
@@ -1059,7 +1113,16 @@ double Percentile(std::vector<double> v, double q) {
 //   18.3 cm, completeness 97.4 %; planar median 0.97 cm, p90 29.6 cm, completeness 94.75 %;
 //   77 s, 1.3 GB peak RSS. Only the p90s and the planar completeness are not met: the samples
 //   more than 10 cm from any truth cluster at 1.5–2.5 m (the scanners' height and the lights')
-//   along the corridor (x 8–16 m, y 4–8 m). OfficeMeshesAgainstTruthWhatIsMet holds the rest.
+//   along the corridor (x 8–16 m, y 4–8 m).
+// - the same meshes, with the mesh's exterior side told by the meshes' own record instead of
+//   the leaf one cell behind each sample (2026-11-26 (4)): dense median 0.90 cm, p90 2.2 cm over
+//   501 k of 1.73 M samples; planar median 0.66 cm, p90 3.65 cm over 513 k of 1.68 M;
+//   completeness unchanged (97.4 %, 94.75 %). The old probe was wrong for 87 % of the samples it
+//   found far from truth: the one-cell step from a surface that closes a thin unobserved pocket
+//   (or a free-space slab whose underside was never seen, e.g. at z 1.5 and 1.75 m in the
+//   corridor) lands in observed space on the pocket's other side. Of the boundary faces whose
+//   exterior leaf is observed, 1.8 % lie more than 10 cm from truth. Only the planar
+//   completeness is not met; OfficeMeshesAgainstTruthWhatIsMet holds the rest.
 void CheckOfficeMeshes(bool all_of_issue_4) {
   testing::CarvedPresetOptions options;
   options.preset = "office";
@@ -1086,10 +1149,6 @@ void CheckOfficeMeshes(bool all_of_issue_4) {
   truth.Append(ObjectsMesh(*building));
   const double r = options.resolution_m;
   TileSet& tiles = *m->tiles;
-  auto observed = [&](const Eigen::Vector3d& x) {
-    absl::StatusOr<LeafQuery> q = tiles.Query(x);
-    return q.ok() && q->stored && q->stats.observed();
-  };
   auto carved = [&](const Eigen::Vector3d& x) {
     absl::StatusOr<LeafQuery> q = tiles.Query(x);
     return q.ok() && q->stored && q->stats.observed() && q->stats.p() > 0.5;
@@ -1109,6 +1168,10 @@ void CheckOfficeMeshes(bool all_of_issue_4) {
                           truth.vertices[t[2]].cast<double>()});
   }
   const testing::TruthDistance to_truth(truth_tris, 0.25, 0.5);
+  // Where the mesh's exterior was observed, by the mesh's own record: a dense triangle whose
+  // three vertices lie between interior and observed exterior leaves (vertex_observed), a
+  // planar point whose nearest boundary face of its region has an observed exterior leaf.
+  const RegionFaceObserved planar_observed(m->faces, m->regions, r);
   for (const auto& [name, mesh] : {std::pair<const char*, const TriangleMesh*>{"dense", &m->dense},
                                    {"planar", &m->planar.mesh}}) {
     SCOPED_TRACE(name);
@@ -1116,7 +1179,13 @@ void CheckOfficeMeshes(bool all_of_issue_4) {
     size_t samples = 0;
     for (const SurfaceSample& s : SampleSurface(*mesh, 0.03, 11)) {
       ++samples;
-      if (observed(s.x - r * s.n)) d.push_back(to_truth(s.x));
+      const Eigen::Vector3i& t = mesh->triangles[s.triangle];
+      const bool on_observed =
+          mesh == &m->dense
+              ? m->dense_vertex_observed[t[0]] && m->dense_vertex_observed[t[1]] &&
+                    m->dense_vertex_observed[t[2]]
+              : planar_observed(m->planar.triangle_region[s.triangle], s.x);
+      if (on_observed) d.push_back(to_truth(s.x));
     }
     const testing::TruthDistance to_mesh(testing::MeshTriangles(*mesh), 0.25, 0.05);
     size_t near = 0;
@@ -1128,15 +1197,10 @@ void CheckOfficeMeshes(bool all_of_issue_4) {
         "p90 %.4f m; %.1f %% of %zu observed truth samples within 5 cm\n",
         name, d.size(), samples, median, p90, 100 * completeness, seen_truth.size());
     EXPECT_LE(median, 0.015);
-    if (all_of_issue_4) {
-      EXPECT_LE(p90, 0.04);
-      EXPECT_GE(completeness, 0.95);
-    } else {
-      // Regression bounds below the measured values (p90 18 / 30 cm, completeness 97.4 / 94.75 %).
-      const bool dense = mesh == &m->dense;
-      EXPECT_LE(p90, dense ? 0.25 : 0.35);
-      EXPECT_GE(completeness, dense ? 0.95 : 0.93);
-    }
+    EXPECT_LE(p90, 0.04);
+    // The planar mesh's completeness (94.75 %) is the one goal not met: a regression bound
+    // below it here, the goal in the DISABLED_ variant.
+    EXPECT_GE(completeness, all_of_issue_4 || mesh == &m->dense ? 0.95 : 0.94);
   }
 }
 
