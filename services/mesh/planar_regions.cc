@@ -555,6 +555,12 @@ class Fitter {
     Moments u = a.moments;
     u.Add(b.moments);
     *merged = FitPlane(u);
+    // For the planar mesh (mesh_growth) the union must also stay a plane: its RMS distance
+    // from the fitted plane within the grid-size tolerance. The seed's relaxation has no
+    // distance test ("aesthetically pleasing"), so facets of a curved wall, each within 15° of
+    // the next, chain into one plane: on the simulated office's lobby (an arc of 1.5 m
+    // sagitta) the planar mesh then lay up to ~10 cm off the wall the dense mesh follows.
+    if (opt_.mesh_growth && merged->eigenvalues[0] > tol_ * tol_) return false;
     return AngleDeg(merged->normal, a.plane.normal) < opt_.merge_angle_deg &&
            AngleDeg(merged->normal, b.plane.normal) < opt_.merge_angle_deg;
   }

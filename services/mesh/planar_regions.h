@@ -13,7 +13,8 @@
 //      riser, one side of a step) is never split between two regions;
 //  (c) relaxation: adjacent regions within merge_angle_deg merge, smallest angle first, when
 //      their planes also meet where the regions touch (boundary_tolerance_factor) and the
-//      union's normal is within the angle of both. (b) never adds a group facing away from
+//      union's normal is within the angle of both (with mesh_growth: and the union lies
+//      within the tolerance of its plane in RMS). (b) never adds a group facing away from
 //      the region's normal (with mesh_growth: more than ~105° away; perpendicular risers and
 //      steps do join) and (c) merges only planes within the angle, so the two sides of a thin
 //      slab (a table top one cell thick) stay apart.
@@ -56,7 +57,9 @@ struct PlanarRegionOptions {
   // less than half the planar mesh's triangles on the simulated office. Its vertical regions
   // give worse wall samples, and its planes lie a little farther from the true walls
   // (docs/BENCHMARKS.md "Dense vs planar meshes"). The merge fits the default for the levels
-  // and floor plans and this for mesh/building.ply.
+  // and floor plans and this for mesh/building.ply. With it, relaxation (c) also requires
+  // the union's RMS distance from its plane to stay within the tolerance (a curved wall's
+  // facets would otherwise chain into one plane; the seed's relaxation has no distance test).
   bool mesh_growth = false;
 
   // InvalidArgument for a negative or non-finite tolerance or factor, or a merge angle outside
