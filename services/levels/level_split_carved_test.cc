@@ -59,12 +59,13 @@ absl::StatusOr<std::vector<BoundaryFace>> AllFaces(TileSet& set) {
   return faces;
 }
 
-// DISABLED by default: with the carving of today, office2 needs the scanners at 10 Hz and 1°
-// and most of its 1164 s walk before both levels' floors and ceilings are carved (level 1 is
-// reached at 565 s; its floor was not yet interior at 650 s): 1144 s of walk took 7–14 minutes
-// here (carving 6–12.5 of them, 2 threads, shared machine), far beyond a unit test. Measured then: floors
-// +0.1 mm and +1.4 mm, ceilings −1.2 cm and −1.2 cm from gt/building.json. Thinner scans (2–4 Hz, 2°) leave the volume between floor and ceiling
-// unobserved except the level scanner's slab, whose faces then dominate the histograms. Run
+// DISABLED by default: it carves office2's whole walk (1144 s, back at the stairs with level 1
+// done) at 10 Hz and 1°. Until the rays carried their share of the gaps (SamplingCovariance)
+// that took 7–14 minutes here and thinner scans left the volume between floor and ceiling
+// unobserved; on 2026-11-26 (fourth session) the test took 105 s (carve 100 s) and gave floors
+// +0.4 mm and +0.5 mm, ceilings −1.1 cm and −1.1 cm from gt/building.json (floors +2.6 cm
+// before the isosurface took each leaf's p at the finest cell beside the face). CI checks the
+// same through `carvemap run` on the thinner e2e scan (5 Hz, 2°): e2e_office2_outputs. Run
 // it with --gtest_also_run_disabled_tests; CARVEMAP_LEVELS_{WALK_S,RATE_HZ,BEAM_DEG,RES_M}
 // override the scan, CARVEMAP_LEVELS_REUSE_ROOT reuses a kept run (CARVEMAP_KEEP_TEST_TMPDIR)
 // and CARVEMAP_LEVELS_VERBOSE lists the horizontal regions.

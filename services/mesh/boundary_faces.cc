@@ -25,13 +25,13 @@ int FloorDiv(int a, int n) { return a >= 0 ? a / n : -((-a + n - 1) / n); }
 
 }  // namespace
 
-double IsosurfaceOffsetM(double p_interior, double half_interior_m, double p_exterior,
-                         double half_exterior_m, double limit_m) {
-  // Fig 4.9: p(x) linear between (−a, p_i) and (+b, p_e); p(x) = 0.5 at x = −a + (a + b) t.
+double IsosurfaceOffsetM(double p_interior, double p_exterior, double cell_m, double limit_m) {
+  // Fig 4.9: p(x) linear between (−h, p_i) and (+h, p_e), h = cell_m / 2; p(x) = 0.5 at
+  // x = −h + 2h t.
   const double denom = p_interior - p_exterior;
   const double t = denom > 0 ? (p_interior - 0.5) / denom : 0.5;
-  const double x = -half_interior_m + (half_interior_m + half_exterior_m) * t;
-  return std::clamp(x, -limit_m, limit_m);
+  const double h = 0.5 * cell_m;
+  return std::clamp(-h + 2 * h * t, -limit_m, limit_m);
 }
 
 absl::StatusOr<NeighbourhoodIndex> NeighbourhoodIndex::Build(const ChunkNeighbourhood& hood) {
@@ -225,10 +225,8 @@ struct FaceBuilder {
     if (sign < 0) corner[axis] += cells;
     f.center = (corner.cast<double>() + Eigen::Vector3d::Constant(0.5 * cells)) * res;
     f.center[axis] = corner[axis] * res;
-    const double half_i = 0.5 * res * (1 << (k - interior.depth));
-    const double half_e = 0.5 * res * (1 << (k - ext.depth));
-    const double x = IsosurfaceOffsetM(interior.stats.p(), half_i, ext.stats.p(), half_e,
-                                       kIsosurfaceLimitFraction * f.size_m);
+    const double x = IsosurfaceOffsetM(interior.stats.p(), ext.stats.p(), res,
+                                       kIsosurfaceLimitFraction * res);
     f.isosurface = f.center;
     f.isosurface[axis] += sign * x;
     out.emplace_back(std::array<int, 5>{axis, corner.x(), corner.y(), corner.z(), cells},

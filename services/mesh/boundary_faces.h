@@ -42,10 +42,10 @@ struct BoundaryFace {
   Eigen::Vector3d center;     // centre of the shared square, on the leaves' common plane, m
   double size_m = 0;          // side of the shared square, m
   // Fig 4.9: the point on the line through `center` along `axis` where p, linearly
-  // interpolated between the two leaves' centres (projected on that line), is 0.5, clamped to
-  // within kIsosurfaceLimitFraction × size_m of the face (IsosurfaceOffsetM: an unobserved
-  // exterior would otherwise put it on that leaf's centre). Equals `center` moved along the
-  // axis, strictly between the two leaf centres.
+  // interpolated between the finest cells on either side of the face (IsosurfaceOffsetM: each
+  // leaf's p taken at its cell beside the face), is 0.5, clamped to within
+  // kIsosurfaceLimitFraction × the resolution of the face. Equals `center` moved along the
+  // axis, strictly between those two cells' centres.
   Eigen::Vector3d isosurface;
   [[nodiscard]] double area_m2() const { return size_m * size_m; }
 };
@@ -70,18 +70,22 @@ struct ChunkNeighbourhood {
 
 // The isosurface rule (Fig 4.9) shared by the faces above and the dense mesh. Returns the
 // signed distance, m, from the face plane to the isosurface, positive towards the exterior
-// leaf: p is linear from `p_interior` at the interior leaf's centre (`half_interior_m` behind
-// the plane) to `p_exterior` at the exterior leaf's centre (`half_exterior_m` in front), and
-// the result is where it crosses 0.5. Clamped to [−limit_m, +limit_m]. Why the clamp: an
-// unobserved or p = 0.5 exterior puts the crossing exactly on the exterior centre, which for a
-// 1 m unobserved node is 0.5 m away from the only evidence; a barely interior leaf
-// (p → 0.5⁺) puts it on the interior centre, where the six faces of a lone cell would collapse
-// to one point. Callers pass limit_m = kIsosurfaceLimitFraction × (side of the smaller leaf),
-// so the surface stays strictly inside the interior..exterior span and faces never collapse.
+// leaf: p is linear from `p_interior` at the centre of the finest cell behind the plane
+// (cell_m / 2 behind it) to `p_exterior` at the centre of the finest cell in front, and the
+// result is where it crosses 0.5. Fig 4.9 interpolates between the two leaves' centres; we
+// take each leaf's p at the finest cell beside the face whatever the leaf's size, because a
+// simplified leaf's p is the mean over its whole volume (§4.3.2 merges the children's sums),
+// not a value at its centre. Interpolating from the centres of the big leaves that cover a
+// floor and the solid below it moved office2's floor faces up 4.4 cm on average at 6.25 cm
+// (far_probe, 2026-11-26); from the finest cells, −0.2 cm.
+// Clamped to [−limit_m, +limit_m]. Why the clamp: an unobserved or p = 0.5 exterior puts the
+// crossing exactly on the exterior cell's centre, with no evidence there; a barely interior
+// leaf (p → 0.5⁺) puts it on the interior cell's centre, where the six faces of a lone cell
+// would collapse to one point. Callers pass limit_m = kIsosurfaceLimitFraction × cell_m, so
+// the surface stays strictly between the two cells' centres and faces never collapse.
 // REQUIRES: p_interior > 0.5 ≥ p_exterior.
 inline constexpr double kIsosurfaceLimitFraction = 0.45;
-[[nodiscard]] double IsosurfaceOffsetM(double p_interior, double half_interior_m,
-                                       double p_exterior, double half_exterior_m,
+[[nodiscard]] double IsosurfaceOffsetM(double p_interior, double p_exterior, double cell_m,
                                        double limit_m);
 
 // Leaf lookups in a ChunkNeighbourhood (global finest-cell coordinates), shared by the

@@ -95,14 +95,13 @@ std::multiset<FinestFace> Expand(const std::vector<BoundaryFace>& faces, const O
 }
 
 TEST(IsosurfaceOffset, HandComputedCasesOfFig49) {
-  const double h = 0.5;  // half a leaf
-  EXPECT_NEAR(IsosurfaceOffsetM(0.9, h, 0.1, h, 10), 0.0, 1e-12);       // symmetric: midway
-  EXPECT_NEAR(IsosurfaceOffsetM(0.7, h, 0.1, h, 10), -h / 3, 1e-12);     // t = 1/3
-  EXPECT_NEAR(IsosurfaceOffsetM(0.9, h, 0.4, h, 10), 0.3, 1e-12);        // t = 0.8
-  EXPECT_NEAR(IsosurfaceOffsetM(0.9, 2 * h, 0.3, h, 10), 0.0, 1e-12);    // big interior: t = 2/3
-  EXPECT_NEAR(IsosurfaceOffsetM(0.9, h, 0.5, 8 * h, 10), 8 * h, 1e-12);  // unobserved: ext centre
-  EXPECT_NEAR(IsosurfaceOffsetM(0.9, h, 0.5, 8 * h, 0.45), 0.45, 1e-12); // ... clamped
-  EXPECT_NEAR(IsosurfaceOffsetM(0.5000001, h, 0.0, h, 0.45), -0.45, 1e-12);
+  const double c = 1.0, h = 0.5;  // a finest cell, half of it
+  EXPECT_NEAR(IsosurfaceOffsetM(0.9, 0.1, c, 10), 0.0, 1e-12);       // symmetric: midway
+  EXPECT_NEAR(IsosurfaceOffsetM(0.7, 0.1, c, 10), -h / 3, 1e-12);     // t = 1/3
+  EXPECT_NEAR(IsosurfaceOffsetM(0.9, 0.4, c, 10), 0.3, 1e-12);        // t = 0.8
+  EXPECT_NEAR(IsosurfaceOffsetM(0.9, 0.5, c, 10), h, 1e-12);          // unobserved: ext centre
+  EXPECT_NEAR(IsosurfaceOffsetM(0.9, 0.5, c, 0.45), 0.45, 1e-12);     // ... clamped
+  EXPECT_NEAR(IsosurfaceOffsetM(0.5000001, 0.0, c, 0.45), -0.45, 1e-12);
 }
 
 class BoxRoom : public ::testing::TestWithParam<int> {};
@@ -164,7 +163,7 @@ TEST(BoundaryFaces, BigInteriorNextToSmallExteriorGivesOneFacePerSmallNeighbour)
   // Across +x: four finest exterior leaves with different p.
   const double ps[4] = {0.1, 0.3, 0.45, 0.5};
   for (int j = 0; j < 4; ++j) AddLeaf(tiles, grid, LeafKey(2, j & 1, j >> 1), 2, ps[j]);
-  // Across +y: one leaf as big as the interior one, p = 0.2 (offset: t = 0.4/0.7).
+  // Across +y: one leaf as big as the interior one, p = 0.2 (t = 0.4/0.7 over the finest cells).
   AddLeaf(tiles, grid, LeafKey(0, 2, 0), 1, 0.2);
   auto faces = ChunkBoundaryFaces(HoodOf(tiles, grid, ChunkKey(0, 0, 0)));
   ASSERT_TRUE(faces.ok()) << faces.status();
@@ -176,15 +175,16 @@ TEST(BoundaryFaces, BigInteriorNextToSmallExteriorGivesOneFacePerSmallNeighbour)
       EXPECT_EQ(f.exterior.depth, 2);
       EXPECT_EQ(f.interior.depth, 1);
       EXPECT_EQ(f.normal, Eigen::Vector3f(-1, 0, 0));
-      // interior centre 0.5 m behind, exterior 0.25 m ahead.
+      // Each leaf's p at its finest cell beside the face (0.25 m either side), not at the
+      // 1 m interior leaf's centre: IsosurfaceOffsetM.
       const double pe = f.exterior.stats.p();
       const double t = (0.9 - 0.5) / (0.9 - pe);
-      const double x = std::clamp(-0.5 + 0.75 * t, -0.45 * 0.5, 0.45 * 0.5);
+      const double x = std::clamp(-0.25 + 0.5 * t, -0.45 * 0.5, 0.45 * 0.5);
       EXPECT_NEAR(f.isosurface.x(), 1.0 + x, 1e-9) << pe;
     } else if (f.axis == 1 && f.center.y() > 0.9) {
       ++plus_y;
       EXPECT_NEAR(f.size_m, 1.0, 1e-12);
-      EXPECT_NEAR(f.isosurface.y(), 1.0 + (-0.5 + 1.0 * 0.4 / 0.7), 1e-9);
+      EXPECT_NEAR(f.isosurface.y(), 1.0 + (-0.25 + 0.5 * 0.4 / 0.7), 1e-9);
       EXPECT_NEAR(f.center.x(), 0.5, 1e-12);
       EXPECT_NEAR(f.center.z(), 0.5, 1e-12);
     } else {
@@ -238,7 +238,7 @@ TEST(BoundaryFaces, RandomTilesGiveEveryFinestFaceOnce) {
       EXPECT_TRUE(f.interior.stats.interior());
       EXPECT_FALSE(f.exterior.stats.interior());
       const double off = (f.isosurface - f.center).norm();
-      EXPECT_LE(off, 0.45 * f.size_m + 1e-12);
+      EXPECT_LE(off, 0.45 * grid.resolution_m() + 1e-12);
       EXPECT_EQ(f.size_m, std::min(grid.resolution_m() * (1 << (3 - f.interior.depth)),
                                    grid.resolution_m() * (1 << (3 - f.exterior.depth))));
     }

@@ -18,11 +18,10 @@ struct KeyHash {
   }
 };
 
-// A leaf as the mesh needs it: its p, its half side (Fig 4.9's distance from the face to the
-// leaf's centre) and its label.
+// A leaf as the mesh needs it: its p (taken at each of its cells, IsosurfaceOffsetM), its
+// label and whether it was observed.
 struct CellLeaf {
   double p = 0.5;
-  double half_m = 0;
   bool interior = false;
   bool observed = false;
 };
@@ -38,7 +37,7 @@ class LabelWindow {
     res_ = grid.resolution_m();
     base_ = index.hood().chunk * n_;
     cells_.assign(static_cast<size_t>(w_) * w_ * w_, 0);
-    leaves_.push_back(CellLeaf{0.5, 0.5 * res_, false, false});
+    leaves_.push_back(CellLeaf{0.5, false, false});
     const int k = grid.chunk_depth;
     if (const TileData* own = index.hood().tiles[ChunkNeighbourhood::Index(0, 0, 0)]) {
       for (const TileLeaf& leaf : own->leaves) {
@@ -85,9 +84,7 @@ class LabelWindow {
 
  private:
   uint32_t Add(const TileLeaf& leaf) {
-    const int k = index_.hood().grid.chunk_depth;
-    leaves_.push_back(CellLeaf{leaf.stats.p(), 0.5 * res_ * (1 << (k - leaf.node.depth)),
-                               leaf.stats.interior(), leaf.stats.observed()});
+    leaves_.push_back(CellLeaf{leaf.stats.p(), leaf.stats.interior(), leaf.stats.observed()});
     return static_cast<uint32_t>(leaves_.size() - 1);
   }
   [[nodiscard]] size_t Index(const Eigen::Vector3i& local) const {
@@ -184,8 +181,7 @@ class CornerMesher {
     const double res = win_.res();
     Eigen::Vector3d pos = (lower.cast<double>() + Eigen::Vector3d::Constant(0.5)) * res;
     pos[i] = (lower[i] + 1) * res;
-    pos[i] += s * IsosurfaceOffsetM(in.p, in.half_m, ex.p, ex.half_m,
-                                    kIsosurfaceLimitFraction * res);
+    pos[i] += s * IsosurfaceOffsetM(in.p, ex.p, res, kIsosurfaceLimitFraction * res);
     return it->second = Push(key, pos, ex.observed);
   }
 

@@ -9,9 +9,9 @@
 //   - topology on the finest grid: every leaf is resampled to finest cells (only labels, and
 //     only for the chunk plus a one-cell halo; cost (2^k + 1)³ × 4 bytes per chunk, 8.6 MB at
 //     k = 7), so coarse leaves next to fine ones need no special cases;
-//   - one vertex per finest boundary face, at its Fig 4.9 isosurface point (the offset of the
-//     two leaves holding its cells, IsosurfaceOffsetM, clamped to ±0.45 of the finest
-//     resolution so a vertex stays between the centres of the two cells beside its face);
+//   - one vertex per finest boundary face, at its Fig 4.9 isosurface point (IsosurfaceOffsetM
+//     from the p of the two leaves holding its cells, taken at those cells, clamped to ±0.45
+//     of the finest resolution so a vertex stays between the two cells' centres);
 //   - one polygon per (grid corner × connected sheet of faces around it), triangulated.
 // Ambiguities (two interior cells touching only along an edge or at a corner) are resolved by
 // one rule: at a grid edge with four boundary faces, the two faces of the same interior cell
