@@ -171,6 +171,15 @@ absl::StatusOr<std::vector<Level>> SplitLevelsFromSamples(std::span<const Height
       level.ceiling_weight = highest->weight;
       level.dominant_ceiling_z = heaviest->z;
     } else {
+      // §5.2 pairs each level's floor with a ceiling. A floor with none above it, over a level
+      // whose ceiling was seen, is not a level: the scans that saw the lower ceiling would
+      // have seen this one's too. It is carved space above a ceiling, e.g. the sheet that
+      // drifted rays carve over a slab (Freiburg101, 3D route: a 33 m² "floor" 19 cm above
+      // the 2.61 m ceiling). Its floor peaks join the level below, like a table top.
+      if (!levels.empty() && levels.back().ceiling_found) {
+        i = next;
+        continue;
+      }
       level.ceiling_found = false;
       level.ceiling_z = std::isfinite(upper) ? upper
                                              : level.floor_z + options.default_ceiling_height_m;

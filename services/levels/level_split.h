@@ -90,6 +90,9 @@ struct HeightHistogram {
 };
 
 // The core: levels from floor and ceiling samples (§5.2 pairing). No floor sample → no level.
+// A level without a ceiling peak falls back (next floor, or floor + default_ceiling_height_m),
+// unless the level below found its ceiling: then that floor is carved space over a ceiling and
+// joins the level below.
 // Errors: InvalidArgument for bad options, non-finite samples or negative weights, or a
 // height range of more than 10^7 bins.
 [[nodiscard]] absl::StatusOr<std::vector<Level>> SplitLevelsFromSamples(

@@ -143,6 +143,23 @@ TEST(LevelSplit, MissingCeilingFallsBack) {
   EXPECT_NEAR((*levels)[1].ceiling_z, 3.0 + LevelSplitOptions{}.default_ceiling_height_m, 1e-12);
 }
 
+// A floor peak without a ceiling above it, over a level whose ceiling was seen, is carved
+// space over that ceiling (drifted rays through the slab), not a level.
+TEST(LevelSplit, FloorOverASeenCeilingWithoutItsOwnIsNoLevel) {
+  absl::StatusOr<std::vector<Level>> levels = SplitLevelsFromRegions(std::vector<PlanarRegion>{
+      Floor(0, 700), Ceiling(2.61, 700), Floor(2.80, 40), Ceiling(2.91, 35)});
+  ASSERT_TRUE(levels.ok());
+  ASSERT_EQ(levels->size(), 1u);
+  EXPECT_NEAR((*levels)[0].floor_z, 0.0, 1e-12);
+  EXPECT_NEAR((*levels)[0].ceiling_z, 2.61, 1e-12);
+  EXPECT_TRUE((*levels)[0].ceiling_found);
+  // With a ceiling of its own (≥ min_ceiling_height_m above it) it is a level.
+  levels = SplitLevelsFromRegions(std::vector<PlanarRegion>{
+      Floor(0, 700), Ceiling(2.61, 700), Floor(2.80, 40), Ceiling(5.2, 35)});
+  ASSERT_TRUE(levels.ok());
+  EXPECT_EQ(levels->size(), 2u);
+}
+
 TEST(LevelSplit, NoFloorsNoLevels) {
   absl::StatusOr<std::vector<Level>> levels =
       SplitLevelsFromRegions(std::vector<PlanarRegion>{Ceiling(2.5, 40), Wall(1, 30)});
