@@ -3,15 +3,16 @@
 
   - every file job.json lists exists and is not empty;
   - levels.json is a list of {index, floor_z, ceiling_z, split_z}, and when the job came from
-    the simulator (input/gt/building.json), each true level is matched by one whose floor and
-    ceiling are within --level-tol metres;
+    the simulator (input/gt/building.json, or --gt DIR), each true level is matched by one
+    whose floor and ceiling are within --level-tol metres;
   - each mesh/*.ply listed is binary little-endian PLY with float x y z vertices and
     `list uchar int` faces, and is watertight: every undirected edge is used by exactly two
     triangles, once in each direction, no triangle repeats or has a repeated vertex;
   - every object of job.json has its fields and its listed mesh; combined.ply has exactly the
     triangles of building.ply and objects.ply.
 
-Usage: check_outputs.py OUT_DIR [--level-tol 0.05] [--selftest]
+Usage: check_outputs.py OUT_DIR [--level-tol 0.05] [--gt GT_DIR] [--selftest]
+  --gt: the simulator's gt/ folder, when the job's input was not copied into OUT_DIR/input.
   --selftest: also checks that the checks can fail (a mesh with a triangle removed or flipped
   is not watertight; levels moved by 2 × the tolerance do not match the truth).
 """
@@ -105,6 +106,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
     ap.add_argument("--level-tol", type=float, default=0.05)
+    ap.add_argument("--gt", help="the simulator's gt/ folder (default OUT/input/gt)")
     ap.add_argument("--selftest", action="store_true")
     args = ap.parse_args()
     problems = []
@@ -119,7 +121,9 @@ def main():
         for key in ("index", "floor_z", "ceiling_z", "split_z"):
             if key not in lv:
                 problems.append(f"levels.json: level without '{key}'")
-    gt = os.path.join(args.out, "input", "gt", "building.json")
+    gt = os.path.join(args.gt or os.path.join(args.out, "input", "gt"), "building.json")
+    if args.gt and not os.path.isfile(gt):
+        problems.append(f"{gt}: --gt given but there is no building.json")
     if os.path.isfile(gt):
         truth = json.load(open(gt)).get("levels", [])
         for t in truth:
