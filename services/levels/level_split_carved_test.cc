@@ -65,7 +65,7 @@ absl::StatusOr<std::vector<BoundaryFace>> AllFaces(TileSet& set) {
 // unobserved; on 2026-11-26 (fourth session) the test took 105 s (carve 100 s) and gave floors
 // +0.4 mm and +0.5 mm, ceilings −1.1 cm and −1.1 cm from gt/building.json (floors +2.6 cm
 // before the isosurface took each leaf's p at the finest cell beside the face). CI checks the
-// same through `carvemap run` on the thinner e2e scan (5 Hz, 2°): e2e_office2_outputs. Run
+// same through `carvemap run` on the thinner e2e scan (3 Hz, 2°): e2e_office2_outputs. Run
 // it with --gtest_also_run_disabled_tests; CARVEMAP_LEVELS_{WALK_S,RATE_HZ,BEAM_DEG,RES_M}
 // override the scan, CARVEMAP_LEVELS_REUSE_ROOT reuses a kept run (CARVEMAP_KEEP_TEST_TMPDIR)
 // and CARVEMAP_LEVELS_VERBOSE lists the horizontal regions.
