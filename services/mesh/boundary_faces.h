@@ -44,8 +44,8 @@ struct BoundaryFace {
   // Fig 4.9: the point on the line through `center` along `axis` where p, linearly
   // interpolated between the finest cells on either side of the face (IsosurfaceOffsetM: each
   // leaf's p taken at its cell beside the face), is 0.5, clamped to within
-  // kIsosurfaceLimitFraction × the resolution of the face. Equals `center` moved along the
-  // axis, strictly between those two cells' centres.
+  // kIsosurfaceLimitFraction × the grid resolution. Equals `center` moved along the axis,
+  // strictly between those two cells' centres.
   Eigen::Vector3d isosurface;
   [[nodiscard]] double area_m2() const { return size_m * size_m; }
 };
@@ -76,8 +76,9 @@ struct ChunkNeighbourhood {
 // take each leaf's p at the finest cell beside the face whatever the leaf's size, because a
 // simplified leaf's p is the mean over its whole volume (§4.3.2 merges the children's sums),
 // not a value at its centre. Interpolating from the centres of the big leaves that cover a
-// floor and the solid below it moved office2's floor faces up 4.4 cm on average at 6.25 cm
-// (far_probe, 2026-11-26); from the finest cells, −0.2 cm.
+// floor and the solid below it moved office2's floor faces up 4.4 cm on average at 6.25 cm;
+// from the finest cells, −0.2 cm (docs/BENCHMARKS.md, "Dense vs planar meshes", fourth
+// session).
 // Clamped to [−limit_m, +limit_m]. Why the clamp: an unobserved or p = 0.5 exterior puts the
 // crossing exactly on the exterior cell's centre, with no evidence there; a barely interior
 // leaf (p → 0.5⁺) puts it on the interior cell's centre, where the six faces of a lone cell
