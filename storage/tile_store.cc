@@ -47,6 +47,7 @@ struct Columns {
   std::vector<uint32_t> count;
   std::vector<double> sum_wp;
   std::vector<double> sum_wp2;
+  std::vector<uint32_t> points;  // version 2 (zeros when reading version 1)
 };
 
 struct ColumnSpec {
@@ -56,7 +57,8 @@ struct ColumnSpec {
   bool integer;
 };
 // File types are fixed little-endian so the bytes do not depend on the host.
-std::array<ColumnSpec, 8> ColumnSpecs() {
+// Version 1 tiles have the first 8 columns only.
+std::array<ColumnSpec, 9> ColumnSpecs() {
   return {{
       {"key", H5T_STD_U64LE, H5T_NATIVE_UINT64, true},
       {"depth", H5T_STD_U8LE, H5T_NATIVE_UINT8, true},
@@ -66,11 +68,13 @@ std::array<ColumnSpec, 8> ColumnSpecs() {
       {"count", H5T_STD_U32LE, H5T_NATIVE_UINT32, true},
       {"sum_wp", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, false},
       {"sum_wp2", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, false},
+      {"points", H5T_STD_U32LE, H5T_NATIVE_UINT32, true},
   }};
 }
-std::array<void*, 8> ColumnData(Columns& c) {
-  return {c.key.data(),    c.depth.data(), c.p.data(),      c.weight.data(),
-          c.variance.data(), c.count.data(), c.sum_wp.data(), c.sum_wp2.data()};
+std::array<void*, 9> ColumnData(Columns& c) {
+  return {c.key.data(),      c.depth.data(), c.p.data(),      c.weight.data(),
+          c.variance.data(), c.count.data(), c.sum_wp.data(), c.sum_wp2.data(),
+          c.points.data()};
 }
 void ResizeColumns(Columns& c, size_t n) {
   c.key.resize(n);
@@ -81,6 +85,7 @@ void ResizeColumns(Columns& c, size_t n) {
   c.count.resize(n);
   c.sum_wp.resize(n);
   c.sum_wp2.resize(n);
+  c.points.resize(n);
 }
 
 bool ValidGrid(const OctreeGrid& grid) {
@@ -197,6 +202,7 @@ absl::Status WriteFile(const std::string& path, const TileData& tile,
     c.count[i] = s.count;
     c.sum_wp[i] = s.sum_wp;
     c.sum_wp2[i] = s.sum_wp2;
+    c.points[i] = s.points;
   }
 
   Hid fcpl(H5Pcreate(H5P_FILE_CREATE));
@@ -226,7 +232,7 @@ absl::Status WriteFile(const std::string& path, const TileData& tile,
 
 absl::Status Corrupt(absl::string_view what) { return absl::DataLossError(what); }
 
-absl::Status ReadAttributes(hid_t root, TileData& tile) {
+absl::Status ReadAttributes(hid_t root, TileData& tile, int64_t& version_out) {
   auto format = h5::ReadStringAttr(root, "format");
   if (!format.ok()) return Corrupt(absl::StrCat("/: ", format.status().message()));
   if (*format != kTileFormat) {
@@ -235,10 +241,11 @@ absl::Status ReadAttributes(hid_t root, TileData& tile) {
   }
   auto version = h5::ReadIntAttr(root, "version");
   if (!version.ok()) return Corrupt(absl::StrCat("/: ", version.status().message()));
-  if (*version != kTileVersion) {
-    return Corrupt(absl::StrCat("/: unsupported version ", *version, " (this reader knows ",
+  if (*version < 1 || *version > kTileVersion) {
+    return Corrupt(absl::StrCat("/: unsupported version ", *version, " (this reader knows 1 to ",
                                 kTileVersion, ")"));
   }
+  version_out = *version;
   auto chunk = h5::ReadDoublesAttr(root, "chunk", 3);
   if (!chunk.ok()) return Corrupt(absl::StrCat("/: ", chunk.status().message()));
   for (int a = 0; a < 3; ++a) {
@@ -344,6 +351,7 @@ absl::Status ValidateRows(const Columns& c, TileData& tile) {
     s.sum_wp = c.sum_wp[i];
     s.sum_wp2 = c.sum_wp2[i];
     s.count = c.count[i];
+    s.points = c.points[i];
     if (!std::isfinite(s.sum_w) || s.sum_w < 0) {
       return Corrupt(absl::StrCat("/leaves/weight[", i, "]: ", s.sum_w, " not finite and >= 0"));
     }
@@ -381,7 +389,8 @@ absl::StatusOr<TileData> ReadFile(const std::string& path) {
   Hid root(H5Gopen2(file->get(), "/", H5P_DEFAULT));
   if (!root.valid()) return h5::Error(absl::StatusCode::kDataLoss, "cannot open the root group");
   TileData tile;
-  absl::Status s = ReadAttributes(root.get(), tile);
+  int64_t version = 0;
+  absl::Status s = ReadAttributes(root.get(), tile, version);
   if (!s.ok()) return s;
   if (!h5::Exists(file->get(), "/leaves")) return Corrupt("/leaves: missing group");
   auto group = h5::CheckId(H5Gopen2(file->get(), kLeavesGroup, H5P_DEFAULT),
@@ -390,7 +399,8 @@ absl::StatusOr<TileData> ReadFile(const std::string& path) {
   Columns c;
   size_t n = SIZE_MAX;
   const auto specs = ColumnSpecs();
-  for (size_t j = 0; j < specs.size(); ++j) {
+  const size_t num_columns = version >= 2 ? specs.size() : specs.size() - 1;
+  for (size_t j = 0; j < num_columns; ++j) {
     auto rows = ReadColumn(group->get(), specs[j], n, c, j);
     if (!rows.ok()) return rows.status();
     n = *rows;

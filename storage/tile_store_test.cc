@@ -64,6 +64,7 @@ TileData MakeTile(int n, uint32_t seed) {
       leaf.node.depth = depth;
       const int rays = 1 + static_cast<int>(u(rng) * 20);
       for (int r = 0; r < rays; ++r) leaf.stats.Add(u(rng), 1e-3 + u(rng));
+      if (depth == 5) leaf.stats.points = static_cast<uint32_t>(u(rng) * 4);
       tile.leaves.push_back(leaf);
       ++made;
     };
@@ -121,6 +122,7 @@ TEST_F(TileStoreTest, RoundTripIsExact) {
     EXPECT_EQ(read->leaves[i].stats.sum_wp, expected[i].stats.sum_wp);
     EXPECT_EQ(read->leaves[i].stats.sum_wp2, expected[i].stats.sum_wp2);
     EXPECT_EQ(read->leaves[i].stats.count, expected[i].stats.count);
+    EXPECT_EQ(read->leaves[i].stats.points, expected[i].stats.points);
   }
 }
 
@@ -218,6 +220,41 @@ TEST_F(TileStoreTest, MissingColumnNamesFileAndDataset) {
   EXPECT_THAT(read.status().message(), HasSubstr("c_-3_7_-1.h5"));
   EXPECT_THAT(read.status().message(), HasSubstr("/leaves/sum_wp"));
   EXPECT_THAT(read.status().message(), HasSubstr("missing"));
+}
+
+// Version 1 (before /leaves/points) still reads, with no points; a version 2 tile without
+// the column is damaged.
+TEST_F(TileStoreTest, VersionOneTilesReadWithoutPoints) {
+  const TileData tile = MakeTile(100, 6);
+  uint64_t points = 0;
+  for (const TileLeaf& l : tile.leaves) points += l.stats.points;
+  ASSERT_GT(points, 0u);
+  auto path = WriteTile(Dir(), tile);
+  ASSERT_TRUE(path.ok()) << path.status();
+  EditTile(*path, [](hid_t file) { ASSERT_GE(H5Ldelete(file, "/leaves/points", H5P_DEFAULT), 0); });
+  auto damaged = ReadTile(*path);
+  ASSERT_FALSE(damaged.ok());
+  EXPECT_THAT(damaged.status().message(), HasSubstr("/leaves/points"));
+  EditTile(*path, [](hid_t file) {
+    hid_t attr = H5Aopen(file, "version", H5P_DEFAULT);
+    ASSERT_GE(attr, 0);
+    const int64_t one = 1;
+    ASSERT_GE(H5Awrite(attr, H5T_NATIVE_INT64, &one), 0);
+    H5Aclose(attr);
+  });
+  auto v1 = ReadTile(*path);
+  ASSERT_TRUE(v1.ok()) << v1.status();
+  ASSERT_EQ(v1->leaves.size(), tile.leaves.size());
+  for (const TileLeaf& l : v1->leaves) EXPECT_EQ(l.stats.points, 0u);
+  EditTile(*path, [](hid_t file) {
+    hid_t attr = H5Aopen(file, "version", H5P_DEFAULT);
+    const int64_t three = 3;
+    ASSERT_GE(H5Awrite(attr, H5T_NATIVE_INT64, &three), 0);
+    H5Aclose(attr);
+  });
+  auto future = ReadTile(*path);
+  ASSERT_FALSE(future.ok());
+  EXPECT_THAT(future.status().message(), HasSubstr("unsupported version 3"));
 }
 
 // Found by tests/fuzz (tile_reader): a column declaring 2^33 rows that were never written

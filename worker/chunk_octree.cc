@@ -10,6 +10,7 @@
 #include <optional>
 #include <utility>
 
+#include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_cat.h"
 #include "services/geometry/carve_map.h"
 #include "services/geometry/wedge_geometry.h"
@@ -363,7 +364,27 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   scratch.ForEach([&](const Eigen::Vector3i& local, const LeafStats& stats) {
     finest[MortonCode(local)].Merge(stats);
   });
+  CountPoints(in.rays);
   return absl::OkStatus();
+}
+
+void ChunkOctree::CountPoints(std::span<const RayModel> rays) {
+  // §4.2.3's point voxel set. A ray written twice into one payload (WedgePayloadWriter repeats
+  // rays of old frames) is one point: count each bit-identical ray once. Points in a leaf that
+  // no ray observed (the carve skipped every vote there) are not kept: an unobserved leaf
+  // stores nothing.
+  absl::flat_hash_set<RayBits> seen;
+  Level& finest = levels_[grid_.chunk_depth];
+  const Eigen::Vector3i base = chunk_ * grid_.leaves_per_side();
+  const int n = grid_.leaves_per_side();
+  for (const RayModel& ray : rays) {
+    const Eigen::Vector3i local = LeafOf(grid_, ray.point_mean.cast<double>()) - base;
+    if ((local.array() < 0).any() || (local.array() >= n).any()) continue;
+    if (region_ && !region_->Intersects(ChunkNode{local, grid_.chunk_depth})) continue;
+    auto it = finest.find(MortonCode(local));
+    if (it == finest.end() || !seen.insert(RayBits(ray)).second) continue;
+    ++it->second.points;
+  }
 }
 
 void ChunkOctree::Simplify() {
@@ -388,9 +409,13 @@ void ChunkOctree::Simplify() {
         continue;
       }
       const bool interior = sorted[i].second.interior();
-      bool same_label = true;
-      for (size_t j = i + 1; j < i + 8; ++j) same_label &= sorted[j].second.interior() == interior;
-      if (same_label) {
+      bool same_label = true, points = false;
+      for (size_t j = i; j < i + 8; ++j) {
+        same_label &= sorted[j].second.interior() == interior;
+        points |= sorted[j].second.points > 0;
+      }
+      // Leaves holding scan points stay finest, so segmentation knows where the points are.
+      if (same_label && !points) {
         // Sums: the parent's p is the weight-averaged p of its children, which keeps the label
         // (a weighted mean of values all > 0.5, or all ≤ 0.5, stays on the same side).
         LeafStats merged;

@@ -53,6 +53,8 @@ class ChunkOctree {
   // passes a chunk's whole payload); a ray given again in a later call votes again. A wedge that misses the chunk
   // changes nothing; rays shorter than 1 µm carve nothing. Votes are summed in a fixed order
   // that depends only on the input, so equal input gives bit-identical sums.
+  // Each distinct ray whose point lies in an observed finest leaf of the chunk (and of the
+  // region, if any) also adds 1 to that leaf's `points` (§4.2.3's point voxel set).
   // Errors (nothing changed): InvalidArgument for num_rays outside [1, 4], a ray index out of
   // range or a non-finite mean/covariance (naming the wedge or ray); FailedPrecondition after
   // Simplify().
@@ -66,7 +68,8 @@ class ChunkOctree {
   void RestrictTo(ChunkRegion region) { region_ = std::move(region); }
 
   // §4.3.2, bottom-up: 8 sibling leaves merge into their parent (LeafStats::Merge, exact sums)
-  // when all 8 are observed leaves with the same label (interior iff p > 0.5). A node with an
+  // when all 8 are observed leaves with the same label (interior iff p > 0.5) and none holds a
+  // scan point (LeafStats::points stay at the finest depth, where segmentation reads them). A node with an
   // unobserved child is never merged (its children are not all observed, nor all unobserved);
   // a node whose children are all unobserved is an unobserved leaf already (stores nothing).
   // Repeats up to the chunk root. Labels of every point are unchanged. Idempotent.
@@ -92,6 +95,8 @@ class ChunkOctree {
 
  private:
   using Level = absl::flat_hash_map<uint64_t, LeafStats>;  // Morton code at that depth → stats
+
+  void CountPoints(std::span<const RayModel> rays);
 
   OctreeGrid grid_;
   ChunkKey chunk_;

@@ -208,6 +208,43 @@ TEST_P(WallTest, SimplifyKeepsEveryLabelAndReducesLeaves) {
   EXPECT_EQ(tree.num_leaves(), leaves_after);
 }
 
+// §4.2.3's point voxel set: every scan point counts once, in the finest leaf holding it, and
+// simplification keeps those leaves finest.
+TEST_P(WallTest, EachScanPointCountsOnceInItsFinestLeaf) {
+  ChunkOctree tree = Carve(grid_, scan_.Wedges());
+  std::map<uint64_t, uint32_t> expected;  // Morton code of the finest leaf → points
+  for (int i = 0; i < scan_.n; ++i)
+    for (int j = 0; j < scan_.n; ++j)
+      ++expected[MortonCode(LeafOf(grid_, scan_.Ray(i, j).point_mean.cast<double>()))];
+  tree.Simplify();
+  std::map<uint64_t, uint32_t> counted;
+  for (const TileLeaf& l : tree.Leaves()) {
+    if (l.stats.points == 0) continue;
+    EXPECT_EQ(l.node.depth, grid_.chunk_depth);
+    counted[MortonCode(l.node.local)] = l.stats.points;
+  }
+  EXPECT_EQ(counted, expected);
+
+  // A ray given twice in one payload (WedgePayloadWriter repeats rays of old frames) is one
+  // point; a ray whose point lies in another chunk counts there, not here.
+  IndexedWedges in;
+  in.rays = {scan_.Ray(0, 0), scan_.Ray(0, 1), scan_.Ray(1, 1), scan_.Ray(0, 0)};
+  RayModel far = scan_.Ray(1, 0);
+  far.point_mean.x() += 2.0f;  // x ≈ 3 m: chunk (1, 0, 0)
+  in.rays.push_back(far);
+  WedgeRef w;
+  w.ray = {0, 1, 2, 4};
+  w.num_rays = 4;
+  WedgeRef again = w;
+  again.ray = {3, 1, 2, 4};
+  in.wedges = {w, again};
+  ChunkOctree twice(grid_, ChunkKey(0, 0, 0));
+  ASSERT_TRUE(twice.CarveIndexed(in).ok());
+  uint32_t points = 0;
+  for (const TileLeaf& l : twice.Leaves()) points += l.stats.points;
+  EXPECT_EQ(points, 3u);
+}
+
 INSTANTIATE_TEST_SUITE_P(ResolutionsAndWalls, WallTest,
                          ::testing::Combine(::testing::Values(5, 6),
                                             ::testing::Values(1.0, 1.02)),
@@ -220,7 +257,9 @@ bool SameLeaves(const std::vector<TileLeaf>& a, const std::vector<TileLeaf>& b, 
   if (a.size() != b.size()) return false;
   for (size_t i = 0; i < a.size(); ++i) {
     if (a[i].node.local != b[i].node.local || a[i].node.depth != b[i].node.depth) return false;
-    if (a[i].stats.count != b[i].stats.count) return false;
+    if (a[i].stats.count != b[i].stats.count || a[i].stats.points != b[i].stats.points) {
+      return false;
+    }
     const auto close = [&](double x, double y) {
       return exact ? x == y : std::abs(x - y) <= 1e-12 * std::max(1.0, std::abs(x));
     };

@@ -74,6 +74,10 @@ struct LeafStats {
   double sum_wp = 0;    // Σ w_i p_i(x_L)
   double sum_wp2 = 0;   // Σ w_i p_i(x_L)²
   uint32_t count = 0;   // number of rays that contributed
+  // §4.2.3's second voxel set ("voxels intersected by the input point cloud"): the scan points
+  // that fell in the leaf. Not part of eq 4.8; segmentation reads it to keep fine detail
+  // (legs, rods, boards) that the wedges carve away (segment_chunk.h).
+  uint32_t points = 0;
 
   void Add(double p, double w) {
     sum_w += w;
@@ -86,6 +90,7 @@ struct LeafStats {
     sum_wp += o.sum_wp;
     sum_wp2 += o.sum_wp2;
     count += o.count;
+    points += o.points;
   }
   [[nodiscard]] bool observed() const { return count > 0 && sum_w > 0; }
   // eq 4.8: the weighted mean of the rays' carve-map values.

@@ -88,7 +88,7 @@ TEST_F(FirstOutputsTest, WritesAllOutputs) {
   EXPECT_EQ(job["counts"]["frames"], 1000);  // the caller's counts are kept
   EXPECT_EQ(job["counts"]["tiles"], 3);
   EXPECT_EQ(job["counts"]["octree_bt_nodes"], summary->num_bt_nodes);
-  EXPECT_EQ(job["versions"]["tile_format"], "carvemap-tile/1");
+  EXPECT_EQ(job["versions"]["tile_format"], "carvemap-tile/2");
   EXPECT_TRUE(job["versions"].contains("carvemap"));
   EXPECT_DOUBLE_EQ(job["parameters"]["merge"]["resolution_m"].get<double>(), 0.125);
   for (const char* t : {"merge.index", "merge.octree_bt", "merge.topdown_png", "merge.total"}) {
