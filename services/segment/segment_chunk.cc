@@ -79,6 +79,35 @@ class ChunkSegmenter {
     const ChunkKey chunk = index.hood().chunk;
     const double res = grid.resolution_m();
     cells_.assign(static_cast<size_t>(n_) * n_ * n_, CellKey{});
+    // §4.2.3 point evidence: points per cube of 2^shift cells a side.
+    int shift = 0;
+    while (shift < k_ && (res * (2 << shift)) <= options.point_cell_m * (1 + 1e-9)) ++shift;
+    const int nc = n_ >> shift;
+    std::vector<uint32_t> cube_points;
+    if (options.min_points > 0 && tile != nullptr) {
+      cube_points.assign(static_cast<size_t>(nc) * nc * nc, 0);
+      for (const TileLeaf& leaf : tile->leaves) {
+        if (leaf.stats.points == 0) continue;
+        // A leaf coarser than a cube (not written by this build's workers) counts in each.
+        const int s = 1 << (k_ - leaf.node.depth);
+        const Eigen::Vector3i lo = leaf.node.local * s;
+        const int c0 = 1 << shift;
+        for (int z = lo.z(); z < lo.z() + s; z += c0)
+          for (int y = lo.y(); y < lo.y() + s; y += c0)
+            for (int x = lo.x(); x < lo.x() + s; x += c0) {
+              uint32_t& c = cube_points[size_t(x >> shift) +
+                                        size_t(nc) * (size_t(y >> shift) +
+                                                      size_t(nc) * size_t(z >> shift))];
+              c += leaf.stats.points;
+            }
+      }
+    }
+    auto points_at = [&](int x, int y, int z) {
+      if (cube_points.empty()) return false;
+      return cube_points[size_t(x >> shift) +
+                         size_t(nc) * (size_t(y >> shift) + size_t(nc) * size_t(z >> shift))] >=
+             static_cast<uint32_t>(options.min_points);
+    };
     if (tile != nullptr) {
       for (size_t row = 0; row < tile->leaves.size(); ++row) {
         const ChunkNode& node = tile->leaves[row].node;
@@ -106,8 +135,8 @@ class ChunkSegmenter {
           const LeafStats* s = c.leaf >= 0 ? &tile->leaves[c.leaf].stats : nullptr;
           const bool observed = s != nullptr && s->observed();
           const Eigen::Vector3d centre = LeafCenter(grid, base + Eigen::Vector3i(x, y, z));
-          c.segment =
-              ClassifyCell(plan, centre, s != nullptr && s->interior(), observed, res, options);
+          c.segment = ClassifyCell(plan, centre, s != nullptr && s->interior(), observed,
+                                   points_at(x, y, z), res, options);
           if (c.segment == CellSegment::kObject && !observed &&
               !HiddenBehindSolid(index, plan, centre, options)) {
             c.segment = CellSegment::kBuilding;
@@ -193,6 +222,10 @@ absl::Status SegmentOptions::Validate() const {
   if (!(hidden_fill_m >= 0) || !std::isfinite(hidden_fill_m)) {
     return absl::InvalidArgumentError("segment: hidden_fill_m must be finite and ≥ 0");
   }
+  if (min_points < 0) return absl::InvalidArgumentError("segment: min_points must be ≥ 0");
+  if (!(point_cell_m > 0) || !std::isfinite(point_cell_m)) {
+    return absl::InvalidArgumentError("segment: point_cell_m must be finite and > 0");
+  }
   if (!std::isfinite(plan_tolerance_m)) {
     return absl::InvalidArgumentError("segment: plan_tolerance_m must be finite");
   }
@@ -200,13 +233,19 @@ absl::Status SegmentOptions::Validate() const {
 }
 
 CellSegment ClassifyCell(const PlanVolume& plan, const Eigen::Vector3d& centre, bool interior,
-                         bool observed, double res_m, const SegmentOptions& options) {
+                         bool observed, bool points, double res_m,
+                         const SegmentOptions& options) {
   const PlanColumn col = LookupPlan(plan, centre);
   if (interior) {
     // §5.5: only levels with a plan trim; space above or below every level is kept.
-    return col.level >= 0 && col.signed_distance_m < -options.trim_distance_m
-               ? CellSegment::kTrimmed
-               : CellSegment::kFree;
+    if (col.level >= 0 && col.signed_distance_m < -options.trim_distance_m) {
+      return CellSegment::kTrimmed;
+    }
+    // §4.2.3: carved, but the scan's points say solid: an object if the plan below agrees,
+    // else free as carved (a wall's or floor's points stay building's free side).
+    if (!points) return CellSegment::kFree;
+    const CellSegment solid = ClassifyCell(plan, centre, false, true, false, res_m, options);
+    return solid == CellSegment::kObject ? solid : CellSegment::kFree;
   }
   if (col.room < 0 || (!observed && !options.unobserved_is_object)) return CellSegment::kBuilding;
   const double tol = options.plan_tolerance_m < 0 ? res_m : options.plan_tolerance_m;

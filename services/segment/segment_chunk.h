@@ -6,7 +6,8 @@
 //   - object: exterior in the octree and interior in the extruded plan, the cell's whole box
 //     inside it (§5.6: "volume intersected by the boundary of the 2.5D floor plan is considered
 //     exterior", so walls, floors and ceilings stay building). Observed solid space always;
-//     unobserved space only where it is hidden behind a solid surface (below);
+//     unobserved space only where it is hidden behind a solid surface (below); interior space
+//     where the scan points say it is solid (below);
 //   - building: every other exterior cell.
 // The result is two tiles of the same chunk that the existing stages mesh unchanged:
 //   - building: interior = free ∪ object (the union of both models' interiors, §5.6), so its
@@ -21,6 +22,17 @@
 // away from the nearest wall is solid and the first one towards it is solid or the wall itself,
 // both within hidden_fill_m: the space between a shelf's seen front and the wall behind it,
 // or inside a chair's seen shell; not a pocket of unswept air in front of an empty wall.
+// Scan points: the wedges of §4.3.1 interpolate between neighbouring rays, so a ray passing
+// beside a 2–5 cm leg, rod or board carves it as free even at 1.5625 cm (measured on the
+// simulated office: desks came out as their tops, lamps without their rods). §4.2.3 keeps such
+// detail in voxel carving with a second voxel set, the voxels holding scan points, which it
+// treats as exterior. Here the points (LeafStats::points, counted by the worker) count over
+// cubes of point_cell_m (a cell, or on grids finer than it a cube of cells: a scan's points
+// lie a few cm apart, so 1.5625 cm cells would leave a leg as a dotted line), and an interior
+// cell whose cube holds at least min_points of them is classified as solid: an object where
+// the plan says so, else as carved. Measured on the simulated office (docs/BENCHMARKS.md):
+// 6.25 cm cubes on the 3.125 cm grid joined desks to their chairs 4 cm away; min_points 2
+// lost most lamp rods, whose 2 cm get one point in a few cm of height.
 // Relabelled leaves keep their evidence mirrored (p → 1 − p, sums mirrored exactly) so the
 // Fig 4.9 isosurface between an object and the free space beside it sits where the octree put
 // it; unobserved cells that become interior get p = kUnobservedObjectP.
@@ -55,6 +67,11 @@ struct SegmentOptions {
   bool unobserved_is_object = true;
   // How far the hidden-space test above looks each way, m.
   double hidden_fill_m = 1.0;
+  // §4.2.3 point evidence (above): an interior cell is solid when the cube of side
+  // point_cell_m around it (aligned with the octree; at least one cell) holds at least
+  // min_points scan points. 0 = off.
+  int min_points = 1;
+  double point_cell_m = 0.03125;
   // InvalidArgument naming the bad field.
   [[nodiscard]] absl::Status Validate() const;
 };
@@ -67,9 +84,10 @@ enum class CellSegment : uint8_t { kFree = 0, kTrimmed = 1, kObject = 2, kBuildi
 
 // The class of a finest cell with centre `centre`, interior (p > 0.5) or not, observed or not,
 // from the plan alone (an unobserved cell it calls object still needs the hidden-space test of
-// SegmentChunk). `res_m` is the finest resolution.
+// SegmentChunk). `points`: its point cube holds at least min_points (an interior cell is then
+// classified as solid). `res_m` is the finest resolution.
 [[nodiscard]] CellSegment ClassifyCell(const PlanVolume& plan, const Eigen::Vector3d& centre,
-                                       bool interior, bool observed, double res_m,
+                                       bool interior, bool observed, bool points, double res_m,
                                        const SegmentOptions& options);
 
 struct SegmentedChunk {

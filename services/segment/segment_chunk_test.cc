@@ -84,24 +84,24 @@ TEST_F(SegmentChunkTest, ClassifiesCellsByTheOctreeAndThePlan) {
   const double r = grid_.resolution_m();
   const SegmentOptions o;
   // Free space in the room, and interior space 0.5 m outside the plan (within the 1 m buffer).
-  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, true, true, r, o), CellSegment::kFree);
-  EXPECT_EQ(ClassifyCell(volume_, {-0.25, 1.0, 1.0}, true, true, r, o), CellSegment::kFree);
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, true, true, false, r, o), CellSegment::kFree);
+  EXPECT_EQ(ClassifyCell(volume_, {-0.25, 1.0, 1.0}, true, true, false, r, o), CellSegment::kFree);
   // §5.5: interior space more than 1 m outside the plan is trimmed; above every level it stays.
-  EXPECT_EQ(ClassifyCell(volume_, {3.0, 1.0, 1.0}, true, true, r, o), CellSegment::kTrimmed);
-  EXPECT_EQ(ClassifyCell(volume_, {3.0, 1.0, 5.0}, true, true, r, o), CellSegment::kFree);
+  EXPECT_EQ(ClassifyCell(volume_, {3.0, 1.0, 1.0}, true, true, false, r, o), CellSegment::kTrimmed);
+  EXPECT_EQ(ClassifyCell(volume_, {3.0, 1.0, 5.0}, true, true, false, r, o), CellSegment::kFree);
   // Solid or unobserved in the room's volume: object; on the plan's walls, floor or ceiling,
   // or outside it: building.
-  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, false, true, r, o), CellSegment::kObject);
-  EXPECT_EQ(ClassifyCell(volume_, {0.28125, 1.0, 1.0}, false, true, r, o), CellSegment::kBuilding);
-  EXPECT_EQ(ClassifyCell(volume_, {0.21875, 1.0, 1.0}, false, true, r, o), CellSegment::kBuilding);
-  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 0.28125}, false, true, r, o), CellSegment::kBuilding);
-  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.71875}, false, true, r, o), CellSegment::kBuilding);
-  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 0.34375}, false, true, r, o), CellSegment::kObject);
-  EXPECT_EQ(ClassifyCell(volume_, {5.0, 1.0, 1.0}, false, true, r, o), CellSegment::kBuilding);
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, false, true, false, r, o), CellSegment::kObject);
+  EXPECT_EQ(ClassifyCell(volume_, {0.28125, 1.0, 1.0}, false, true, false, r, o), CellSegment::kBuilding);
+  EXPECT_EQ(ClassifyCell(volume_, {0.21875, 1.0, 1.0}, false, true, false, r, o), CellSegment::kBuilding);
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 0.28125}, false, true, false, r, o), CellSegment::kBuilding);
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.71875}, false, true, false, r, o), CellSegment::kBuilding);
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 0.34375}, false, true, false, r, o), CellSegment::kObject);
+  EXPECT_EQ(ClassifyCell(volume_, {5.0, 1.0, 1.0}, false, true, false, r, o), CellSegment::kBuilding);
   SegmentOptions no_fill;
   no_fill.unobserved_is_object = false;
-  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, false, false, r, o), CellSegment::kObject);
-  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, false, false, r, no_fill),
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, false, false, false, r, o), CellSegment::kObject);
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 1.0}, false, false, false, r, no_fill),
             CellSegment::kBuilding);
 }
 
@@ -152,6 +152,122 @@ TEST_F(SegmentChunkTest, BoxOnTheFloorBecomesObjectAndFreeSpaceForTheBuilding) {
       }
   EXPECT_EQ(object_interior, 8 * 8 * 7);
   EXPECT_EQ(building_changed, 8 * 8 * 7);
+}
+
+// §4.2.3's point voxels: a table whose leg the wedges carved free (p = 0.9) but whose scan
+// points lie in the leg's cells. The leg becomes object, joined to the top; points on the
+// wall and floor stay building's free side; too few points change nothing.
+TEST_F(SegmentChunkTest, ScanPointsKeepALegTheWedgesCarvedAway) {
+  auto in_top = [](const Eigen::Vector3d& c) {
+    return Inside(c, {0.75, 0.75, 0.75}, {1.25, 1.25, 0.8125});
+  };
+  auto in_leg = [](const Eigen::Vector3d& c) {  // one cell a side, floor to top
+    return Inside(c, {0.75, 0.75, 0.25}, {0.8125, 0.8125, 0.75});
+  };
+  auto on_wall = [](const Eigen::Vector3d& c) {  // the first free layer in front of x = 0.25
+    return Inside(c, {0.25, 0.5, 0.5}, {0.3125, 1.5, 1.5});
+  };
+  TileData tile = FinestTile(grid_, [&](const Eigen::Vector3d& c) {
+    const bool in_room = Inside(c, Eigen::Vector3d::Constant(0.25), Eigen::Vector3d::Constant(1.75));
+    return in_room && !in_top(c) ? 0.9 : 0.2;
+  });
+  auto with_points = [&](uint32_t points) {
+    TileData t = tile;
+    for (TileLeaf& l : t.leaves) {
+      const Eigen::Vector3d c = LeafCenter(grid_, l.node.local);
+      if (in_leg(c) || on_wall(c)) l.stats.points = points;
+    }
+    return t;
+  };
+  absl::StatusOr<SegmentedChunk> none =
+      SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, SegmentOptions{});
+  ASSERT_TRUE(none.ok()) << none.status();
+  EXPECT_EQ(none->object_cells, 8u * 8u);  // the top alone
+
+  SegmentOptions two;
+  two.min_points = 2;
+  const TileData one_point = with_points(1);  // below min_points = 2
+  absl::StatusOr<SegmentedChunk> few =
+      SegmentAlone(&one_point, ChunkKey::Zero(), grid_, volume_, two);
+  ASSERT_TRUE(few.ok()) << few.status();
+  EXPECT_EQ(few->object_cells, 8u * 8u);
+
+  const TileData points = with_points(3);
+  absl::StatusOr<SegmentedChunk> seg =
+      SegmentAlone(&points, ChunkKey::Zero(), grid_, volume_, two);
+  ASSERT_TRUE(seg.ok()) << seg.status();
+  // The leg's 8 cells less the one on the plan's floor (its box within a cell of the floor,
+  // as for solid cells).
+  EXPECT_EQ(seg->object_cells, 8u * 8u + 7u);
+  const std::vector<LeafStats> objects = Cells(seg->objects);
+  const int n = grid_.leaves_per_side();
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const Eigen::Vector3d c = LeafCenter(grid_, Eigen::Vector3i(x, y, z));
+        const bool object = in_top(c) || (in_leg(c) && c.z() > 0.3125);
+        EXPECT_EQ(objects[x + size_t(n) * (y + size_t(n) * z)].interior(), object)
+            << c.transpose();
+      }
+  SegmentOptions off;
+  off.min_points = 0;
+  absl::StatusOr<SegmentedChunk> ignored =
+      SegmentAlone(&points, ChunkKey::Zero(), grid_, volume_, off);
+  ASSERT_TRUE(ignored.ok()) << ignored.status();
+  EXPECT_EQ(ignored->object_cells, 8u * 8u);
+}
+
+// On a finer grid the points count over cubes of point_cell_m: a scan's points are a few cm
+// apart, so on a 1.5625 cm grid one finest cell in four along a leg holds one.
+TEST_F(SegmentChunkTest, PointsCountOverCubesOfPointCellSize) {
+  const OctreeGrid fine = *OctreeGrid::FromResolution(0.015625);
+  const PlanLevelInput in{&plan_, 0, -1.0, 3.0};
+  const PlanVolume volume = *RasterizePlanVolume({&in, 1}, fine.resolution_m(), 1.5);
+  TileData tile;
+  tile.grid = fine;
+  // Free space in the room as one leaf per 6.25 cm cube except the cube [1, 1.0625)³, whose 64
+  // finest cells are leaves; two of them hold a point each.
+  const int k = fine.chunk_depth;
+  for (int z = 0; z < 32; ++z)
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 32; ++x) {
+        const Eigen::Vector3d c = (Eigen::Vector3d(x, y, z).array() + 0.5) * 0.0625;
+        if (!Inside(c, Eigen::Vector3d::Constant(0.25), Eigen::Vector3d::Constant(1.75))) continue;
+        if (x == 16 && y == 16 && z == 16) {
+          for (int i = 0; i < 64; ++i) {
+            TileLeaf l{ChunkNode{Eigen::Vector3i(64 + (i & 3), 64 + ((i >> 2) & 3), 64 + (i >> 4)), k},
+                       WithP(0.9)};
+            l.stats.points = (i == 0 || i == 63) ? 1 : 0;
+            tile.leaves.push_back(l);
+          }
+          continue;
+        }
+        tile.leaves.push_back(TileLeaf{ChunkNode{Eigen::Vector3i(x, y, z), k - 2}, WithP(0.9)});
+      }
+  SortTileLeaves(fine, tile.leaves);
+  SegmentOptions cubes;
+  cubes.min_points = 2;
+  cubes.point_cell_m = 0.0625;
+  absl::StatusOr<SegmentedChunk> seg =
+      SegmentAlone(&tile, ChunkKey::Zero(), fine, volume, cubes);
+  ASSERT_TRUE(seg.ok()) << seg.status();
+  EXPECT_EQ(seg->object_cells, 64u);  // the whole cube, from 2 points
+  cubes.point_cell_m = 0.03125;  // 2 × 2 × 2 cells, one point each in two of them
+  absl::StatusOr<SegmentedChunk> smaller =
+      SegmentAlone(&tile, ChunkKey::Zero(), fine, volume, cubes);
+  ASSERT_TRUE(smaller.ok()) << smaller.status();
+  EXPECT_EQ(smaller->object_cells, 0u);
+  cubes.min_points = 1;  // the two 8-cell cubes holding a point
+  smaller = SegmentAlone(&tile, ChunkKey::Zero(), fine, volume, cubes);
+  ASSERT_TRUE(smaller.ok()) << smaller.status();
+  EXPECT_EQ(smaller->object_cells, 16u);
+  SegmentOptions per_cell;
+  per_cell.min_points = 2;
+  per_cell.point_cell_m = fine.resolution_m();
+  absl::StatusOr<SegmentedChunk> fine_cells =
+      SegmentAlone(&tile, ChunkKey::Zero(), fine, volume, per_cell);
+  ASSERT_TRUE(fine_cells.ok()) << fine_cells.status();
+  EXPECT_EQ(fine_cells->object_cells, 0u);  // one point per cell < min_points
 }
 
 // §5.6.1: the region to carve again holds the object, a cell around it, and the column down
@@ -219,7 +335,7 @@ TEST_F(SegmentChunkTest, LeavesSplitOnlyWhereTheClassChanges) {
     for (int y = 0; y < n; ++y)
       for (int x = 0; x < n; ++x) {
         expected += ClassifyCell(volume_, LeafCenter(grid_, Eigen::Vector3i(x, y, z)), false,
-                                 true, grid_.resolution_m(),
+                                 true, false, grid_.resolution_m(),
                                  SegmentOptions{}) == CellSegment::kObject;
       }
   EXPECT_GT(expected, 1000u);
