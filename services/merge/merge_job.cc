@@ -433,6 +433,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   counts["objects_dropped_small"] = split_report.dropped_small;
   counts["objects_dropped_cavities"] = split_report.dropped_cavities;
   counts["objects_dropped_ceiling"] = split_report.dropped_ceiling;
+  counts["objects_grouped"] = split_report.grouped;
   timings["merge.object_mesh"] = SecondsSince(t0);
   result.objects = objects.size();
   return result;

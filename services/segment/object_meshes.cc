@@ -15,6 +15,89 @@ int Find(std::vector<int>& parent, int x) {
   return x;
 }
 
+bool TooSmall(const SegmentedObject& o, const ObjectSplitOptions& options) {
+  return o.volume_m3 < options.min_volume_m3 || o.box.sizes().minCoeff() < options.min_thickness_m;
+}
+
+// The share of the smaller footprint (xy box) that the two footprints share.
+double FootprintOverlap(const Eigen::AlignedBox3d& a, const Eigen::AlignedBox3d& b) {
+  const Eigen::AlignedBox2d fa(a.min().head<2>(), a.max().head<2>());
+  const Eigen::AlignedBox2d fb(b.min().head<2>(), b.max().head<2>());
+  const Eigen::AlignedBox2d i = fa.intersection(fb);
+  if (i.isEmpty()) return 0;
+  const double smaller = std::min(fa.volume(), fb.volume());
+  return smaller > 0 ? i.volume() / smaller : 0;
+}
+
+// Pieces on one level stacked over each other (footprints overlapping by stack_overlap of the
+// smaller, vertical gap at most stack_gap_m) become one object, transitively.
+std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
+                                          const PlanVolume& plan,
+                                          const ObjectSplitOptions& options,
+                                          ObjectSplitReport& rep) {
+  if (options.stack_gap_m < 0) return pieces;
+  const int n = static_cast<int>(pieces.size());
+  std::vector<int> parent(n);
+  std::iota(parent.begin(), parent.end(), 0);
+  // How much j's footprint shares with i's when they are stacked; 0 when not.
+  auto stacked = [&](int i, int j) {
+    const Eigen::AlignedBox3d &a = pieces[i].box, &b = pieces[j].box;
+    if (pieces[i].level != pieces[j].level) return 0.0;
+    const double gap = std::max(a.min().z() - b.max().z(), b.min().z() - a.max().z());
+    const double overlap = FootprintOverlap(a, b);
+    return gap <= options.stack_gap_m && overlap >= options.stack_overlap ? overlap : 0.0;
+  };
+  auto join = [&](int i, int j) {
+    const int ra = Find(parent, i), rb = Find(parent, j);
+    if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+  };
+  std::vector<bool> small(n);
+  for (int i = 0; i < n; ++i) small[i] = TooSmall(pieces[i], options);
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      if (!small[i] && !small[j] && stacked(i, j) > 0) join(i, j);
+    }
+  }
+  // A speck joins the one object it overlaps most, so specks never link two objects (a desk
+  // and the chair beside it share specks in the gap between them).
+  for (int i = 0; i < n; ++i) {
+    if (!small[i]) continue;
+    int best = -1;
+    double best_overlap = 0;
+    for (int j = 0; j < n; ++j) {
+      if (small[j]) continue;
+      if (const double o = stacked(i, j); o > best_overlap) best = j, best_overlap = o;
+    }
+    if (best >= 0) join(i, best);
+  }
+  std::vector<SegmentedObject> grouped;
+  std::vector<int> group_of(n, -1);
+  for (int i = 0; i < n; ++i) {
+    const int root = Find(parent, i);
+    if (group_of[root] < 0) {
+      group_of[root] = static_cast<int>(grouped.size());
+      grouped.push_back(std::move(pieces[i]));
+      continue;
+    }
+    SegmentedObject& g = grouped[group_of[root]];
+    const SegmentedObject& p = pieces[i];
+    const int offset = static_cast<int>(g.mesh.vertices.size());
+    g.mesh.vertices.insert(g.mesh.vertices.end(), p.mesh.vertices.begin(), p.mesh.vertices.end());
+    for (const Eigen::Vector3i& t : p.mesh.triangles) {
+      g.mesh.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
+    }
+    g.box.extend(p.box);
+    g.volume_m3 += p.volume_m3;
+    ++rep.grouped;
+  }
+  for (SegmentedObject& g : grouped) {
+    const PlanColumn col = LookupPlan(plan, g.box.center());
+    g.level = col.level;
+    g.room = col.room;
+  }
+  return grouped;
+}
+
 }  // namespace
 
 std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
@@ -82,15 +165,13 @@ std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
       ++rep.dropped_cavities;
       continue;
     }
-    if (obj.volume_m3 < options.min_volume_m3 ||
-        obj.box.sizes().minCoeff() < options.min_thickness_m) {
-      ++rep.dropped_small;
-      continue;
-    }
     const PlanColumn col = LookupPlan(plan, obj.box.center());
     obj.level = col.level;
     obj.room = col.room;
-    if (col.room >= 0 && obj.box.max().z() >= col.ceiling_z - options.ceiling_film_m) {
+    // Specks are judged after grouping: a speck stacked on an object is part of it (a point
+    // of a lamp's rod, a leg's foot).
+    if (!TooSmall(obj, options) && col.room >= 0 &&
+        obj.box.max().z() >= col.ceiling_z - options.ceiling_film_m) {
       const Eigen::Vector3d size = obj.box.sizes();
       const double thin = std::min(size.x(), size.y()), wide = std::max(size.x(), size.y());
       if (size.z() <= options.ceiling_film_m ||
@@ -101,6 +182,10 @@ std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
     }
     objects.push_back(std::move(obj));
   }
+  objects = GroupStacked(std::move(objects), plan, options, rep);
+  const size_t before = objects.size();
+  std::erase_if(objects, [&](const SegmentedObject& o) { return TooSmall(o, options); });
+  rep.dropped_small = before - objects.size();
   std::sort(objects.begin(), objects.end(), [](const SegmentedObject& a, const SegmentedObject& b) {
     return std::make_tuple(a.level, a.box.min().x(), a.box.min().y(), a.box.min().z()) <
            std::make_tuple(b.level, b.box.min().x(), b.box.min().y(), b.box.min().z());

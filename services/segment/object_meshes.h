@@ -21,7 +21,8 @@
 namespace carvemap {
 
 struct ObjectSplitOptions {
-  // Pieces smaller than this are specks (noise on floors and walls), dropped, m³.
+  // Objects smaller than this are specks (noise on floors and walls), dropped, m³. Judged
+  // after stacked pieces are grouped (below), so a speck on an object's column joins it.
   double min_volume_m3 = 0.001;
   // Pieces whose bounding box is thinner than this on any axis are dropped too (one-cell films
   // where the carved walls bulge into a room past the plan's tolerance), m. 0 = keep.
@@ -35,6 +36,14 @@ struct ObjectSplitOptions {
   // counts door frames as objects); users of a furniture list do not want them. m.
   double door_header_depth_m = 0.4;
   double door_header_min_width_m = 0.6;
+  // Pieces stacked over each other are one object: footprints (xy boxes) that share at least
+  // stack_overlap of the smaller one, and at most stack_gap_m between them vertically, on one
+  // level. Why: furniture made of thin parts comes out of the carve in pieces along its
+  // height (a shelf's boards, whose 2 cm side panels the wedges carve away; a table's top and
+  // the lower parts of its legs), while neighbours standing side by side (a desk and its
+  // chair) do not overlap. < 0: no grouping (the seed's one object per connected component).
+  double stack_gap_m = 0.5;
+  double stack_overlap = 0.5;
 };
 
 struct SegmentedObject {
@@ -48,15 +57,18 @@ struct SegmentedObject {
 
 struct ObjectSplitReport {
   uint64_t components = 0;     // closed surfaces found
-  uint64_t dropped_small = 0;  // below min_volume_m3 or min_thickness_m
+  uint64_t dropped_small = 0;  // below min_volume_m3 or min_thickness_m (after grouping)
   uint64_t dropped_ceiling = 0;  // ceiling films and door headers
   uint64_t dropped_cavities = 0;  // inner surfaces of hollow objects (negative volume)
+  uint64_t grouped = 0;  // pieces joined to a piece stacked over or under them
 };
 
 // `object_mesh`: dual contouring of the object volume, counter-clockwise seen from the free
 // space (normals into the objects, as dual_contouring.h makes them). Objects are ordered by
 // level, then by the min corner of their box (x, y, z), so ids are deterministic. An inner
 // surface (a free cavity enclosed in an object) is dropped: its object stays watertight, filled.
+// Stacked pieces (options.stack_gap_m) are then joined: such an object's mesh is several closed
+// surfaces, each watertight.
 [[nodiscard]] std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
                                                         const PlanVolume& plan,
                                                         const ObjectSplitOptions& options,

@@ -81,6 +81,35 @@ TEST_F(ObjectMeshesTest, SplitsPiecesOrientsThemOutwardAndDropsSpecksAndCavities
   EXPECT_EQ(SplitObjects(all, volume_, thin).size(), 1u);
 }
 
+// A shelf whose side panels the carve lost comes out as boards stacked over each other: one
+// object. A chair beside it (footprints apart) and a lamp far above a table stay apart.
+TEST_F(ObjectMeshesTest, StackedPiecesAreOneObject) {
+  TriangleMesh all;
+  for (float z : {0.05f, 0.45f, 0.85f, 1.25f}) all.Append(InwardBox({1, 1, z}, {2, 1.35f, z + 0.05f}));
+  all.Append(InwardBox({2.05f, 1.0f, 0.0f}, {2.5f, 1.45f, 0.9f}));  // a chair beside it
+  all.Append(InwardBox({5, 1, 0.4f}, {6, 2, 0.75f}));                 // a table ...
+  all.Append(InwardBox({5.2f, 1.2f, 1.9f}, {5.8f, 1.8f, 2.0f}));     // ... a lamp 1.15 m over it
+  ObjectSplitReport report;
+  const std::vector<SegmentedObject> objects =
+      SplitObjects(all, volume_, ObjectSplitOptions{}, &report);
+  EXPECT_EQ(report.components, 7u);
+  EXPECT_EQ(report.grouped, 3u);
+  ASSERT_EQ(objects.size(), 4u);
+  const SegmentedObject& shelf = objects[0];
+  EXPECT_TRUE(shelf.box.isApprox(
+      Eigen::AlignedBox3d(Eigen::Vector3d(1, 1, 0.05), Eigen::Vector3d(2, 1.35, 1.3)), 1e-6));
+  EXPECT_NEAR(shelf.volume_m3, 4 * 0.35 * 0.05, 1e-5);
+  EXPECT_EQ(shelf.mesh.triangles.size(), 4u * 12u);
+  EXPECT_TRUE(CheckMesh(shelf.mesh).watertight()) << CheckMesh(shelf.mesh).ToString();
+  EXPECT_NEAR(objects[1].box.min().x(), 2.05, 1e-6);  // the chair
+  EXPECT_EQ(objects[2].mesh.triangles.size(), 12u);   // the table
+  EXPECT_EQ(objects[3].mesh.triangles.size(), 12u);   // the lamp
+  // The seed's rule: one object per piece.
+  ObjectSplitOptions pieces;
+  pieces.stack_gap_m = -1;
+  EXPECT_EQ(SplitObjects(all, volume_, pieces).size(), 7u);
+}
+
 TEST_F(ObjectMeshesTest, EmptyMeshHasNoObjects) {
   ObjectSplitReport report;
   EXPECT_TRUE(SplitObjects(TriangleMesh{}, volume_, ObjectSplitOptions{}, &report).empty());
