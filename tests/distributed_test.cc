@@ -270,7 +270,7 @@ TEST_F(DistributedTest, MergeCarvesChunksAgainFinerThroughTheWorkers) {
   auto done = client.Watch(job->job_id, 0.2, [](const WatchUpdate&) {});
   ASSERT_TRUE(done.ok()) << done.status();
   EXPECT_EQ(done->state, "SUCCEEDED") << done->error;
-  EXPECT_DOUBLE_EQ(object_resolution, 0.015625);  // the default: a quarter of 6.25 cm
+  EXPECT_DOUBLE_EQ(object_resolution, 0.03125);  // the default: half of 6.25 cm
   ASSERT_TRUE(dir.ok()) << dir.status();
   EXPECT_EQ(fs::path(*dir), root_ / "out" / "room" / "object_tiles");
   ASSERT_EQ(again.size(), 3u);

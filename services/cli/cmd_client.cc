@@ -114,8 +114,8 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
   submit->add_option("--resolution", flags->submit.resolution_m,
                      "Leaf size in metres: 0.0625, 0.03125, 0.015625 or 0.0078125 (0: default)");
   submit->add_option("--object-resolution", flags->submit.object_resolution_m,
-                     "Leaf size the object chunks are carved again at (seed §5.6.1); 0: a "
-                     "quarter of --resolution, equal to it: no re-carving");
+                     "Leaf size the object chunks are carved again at (seed §5.6.1); 0: half "
+                     "of --resolution, equal to it: no re-carving");
   submit->add_option("--floorplan", flags->submit.floorplan_method,
                      "Floor-plan method of the merge: rooms (§3.3 room partitioning, the "
                      "default) or eigencrust (§3.2, with §3.3's rooms on its interior)")

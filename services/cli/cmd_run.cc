@@ -40,7 +40,7 @@ struct RunFlags {
   std::string output_dir;
   int workers = 2;
   double resolution_m = 0.0625;
-  double object_resolution_m = 0;  // 0 = resolution / 4
+  double object_resolution_m = 0;  // 0 = resolution / 2
   std::string floorplan_method = "rooms";
   std::string storage_root;
   // Short defaults on one machine: a killed worker's chunks come back within seconds.
@@ -286,7 +286,7 @@ void RegisterRun(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--object-resolution", flags->object_resolution_m,
                   "Leaf size the chunks holding furniture are carved again at before the "
-                  "objects are meshed (seed §5.6.1); 0 = a quarter of --resolution (at least "
+                  "objects are meshed (seed §5.6.1); 0 = half of --resolution (at least "
                   "0.0078125), equal to --resolution = no re-carving")
       ->capture_default_str();
   cmd->add_option("--floorplan", flags->floorplan_method,
