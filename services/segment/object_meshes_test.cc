@@ -85,7 +85,9 @@ TEST_F(ObjectMeshesTest, SplitsPiecesOrientsThemOutwardAndDropsSpecksAndCavities
 // object. A chair beside it (footprints apart) and a lamp far above a table stay apart.
 TEST_F(ObjectMeshesTest, StackedPiecesAreOneObject) {
   TriangleMesh all;
-  for (float z : {0.05f, 0.45f, 0.85f, 1.25f}) all.Append(InwardBox({1, 1, z}, {2, 1.35f, z + 0.05f}));
+  for (float z : {0.05f, 0.45f, 0.85f, 1.25f}) {
+    all.Append(InwardBox({1, 1, z}, {2, 1.35f, z + 0.05f}));  // a shelf's boards
+  }
   all.Append(InwardBox({2.05f, 1.0f, 0.0f}, {2.5f, 1.45f, 0.9f}));  // a chair beside it
   all.Append(InwardBox({5, 1, 0.4f}, {6, 2, 0.75f}));                 // a table ...
   all.Append(InwardBox({5.2f, 1.2f, 1.9f}, {5.8f, 1.8f, 2.0f}));     // ... a lamp 1.15 m over it

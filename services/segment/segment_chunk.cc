@@ -83,6 +83,10 @@ class ChunkSegmenter {
     int shift = 0;
     while (shift < k_ && (res * (2 << shift)) <= options.point_cell_m * (1 + 1e-9)) ++shift;
     const int nc = n_ >> shift;
+    auto cube = [&](int x, int y, int z) {
+      return size_t(x >> shift) +
+             size_t(nc) * (size_t(y >> shift) + size_t(nc) * size_t(z >> shift));
+    };
     std::vector<uint32_t> cube_points;
     if (options.min_points > 0 && tile != nullptr) {
       cube_points.assign(static_cast<size_t>(nc) * nc * nc, 0);
@@ -95,18 +99,13 @@ class ChunkSegmenter {
         for (int z = lo.z(); z < lo.z() + s; z += c0)
           for (int y = lo.y(); y < lo.y() + s; y += c0)
             for (int x = lo.x(); x < lo.x() + s; x += c0) {
-              uint32_t& c = cube_points[size_t(x >> shift) +
-                                        size_t(nc) * (size_t(y >> shift) +
-                                                      size_t(nc) * size_t(z >> shift))];
-              c += leaf.stats.points;
+              cube_points[cube(x, y, z)] += leaf.stats.points;
             }
       }
     }
     auto points_at = [&](int x, int y, int z) {
-      if (cube_points.empty()) return false;
-      return cube_points[size_t(x >> shift) +
-                         size_t(nc) * (size_t(y >> shift) + size_t(nc) * size_t(z >> shift))] >=
-             static_cast<uint32_t>(options.min_points);
+      return !cube_points.empty() &&
+             cube_points[cube(x, y, z)] >= static_cast<uint32_t>(options.min_points);
     };
     if (tile != nullptr) {
       for (size_t row = 0; row < tile->leaves.size(); ++row) {

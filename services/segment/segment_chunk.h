@@ -30,9 +30,9 @@
 // cubes of point_cell_m (a cell, or on grids finer than it a cube of cells: a scan's points
 // lie a few cm apart, so 1.5625 cm cells would leave a leg as a dotted line), and an interior
 // cell whose cube holds at least min_points of them is classified as solid: an object where
-// the plan says so, else as carved. Measured on the simulated office (docs/BENCHMARKS.md):
-// 6.25 cm cubes on the 3.125 cm grid joined desks to their chairs 4 cm away; min_points 2
-// lost most lamp rods, whose 2 cm get one point in a few cm of height.
+// the plan says so, else as carved. Measured on the simulated office (docs/BENCHMARKS.md),
+// objects re-carved at 3.125 cm: one point per 3.125 cm cube found 62 of 96 objects, two per
+// 6.25 cm cube 52 (fewer chairs and lamps: a lamp's 2 cm rod gets 0–11 points in all).
 // Relabelled leaves keep their evidence mirrored (p → 1 − p, sums mirrored exactly) so the
 // Fig 4.9 isosurface between an object and the free space beside it sits where the octree put
 // it; unobserved cells that become interior get p = kUnobservedObjectP.
