@@ -222,6 +222,9 @@ absl::Status SegmentOptions::Validate() const {
     return absl::InvalidArgumentError("segment: hidden_fill_m must be finite and ≥ 0");
   }
   if (min_points < 0) return absl::InvalidArgumentError("segment: min_points must be ≥ 0");
+  if (!(point_wall_margin_m >= 0) || !std::isfinite(point_wall_margin_m)) {
+    return absl::InvalidArgumentError("segment: point_wall_margin_m must be finite and ≥ 0");
+  }
   if (!(point_cell_m > 0) || !std::isfinite(point_cell_m)) {
     return absl::InvalidArgumentError("segment: point_cell_m must be finite and > 0");
   }
@@ -235,25 +238,28 @@ CellSegment ClassifyCell(const PlanVolume& plan, const Eigen::Vector3d& centre, 
                          bool observed, bool points, double res_m,
                          const SegmentOptions& options) {
   const PlanColumn col = LookupPlan(plan, centre);
+  double wall_margin = 0;
   if (interior) {
     // §5.5: only levels with a plan trim; space above or below every level is kept.
     if (col.level >= 0 && col.signed_distance_m < -options.trim_distance_m) {
       return CellSegment::kTrimmed;
     }
-    // §4.2.3: carved, but the scan's points say solid: an object if the plan below agrees,
+    // §4.2.3: carved, but the scan's points say solid: an object if the plan agrees below,
     // else free as carved (a wall's or floor's points stay building's free side).
     if (!points) return CellSegment::kFree;
-    const CellSegment solid = ClassifyCell(plan, centre, false, true, false, res_m, options);
-    return solid == CellSegment::kObject ? solid : CellSegment::kFree;
+    wall_margin = options.point_wall_margin_m;
+  } else if (col.room < 0 || (!observed && !options.unobserved_is_object)) {
+    return CellSegment::kBuilding;
   }
-  if (col.room < 0 || (!observed && !options.unobserved_is_object)) return CellSegment::kBuilding;
+  const CellSegment not_object = interior ? CellSegment::kFree : CellSegment::kBuilding;
+  if (col.room < 0) return not_object;
   const double tol = options.plan_tolerance_m < 0 ? res_m : options.plan_tolerance_m;
   // The whole cell inside: its half diagonal (2D) from the walls, its half side from the floor
   // and ceiling, plus the tolerance.
   const double half = 0.5 * res_m;
-  if (col.signed_distance_m < half * std::sqrt(2.0) + tol) return CellSegment::kBuilding;
+  if (col.signed_distance_m < half * std::sqrt(2.0) + tol + wall_margin) return not_object;
   if (centre.z() - half < col.floor_z + tol || centre.z() + half > col.ceiling_z - tol) {
-    return CellSegment::kBuilding;
+    return not_object;
   }
   return CellSegment::kObject;
 }

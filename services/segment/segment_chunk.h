@@ -72,6 +72,11 @@ struct SegmentOptions {
   // min_points scan points. 0 = off.
   int min_points = 1;
   double point_cell_m = 0.03125;
+  // Such cells keep this much more from the plan's walls than solid cells do, m: a wall's
+  // scan points lie in the free layer in front of its carved surface, one cell further into
+  // the room, and §3.3.3's simplification moves the plan's walls by up to its error bound.
+  // Measured: office2's false objects 11 % with 0, 9 % with 0.05 or 0.1 m; 0.1 m lost shelves.
+  double point_wall_margin_m = 0.05;
   // InvalidArgument naming the bad field.
   [[nodiscard]] absl::Status Validate() const;
 };

@@ -217,6 +217,23 @@ TEST_F(SegmentChunkTest, ScanPointsKeepALegTheWedgesCarvedAway) {
   EXPECT_EQ(ignored->object_cells, 8u * 8u);
 }
 
+// A wall's points lie in the free layer in front of it: point cells keep point_wall_margin_m
+// more from the plan's walls than solid cells.
+TEST_F(SegmentChunkTest, PointCellsKeepAMarginFromThePlansWalls) {
+  const double r = grid_.resolution_m();
+  // A cell 0.125–0.1875 m from the wall at x = 0.25: far enough for a solid cell.
+  const Eigen::Vector3d c(0.40625, 1.03125, 1.03125);
+  EXPECT_EQ(ClassifyCell(volume_, c, false, true, false, r, SegmentOptions{}), CellSegment::kObject);
+  SegmentOptions none, wide;
+  none.point_wall_margin_m = 0;
+  wide.point_wall_margin_m = 0.2;
+  EXPECT_EQ(ClassifyCell(volume_, c, true, true, true, r, none), CellSegment::kObject);
+  EXPECT_EQ(ClassifyCell(volume_, c, true, true, true, r, wide), CellSegment::kFree);
+  // The margin is from the walls only: a point cell one cell above the floor's tolerance.
+  EXPECT_EQ(ClassifyCell(volume_, {1.0, 1.0, 0.34375}, true, true, true, r, wide),
+            CellSegment::kObject);
+}
+
 // On a finer grid the points count over cubes of point_cell_m: a scan's points are a few cm
 // apart, so on a 1.5625 cm grid one finest cell in four along a leg holds one.
 TEST_F(SegmentChunkTest, PointsCountOverCubesOfPointCellSize) {
