@@ -204,8 +204,12 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   EXPECT_EQ(combined->mesh.triangles.size(), building->mesh.triangles.size() + object_triangles);
 
   // Wall cover: points on the true walls (vertical truth triangles, ~10 cm apart) that the
-  // scans reached (within 20 cm of the dense mesh), and the share of them within 5 cm and
-  // 10 cm of building.ply; `hidden`: those with a true object within 10 cm (behind furniture).
+  // scans saw (within 5 cm of the dense mesh), and the share of them within 5 cm and 10 cm of
+  // building.ply. Not 20 cm: the walls are 15 cm thick, and the outer faces of the outside
+  // walls, which no scan inside reaches, lie that far from the dense mesh (they were 28 % of
+  // the points, 12–19 cm from both meshes). `hidden`: wall points within 20 cm of the dense
+  // mesh with a true object within 10 cm (behind furniture, where the dense mesh is the
+  // furniture).
   const testing::TruthDistance to_building(
       testing::ReadPlyTriangles(out + "/mesh/building.ply"), 0.25, 0.2);
   const testing::TruthDistance to_dense(testing::ReadPlyTriangles(out + "/mesh/dense.ply"), 0.25,
@@ -213,11 +217,14 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   size_t wall_points = 0, covered5 = 0, covered10 = 0, hidden = 0, hidden_covered = 0;
   for (const Eigen::Vector3d& p :
        testing::WallPoints(testing::ReadPlyTriangles(carved->gt_dir + "/surfaces.ply"), 0.1)) {
-    if (to_dense(p) >= 0.2) continue;
-    ++wall_points;
+    const double dd = to_dense(p);
+    if (dd >= 0.2) continue;
     const double db = to_building(p);
-    covered5 += db <= 0.05;
-    covered10 += db <= 0.10;
+    if (dd < 0.05) {
+      ++wall_points;
+      covered5 += db <= 0.05;
+      covered10 += db <= 0.10;
+    }
     bool behind = false;
     for (const Box& o : true_boxes) behind = behind || o.exteriorDistance(p) <= 0.1;
     if (behind) {
@@ -285,12 +292,13 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
 INSTANTIATE_TEST_SUITE_P(Presets, ObjectSegmentation,
                          // Measured (2026-11-26, docs/BENCHMARKS.md): found 65 % with the
                          // objects re-carved at 3.125 cm (the default: half of 6.25 cm), false
-                         // 4 %, cover 72.0 %, behind furniture 93.7 %. Before the scan points
+                         // 4 %, wall cover 96.9 % (72.0 % when the outer faces of the outside walls counted), behind
+                         // furniture 93.7 %. Before the scan points
                          // kept legs, rods and boards (§4.2.3) and stacked pieces were grouped:
                          // found 29 %. Still short of the 90 %: desks merged with the
                          // chairs 4 cm in front of them, lamps whose 2 cm rods got too few
                          // points, two shelves in the room the walk never entered.
-                         ::testing::Values(PresetCase{"office", 0, 0.03125, 0.60, 0.10, 0.65,
+                         ::testing::Values(PresetCase{"office", 0, 0.03125, 0.60, 0.10, 0.95,
                                                       0.8}),
                          [](const auto& info) { return std::string(info.param.preset); });
 
