@@ -248,7 +248,7 @@ CellSegment ClassifyCell(const PlanVolume& plan, const Eigen::Vector3d& centre, 
     // else free as carved (a wall's or floor's points stay building's free side).
     if (!points) return CellSegment::kFree;
     wall_margin = options.point_wall_margin_m;
-  } else if (col.room < 0 || (!observed && !options.unobserved_is_object)) {
+  } else if (!observed && !options.unobserved_is_object) {
     return CellSegment::kBuilding;
   }
   const CellSegment not_object = interior ? CellSegment::kFree : CellSegment::kBuilding;
