@@ -228,7 +228,7 @@ TEST(WedgeBuilderTest, SmallRangeChangesAndNoiseAreJoined) {
   Collected out;
   absl::StatusOr<WedgeBuilder> b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
   ASSERT_TRUE(b.ok());
-  // 0.3 m vs 0.38 m: a 27 % ratio but under min_jump_m; 5 m vs 6 m: 20 %, under the ratio.
+  // 0.3 m vs 0.38 m: a 27 % ratio but under min_jump_m; 5 m vs 5.35 m: 7 %, under the ratio.
   ASSERT_TRUE(b->AddFrame(WallFrame(0, 2, {0.3, 5.0}), WalkContext(0)).ok());
   ASSERT_TRUE(b->AddFrame(WallFrame(1, 2, {0.38, 6.0}), WalkContext(1)).ok());
   ASSERT_TRUE(b->Finish().ok());
@@ -244,10 +244,89 @@ TEST(WedgeBuilderTest, SmallRangeChangesAndNoiseAreJoined) {
   EXPECT_EQ(out.Count(4), 1);
   out.wedges.clear();
   b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
+  ASSERT_TRUE(b->AddFrame(WallFrame(0, 2, {5.0, 5.2}), WalkContext(0)).ok());
+  ASSERT_TRUE(b->AddFrame(WallFrame(1, 2, {5.2, 5.35}), WalkContext(1)).ok());
+  ASSERT_TRUE(b->Finish().ok());
+  EXPECT_EQ(out.Count(4), 1);
+  // 5 m then 6 m, frames 10 cm apart: within the range rule's 25 %, but the points lie 1.15 m
+  // apart for 10 cm between the rays, a surface met at 85° or an occlusion edge: not joined.
+  out.wedges.clear();
+  b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
   ASSERT_TRUE(b->AddFrame(WallFrame(0, 2, {5.0, 5.5}), WalkContext(0)).ok());
   ASSERT_TRUE(b->AddFrame(WallFrame(1, 2, {6.0, 5.2}), WalkContext(1)).ok());
   ASSERT_TRUE(b->Finish().ok());
-  EXPECT_EQ(out.Count(4), 1);
+  EXPECT_EQ(out.Count(4), 0);
+  EXPECT_EQ(b->stats().discontinuities, 1u);
+}
+
+// An occlusion edge that the range rule joins: a near surface (x = 4) over a far one (the wall,
+// x = 5), 1 m apart along the rays where neighbouring rays are 9 cm apart, as a desk's front edge
+// over the chair seat below it. A wedge across it would carve a solid sheet joining the two.
+TEST(WedgeBuilderTest, OcclusionEdgeIsNotBridged) {
+  constexpr int kRays = 61, kFrames = 4;  // 1° apart
+  std::vector<double> range_x(kRays, kWallX);
+  for (int j = 40; j < kRays; ++j) range_x[j] = 4.0;
+  auto build = [&](double max_obliquity, Collected& out) {
+    WedgeBuilderOptions o;
+    o.max_obliquity = max_obliquity;
+    absl::StatusOr<WedgeBuilder> b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
+    EXPECT_TRUE(b.ok());
+    for (int i = 0; i < kFrames; ++i) {
+      EXPECT_TRUE(b->AddFrame(WallFrame(i, kRays, range_x), WalkContext(i)).ok());
+    }
+    EXPECT_TRUE(b->Finish().ok());
+    return b->stats();
+  };
+  auto spans_edge = [](const Collected& out) {
+    int n = 0;
+    for (size_t w = 0; w < out.wedges.size(); ++w) {
+      if (out.wedges[w].num_rays != 4) continue;
+      std::set<uint32_t> index;
+      for (const RayId& id : out.ids[w]) index.insert(id.index);
+      n += index.count(39) && index.count(40);
+    }
+    return n;
+  };
+  Collected split, joined;
+  const WedgeBuilderStats s = build(WedgeBuilderOptions{}.max_obliquity, split);
+  EXPECT_EQ(s.discontinuities, uint64_t{kFrames - 1});
+  EXPECT_EQ(spans_edge(split), 0);
+  EXPECT_EQ(split.Count(4), (kRays - 2) * (kFrames - 1));
+  EXPECT_EQ(split.Count(1), 0);  // every ray still belongs to a wedge on its own surface
+  // The range rule alone joins them (the test can fail).
+  EXPECT_EQ(build(1e9, joined).discontinuities, 0u);
+  EXPECT_EQ(spans_edge(joined), kFrames - 1);
+  // A head-on wall is within any limit ≥ 1: nothing else changed.
+  WedgeBuilderOptions o;
+  o.max_obliquity = 0.5;
+  EXPECT_EQ(o.Validate().code(), absl::StatusCode::kInvalidArgument);
+}
+
+// Consecutive frames farther apart than max_frame_gap_m across the rays (a walker turning)
+// join only on a surface facing the scanner: a near surface in one frame (a chair back, 4 m)
+// and a far one in the next (the wall behind, 4.8 m) are one surface met at 53° when the frames
+// are 0.6 m apart, which the range and obliquity rules allow.
+TEST(WedgeBuilderTest, WideGapsJoinOnlyFacingSurfaces) {
+  constexpr int kRays = 61;  // 1° apart: 7–10 cm on the wall
+  auto four_ray_wedges = [&](double step_m, double second_range_x) {
+    Collected out;
+    absl::StatusOr<WedgeBuilder> b =
+        WedgeBuilder::Create({VerticalLineSensor()}, WedgeBuilderOptions{}, out.Sink());
+    EXPECT_TRUE(b.ok());
+    for (int i = 0; i < 2; ++i) {
+      FrameContext c = WalkContext(i);
+      c.pose_world_sys.translation = Vector3d(0, step_m * i, 0);
+      const std::vector<double> range_x(kRays, i == 0 ? 4.0 : second_range_x);
+      EXPECT_TRUE(b->AddFrame(WallFrame(i, kRays, range_x), c).ok());
+    }
+    EXPECT_TRUE(b->Finish().ok());
+    return out.Count(4);
+  };
+  ASSERT_EQ(WedgeBuilderOptions{}.max_frame_gap_m, 0.5);
+  EXPECT_EQ(four_ray_wedges(0.4, 4.8), kRays - 1);  // close frames: within the obliquity rule
+  EXPECT_EQ(four_ray_wedges(0.6, 4.8), 0);          // far apart, ranges 0.8 m apart
+  EXPECT_EQ(four_ray_wedges(0.6, 4.0), kRays - 1);  // far apart on a wall facing the scanner
+  EXPECT_EQ(four_ray_wedges(0.6, 4.25), kRays - 1);  // ranges within half the spacing
 }
 
 // The point covariance of every ray carved, by (frame, ray).
@@ -280,7 +359,8 @@ TEST(WedgeBuilderTest, PointsAreSpreadOverTheirShareOfTheSurface) {
       EXPECT_TRUE(b->AddFrame(WallFrame(i, kRays, range_x), WalkContext(i)).ok());
     }
     EXPECT_TRUE(b->Finish().ok());
-    EXPECT_EQ(b->stats().discontinuities, 0u);
+    // The step between rays 39 and 40 joins no wedge either (OcclusionEdgeIsNotBridged).
+    EXPECT_EQ(b->stats().discontinuities, uint64_t{kFrames - 1});
     return PointCovariances(out);
   };
   const auto spread = build(1.0 / 12), plain = build(0);
