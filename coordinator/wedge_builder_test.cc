@@ -224,39 +224,30 @@ TEST(WedgeBuilderTest, DepthDiscontinuityIsNotBridged) {
 }
 
 TEST(WedgeBuilderTest, SmallRangeChangesAndNoiseAreJoined) {
-  WedgeBuilderOptions o;
-  Collected out;
-  absl::StatusOr<WedgeBuilder> b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
-  ASSERT_TRUE(b.ok());
+  // Two frames of two rays (±30°) with the given ranges along x; the builder's stats.
+  auto build = [](const std::vector<double>& first, const std::vector<double>& second,
+                  Collected& out) {
+    absl::StatusOr<WedgeBuilder> b =
+        WedgeBuilder::Create({VerticalLineSensor()}, WedgeBuilderOptions{}, out.Sink());
+    EXPECT_TRUE(b.ok());
+    EXPECT_TRUE(b->AddFrame(WallFrame(0, 2, first), WalkContext(0)).ok());
+    EXPECT_TRUE(b->AddFrame(WallFrame(1, 2, second), WalkContext(1)).ok());
+    EXPECT_TRUE(b->Finish().ok());
+    return b->stats();
+  };
+  Collected jump, near, far, steep;
+  EXPECT_EQ(build({0.3, 5.0}, {0.38, 6.0}, jump).discontinuities, 1u);  // 0.3 vs 6 m
+  EXPECT_EQ(jump.Count(4), 0);
+  EXPECT_EQ(jump.Count(1), 4);
   // 0.3 m vs 0.38 m: a 27 % ratio but under min_jump_m; 5 m vs 5.35 m: 7 %, under the ratio.
-  ASSERT_TRUE(b->AddFrame(WallFrame(0, 2, {0.3, 5.0}), WalkContext(0)).ok());
-  ASSERT_TRUE(b->AddFrame(WallFrame(1, 2, {0.38, 6.0}), WalkContext(1)).ok());
-  ASSERT_TRUE(b->Finish().ok());
-  EXPECT_EQ(out.Count(4), 0);  // 0.3 vs 6 m is a jump
-  EXPECT_EQ(b->stats().discontinuities, 1u);
-  EXPECT_EQ(out.Count(1), 4);
-
-  out.wedges.clear();
-  b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
-  ASSERT_TRUE(b->AddFrame(WallFrame(0, 2, {0.30, 0.32}), WalkContext(0)).ok());
-  ASSERT_TRUE(b->AddFrame(WallFrame(1, 2, {0.38, 0.35}), WalkContext(1)).ok());
-  ASSERT_TRUE(b->Finish().ok());
-  EXPECT_EQ(out.Count(4), 1);
-  out.wedges.clear();
-  b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
-  ASSERT_TRUE(b->AddFrame(WallFrame(0, 2, {5.0, 5.2}), WalkContext(0)).ok());
-  ASSERT_TRUE(b->AddFrame(WallFrame(1, 2, {5.2, 5.35}), WalkContext(1)).ok());
-  ASSERT_TRUE(b->Finish().ok());
-  EXPECT_EQ(out.Count(4), 1);
+  build({0.30, 0.32}, {0.38, 0.35}, near);
+  EXPECT_EQ(near.Count(4), 1);
+  build({5.0, 5.2}, {5.2, 5.35}, far);
+  EXPECT_EQ(far.Count(4), 1);
   // 5 m then 6 m, frames 10 cm apart: within the range rule's 25 %, but the points lie 1.15 m
   // apart for 10 cm between the rays, a surface met at 85° or an occlusion edge: not joined.
-  out.wedges.clear();
-  b = WedgeBuilder::Create({VerticalLineSensor()}, o, out.Sink());
-  ASSERT_TRUE(b->AddFrame(WallFrame(0, 2, {5.0, 5.5}), WalkContext(0)).ok());
-  ASSERT_TRUE(b->AddFrame(WallFrame(1, 2, {6.0, 5.2}), WalkContext(1)).ok());
-  ASSERT_TRUE(b->Finish().ok());
-  EXPECT_EQ(out.Count(4), 0);
-  EXPECT_EQ(b->stats().discontinuities, 1u);
+  EXPECT_EQ(build({5.0, 5.5}, {6.0, 5.2}, steep).discontinuities, 1u);
+  EXPECT_EQ(steep.Count(4), 0);
 }
 
 // An occlusion edge that the range rule joins: a near surface (x = 4) over a far one (the wall,
@@ -296,7 +287,7 @@ TEST(WedgeBuilderTest, OcclusionEdgeIsNotBridged) {
   // The range rule alone joins them (the test can fail).
   EXPECT_EQ(build(1e9, joined).discontinuities, 0u);
   EXPECT_EQ(spans_edge(joined), kFrames - 1);
-  // A head-on wall is within any limit ≥ 1: nothing else changed.
+  // A limit below 1 would split a wall met head-on: refused.
   WedgeBuilderOptions o;
   o.max_obliquity = 0.5;
   EXPECT_EQ(o.Validate().code(), absl::StatusCode::kInvalidArgument);
