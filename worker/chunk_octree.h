@@ -69,9 +69,10 @@ class ChunkOctree {
 
   // §4.3.2, bottom-up: 8 sibling leaves merge into their parent (LeafStats::Merge, exact sums)
   // when all 8 are observed leaves with the same label (interior iff p > 0.5) and none holds a
-  // scan point (LeafStats::points stay at the finest depth, where segmentation reads them). A node with an
-  // unobserved child is never merged (its children are not all observed, nor all unobserved);
-  // a node whose children are all unobserved is an unobserved leaf already (stores nothing).
+  // scan point (LeafStats::points stay at the finest depth, where segmentation reads them). A
+  // node with an unobserved child is never merged (its children are not all observed, nor all
+  // unobserved); a node whose children are all unobserved is an unobserved leaf already
+  // (stores nothing).
   // Repeats up to the chunk root. Labels of every point are unchanged. Idempotent.
   void Simplify();
 

@@ -72,13 +72,16 @@ std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
   }
   std::vector<SegmentedObject> grouped;
   std::vector<int> group_of(n, -1);
+  std::vector<bool> grew;  // per group: its box changed, so its level and room may have
   for (int i = 0; i < n; ++i) {
     const int root = Find(parent, i);
     if (group_of[root] < 0) {
       group_of[root] = static_cast<int>(grouped.size());
       grouped.push_back(std::move(pieces[i]));
+      grew.push_back(false);
       continue;
     }
+    grew[group_of[root]] = true;
     SegmentedObject& g = grouped[group_of[root]];
     const SegmentedObject& p = pieces[i];
     const int offset = static_cast<int>(g.mesh.vertices.size());
@@ -90,10 +93,12 @@ std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
     g.volume_m3 += p.volume_m3;
     ++rep.grouped;
   }
-  for (SegmentedObject& g : grouped) {
-    const PlanColumn col = LookupPlan(plan, g.box.center());
-    g.level = col.level;
-    g.room = col.room;
+  // A piece kept alone keeps the level and room SplitObjects found for it.
+  for (size_t g = 0; g < grouped.size(); ++g) {
+    if (!grew[g]) continue;
+    const PlanColumn col = LookupPlan(plan, grouped[g].box.center());
+    grouped[g].level = col.level;
+    grouped[g].room = col.room;
   }
   return grouped;
 }
