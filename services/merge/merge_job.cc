@@ -235,7 +235,10 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
     for (const ChunkKey& chunk : chunks) {
       absl::StatusOr<std::shared_ptr<const TileData>> tile = (*objects)->Get(chunk);
       if (!tile.ok()) return tile.status();
-      ChunkRegion region = ObjectRecarveRegion(**tile, coarse_volume, /*margin_cells=*/1);
+      // Up to the ceiling over objects as close to it as SplitObjects groups stacked pieces:
+      // a lamp's rod, whose points join it only when they are in the region.
+      ChunkRegion region = ObjectRecarveRegion(**tile, coarse_volume, /*margin_cells=*/1,
+                                               ObjectSplitOptions{}.stack_gap_m);
       if (region.empty()) continue;
       region_volume += std::ldexp(double(region.count()), -3 * region.depth());
       again.push_back(RecarveChunk{chunk, std::move(region)});

@@ -286,7 +286,7 @@ absl::StatusOr<SegmentedChunk> SegmentChunk(const ChunkNeighbourhood& hood,
 }
 
 ChunkRegion ObjectRecarveRegion(const TileData& objects, const PlanVolume& plan,
-                                int margin_cells) {
+                                int margin_cells, double ceiling_reach_m) {
   const int depth = std::min(objects.grid.chunk_depth, ChunkRegion::kMaxDepth);
   const int n = 1 << depth;
   const double res = kChunkSizeM / n;
@@ -325,7 +325,12 @@ ChunkRegion ObjectRecarveRegion(const TileData& objects, const PlanVolume& plan,
         const int floor_cell =
             col.room >= 0 ? int(std::floor((col.floor_z - origin.z()) / res)) : z;
         const int z0 = std::max(std::min(floor_cell, z), 0) - margin_cells;
-        for (int zz = z0; zz <= z + margin_cells; ++zz)
+        // A hanging object: up to the cell holding the ceiling (its rod's points, below).
+        const double top = origin.z() + (z + 1) * res;
+        const int z1 = col.room >= 0 && col.ceiling_z - top <= ceiling_reach_m
+                           ? std::max(z, int(std::floor((col.ceiling_z - origin.z()) / res)))
+                           : z;
+        for (int zz = z0; zz <= std::min(z1, n - 1) + margin_cells; ++zz)
           for (int dy = -margin_cells; dy <= margin_cells; ++dy)
             for (int dx = -margin_cells; dx <= margin_cells; ++dx) take(x + dx, y + dy, zz);
       }

@@ -117,11 +117,15 @@ struct SegmentedChunk {
 
 // §5.6.1: the part of a chunk worth carving again finer, from its object tile (SegmentChunk's
 // `objects`): every object cell at the tile's depth, the cells within `margin_cells` of one,
-// and the columns below one down to its room's floor (furniture stands on legs and frames
-// that the coarse grid may have carved away). Empty when the tile has no object cell.
-// (Columns up to the ceiling for hanging lamps were tried on the simulated office: their
-// 2 cm rods stay carved away at 1.5625 cm, so they found nothing and are not done.)
+// the columns below one down to its room's floor (furniture stands on legs and frames that
+// the coarse grid may have carved away), and, for a cell whose top is within
+// `ceiling_reach_m` of its room's ceiling, the column above it up to the ceiling (a hanging
+// lamp's rod). Empty when the tile has no object cell.
+// The rods are 2 cm: the wedges carve them away even at 1.5625 cm, but a few of the scan's
+// points hit them (0–25 per rod on the simulated office), and those make their cells solid
+// (the point evidence above), so the lamp's box reaches up its rod. Before the point evidence
+// existed, columns up to the ceiling found nothing.
 [[nodiscard]] ChunkRegion ObjectRecarveRegion(const TileData& objects, const PlanVolume& plan,
-                                              int margin_cells);
+                                              int margin_cells, double ceiling_reach_m = 0);
 
 }  // namespace carvemap

@@ -338,6 +338,36 @@ TEST_F(SegmentChunkTest, RecarveRegionCoversTheObjectDownToTheFloor) {
   EXPECT_EQ(limited->object_cells, 0u);
 }
 
+// A lamp's shade hanging under the ceiling on a rod too thin for the grid: the region reaches
+// up its column to the ceiling only when the shade is within ceiling_reach_m of it.
+TEST_F(SegmentChunkTest, RecarveRegionReachesUpToTheCeilingOverHangingObjects) {
+  // The shade [0.75, 1.25]² × [1.375, 1.5] under the ceiling at 1.75 (0.25 m above its top).
+  const TileData tile = FinestTile(grid_, [](const Eigen::Vector3d& c) {
+    const bool in_room = Inside(c, Eigen::Vector3d::Constant(0.25), Eigen::Vector3d::Constant(1.75));
+    const bool in_shade = Inside(c, {0.75, 0.75, 1.375}, {1.25, 1.25, 1.5});
+    return in_room && !in_shade ? 0.9 : 0.2;
+  });
+  absl::StatusOr<SegmentedChunk> seg =
+      SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, SegmentOptions{});
+  ASSERT_TRUE(seg.ok()) << seg.status();
+  ASSERT_EQ(seg->object_cells, 8u * 8u * 2u);
+  const double r = grid_.resolution_m();
+  auto cell = [&](double x, double y, double z) {
+    return ChunkNode{Eigen::Vector3i(int(x / r), int(y / r), int(z / r)), grid_.chunk_depth};
+  };
+  const ChunkRegion near = ObjectRecarveRegion(seg->objects, volume_, 1, 0.3);
+  EXPECT_TRUE(near.Intersects(cell(1.0, 1.0, 1.7)));    // the rod's cell under the ceiling
+  EXPECT_TRUE(near.Intersects(cell(1.0, 1.0, 1.78)));   // the ceiling's own cell
+  EXPECT_TRUE(near.Intersects(cell(0.72, 1.0, 1.7)));   // and a cell around the column
+  EXPECT_FALSE(near.Intersects(cell(0.6, 1.0, 1.7)));   // not two
+  EXPECT_FALSE(near.Intersects(cell(1.0, 1.0, 1.9)));   // not above the ceiling's cell and one
+  // 0.25 m to the ceiling is farther than 0.2 m: up to one cell above the shade only.
+  const ChunkRegion far = ObjectRecarveRegion(seg->objects, volume_, 1, 0.2);
+  EXPECT_TRUE(far.Intersects(cell(1.0, 1.0, 1.53)));
+  EXPECT_FALSE(far.Intersects(cell(1.0, 1.0, 1.6)));
+  EXPECT_GT(near.count(), far.count());
+}
+
 TEST_F(SegmentChunkTest, LeavesSplitOnlyWhereTheClassChanges) {
   // One observed solid leaf over the whole chunk: the room's volume inside it is object.
   TileData tile;
