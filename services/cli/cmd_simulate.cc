@@ -30,6 +30,7 @@ struct SimulateFlags {
   SimulateOptions options;
   std::string noise = "on";
   double drift_m = -1;
+  bool no_drift = false;
   double range_sigma_m = -1;
   bool quiet = false;
 };
@@ -40,6 +41,10 @@ absl::Status RunSimulate(SimulateFlags& flags) {
     return absl::InvalidArgumentError("--noise must be 'on' or 'off'");
   }
   o.noise.enabled = flags.noise == "on";
+  if (flags.no_drift && flags.drift_m >= 0) {
+    return absl::InvalidArgumentError("--no-drift and --drift-m cannot both be given");
+  }
+  o.noise.drift = !flags.no_drift;
   if (flags.drift_m >= 0) {
     o.noise.drift_options.sigma_xy_m = flags.drift_m;
     o.noise.drift_options.sigma_z_m = 0.3 * flags.drift_m;
@@ -101,7 +106,11 @@ void RegisterSimulate(CLI::App& app, int& exit_code) {
                   "on: drift, clock jitter, range noise; off: exact data for tests")
       ->capture_default_str();
   cmd->add_option("--drift-m", flags->drift_m,
-                  "Localization drift std-dev in x and y, metres (z: 0.3 of it; default 0.1)");
+                  "Localization drift std-dev in x and y, metres (z: 0.3 of it; default 0.1); "
+                  "the rotation drift (yaw 0.5°, roll and pitch 0.2°) stays");
+  cmd->add_flag("--no-drift", flags->no_drift,
+                "No localization drift at all, the path exact (range noise and clock jitter "
+                "stay; --noise off removes them too)");
   cmd->add_option("--range-sigma", flags->range_sigma_m,
                   "Constant part a of the range noise std-dev a + b·range, metres (default 0.01)");
   cmd->add_option("--max-duration", o.max_duration_s,
