@@ -120,6 +120,9 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
                      "Floor-plan method of the merge: rooms (§3.3 room partitioning, the "
                      "default) or eigencrust (§3.2, with §3.3's rooms on its interior)")
       ->check(CLI::IsMember({"rooms", "eigencrust"}));
+  submit->add_flag("--points", flags->submit.trimmed_points,
+                   "The merge also writes points.ply: the scan's points without those farther "
+                   "than 1 m from the floor plans (seed §5.5)");
   submit->add_option("--idempotency-key", flags->submit.idempotency_key,
                      "Submitting twice with the same key returns the first job");
   submit->add_flag("--watch", flags->watch, "Watch the job until it ends");

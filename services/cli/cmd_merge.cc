@@ -27,7 +27,9 @@ struct MergeFlags {
 absl::Status RunMergeCommand(MergeFlags& flags) {
   flags.options.cache_budget_bytes = static_cast<uint64_t>(flags.cache_mb * (1 << 20));
   flags.options.job = {{"command", "carvemap merge"},
-                       {"params", {{"floorplan", flags.options.floorplan_method}}}};
+                       {"params",
+                        {{"floorplan", flags.options.floorplan_method},
+                         {"points", flags.options.trimmed_points}}}};
   ProgressLine line(!flags.quiet);
   auto progress = [&line](const MergeProgress& p) {
     line.Update("merge: %s %llu/%llu", p.stage.c_str(),
@@ -61,6 +63,11 @@ absl::Status RunMergeCommand(MergeFlags& flags) {
     if (s.building_triangles > 0) {
       std::cout << "  mesh/building.ply: " << s.building_triangles << " triangles\n";
     }
+    const nlohmann::json counts = s.job.value("counts", nlohmann::json::object());
+    if (counts.contains("points_kept")) {
+      std::cout << "  points.ply: " << counts.value("points_kept", uint64_t{0}) << " points ("
+                << counts.value("points_trimmed", uint64_t{0}) << " trimmed, §5.5)\n";
+    }
     for (const std::string& w : s.warnings) std::cout << "  warning: " << w << "\n";
   }
   std::cout << "  " << s.job_json_path << "\n";
@@ -85,6 +92,11 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
                   "(§3.2, with §3.3's rooms on its interior)")
       ->check(CLI::IsMember({"rooms", "eigencrust"}))
       ->capture_default_str();
+  cmd->add_flag("--points", flags->options.trimmed_points,
+                "Also write points.ply: the scan's points in the world frame without those "
+                "farther than 1 m from the floor plans (§5.5: seen through windows and doors); "
+                "needs --scan")
+      ->needs("--scan");
   cmd->add_option("--resolution", flags->options.resolution_m,
                   "Octree resolution in m (2 m / 2^k); default: the tiles'");
   cmd->add_option("--cache-mb", flags->cache_mb, "Decoded-tile cache budget in MiB")

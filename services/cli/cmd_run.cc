@@ -42,6 +42,7 @@ struct RunFlags {
   double resolution_m = 0.0625;
   double object_resolution_m = 0;  // 0 = resolution / 2
   std::string floorplan_method = "rooms";
+  bool trimmed_points = false;
   std::string storage_root;
   // Short defaults on one machine: a killed worker's chunks come back within seconds.
   double heartbeat_interval_s = 1.0;
@@ -222,13 +223,16 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   submit.resolution_m = flags.resolution_m;
   submit.object_resolution_m = flags.object_resolution_m;
   submit.floorplan_method = flags.floorplan_method;
+  submit.trimmed_points = flags.trimmed_points;
   // The job id follows from the key (and tiles record it), so repeated runs of the same scan
-  // and resolutions give byte-identical tiles whatever the number of workers. The method is in
-  // the key only when it is not the default, so the default's job ids stay as they were.
+  // and resolutions give byte-identical tiles whatever the number of workers. The method and
+  // --points are in the key only when not the default, so the default's job ids stay as they
+  // were.
   submit.idempotency_key = absl::StrCat(
       "carvemap run ", scan.filename().string(), " ", flags.resolution_m, " ",
       flags.object_resolution_m,
-      flags.floorplan_method == "rooms" ? "" : absl::StrCat(" ", flags.floorplan_method));
+      flags.floorplan_method == "rooms" ? "" : absl::StrCat(" ", flags.floorplan_method),
+      flags.trimmed_points ? " points" : "");
   absl::StatusOr<JobInfo> job = state.client->Submit(submit);
   if (!job.ok()) return job.status();
   {
@@ -294,6 +298,9 @@ void RegisterRun(CLI::App& app, int& exit_code) {
                   "eigencrust (§3.2, with §3.3's rooms on its interior)")
       ->check(CLI::IsMember({"rooms", "eigencrust"}))
       ->capture_default_str();
+  cmd->add_flag("--points", flags->trimmed_points,
+                "Also write OUT/points.ply: the scan's points in the world frame without those "
+                "farther than 1 m from the floor plans (§5.5: seen through windows and doors)");
   cmd->add_option("--storage-root", flags->storage_root,
                   "Keep tiles under <storage-root>/<job>/tiles instead of OUT/tiles");
   cmd->add_option("--heartbeat-interval-s", flags->heartbeat_interval_s,

@@ -60,6 +60,9 @@ absl::Status MergeOptions::Validate() const {
           absl::StrCat("merge: object resolution: ", grid.status().message()));
     }
   }
+  if (trimmed_points && scan_path.empty()) {
+    return absl::InvalidArgumentError("merge: trimmed points need the job's scan (scan_path)");
+  }
   if (!job.is_object() && !job.is_null()) {
     return absl::InvalidArgumentError("merge: job must be a JSON object");
   }

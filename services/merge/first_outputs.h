@@ -48,6 +48,10 @@ struct MergeOptions {
   // plans their scanner positions (§3.3.1 lines of sight, §3.3.2 unentered rooms). Empty: no
   // floor plans (job.json says why under "warnings").
   std::string scan_path;
+  // RunMerge only, §5.5 on request: OUT/points.ply, the scan's returns in the world frame
+  // without those the floor plans trim (services/merge/trimmed_points.h). Needs scan_path
+  // (else InvalidArgument) and floor plans (without them job.json warns and there is no file).
+  bool trimmed_points = false;
   // RunMerge only: the floor-plan method, "rooms" (§3.3) or "eigencrust" (§3.2); another name
   // is InvalidArgument before any work.
   std::string floorplan_method = "rooms";

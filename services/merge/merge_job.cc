@@ -13,10 +13,12 @@
 #include "services/floorplan/floorplan_export.h"
 #include "services/floorplan/floorplan_pipeline.h"
 #include "services/floorplan/octree_wall_samples.h"
+#include "services/floorplan/scan_cloud_stream.h"
 #include "services/levels/level_split.h"
 #include "services/merge/dense_mesh.h"
 #include "services/merge/segment_tiles.h"
 #include "services/merge/tile_set.h"
+#include "services/merge/trimmed_points.h"
 #include "services/mesh/mesh_checks.h"
 #include "services/mesh/planar_mesh.h"
 #include "services/mesh/planar_regions.h"
@@ -312,6 +314,21 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   counts["trimmed_cells"] = segmented->trimmed_cells;
   timings["merge.segmentation"] = SecondsSince(t0);
 
+  if (options.trimmed_points) {
+    t0 = Clock::now();
+    if (absl::Status s = ReportMergeProgress(progress, "trimmed_points", 0, 1); !s.ok()) return s;
+    absl::StatusOr<std::unique_ptr<ScanCloudStream>> scan =
+        ScanCloudStream::Open(options.scan_path, /*validate=*/false);  // the floor plans read it
+    if (!scan.ok()) return scan.status();
+    absl::StatusOr<TrimmedPointsCounts> points = WriteTrimmedPoints(
+        (*scan)->Stream(), *volume, seg_options.trim_distance_m, (out / "points.ply").string());
+    if (!points.ok()) return points.status();
+    counts["points_kept"] = points->kept;
+    counts["points_trimmed"] = points->trimmed;
+    outputs.push_back("points.ply");
+    timings["merge.trimmed_points"] = SecondsSince(t0);
+  }
+
   // The building: faces, regions and planar mesh of the building tiles.
   t0 = Clock::now();
   std::optional<TriangleMesh> building;
@@ -546,6 +563,10 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   // mesh/combined.ply. Without floor plans the building mesh holds everything (issue 4's).
   t0 = Clock::now();
   uint64_t building_triangles = 0, object_count = 0;
+  {
+    std::error_code ec;  // an earlier merge's points.ply is not this one's (rewritten on request)
+    fs::remove(out / "points.ply", ec);
+  }
   if (plans.empty()) {
     warnings.push_back("segmentation: no floor plan, so no objects; mesh/building.ply is the "
                        "planar mesh of everything");
@@ -553,6 +574,9 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
     std::error_code ec;
     for (const char* stale : {"objects", "objects.ply", "combined.ply"}) {
       fs::remove_all(out / "mesh" / stale, ec);
+    }
+    if (options.trimmed_points) {
+      warnings.push_back("trimmed_points: no floor plan to trim by, so no points.ply");
     }
     if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
     // The regions above made the levels (and would have made the floor plans); the planar

@@ -9,6 +9,8 @@
 //   segmentation     with floor plans: every tile split against the extruded plans into
 //                    building and object tiles (§5.5 trimming, §5.6; services/segment), in
 //                    <out>/.segment while the merge runs
+//   trimmed_points   with MergeOptions::trimmed_points: the scan's points without those the
+//                    plans trim (§5.5; services/merge/trimmed_points.h) ➜ points.ply
 //   building_faces, planar_mesh   the building tiles' faces, regions and planar mesh ➜
 //                    mesh/building.ply (face property `region`); without floor plans the
 //                    planar mesh of everything

@@ -61,6 +61,7 @@ struct ResolvedParams {
   int workers_hint = 0;
   double object_resolution_m = kDefaultResolutionM;  // = resolution_m: no re-carving
   std::string floorplan_method = "rooms";               // §3.3 rooms or §3.2 eigencrust
+  bool trimmed_points = false;                          // §5.5 points.ply on request
 };
 
 std::string ParamsToJson(const ResolvedParams& p) {
@@ -69,7 +70,8 @@ std::string ParamsToJson(const ResolvedParams& p) {
       {"method", p.method},
       {"workers_hint", p.workers_hint},
       {"object_resolution_m", p.object_resolution_m},
-      {"floorplan_method", p.floorplan_method}};
+      {"floorplan_method", p.floorplan_method},
+      {"trimmed_points", p.trimmed_points}};
   return j.dump();
 }
 
@@ -83,6 +85,7 @@ ResolvedParams ParamsFromJson(const std::string& text) {
     // Jobs stored before §5.6.1's re-carving existed merge as they were submitted.
     p.object_resolution_m = j.value("object_resolution_m", p.resolution_m);
     p.floorplan_method = j.value("floorplan_method", std::string("rooms"));
+    p.trimmed_points = j.value("trimmed_points", false);
   }
   return p;
 }
@@ -132,6 +135,7 @@ absl::StatusOr<ResolvedParams> ResolveParams(const pb::JobParams& in) {
     return absl::InvalidArgumentError(absl::StrCat("floorplan_method: ", plan.status().message()));
   }
   p.floorplan_method = std::string(FloorPlanMethodName(*plan));
+  p.trimmed_points = in.trimmed_points();
   return p;
 }
 
@@ -147,6 +151,7 @@ void ToProto(const JobRecord& r, pb::Job& out) {
   out.mutable_params()->set_workers_hint(p.workers_hint);
   out.mutable_params()->set_object_resolution_m(p.object_resolution_m);
   out.mutable_params()->set_floorplan_method(p.floorplan_method);
+  out.mutable_params()->set_trimmed_points(p.trimmed_points);
   out.set_error(r.error);
   out.set_created_unix_ms(r.created_unix_ms);
   out.set_updated_unix_ms(r.updated_unix_ms);
@@ -1089,6 +1094,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       req.resolution_m = rt.params.resolution_m;
       req.object_resolution_m = rt.params.object_resolution_m;
       req.floorplan_method = rt.params.floorplan_method;
+      req.trimmed_points = rt.params.trimmed_points;
       nlohmann::json doc = {{"job_id", job_id},
                             {"input_path", job->input_path},
                             {"output_name", job->output_name},

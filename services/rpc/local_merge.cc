@@ -19,6 +19,7 @@ MergeFunction LocalMerge() {
     options.resolution_m = req.resolution_m;
     options.object_resolution_m = req.object_resolution_m;
     options.floorplan_method = req.floorplan_method;
+    options.trimmed_points = req.trimmed_points && !req.scan_input.empty();  // no scan: no points
     options.recarve = req.recarve;
     // The scan through the descriptor checked here (ConfinedFile: "/proc/self/fd/N"), as the
     // ingest reads it; its errors then name the path as the tenant gave it.

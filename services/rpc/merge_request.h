@@ -36,6 +36,7 @@ struct MergeJobRequest {
   // the directory of their tiles). Equal to resolution_m, or no `recarve`: no re-carving.
   double object_resolution_m = 0.0625;
   std::string floorplan_method = "rooms";  // §3.3 "rooms" or §3.2 "eigencrust"
+  bool trimmed_points = false;             // §5.5 on request: points.ply (needs the scan)
   std::function<absl::StatusOr<std::string>(const std::vector<RecarveChunk>& chunks,
                                             double resolution_m)>
       recarve;

@@ -68,6 +68,15 @@ struct PlanColumn {
 };
 [[nodiscard]] PlanColumn LookupPlan(const PlanVolume& volume, const Eigen::Vector3d& x);
 
+// §5.5: a point (or an octree cell's centre) in `col` lies outside the scanned area, seen
+// through a window or an open door, when it is on a level and farther than trim_distance_m
+// (2D) from that level's plan interior ("any points that are at least some distance d meters
+// from any interior area of the floor plan"). Above or below every level: kept (no plan there
+// to judge by).
+[[nodiscard]] inline bool TrimmedByPlan(const PlanColumn& col, double trim_distance_m) {
+  return col.level >= 0 && col.signed_distance_m < -trim_distance_m;
+}
+
 // The unit 2D direction in which the signed distance grows fastest at x's column (away from
 // the nearest wall, into the room; central differences over the neighbouring columns), or zero
 // where it is flat, undefined, or x is in no level's raster.

@@ -241,9 +241,7 @@ CellSegment ClassifyCell(const PlanVolume& plan, const Eigen::Vector3d& centre, 
   double wall_margin = 0;
   if (interior) {
     // §5.5: only levels with a plan trim; space above or below every level is kept.
-    if (col.level >= 0 && col.signed_distance_m < -options.trim_distance_m) {
-      return CellSegment::kTrimmed;
-    }
+    if (TrimmedByPlan(col, options.trim_distance_m)) return CellSegment::kTrimmed;
     // §4.2.3: carved, but the scan's points say solid: an object if the plan agrees below,
     // else free as carved (a wall's or floor's points stay building's free side).
     if (!points) return CellSegment::kFree;

@@ -161,8 +161,15 @@ def main():
                             f"{counts[0]} + {counts[1]}")
         print(f"objects: {len(job.get('objects', []))}; combined = building + objects "
               f"({counts[2]} = {counts[0]} + {counts[1]})")
-    # §5.6.1: the objects were meshed from chunks carved again finer, one tile each.
     job_counts = job.get("counts", {})
+    # §5.5 on request: points.ply holds the points kept, vertices only.
+    if "points.ply" in outputs:
+        xyz, tri = read_ply(os.path.join(args.out, "points.ply"))
+        if len(xyz) != job_counts.get("points_kept", -1) or len(tri) != 0:
+            problems.append(f"points.ply: {len(xyz)} vertices and {len(tri)} faces, job.json "
+                            f"says {job_counts.get('points_kept')} points kept")
+        print(f"points.ply: {len(xyz)} points, {job_counts.get('points_trimmed')} trimmed")
+    # §5.6.1: the objects were meshed from chunks carved again finer, one tile each.
     if job_counts.get("recarved_chunks", 0) > 0:
         finer = job_counts.get("object_resolution_m", 0)
         coarse = job.get("params", {}).get("resolution_m", 0)
