@@ -123,6 +123,10 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
   submit->add_flag("--points", flags->submit.trimmed_points,
                    "The merge also writes points.ply: the scan's points without those farther "
                    "than 1 m from the floor plans (seed §5.5)");
+  submit->add_option("--min-object-volume", flags->submit.min_object_volume_m3,
+                     "Objects with less volume than this, m³, are dropped (§5.6); 0: the "
+                     "default, 0.005")
+      ->check(CLI::Range(0.0, 1000.0));
   submit->add_option("--idempotency-key", flags->submit.idempotency_key,
                      "Submitting twice with the same key returns the first job");
   submit->add_flag("--watch", flags->watch, "Watch the job until it ends");

@@ -43,6 +43,7 @@ struct RunFlags {
   double object_resolution_m = 0;  // 0 = resolution / 2
   std::string floorplan_method = "rooms";
   bool trimmed_points = false;
+  double min_object_volume_m3 = 0;  // 0 = the merge's default
   std::string storage_root;
   // Short defaults on one machine: a killed worker's chunks come back within seconds.
   double heartbeat_interval_s = 1.0;
@@ -224,15 +225,17 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   submit.object_resolution_m = flags.object_resolution_m;
   submit.floorplan_method = flags.floorplan_method;
   submit.trimmed_points = flags.trimmed_points;
+  submit.min_object_volume_m3 = flags.min_object_volume_m3;
   // The job id follows from the key (and tiles record it), so repeated runs of the same scan
-  // and resolutions give byte-identical tiles whatever the number of workers. The method and
-  // --points are in the key only when not the default, so the default's job ids stay as they
-  // were.
+  // and resolutions give byte-identical tiles whatever the number of workers. The method,
+  // --points and --min-object-volume are in the key only when not the default, so the
+  // default's job ids stay as they were.
   submit.idempotency_key = absl::StrCat(
       "carvemap run ", scan.filename().string(), " ", flags.resolution_m, " ",
       flags.object_resolution_m,
       flags.floorplan_method == "rooms" ? "" : absl::StrCat(" ", flags.floorplan_method),
-      flags.trimmed_points ? " points" : "");
+      flags.trimmed_points ? " points" : "",
+      flags.min_object_volume_m3 > 0 ? absl::StrCat(" ", flags.min_object_volume_m3) : "");
   absl::StatusOr<JobInfo> job = state.client->Submit(submit);
   if (!job.ok()) return job.status();
   {
@@ -301,6 +304,10 @@ void RegisterRun(CLI::App& app, int& exit_code) {
   cmd->add_flag("--points", flags->trimmed_points,
                 "Also write OUT/points.ply: the scan's points in the world frame without those "
                 "farther than 1 m from the floor plans (§5.5: seen through windows and doors)");
+  cmd->add_option("--min-object-volume", flags->min_object_volume_m3,
+                  "Objects with less volume than this, m³, are specks and dropped (§5.6); "
+                  "0 = the default, 0.005 (5 litres)")
+      ->check(CLI::Range(0.0, 1000.0));
   cmd->add_option("--storage-root", flags->storage_root,
                   "Keep tiles under <storage-root>/<job>/tiles instead of OUT/tiles");
   cmd->add_option("--heartbeat-interval-s", flags->heartbeat_interval_s,

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <system_error>
 
@@ -59,6 +60,9 @@ absl::Status MergeOptions::Validate() const {
       return absl::InvalidArgumentError(
           absl::StrCat("merge: object resolution: ", grid.status().message()));
     }
+  }
+  if (!std::isfinite(min_object_volume_m3)) {
+    return absl::InvalidArgumentError("merge: min_object_volume_m3 must be finite");
   }
   if (trimmed_points && scan_path.empty()) {
     return absl::InvalidArgumentError("merge: trimmed points need the job's scan (scan_path)");

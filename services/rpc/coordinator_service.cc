@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -62,6 +63,7 @@ struct ResolvedParams {
   double object_resolution_m = kDefaultResolutionM;  // = resolution_m: no re-carving
   std::string floorplan_method = "rooms";               // §3.3 rooms or §3.2 eigencrust
   bool trimmed_points = false;                          // §5.5 points.ply on request
+  double min_object_volume_m3 = 0;                      // §5.6 specks; 0 = the merge's default
 };
 
 std::string ParamsToJson(const ResolvedParams& p) {
@@ -71,7 +73,8 @@ std::string ParamsToJson(const ResolvedParams& p) {
       {"workers_hint", p.workers_hint},
       {"object_resolution_m", p.object_resolution_m},
       {"floorplan_method", p.floorplan_method},
-      {"trimmed_points", p.trimmed_points}};
+      {"trimmed_points", p.trimmed_points},
+      {"min_object_volume_m3", p.min_object_volume_m3}};
   return j.dump();
 }
 
@@ -86,6 +89,7 @@ ResolvedParams ParamsFromJson(const std::string& text) {
     p.object_resolution_m = j.value("object_resolution_m", p.resolution_m);
     p.floorplan_method = j.value("floorplan_method", std::string("rooms"));
     p.trimmed_points = j.value("trimmed_points", false);
+    p.min_object_volume_m3 = j.value("min_object_volume_m3", 0.0);
   }
   return p;
 }
@@ -136,6 +140,11 @@ absl::StatusOr<ResolvedParams> ResolveParams(const pb::JobParams& in) {
   }
   p.floorplan_method = std::string(FloorPlanMethodName(*plan));
   p.trimmed_points = in.trimmed_points();
+  if (!(in.min_object_volume_m3() >= 0) || !std::isfinite(in.min_object_volume_m3())) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "min_object_volume_m3 ", in.min_object_volume_m3(), ": must be finite and ≥ 0"));
+  }
+  p.min_object_volume_m3 = in.min_object_volume_m3();
   return p;
 }
 
@@ -152,6 +161,7 @@ void ToProto(const JobRecord& r, pb::Job& out) {
   out.mutable_params()->set_object_resolution_m(p.object_resolution_m);
   out.mutable_params()->set_floorplan_method(p.floorplan_method);
   out.mutable_params()->set_trimmed_points(p.trimmed_points);
+  out.mutable_params()->set_min_object_volume_m3(p.min_object_volume_m3);
   out.set_error(r.error);
   out.set_created_unix_ms(r.created_unix_ms);
   out.set_updated_unix_ms(r.updated_unix_ms);
@@ -1095,6 +1105,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       req.object_resolution_m = rt.params.object_resolution_m;
       req.floorplan_method = rt.params.floorplan_method;
       req.trimmed_points = rt.params.trimmed_points;
+      req.min_object_volume_m3 = rt.params.min_object_volume_m3;
       nlohmann::json doc = {{"job_id", job_id},
                             {"input_path", job->input_path},
                             {"output_name", job->output_name},

@@ -100,6 +100,7 @@ absl::StatusOr<JobInfo> JobClient::Submit(const SubmitParams& params) {
   req.mutable_params()->set_object_resolution_m(params.object_resolution_m);
   req.mutable_params()->set_floorplan_method(params.floorplan_method);
   req.mutable_params()->set_trimmed_points(params.trimmed_points);
+  req.mutable_params()->set_min_object_volume_m3(params.min_object_volume_m3);
   req.set_idempotency_key(params.idempotency_key);
   pb::SubmitJobResponse resp;
   if (!impl_->init.ok()) return impl_->init;

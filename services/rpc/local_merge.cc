@@ -20,6 +20,7 @@ MergeFunction LocalMerge() {
     options.object_resolution_m = req.object_resolution_m;
     options.floorplan_method = req.floorplan_method;
     options.trimmed_points = req.trimmed_points && !req.scan_input.empty();  // no scan: no points
+    if (req.min_object_volume_m3 > 0) options.min_object_volume_m3 = req.min_object_volume_m3;
     options.recarve = req.recarve;
     // The scan through the descriptor checked here (ConfinedFile: "/proc/self/fd/N"), as the
     // ingest reads it; its errors then name the path as the tenant gave it.

@@ -37,6 +37,7 @@ struct MergeJobRequest {
   double object_resolution_m = 0.0625;
   std::string floorplan_method = "rooms";  // §3.3 "rooms" or §3.2 "eigencrust"
   bool trimmed_points = false;             // §5.5 on request: points.ply (needs the scan)
+  double min_object_volume_m3 = 0;         // §5.6 specks, m³; 0 = the merge's default
   std::function<absl::StatusOr<std::string>(const std::vector<RecarveChunk>& chunks,
                                             double resolution_m)>
       recarve;

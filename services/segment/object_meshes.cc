@@ -15,8 +15,15 @@ int Find(std::vector<int>& parent, int x) {
   return x;
 }
 
+// A piece that only joins others while grouping (a speck), never links two.
+bool Speck(const SegmentedObject& o, const ObjectSplitOptions& options) {
+  return o.volume_m3 < options.speck_volume_m3 ||
+         o.box.sizes().minCoeff() < options.min_thickness_m;
+}
+
+// An object, once grouped, too small to report.
 bool TooSmall(const SegmentedObject& o, const ObjectSplitOptions& options) {
-  return o.volume_m3 < options.min_volume_m3 || o.box.sizes().minCoeff() < options.min_thickness_m;
+  return Speck(o, options) || o.volume_m3 < options.min_volume_m3;
 }
 
 // The share of the smaller footprint (xy box) that the two footprints share.
@@ -52,7 +59,7 @@ std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
     if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
   };
   std::vector<bool> small(n);
-  for (int i = 0; i < n; ++i) small[i] = TooSmall(pieces[i], options);
+  for (int i = 0; i < n; ++i) small[i] = Speck(pieces[i], options);
   for (int i = 0; i < n; ++i) {
     for (int j = i + 1; j < n; ++j) {
       if (!small[i] && !small[j] && stacked(i, j) > 0) join(i, j);
@@ -175,7 +182,7 @@ std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
     obj.room = col.room;
     // Specks are judged after grouping: a speck stacked on an object is part of it (a point
     // of a lamp's rod, a leg's foot).
-    if (!TooSmall(obj, options) && col.room >= 0 &&
+    if (!Speck(obj, options) && col.room >= 0 &&
         obj.box.max().z() >= col.ceiling_z - options.ceiling_film_m) {
       const Eigen::Vector3d size = obj.box.sizes();
       const double thin = std::min(size.x(), size.y()), wide = std::max(size.x(), size.y());

@@ -21,9 +21,16 @@
 namespace carvemap {
 
 struct ObjectSplitOptions {
-  // Objects smaller than this are specks (noise on floors and walls), dropped, m³. Judged
-  // after stacked pieces are grouped (below), so a speck on an object's column joins it.
-  double min_volume_m3 = 0.001;
+  // Pieces smaller than this are specks (noise on floors and walls), m³: while stacked pieces
+  // are grouped (below) a speck joins the one object it overlaps most and never links two;
+  // left alone it is dropped.
+  double speck_volume_m3 = 0.001;
+  // Objects smaller than this after grouping are dropped, m³. 5 litres (a 17 cm cube):
+  // slivers of walls that a drifting path or sparse frames put inside the plan are 1–4
+  // litres; measured on office2 (docs/BENCHMARKS.md), false objects 11 % → 7 % with rotation
+  // drift and 10 % → 8 % at 10 Hz, with the same objects found as at 1 litre. Raising the
+  // speck size instead lost objects: pieces of one chair stopped joining.
+  double min_volume_m3 = 0.005;
   // Pieces whose bounding box is thinner than this on any axis are dropped too (one-cell films
   // where the carved walls bulge into a room past the plan's tolerance), m. 0 = keep.
   double min_thickness_m = 0;

@@ -53,11 +53,12 @@ TEST_F(ObjectMeshesTest, SplitsPiecesOrientsThemOutwardAndDropsSpecksAndCavities
   all.Append(InwardBox({1, 1, 0}, {2, 3, 1}));               // a cabinet in room 0 ...
   all.Append(Reversed(InwardBox({1.2f, 1.2f, 0.2f}, {1.8f, 2.8f, 0.8f})));  // ... hollow
   all.Append(InwardBox({3, 3, 1}, {3.05f, 3.05f, 1.05f}));   // a speck
+  all.Append(InwardBox({6.5f, 3, 1}, {6.64f, 3.14f, 1.1f}));  // a 2-litre sliver of a wall
   ObjectSplitReport report;
   const std::vector<SegmentedObject> objects =
       SplitObjects(all, volume_, ObjectSplitOptions{}, &report);
-  EXPECT_EQ(report.components, 4u);
-  EXPECT_EQ(report.dropped_small, 1u);
+  EXPECT_EQ(report.components, 5u);
+  EXPECT_EQ(report.dropped_small, 2u);  // below the default 5 litres
   EXPECT_EQ(report.dropped_cavities, 1u);
   ASSERT_EQ(objects.size(), 2u);
   // Ordered by box min x: the cabinet first.
@@ -75,6 +76,10 @@ TEST_F(ObjectMeshesTest, SplitsPiecesOrientsThemOutwardAndDropsSpecksAndCavities
     EXPECT_EQ(o.mesh.triangles.size(), 12u);
     EXPECT_TRUE(CheckMesh(o.mesh).watertight()) << CheckMesh(o.mesh).ToString();
   }
+  // With 1 litre the sliver is an object.
+  ObjectSplitOptions litre;
+  litre.min_volume_m3 = 0.001;
+  EXPECT_EQ(SplitObjects(all, volume_, litre).size(), 3u);
   // Thin pieces go with min_thickness_m.
   ObjectSplitOptions thin;
   thin.min_thickness_m = 0.6;
