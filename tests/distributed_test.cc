@@ -4,6 +4,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -92,13 +93,14 @@ class DistributedTest : public ::testing::Test {
 
 TEST_F(DistributedTest, SubmitValidates) {
   auto submit = [&](const std::string& path, double resolution, double object_resolution = 0,
-                    const std::string& floorplan = "") {
+                    const std::string& floorplan = "", double min_object_volume = 0) {
     grpc::ClientContext ctx;
     pb::SubmitJobRequest req;
     req.set_input_path(path);
     req.mutable_params()->set_resolution_m(resolution);
     req.mutable_params()->set_object_resolution_m(object_resolution);
     req.mutable_params()->set_floorplan_method(floorplan);
+    req.mutable_params()->set_min_object_volume_m3(min_object_volume);
     pb::SubmitJobResponse resp;
     return jobs_->SubmitJob(&ctx, req, &resp).error_code();
   };
@@ -114,6 +116,10 @@ TEST_F(DistributedTest, SubmitValidates) {
   EXPECT_EQ(submit("missing.h5", 0, 0, "graphcut"), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(submit("missing.h5", 0, 0, "eigencrust"), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(submit("missing.h5", 0, 0.0625), grpc::StatusCode::NOT_FOUND);  // = no second pass
+  // §5.6's speck volume: ≥ 0 and finite.
+  EXPECT_EQ(submit("missing.h5", 0, 0, "", -0.001), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(submit("missing.h5", 0, 0, "", std::nan("")), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(submit("missing.h5", 0, 0, "", 0.01), grpc::StatusCode::NOT_FOUND);
 
   grpc::ClientContext ctx;
   pb::GetJobRequest get;

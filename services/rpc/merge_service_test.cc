@@ -69,6 +69,8 @@ MergeJobRequest Request(const fs::path& out, Recorder* recorder = nullptr) {
   req.resolution_m = 0.0625;
   req.object_resolution_m = 0.03125;
   req.floorplan_method = "eigencrust";
+  req.trimmed_points = true;
+  req.min_object_volume_m3 = 0.002;
   req.job_json = R"({"job_id": "j-test"})";
   if (recorder != nullptr) {
     req.progress = [recorder](const std::string& stage, uint64_t, uint64_t) {
@@ -274,6 +276,8 @@ TEST_F(MergeServiceTest, ProgressFlowsAndTheMergesOwnFailureIsFinal) {
   EXPECT_DOUBLE_EQ(seen.resolution_m, 0.0625);
   EXPECT_DOUBLE_EQ(seen.object_resolution_m, 0.03125);
   EXPECT_EQ(seen.floorplan_method, "eigencrust");
+  EXPECT_TRUE(seen.trimmed_points);
+  EXPECT_DOUBLE_EQ(seen.min_object_volume_m3, 0.002);
   EXPECT_EQ(seen.job_json, req.job_json);
   EXPECT_EQ(seen.attempt, 1);
   EXPECT_FALSE(seen.recarve);  // the request offered none
