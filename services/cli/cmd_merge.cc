@@ -99,7 +99,7 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
       ->needs("--scan");
   cmd->add_option("--min-object-volume", flags->options.min_object_volume_m3,
                   "With --scan: objects with less volume than this, m³, are specks and dropped "
-                  "(§5.6); default 0.005 (5 litres)")
+                  "(§5.6); 0 = the default, 0.005 (5 litres)")
       ->check(CLI::Range(0.0, 1000.0));
   cmd->add_option("--resolution", flags->options.resolution_m,
                   "Octree resolution in m (2 m / 2^k); default: the tiles'");

@@ -53,8 +53,9 @@ struct MergeOptions {
   // (else InvalidArgument) and floor plans (without them job.json warns and there is no file).
   bool trimmed_points = false;
   // RunMerge only: objects with less volume than this are specks, dropped (§5.6;
-  // ObjectSplitOptions::min_volume_m3), m³. < 0: that default.
-  double min_object_volume_m3 = -1;
+  // ObjectSplitOptions::min_volume_m3), m³. ≤ 0: that default (5 litres). Pieces under its
+  // speck_volume_m3 (1 litre) go whatever this says.
+  double min_object_volume_m3 = 0;
   // RunMerge only: the floor-plan method, "rooms" (§3.3) or "eigencrust" (§3.2); another name
   // is InvalidArgument before any work.
   std::string floorplan_method = "rooms";

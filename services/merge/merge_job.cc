@@ -400,7 +400,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
     if (!dense.ok()) return dense.status();
     ObjectSplitOptions split;
     split.min_thickness_m = 2 * grid.resolution_m();  // one-cell films are carving noise
-    if (options.min_object_volume_m3 >= 0) split.min_volume_m3 = options.min_object_volume_m3;
+    if (options.min_object_volume_m3 > 0) split.min_volume_m3 = options.min_object_volume_m3;
     objects = SplitObjects(dense->mesh, source.finer_volume ? *source.finer_volume : *volume,
                            split, &split_report);
   }
