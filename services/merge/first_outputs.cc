@@ -64,9 +64,6 @@ absl::Status MergeOptions::Validate() const {
   if (!std::isfinite(min_object_volume_m3)) {
     return absl::InvalidArgumentError("merge: min_object_volume_m3 must be finite");
   }
-  if (trimmed_points && scan_path.empty()) {
-    return absl::InvalidArgumentError("merge: trimmed points need the job's scan (scan_path)");
-  }
   if (!job.is_object() && !job.is_null()) {
     return absl::InvalidArgumentError("merge: job must be a JSON object");
   }

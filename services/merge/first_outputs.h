@@ -50,7 +50,8 @@ struct MergeOptions {
   std::string scan_path;
   // RunMerge only, §5.5 on request: OUT/points.ply, the scan's returns in the world frame
   // without those the floor plans trim (services/merge/trimmed_points.h). Needs scan_path
-  // (else InvalidArgument) and floor plans (without them job.json warns and there is no file).
+  // and floor plans: without either, job.json warns and there is no file (the other outputs
+  // do not depend on it, so the job goes on).
   bool trimmed_points = false;
   // RunMerge only: objects with less volume than this are specks, dropped (§5.6;
   // ObjectSplitOptions::min_volume_m3), m³. ≤ 0: that default (5 litres). Pieces under its

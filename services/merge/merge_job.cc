@@ -198,6 +198,15 @@ absl::StatusOr<std::optional<TriangleMesh>> PlanarBuildingMesh(
   return std::optional<TriangleMesh>(std::move(planar->mesh));
 }
 
+// §5.6's object split as this job asks for it; the re-carving region reaches as far up as the
+// split groups stacked pieces, so both read it here.
+ObjectSplitOptions SplitOptionsFor(const MergeOptions& options, const OctreeGrid& grid) {
+  ObjectSplitOptions split;
+  split.min_thickness_m = 2 * grid.resolution_m();  // one-cell films are carving noise
+  if (options.min_object_volume_m3 > 0) split.min_volume_m3 = options.min_object_volume_m3;
+  return split;
+}
+
 struct SegmentStageResult {
   uint64_t building_triangles = 0;
   uint64_t objects = 0;
@@ -240,7 +249,7 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
       // Up to the ceiling over objects as close to it as SplitObjects groups stacked pieces:
       // a lamp's rod, whose points join it only when they are in the region.
       ChunkRegion region = ObjectRecarveRegion(**tile, coarse_volume, /*margin_cells=*/1,
-                                               ObjectSplitOptions{}.stack_gap_m);
+                                               SplitOptionsFor(options, grid).stack_gap_m);
       if (region.empty()) continue;
       region_volume += std::ldexp(double(region.count()), -3 * region.depth());
       again.push_back(RecarveChunk{chunk, std::move(region)});
@@ -398,11 +407,8 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
     absl::StatusOr<DenseMeshResult> dense =
         BuildDenseMesh(**otiles, StageProgress(progress, "object_mesh"));
     if (!dense.ok()) return dense.status();
-    ObjectSplitOptions split;
-    split.min_thickness_m = 2 * grid.resolution_m();  // one-cell films are carving noise
-    if (options.min_object_volume_m3 > 0) split.min_volume_m3 = options.min_object_volume_m3;
     objects = SplitObjects(dense->mesh, source.finer_volume ? *source.finer_volume : *volume,
-                           split, &split_report);
+                           SplitOptionsFor(options, grid), &split_report);
   }
   fs::remove_all(work, ec);  // scratch: every output below is written from memory
   const fs::path objects_dir = out / "mesh" / "objects";
@@ -577,7 +583,9 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
       fs::remove_all(out / "mesh" / stale, ec);
     }
     if (options.trimmed_points) {
-      warnings.push_back("trimmed_points: no floor plan to trim by, so no points.ply");
+      warnings.push_back(options.scan_path.empty()
+                             ? "trimmed_points: no scan given, so no points.ply"
+                             : "trimmed_points: no floor plan to trim by, so no points.ply");
     }
     if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
     // The regions above made the levels (and would have made the floor plans); the planar

@@ -198,5 +198,22 @@ TEST(RunMerge, NoMeshesGivesTheFirstOutputsOnly) {
   EXPECT_FALSE(fs::exists(options.output_dir + "/levels.json"));
 }
 
+// Points asked for without a scan (a merge of tiles alone): the other outputs do not need them,
+// so the job goes on and job.json says why there is no points.ply.
+TEST(RunMerge, PointsWithoutAScanAreAWarning) {
+  const std::string root = FreshDir();
+  MergeOptions options;
+  options.tiles_dir = WriteBoxRoom(root + "/tiles", LeafKey(0, 0, 0), LeafKey(16, 16, 16));
+  options.output_dir = root + "/out";
+  options.trimmed_points = true;
+  absl::StatusOr<MergeSummary> s = RunMerge(options);
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_NE(std::find(s->warnings.begin(), s->warnings.end(),
+                      "trimmed_points: no scan given, so no points.ply"),
+            s->warnings.end());
+  EXPECT_FALSE(fs::exists(options.output_dir + "/points.ply"));
+  EXPECT_TRUE(fs::exists(options.output_dir + "/mesh/building.ply"));
+}
+
 }  // namespace
 }  // namespace carvemap

@@ -19,8 +19,8 @@ MergeFunction LocalMerge() {
     options.resolution_m = req.resolution_m;
     options.object_resolution_m = req.object_resolution_m;
     options.floorplan_method = req.floorplan_method;
-    options.trimmed_points = req.trimmed_points && !req.scan_input.empty();  // no scan: no points
-    if (req.min_object_volume_m3 > 0) options.min_object_volume_m3 = req.min_object_volume_m3;
+    options.trimmed_points = req.trimmed_points;  // without a scan RunMerge warns, no points
+    options.min_object_volume_m3 = req.min_object_volume_m3;  // ≤ 0: RunMerge's default
     options.recarve = req.recarve;
     // The scan through the descriptor checked here (ConfinedFile: "/proc/self/fd/N"), as the
     // ingest reads it; its errors then name the path as the tenant gave it.
