@@ -6,8 +6,8 @@
 // level are kept.
 //
 // Binary little-endian PLY as DESIGN §7 (vertex float x y z; `element face 0`), through
-// "<path>.partial" and a rename. The cloud streams twice (count, then write) so memory stays
-// bounded whatever the scan's size.
+// "<path>.partial" and a rename. The cloud streams once, so memory stays bounded whatever the
+// scan's size; the vertex count is written into the header afterwards (a padded placeholder).
 #pragma once
 
 #include <cstdint>
@@ -25,8 +25,7 @@ struct TrimmedPointsCounts {
 };
 
 // Errors: the stream's (e.g. a read error naming the scan), or the file's (naming `path`); no
-// file is left at `path` then. The stream must give the same points on both passes
-// (CloudStreamFn's contract); DataLoss when it does not.
+// file is left at `path` then.
 [[nodiscard]] absl::StatusOr<TrimmedPointsCounts> WriteTrimmedPoints(
     const CloudStreamFn& cloud, const PlanVolume& plan, double trim_distance_m,
     const std::string& path);

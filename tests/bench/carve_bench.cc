@@ -110,8 +110,8 @@ int Main(int argc, char** argv) {
   }
 
   // --- The arithmetic of the votes alone: every chunk's rays prepared once, each evaluated at
-  //     kPerRay points from its sensor to 3σ past its point, a leaf apart across it as in a
-  //     wedge, into a small array of sums (in cache, as a chunk's leaves mostly are).
+  //     kPerRay points from its sensor to 3σ past its point, up to two leaves across it as in
+  //     a wedge, into a small array of sums (in cache, as a chunk's leaves mostly are).
   constexpr size_t kPerRay = 256;
   std::vector<double> par(kPerRay), lat_a(kPerRay), lat_b(kPerRay), vp(kPerRay), vw(kPerRay);
   std::vector<LeafStats> sums(kPerRay);
@@ -133,10 +133,13 @@ int Main(int argc, char** argv) {
         lat_b[i] = resolution_m * (double(i % 3) - 1);
       }
       ray->EvaluateMany(par.data(), lat_a.data(), lat_b.data(), kPerRay, vp.data(), vw.data());
+      // Counted as the carve counts its votes: the sums a point gets (w ≥ kMinRayWeight), so
+      // points evaluated to no weight cost time but count nothing, as in the carve.
       for (size_t i = 0; i < kPerRay; ++i) {
-        if (vw[i] >= kMinRayWeight) sums[i].Add(vp[i], vw[i]);
+        if (vw[i] < kMinRayWeight) continue;
+        sums[i].Add(vp[i], vw[i]);
+        ++arith_votes;
       }
-      arith_votes += kPerRay;
     }
     arith_cpu_s += ThreadCpuS() - c0;
   }
