@@ -239,6 +239,9 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
   }
   std::vector<RecarveChunk> again;
   double region_volume = 0;  // in chunks
+  // Up to the ceiling over objects as close to it as SplitObjects groups stacked pieces: a
+  // lamp's rod, whose points join it only when they are in the region.
+  const double ceiling_reach_m = SplitOptionsFor(options, grid).stack_gap_m;
   {
     absl::StatusOr<std::unique_ptr<TileSet>> objects =
         TileSet::Open(source.dir, grid.resolution_m(), options.cache_budget_bytes);
@@ -246,10 +249,8 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
     for (const ChunkKey& chunk : chunks) {
       absl::StatusOr<std::shared_ptr<const TileData>> tile = (*objects)->Get(chunk);
       if (!tile.ok()) return tile.status();
-      // Up to the ceiling over objects as close to it as SplitObjects groups stacked pieces:
-      // a lamp's rod, whose points join it only when they are in the region.
-      ChunkRegion region = ObjectRecarveRegion(**tile, coarse_volume, /*margin_cells=*/1,
-                                               SplitOptionsFor(options, grid).stack_gap_m);
+      ChunkRegion region =
+          ObjectRecarveRegion(**tile, coarse_volume, /*margin_cells=*/1, ceiling_reach_m);
       if (region.empty()) continue;
       region_volume += std::ldexp(double(region.count()), -3 * region.depth());
       again.push_back(RecarveChunk{chunk, std::move(region)});

@@ -11,8 +11,9 @@ namespace carvemap {
 namespace {
 
 // The PLY header for `count` vertices, `size` bytes long: a comment line of spaces pads it, so
-// the count, known only once the points are written, goes over a placeholder in place. That
-// spares a counting pass over the scan (every return read, posed and looked up twice).
+// the header written first (count 0) is rewritten in place with the count once the points are
+// written. That spares a counting pass over the scan (every return read, posed and looked up
+// twice).
 // Comment lines are in every PLY reader's grammar.
 std::string Header(uint64_t count, size_t size) {
   const std::string head =
@@ -33,7 +34,7 @@ absl::StatusOr<TrimmedPointsCounts> WriteTrimmedPoints(const CloudStreamFn& clou
                                                        double trim_distance_m,
                                                        const std::string& path) {
   TrimmedPointsCounts counts;
-  // Long enough for any count: the placeholder's header with the most digits.
+  // Long enough for any count: the header with the most digits and no padding.
   const size_t header_size = Header(std::numeric_limits<uint64_t>::max(), 0).size();
   absl::Status stream_error;
   absl::Status s = WriteFileAtomically(path, [&](std::ostream& out) {

@@ -7,7 +7,7 @@
 //
 // Binary little-endian PLY as DESIGN §7 (vertex float x y z; `element face 0`), through
 // "<path>.partial" and a rename. The cloud streams once, so memory stays bounded whatever the
-// scan's size; the vertex count is written into the header afterwards (a padded placeholder).
+// scan's size; the header, padded to a fixed size, is rewritten with the vertex count at the end.
 #pragma once
 
 #include <cstdint>
