@@ -1,6 +1,7 @@
 #include "coordinator/chunk_spill.h"
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -34,9 +35,32 @@ struct Crc32cTable {
 };
 constexpr Crc32cTable kCrcTable;
 
+#if defined(__x86_64__)
+// The same checksum with SSE4.2's crc32 instruction (CRC-32C in hardware), where the CPU has
+// it: a worker reads every byte of its chunks' spill files through this, and the table costs
+// a few ns per byte.
+__attribute__((target("sse4.2"))) uint32_t Crc32cHardware(uint32_t c, std::string_view data) {
+  const char* p = data.data();
+  size_t n = data.size();
+  uint64_t c64 = c;
+  for (; n >= 8; n -= 8, p += 8) {
+    uint64_t v;
+    std::memcpy(&v, p, 8);
+    c64 = __builtin_ia32_crc32di(c64, v);
+  }
+  c = uint32_t(c64);
+  for (; n > 0; --n, ++p) c = __builtin_ia32_crc32qi(c, static_cast<unsigned char>(*p));
+  return c;
+}
+const bool kHasSse42 = __builtin_cpu_supports("sse4.2");
+#endif
+
 // Extends `crc` (of earlier bytes; 0 for none) with `data`.
 uint32_t Crc32cExtend(uint32_t crc, std::string_view data) {
   uint32_t c = ~crc;
+#if defined(__x86_64__)
+  if (kHasSse42) return ~Crc32cHardware(c, data);
+#endif
   for (unsigned char b : data) c = kCrcTable.t[(c ^ b) & 0xff] ^ (c >> 8);
   return ~c;
 }
@@ -275,42 +299,58 @@ absl::StatusOr<ChunkSpillFile> ReadChunkSpillFile(const std::string& path) {
                                                                  " does not exist"));
     return IoError("open", path);
   }
-  std::string bytes;
-  char buf[1 << 16];
-  for (;;) {
-    const ssize_t n = ::read(fd.get(), buf, sizeof(buf));
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return IoError("read", path);
+  // Reads up to `n` bytes into `out` (fewer only at the end of the file).
+  const auto read_into = [&](char* out, size_t n) -> absl::StatusOr<size_t> {
+    size_t got = 0;
+    while (got < n) {
+      const ssize_t r = ::read(fd.get(), out + got, n - got);
+      if (r < 0) {
+        if (errno == EINTR) continue;
+        return IoError("read", path);
+      }
+      if (r == 0) break;
+      got += size_t(r);
     }
-    if (n == 0) break;
-    bytes.append(buf, size_t(n));
-  }
+    return got;
+  };
   auto corrupt = [&path](auto&&... what) {
     return absl::DataLossError(absl::StrCat("chunk spill file ", path, ": ", what...));
   };
-  if (bytes.size() < kHeaderBytes) {
-    return corrupt("truncated header (", bytes.size(), " of ", kHeaderBytes, " bytes)");
+  char header[kHeaderBytes];
+  absl::StatusOr<size_t> got = read_into(header, kHeaderBytes);
+  if (!got.ok()) return got.status();
+  if (*got < kHeaderBytes) {
+    return corrupt("truncated header (", *got, " of ", kHeaderBytes, " bytes)");
   }
-  if (std::memcmp(bytes.data(), kMagic, 8) != 0) return corrupt("bad magic, not a spill file");
-  if (GetU32(bytes.data() + 44) != Crc32cExtend(0, std::string_view(bytes.data(), 44))) {
+  if (std::memcmp(header, kMagic, 8) != 0) return corrupt("bad magic, not a spill file");
+  if (GetU32(header + 44) != Crc32cExtend(0, std::string_view(header, 44))) {
     return corrupt("header checksum mismatch (unfinished or corrupt)");
   }
-  if (const uint32_t v = GetU32(bytes.data() + 8); v != kVersion) {
+  if (const uint32_t v = GetU32(header + 8); v != kVersion) {
     return corrupt("unsupported version ", v, " (this build reads ", kVersion,
                    v < kVersion ? "; written by an older ingest: ingest the scan again)" : ")");
   }
   ChunkSpillFile file;
-  for (int a = 0; a < 3; ++a) file.chunk[a] = int32_t(GetU32(bytes.data() + 12 + 4 * a));
-  file.wedge_count = GetU64(bytes.data() + 24);
-  const uint64_t payload_bytes = GetU64(bytes.data() + 32);
-  if (bytes.size() - kHeaderBytes != payload_bytes) {
-    return corrupt("has ", bytes.size() - kHeaderBytes, " payload bytes, header says ",
-                   payload_bytes, bytes.size() - kHeaderBytes < payload_bytes ? " (truncated)"
-                                                                              : "");
+  for (int a = 0; a < 3; ++a) file.chunk[a] = int32_t(GetU32(header + 12 + 4 * a));
+  file.wedge_count = GetU64(header + 24);
+  const uint64_t payload_bytes = GetU64(header + 32);
+  // The payload straight into its string (one byte more, to see a file longer than it says).
+  struct stat st;
+  if (::fstat(fd.get(), &st) != 0) return IoError("stat", path);
+  if (uint64_t(st.st_size) != kHeaderBytes + payload_bytes) {
+    const uint64_t has = uint64_t(std::max<off_t>(st.st_size, kHeaderBytes)) - kHeaderBytes;
+    return corrupt("has ", has, " payload bytes, header says ", payload_bytes,
+                   has < payload_bytes ? " (truncated)" : "");
   }
-  file.payload = bytes.substr(kHeaderBytes);
-  if (Crc32cExtend(0, file.payload) != GetU32(bytes.data() + 40)) {
+  file.payload.resize(payload_bytes + 1);
+  got = read_into(file.payload.data(), payload_bytes + 1);
+  if (!got.ok()) return got.status();
+  if (*got != payload_bytes) {
+    return corrupt("has ", *got, " payload bytes, header says ", payload_bytes,
+                   *got < payload_bytes ? " (truncated)" : "");
+  }
+  file.payload.resize(payload_bytes);
+  if (Crc32cExtend(0, file.payload) != GetU32(header + 40)) {
     return corrupt("payload checksum mismatch");
   }
   // Walk the records: structure and count must agree (values are checked by the decoder).
