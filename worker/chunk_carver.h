@@ -11,6 +11,7 @@
 #include "absl/status/statusor.h"
 #include "services/geometry/chunk_region.h"
 #include "services/geometry/octree_keys.h"
+#include "worker/chunk_octree.h"
 
 namespace carvemap {
 
@@ -23,6 +24,7 @@ struct CarveChunkRequest {
   double sigmas = 3.0;             // must match the ingest's
   // Carve only inside this part of the chunk (§5.6.1's second pass); null: the whole chunk.
   const ChunkRegion* region = nullptr;
+  CarveEvaluation evaluation = CarveEvaluation::kFast;  // chunk_octree.h
 };
 
 struct CarveChunkResult {

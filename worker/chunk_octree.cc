@@ -13,6 +13,7 @@
 #include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_cat.h"
 #include "services/geometry/carve_map.h"
+#include "services/geometry/carve_map_float.h"
 #include "services/geometry/wedge_geometry.h"
 #include "worker/hull_raster.h"
 
@@ -91,29 +92,178 @@ class LeafScratch {
   std::vector<uint32_t> used_;
 };
 
+// The fast path's sums over the chunk's finest leaves, for chunk depths up to kMaxDepth: one
+// dense array (64³ leaves, 8 MiB at 3.125 cm), reused by every call on this thread so that a
+// chunk costs no fresh pages, and a run of leaves is a pointer and a stride. The 8³ bricks
+// that got votes are listed, so draining and clearing cost the voted volume, not the chunk's.
+class DenseScratch {
+ public:
+  static constexpr int kMaxDepth = 6;
+
+  // Empties the array for a chunk of depth k ≤ kMaxDepth (it is empty after Drain already).
+  void Reset(int k) {
+    assert(k <= kMaxDepth);
+    if (k == k_) return;
+    k_ = k;
+    n_ = 1 << k;
+    brick_shift_ = std::min(k, 3);
+    bricks_per_side_ = n_ >> brick_shift_;
+    cells_.assign(size_t(n_) * n_ * n_, LeafStats{});
+    touched_.assign(size_t(bricks_per_side_) * bricks_per_side_ * bricks_per_side_, 0);
+    used_.clear();
+  }
+  [[nodiscard]] ptrdiff_t Stride(int axis) const { return ptrdiff_t{1} << (k_ * axis); }
+  [[nodiscard]] LeafStats* At(const Eigen::Vector3i& l) {
+    return &cells_[size_t(l.x()) | size_t(l.y()) << k_ | size_t(l.z()) << (2 * k_)];
+  }
+  // Marks the bricks of leaves lo … hi along `axis` of the row through `l`.
+  void Touch(const Eigen::Vector3i& l, int axis, int lo, int hi) {
+    Eigen::Vector3i b(l.x() >> brick_shift_, l.y() >> brick_shift_, l.z() >> brick_shift_);
+    for (int t = lo >> brick_shift_; t <= hi >> brick_shift_; ++t) {
+      b[axis] = t;
+      const uint32_t i = uint32_t(b.x() + bricks_per_side_ * (b.y() + bricks_per_side_ * b.z()));
+      if (!touched_[i]) {
+        touched_[i] = 1;
+        used_.push_back(i);
+      }
+    }
+  }
+  // Calls f(local, stats) for every leaf with votes, then clears the array.
+  template <typename F>
+  void Drain(F&& f) {
+    const int side = 1 << brick_shift_;
+    for (uint32_t i : used_) {
+      const Eigen::Vector3i base =
+          Eigen::Vector3i(int(i % bricks_per_side_), int((i / bricks_per_side_) % bricks_per_side_),
+                          int(i / (bricks_per_side_ * bricks_per_side_))) *
+          side;
+      for (int z = 0; z < side; ++z)
+        for (int y = 0; y < side; ++y)
+          for (int x = 0; x < side; ++x) {
+            const Eigen::Vector3i l = base + Eigen::Vector3i(x, y, z);
+            LeafStats& c = *At(l);
+            if (c.count > 0) {
+              f(l, c);
+              c = LeafStats{};
+            }
+          }
+      touched_[i] = 0;
+    }
+    used_.clear();
+  }
+
+ private:
+  int k_ = -1, n_ = 0, brick_shift_ = 0, bricks_per_side_ = 0;
+  std::vector<LeafStats> cells_;
+  std::vector<uint8_t> touched_;
+  std::vector<uint32_t> used_;
+};
+
 // The axis a ray runs most along: its rasters are listed in runs along it, so a run is a
 // stretch of the ray (few, long runs) and eq 4.7 is stepped along it.
-int RunAxis(const PreparedRay& ray) {
-  const Eigen::Vector3d d = ray.direction().cwiseAbs();
+int RunAxis(const Eigen::Vector3d& direction) {
+  const Eigen::Vector3d d = direction.cwiseAbs();
   return d.x() >= d.y() && d.x() >= d.z() ? 0 : (d.y() >= d.z() ? 1 : 2);
 }
 
 // Compressed rows: for each of n keys the values [begin[k], begin[k + 1]).
 struct Csr {
-  std::vector<uint32_t> begin, values;
+  std::vector<uint32_t> begin, values, fill;
   template <typename Each>  // Each(emit) calls emit(key, value) for every pair, twice alike
   void Build(size_t n, Each&& each) {
     begin.assign(n + 1, 0);
     each([&](size_t key, uint32_t) { ++begin[key + 1]; });
     for (size_t k = 0; k < n; ++k) begin[k + 1] += begin[k];
     values.resize(begin[n]);
-    std::vector<uint32_t> fill(begin.begin(), begin.end() - 1);
+    fill.assign(begin.begin(), begin.end() - 1);
     each([&](size_t key, uint32_t value) { values[fill[key]++] = value; });
   }
   [[nodiscard]] std::span<const uint32_t> Row(size_t k) const {
     return {values.data() + begin[k], begin[k + 1] - begin[k]};
   }
 };
+
+// CarveIndexed's working memory, kept by each thread from one call to the next: a chunk's
+// bookkeeping is a few hundred bytes per ray and per wedge, and allocated afresh for every
+// chunk its pages cost more (faults and clearing) than the fast path's arithmetic. Holds the
+// largest chunk's worth between calls.
+struct CarveBuffers {
+  std::vector<int8_t> axis;
+  std::vector<Eigen::Vector3d> sensor_means, far_ends;
+  Csr ray_wedges, voters, freed;
+  std::vector<uint32_t> last_wedge, free_after;
+  std::vector<uint8_t> axes_needed;
+  std::vector<std::array<std::vector<LeafRun>, 3>> runs;
+  std::vector<std::vector<LeafRun>> pool;
+  std::vector<LeafRun> merged;
+  std::vector<std::pair<const LeafRun*, const LeafRun*>> heads;
+  std::vector<double> par, lat_a, lat_b, vote_p, vote_w;
+  std::vector<LeafStats*> cells;
+  std::vector<float> row_w, row_p;
+};
+
+// The fast path's votes of one ray in the leaves of its merged runs (sorted, along `axis`):
+// eq 4.7 by FloatRay row by row (by the double path, rounded to float, for a ray FloatRay
+// refuses) as w and p − 0.5, summed in double into the dense array (or the sparse bricks past
+// its depth) in run order. Returns the votes with weight ≥ kMinRayWeight.
+uint64_t VoteFast(const PreparedRay& ray, const FloatRay* float_ray, int axis,
+                  std::span<const LeafRun> merged, const Eigen::Vector3d& chunk_origin,
+                  double leaf_size, DenseScratch* dense, LeafScratch* sparse,
+                  std::vector<float>& w, std::vector<float>& d) {
+  const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+  const Eigen::Vector3d step = Eigen::Vector3d::Unit(axis) * leaf_size;
+  uint64_t votes = 0;
+  for (size_t i = 0; i < merged.size();) {
+    // Overlapping or adjacent runs of one row are one stretch.
+    const LeafRun first = merged[i];
+    int hi = RunHi(first);
+    size_t j = i + 1;
+    for (; j < merged.size() && RunRow(merged[j]) == RunRow(first) && RunLo(merged[j]) <= hi + 1;
+         ++j) {
+      hi = std::max(hi, RunHi(merged[j]));
+    }
+    i = j;
+    const int lo = RunLo(first);
+    Eigen::Vector3i local;
+    local[axis] = 0;
+    local[u] = RunU(first);
+    local[v] = RunV(first);
+    // The centre of the row's leaf 0, as NodeBox computes centres.
+    const Eigen::Vector3d box_lo = chunk_origin + local.cast<double>() * leaf_size;
+    const Eigen::Vector3d row_origin = (box_lo + (box_lo + Eigen::Vector3d::Constant(leaf_size))) / 2.0;
+    const size_t n = size_t(hi - lo + 1);
+    w.resize(std::max(w.size(), n));
+    d.resize(std::max(d.size(), n));
+    if (float_ray != nullptr) {
+      float_ray->EvaluateRow(local[u], local[v], lo, hi, w.data(), d.data());
+    } else {
+      for (int t = lo; t <= hi; ++t) {
+        const CarveSample s = ray.Evaluate(row_origin + t * step);
+        w[size_t(t - lo)] = float(s.w);
+        d[size_t(t - lo)] = float(s.p - 0.5);
+      }
+    }
+    if (dense != nullptr) {
+      local[axis] = lo;
+      dense->Touch(local, axis, lo, hi);
+      LeafStats* cell = dense->At(local);
+      const ptrdiff_t stride = dense->Stride(axis);
+      for (size_t k = 0; k < n; ++k, cell += stride) {
+        if (!(w[k] >= float(kMinRayWeight))) continue;
+        cell->Add(0.5 + double(d[k]), w[k]);
+        ++votes;
+      }
+    } else {
+      for (size_t k = 0; k < n; ++k) {
+        if (!(w[k] >= float(kMinRayWeight))) continue;
+        local[axis] = lo + int(k);
+        sparse->At(local).Add(0.5 + double(d[k]), w[k]);
+        ++votes;
+      }
+    }
+  }
+  return votes;
+}
 
 }  // namespace
 
@@ -176,42 +326,51 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   }
   num_wedges_ += num_wedges;
 
-  // 1. Every ray prepared once (eq 4.7's constants) with its run axis; a ray shorter than 1 µm
-  //    (the only way Make fails on finite input) has no direction and no vote.
-  std::vector<std::optional<PreparedRay>> rays(num_rays);
-  std::vector<int8_t> axis(num_rays, -1);
+  // 1. Every ray's run axis and its wedges' hull points; a ray shorter than 1 µm (the only way
+  //    PreparedRay::Make fails on finite input) has no direction and no vote. Eq 4.7's
+  //    constants are prepared when the ray votes (once), not held for the whole chunk.
+  const bool fast = evaluation_ == CarveEvaluation::kFast;
+  const double leaf_size = grid_.resolution_m();
+  thread_local CarveBuffers buffers;
+  CarveBuffers& buf = buffers;
+  auto& axis = buf.axis;
+  axis.assign(num_rays, -1);
   // The wedge hulls' points, once per ray rather than once per wedge.
-  std::vector<Eigen::Vector3d> sensor_means(num_rays), far_ends(num_rays);
+  auto& sensor_means = buf.sensor_means;
+  auto& far_ends = buf.far_ends;
+  sensor_means.resize(num_rays);
+  far_ends.resize(num_rays);
   for (size_t r = 0; r < num_rays; ++r) {
     sensor_means[r] = in.rays[r].sensor_mean.cast<double>();
     far_ends[r] = ExtendedPointMean(in.rays[r], kWedgeHullSigmas);
-    absl::StatusOr<PreparedRay> p = PreparedRay::Make(in.rays[r]);
-    if (!p.ok()) continue;
-    rays[r] = *p;
-    axis[r] = int8_t(RunAxis(*p));
+    const std::optional<Eigen::Vector3d> direction = PreparedRay::Direction(in.rays[r]);
+    if (direction) axis[r] = int8_t(RunAxis(*direction));
   }
 
   // 2. Each ray's wedges, and the last of them: the ray votes once that wedge is listed, and a
   //    wedge's runs are dropped once all its rays have voted, so the runs held follow the span
   //    of a ray's wedges in the payload (two frames of a line sensor), not the chunk's size
   //    (what grows with the chunk is ~100 bytes of bookkeeping per wedge and per ray).
-  Csr ray_wedges;
+  Csr& ray_wedges = buf.ray_wedges;
   ray_wedges.Build(num_rays, [&](auto&& emit) {
     for (size_t w = 0; w < num_wedges; ++w)
       for (int r = 0; r < in.wedges[w].num_rays; ++r) emit(in.wedges[w].ray[r], uint32_t(w));
   });
-  std::vector<uint32_t> last_wedge(num_rays, 0);
+  auto& last_wedge = buf.last_wedge;
+  last_wedge.assign(num_rays, 0);
   for (size_t r = 0; r < num_rays; ++r) {
     const auto row = ray_wedges.Row(r);
     if (!row.empty()) last_wedge[r] = row.back();
   }
-  Csr voters;  // rays by the wedge after which they vote
+  Csr& voters = buf.voters;  // rays by the wedge after which they vote
   voters.Build(num_wedges, [&](auto&& emit) {
     for (size_t r = 0; r < num_rays; ++r)
       if (!ray_wedges.Row(r).empty()) emit(last_wedge[r], uint32_t(r));
   });
-  std::vector<uint32_t> free_after(num_wedges, 0);
-  std::vector<uint8_t> axes_needed(num_wedges, 0);
+  auto& free_after = buf.free_after;
+  free_after.assign(num_wedges, 0);
+  auto& axes_needed = buf.axes_needed;
+  axes_needed.assign(num_wedges, 0);
   for (size_t w = 0; w < num_wedges; ++w) {
     for (int r = 0; r < in.wedges[w].num_rays; ++r) {
       const uint32_t id = in.wedges[w].ray[r];
@@ -219,7 +378,7 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
       if (axis[id] >= 0) axes_needed[w] |= uint8_t(1 << axis[id]);
     }
   }
-  Csr freed;  // wedges by the wedge after which their runs are no longer needed
+  Csr& freed = buf.freed;  // wedges by the wedge after which their runs are no longer needed
   freed.Build(num_wedges, [&](auto&& emit) {
     for (size_t w = 0; w < num_wedges; ++w) emit(free_after[w], uint32_t(w));
   });
@@ -228,16 +387,27 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   //    whose wedges are all listed votes once in each leaf of the union of their runs (eq 4.8
   //    with S(L) a set), in a fixed order, so the sums depend only on the input.
   const Eigen::Vector3d chunk_origin = chunk_.cast<double>() * kChunkSizeM;
-  const double leaf_size = grid_.resolution_m();
   const ChunkRegion* region = region_ ? &*region_ : nullptr;
-  std::vector<std::array<std::vector<LeafRun>, 3>> runs(num_wedges);
-  std::vector<std::vector<LeafRun>> pool;  // emptied run lists, reused
-  std::vector<LeafRun> merged;
-  std::vector<std::pair<const LeafRun*, const LeafRun*>> heads;
+  auto& runs = buf.runs;  // emptied as their wedges are done: assign only resizes
+  runs.resize(num_wedges);
+  auto& pool = buf.pool;  // emptied run lists, reused
+  auto& merged = buf.merged;
+  auto& heads = buf.heads;
   // One ray's leaves: their projections on the ray, their sums, and its votes.
-  std::vector<double> par, lat_a, lat_b, vote_p, vote_w;
-  std::vector<LeafStats*> cells;
-  LeafScratch scratch(grid_.chunk_depth);
+  auto& par = buf.par;
+  auto& lat_a = buf.lat_a;
+  auto& lat_b = buf.lat_b;
+  auto& vote_p = buf.vote_p;
+  auto& vote_w = buf.vote_w;
+  auto& cells = buf.cells;
+  // Sums: the reference path's sparse bricks, or the fast path's dense array where it fits.
+  const bool dense = fast && grid_.chunk_depth <= DenseScratch::kMaxDepth;
+  std::optional<LeafScratch> sparse;
+  if (!dense) sparse.emplace(grid_.chunk_depth);
+  thread_local DenseScratch dense_scratch;
+  if (dense) dense_scratch.Reset(grid_.chunk_depth);
+  auto& row_w = buf.row_w;
+  auto& row_p = buf.row_p;
   Wedge wedge;
   uint64_t updates = 0, touches = 0;
   for (size_t w = 0; w < num_wedges; ++w) {
@@ -295,7 +465,17 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
           }
         }
       }
-      const PreparedRay& ray = *rays[r];
+      const absl::StatusOr<PreparedRay> prepared = PreparedRay::Make(in.rays[r]);
+      if (!prepared.ok()) continue;  // cannot happen: axis[r] ≥ 0 means Make succeeds
+      const PreparedRay& ray = *prepared;
+      if (fast) {
+        const std::optional<FloatRay> float_ray = FloatRay::Make(
+            ray, chunk_origin + Eigen::Vector3d::Constant(leaf_size / 2), leaf_size, a);
+        updates += VoteFast(ray, float_ray ? &*float_ray : nullptr, a, merged, chunk_origin,
+                            leaf_size, dense ? &dense_scratch : nullptr,
+                            sparse ? &*sparse : nullptr, row_w, row_p);
+        continue;
+      }
       Eigen::Vector3d step = Eigen::Vector3d::Zero();
       step[a] = leaf_size;
       const PreparedRay::Projection dp = ray.ProjectStep(step);
@@ -327,7 +507,7 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
           lat_a.push_back(p0.a + t * dp.a);
           lat_b.push_back(p0.b + t * dp.b);
           local[a] = t;
-          cells.push_back(&scratch.At(local));
+          cells.push_back(&sparse->At(local));
         }
         i = j;
       }
@@ -361,9 +541,14 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   num_leaf_touches_ += touches;
   num_leaf_updates_ += updates;
   Level& finest = levels_[grid_.chunk_depth];
-  scratch.ForEach([&](const Eigen::Vector3i& local, const LeafStats& stats) {
+  const auto keep = [&](const Eigen::Vector3i& local, const LeafStats& stats) {
     finest[MortonCode(local)].Merge(stats);
-  });
+  };
+  if (dense) {
+    dense_scratch.Drain(keep);
+  } else {
+    sparse->ForEach(keep);
+  }
   CountPoints(in.rays);
   return absl::OkStatus();
 }

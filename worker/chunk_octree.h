@@ -34,6 +34,17 @@ inline constexpr double kWedgeHullSigmas = 3.0;
 // returns w = 0 beyond f_⊥ < e^−39 ≈ 1e−17).
 inline constexpr double kMinRayWeight = 1e-15;
 
+// How eq 4.7 is evaluated for each vote (the votes themselves, eq 4.8's S(L), are the same):
+//   kExact — double precision (carve_map.h): the reference, what the tests of the model run.
+//   kFast  — single precision, four leaves at a time (carve_map_float.h), summed in double
+//            into a dense array of the chunk's leaves: the default. The tolerance it is held to
+//            against kExact (chunk_carver_test, carve_bench): ≥ 99.9 % of finest leaves with
+//            the same label and |Δp| ≤ 0.01 on ≥ 99 % of stored leaves. What it gives: the
+//            same votes, every label the same and |Δp| < 1e−6 on the simulated office2 and on
+//            chunk_carver_test's room (docs/BENCHMARKS.md).
+// Both are deterministic: the same input gives the same bytes on any x86-64 worker.
+enum class CarveEvaluation { kExact, kFast };
+
 class ChunkOctree {
  public:
   // REQUIRES: grid.chunk_depth in [kMinChunkDepth, kMaxChunkDepth].
@@ -66,6 +77,8 @@ class ChunkOctree {
   // Later carving touches only the leaves inside `region` (§5.6.1: a second, finer pass over
   // the nodes that hold objects); the rest of the chunk stays unobserved.
   void RestrictTo(ChunkRegion region) { region_ = std::move(region); }
+  // For later carving (default kFast).
+  void SetEvaluation(CarveEvaluation e) { evaluation_ = e; }
 
   // §4.3.2, bottom-up: 8 sibling leaves merge into their parent (LeafStats::Merge, exact sums)
   // when all 8 are observed leaves with the same label (interior iff p > 0.5) and none holds a
@@ -105,6 +118,7 @@ class ChunkOctree {
   // merged parents up.
   std::vector<Level> levels_;
   std::optional<ChunkRegion> region_;
+  CarveEvaluation evaluation_ = CarveEvaluation::kFast;
   bool simplified_ = false;
   uint64_t num_wedges_ = 0;
   uint64_t num_leaf_updates_ = 0;

@@ -253,7 +253,10 @@ INSTANTIATE_TEST_SUITE_P(ResolutionsAndWalls, WallTest,
                                   std::to_string(int(std::round(std::get<1>(info.param) * 100)));
                          });
 
-bool SameLeaves(const std::vector<TileLeaf>& a, const std::vector<TileLeaf>& b, bool exact) {
+// Same nodes, counts and points, and sums equal (exact) or within 1e−12 relative; or within
+// `relative` when given.
+bool SameLeaves(const std::vector<TileLeaf>& a, const std::vector<TileLeaf>& b, bool exact,
+                double relative = 1e-12) {
   if (a.size() != b.size()) return false;
   for (size_t i = 0; i < a.size(); ++i) {
     if (a[i].node.local != b[i].node.local || a[i].node.depth != b[i].node.depth) return false;
@@ -261,7 +264,7 @@ bool SameLeaves(const std::vector<TileLeaf>& a, const std::vector<TileLeaf>& b, 
       return false;
     }
     const auto close = [&](double x, double y) {
-      return exact ? x == y : std::abs(x - y) <= 1e-12 * std::max(1.0, std::abs(x));
+      return exact ? x == y : std::abs(x - y) <= relative * std::max(1.0, std::abs(x));
     };
     if (!close(a[i].stats.sum_w, b[i].stats.sum_w) || !close(a[i].stats.sum_wp, b[i].stats.sum_wp) ||
         !close(a[i].stats.sum_wp2, b[i].stats.sum_wp2)) {
@@ -270,6 +273,15 @@ bool SameLeaves(const std::vector<TileLeaf>& a, const std::vector<TileLeaf>& b, 
   }
   return true;
 }
+
+// Both evaluations: kExact to double precision, kFast within single precision's rounding
+// (carve_map_float.h: w and p within 5e−6 of eq 4.7's; sums of up to 4 votes).
+class EvaluationTest : public ::testing::TestWithParam<CarveEvaluation> {
+ protected:
+  [[nodiscard]] double Tolerance() const {
+    return GetParam() == CarveEvaluation::kExact ? 1e-12 : 1e-5;
+  }
+};
 
 TEST(ChunkOctreeTest, DeterministicWhateverTheInsertionOrder) {
   const OctreeGrid grid = Grid(5);
@@ -303,11 +315,14 @@ TEST(ChunkOctreeTest, DeterministicWhateverTheInsertionOrder) {
 }
 
 // §5.6.1's second pass: restricted to a region, the carve is the whole carve's leaves inside
-// the region, the same sums, and nothing outside.
-TEST(ChunkOctreeTest, RestrictedCarvingIsTheWholeCarveInsideTheRegion) {
+// the region, the same sums (kFast: within float rounding, runs cut at the region's boundary
+// start elsewhere), and nothing outside.
+TEST_P(EvaluationTest, RestrictedCarvingIsTheWholeCarveInsideTheRegion) {
   const OctreeGrid grid = Grid(5);
   const std::vector<Wedge> wedges = WallScan().Wedges();
-  const ChunkOctree whole = Carve(grid, wedges);
+  ChunkOctree whole(grid, ChunkKey(0, 0, 0));
+  whole.SetEvaluation(GetParam());
+  ASSERT_TRUE(whole.CarveWedges(wedges).ok());
   // The octant x < 1 m, y < 1 m, z < 1 m and one 25 cm cell in front of the wall's upper part.
   const ChunkRegion region(3, [] {
     std::vector<Eigen::Vector3i> cells;
@@ -318,6 +333,7 @@ TEST(ChunkOctreeTest, RestrictedCarvingIsTheWholeCarveInsideTheRegion) {
     return cells;
   }());
   ChunkOctree part(grid, ChunkKey(0, 0, 0));
+  part.SetEvaluation(GetParam());
   part.RestrictTo(region);
   ASSERT_TRUE(part.CarveWedges(wedges).ok());
   std::vector<TileLeaf> expected;
@@ -326,15 +342,17 @@ TEST(ChunkOctreeTest, RestrictedCarvingIsTheWholeCarveInsideTheRegion) {
   }
   ASSERT_GT(expected.size(), 100u);
   ASSERT_LT(expected.size(), whole.Leaves().size() / 2);
-  EXPECT_TRUE(SameLeaves(part.Leaves(), expected, /*exact=*/true));
+  const bool exact = GetParam() == CarveEvaluation::kExact;
+  EXPECT_TRUE(SameLeaves(part.Leaves(), expected, exact, 1e-5));
 }
 
-TEST(ChunkOctreeTest, LeafValuesAreEq48AtTheLeafCentre) {
+TEST_P(EvaluationTest, LeafValuesAreEq48AtTheLeafCentre) {
   const OctreeGrid grid = Grid(5);
   WallScan scan;
   const std::vector<Wedge> wedges = scan.Wedges();
   const Wedge& w = wedges[20 * 40 + 20];
   ChunkOctree tree(grid, ChunkKey(0, 0, 0));
+  tree.SetEvaluation(GetParam());
   ASSERT_TRUE(tree.CarveWedge(w).ok());
   ASSERT_GT(tree.num_leaves(), 0u);
   for (const TileLeaf& l : tree.Leaves()) {
@@ -345,8 +363,8 @@ TEST(ChunkOctreeTest, LeafValuesAreEq48AtTheLeafCentre) {
       if (s.w >= kMinRayWeight) expected.Add(s.p, s.w);
     }
     EXPECT_EQ(l.stats.count, expected.count);
-    EXPECT_NEAR(l.stats.p(), expected.p(), 1e-12);
-    EXPECT_NEAR(l.stats.sum_w, expected.sum_w, 1e-12);
+    EXPECT_NEAR(l.stats.p(), expected.p(), Tolerance());
+    EXPECT_NEAR(l.stats.sum_w, expected.sum_w, Tolerance());
   }
   EXPECT_EQ(tree.num_wedges(), 1u);
 }
@@ -354,12 +372,13 @@ TEST(ChunkOctreeTest, LeafValuesAreEq48AtTheLeafCentre) {
 // eq 4.8: S(L) is the set of rays of the wedges touching L. Neighbouring wedges share rays
 // (each inner ray of the grid belongs to 4 wedges); in one CarveWedges call a shared ray votes
 // once per leaf. Checked against brute force over every leaf of the chunk.
-TEST(ChunkOctreeTest, EachRayVotesOncePerLeafWhateverHowManyOfItsWedgesTouchIt) {
+TEST_P(EvaluationTest, EachRayVotesOncePerLeafWhateverHowManyOfItsWedgesTouchIt) {
   const OctreeGrid grid = Grid(5);
   WallScan scan;
   scan.n = 7;  // 6×6 wedges over 49 rays
   const std::vector<Wedge> wedges = scan.Wedges();
   ChunkOctree tree(grid, ChunkKey(0, 0, 0));
+  tree.SetEvaluation(GetParam());
   ASSERT_TRUE(tree.CarveWedges(wedges).ok());
   std::vector<WedgeHull> hulls;
   for (const Wedge& w : wedges) hulls.push_back(MakeWedgeHull(w, kWedgeHullSigmas));
@@ -392,8 +411,8 @@ TEST(ChunkOctreeTest, EachRayVotesOncePerLeafWhateverHowManyOfItsWedgesTouchIt) 
         if (expected.count == 0) continue;
         ++leaves_checked;
         if (touching_wedges > 1 && rays.size() < 4u * touching_wedges) ++shared_ray_leaves;
-        EXPECT_NEAR(got.sum_w, expected.sum_w, 1e-12);
-        EXPECT_NEAR(got.sum_wp, expected.sum_wp, 1e-12);
+        EXPECT_NEAR(got.sum_w, expected.sum_w, Tolerance());
+        EXPECT_NEAR(got.sum_wp, expected.sum_wp, Tolerance());
       }
   EXPECT_GT(leaves_checked, 50u);
   EXPECT_GT(shared_ray_leaves, 20u);  // the case under test occurs
@@ -401,6 +420,12 @@ TEST(ChunkOctreeTest, EachRayVotesOncePerLeafWhateverHowManyOfItsWedgesTouchIt) 
   // Counting each wedge's 4 rays would have given more votes than there are distinct rays.
   EXPECT_GT(4 * tree.num_leaf_touches(), tree.num_leaf_updates());
 }
+
+INSTANTIATE_TEST_SUITE_P(ExactAndFast, EvaluationTest,
+                         ::testing::Values(CarveEvaluation::kExact, CarveEvaluation::kFast),
+                         [](const auto& info) {
+                           return info.param == CarveEvaluation::kExact ? "exact" : "fast";
+                         });
 
 // The carver inlines NodeBox's arithmetic; the boxes (hence the leaves touched) must not differ.
 TEST(ChunkOctreeTest, TouchedLeavesAreThoseNodeBoxIntersects) {

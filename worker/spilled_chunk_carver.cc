@@ -51,6 +51,7 @@ absl::StatusOr<SpilledChunkCarveTotals> CarveSpilledChunks(
         req.grid = options.grid;
         req.wedge_payload = file->payload;
         req.tiles_dir = options.tiles_dir;
+        req.evaluation = options.evaluation;
         if (auto it = options.regions.find(c.chunk); it != options.regions.end()) {
           req.region = &it->second;
         }

@@ -12,6 +12,7 @@
 #include "coordinator/chunk_spill.h"
 #include "services/geometry/chunk_region.h"
 #include "services/geometry/octree_keys.h"
+#include "worker/chunk_octree.h"
 
 namespace carvemap {
 
@@ -20,6 +21,7 @@ struct SpilledChunkCarveOptions {
   std::string job_id;     // recorded in every tile
   std::string tiles_dir;  // must exist
   int threads = 1;
+  CarveEvaluation evaluation = CarveEvaluation::kFast;  // worker/chunk_octree.h
   // §5.6.1's second pass: a chunk listed here is carved only inside its region.
   std::map<ChunkKey, ChunkRegion, ChunkKeyLess> regions;
 };

@@ -39,6 +39,7 @@ struct CarveFlags {
   double resolution_m = 0.0625;
   int threads = 1;
   size_t memory_mb = 256;
+  std::string evaluation = "fast";  // eq 4.7: worker/chunk_octree.h
   bool keep_spill = false;
   bool quiet = false;
 };
@@ -52,13 +53,15 @@ double SecondsSince(Clock::time_point t0) {
 absl::StatusOr<SpilledChunkCarveTotals> CarveAll(const std::vector<SpilledChunk>& chunks,
                                                  const OctreeGrid& grid, const std::string& job_id,
                                                  const std::string& tiles_dir, int threads,
-                                                 uint64_t total_rays, ProgressLine& line) {
+                                                 CarveEvaluation evaluation, uint64_t total_rays,
+                                                 ProgressLine& line) {
   const Clock::time_point t0 = Clock::now();
   SpilledChunkCarveOptions options;
   options.grid = grid;
   options.job_id = job_id;
   options.tiles_dir = tiles_dir;
   options.threads = threads;
+  options.evaluation = evaluation;
   absl::StatusOr<SpilledChunkCarveTotals> totals =
       CarveSpilledChunks(chunks, options, [&](const SpilledChunkCarveProgress& p) {
         // Rays carved so far, estimated from the wedge-chunk pairs done.
@@ -115,8 +118,11 @@ absl::Status RunCarve(const CarveFlags& flags) {
 
   const Clock::time_point t1 = Clock::now();
   const std::string job_id = fs::path(flags.scan_path).stem().string();
-  absl::StatusOr<SpilledChunkCarveTotals> carved = CarveAll(ingest->chunks, *grid, job_id, partial_dir.string(),
-                                                flags.threads, ingest->rays, line);
+  const CarveEvaluation evaluation =
+      flags.evaluation == "exact" ? CarveEvaluation::kExact : CarveEvaluation::kFast;
+  absl::StatusOr<SpilledChunkCarveTotals> carved =
+      CarveAll(ingest->chunks, *grid, job_id, partial_dir.string(), flags.threads, evaluation,
+               ingest->rays, line);
   if (!carved.ok()) {
     fs::remove_all(partial_dir, ec);
     return absl::Status(carved.status().code(),
@@ -175,6 +181,12 @@ void RegisterCarve(CLI::App& app, int& exit_code) {
                   "Carving threads (tiles are byte-identical for any count)")
       ->capture_default_str();
   cmd->add_option("--memory-mb", flags->memory_mb, "Spill buffer budget of the ingest, MB")
+      ->capture_default_str();
+  cmd->add_option("--evaluation", flags->evaluation,
+                  "How the workers evaluate eq 4.7: fast (single precision, the default) or exact (double "
+                  "precision, the reference; the same votes, within the tolerance in "
+                  "worker/chunk_octree.h)")
+      ->check(CLI::IsMember({"fast", "exact"}))
       ->capture_default_str();
   cmd->add_flag("--keep-spill", flags->keep_spill, "Keep OUT/spill/ (per-chunk wedge files)");
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress on stderr");

@@ -127,6 +127,11 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
                      "Objects with less volume than this, m³, are dropped (§5.6); 0: the "
                      "default, 0.005")
       ->check(CLI::Range(0.0, 1000.0));
+  submit->add_option("--evaluation", flags->submit.evaluation,
+                     "How the workers evaluate eq 4.7: fast (single precision, the default) or exact (double "
+                     "precision, the reference; the same votes, within the tolerance in "
+                     "worker/chunk_octree.h)")
+      ->check(CLI::IsMember({"fast", "exact"}));
   submit->add_option("--idempotency-key", flags->submit.idempotency_key,
                      "Submitting twice with the same key returns the first job");
   submit->add_flag("--watch", flags->watch, "Watch the job until it ends");

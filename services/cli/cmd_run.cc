@@ -44,6 +44,7 @@ struct RunFlags {
   std::string floorplan_method = "rooms";
   bool trimmed_points = false;
   double min_object_volume_m3 = 0;  // 0 = the merge's default
+  std::string evaluation = "fast";  // eq 4.7 in the workers
   std::string storage_root;
   // Short defaults on one machine: a killed worker's chunks come back within seconds.
   double heartbeat_interval_s = 1.0;
@@ -226,16 +227,18 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   submit.floorplan_method = flags.floorplan_method;
   submit.trimmed_points = flags.trimmed_points;
   submit.min_object_volume_m3 = flags.min_object_volume_m3;
+  submit.evaluation = flags.evaluation;
   // The job id follows from the key (and tiles record it), so repeated runs of the same scan
   // and resolutions give byte-identical tiles whatever the number of workers. The method,
-  // --points and --min-object-volume are in the key only when not the default, so the
-  // default's job ids stay as they were.
+  // --points, --min-object-volume and --evaluation are in the key only when not the default,
+  // so the default's job ids stay as they were.
   submit.idempotency_key = absl::StrCat(
       "carvemap run ", scan.filename().string(), " ", flags.resolution_m, " ",
       flags.object_resolution_m,
       flags.floorplan_method == "rooms" ? "" : absl::StrCat(" ", flags.floorplan_method),
       flags.trimmed_points ? " points" : "",
-      flags.min_object_volume_m3 > 0 ? absl::StrCat(" ", flags.min_object_volume_m3) : "");
+      flags.min_object_volume_m3 > 0 ? absl::StrCat(" ", flags.min_object_volume_m3) : "",
+      flags.evaluation == "fast" ? "" : absl::StrCat(" ", flags.evaluation));
   absl::StatusOr<JobInfo> job = state.client->Submit(submit);
   if (!job.ok()) return job.status();
   {
@@ -308,6 +311,12 @@ void RegisterRun(CLI::App& app, int& exit_code) {
                   "Objects with less volume than this, m³, are specks and dropped (§5.6); "
                   "0 = the default, 0.005 (5 litres)")
       ->check(CLI::Range(0.0, 1000.0));
+  cmd->add_option("--evaluation", flags->evaluation,
+                  "How the workers evaluate eq 4.7: fast (single precision, the default) or exact (double "
+                  "precision, the reference; the same votes, within the tolerance in "
+                  "worker/chunk_octree.h)")
+      ->check(CLI::IsMember({"fast", "exact"}))
+      ->capture_default_str();
   cmd->add_option("--storage-root", flags->storage_root,
                   "Keep tiles under <storage-root>/<job>/tiles instead of OUT/tiles");
   cmd->add_option("--heartbeat-interval-s", flags->heartbeat_interval_s,

@@ -59,7 +59,7 @@ absl::StatusOr<PreparedRay> PreparedRay::Make(const RayModel& ray) {
         absl::StrCat("carve_map: ray of length ", pr.length_, " m has no direction"));
   }
   pr.inv_length_ = 1.0 / pr.length_;
-  pr.dir_ = axis * pr.inv_length_;
+  pr.dir_ = axis * pr.inv_length_;  // as Direction()
   // Any orthonormal completion works: f_⊥ and k·x_⊥ do not depend on the basis.
   const Eigen::Vector3d helper =
       std::abs(pr.dir_.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
@@ -84,6 +84,13 @@ absl::StatusOr<PreparedRay> PreparedRay::Make(const RayModel& ray) {
   pr.ld12_ = pr.e1_.dot(Cd * pr.e2_);
   pr.ld22_ = pr.e2_.dot(Cd * pr.e2_);
   return pr;
+}
+
+std::optional<Eigen::Vector3d> PreparedRay::Direction(const RayModel& ray) {
+  const Eigen::Vector3d axis = ray.point_mean.cast<double>() - ray.sensor_mean.cast<double>();
+  const double length = axis.norm();
+  if (!(length >= kMinRayLength_m)) return std::nullopt;
+  return Eigen::Vector3d(axis * (1.0 / length));
 }
 
 void PreparedRay::EvaluateMany(const double* par, const double* a, const double* b, size_t n,

@@ -33,6 +33,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 
 #include <Eigen/Core>
 
@@ -64,6 +65,9 @@ class PreparedRay {
   // Errors: InvalidArgument when a mean or covariance is not finite or the ray is shorter than
   // 1 µm (no direction: such a ray carves nothing).
   static absl::StatusOr<PreparedRay> Make(const RayModel& ray);
+  // The unit direction Make gives the ray (bit for bit), without the rest of its work;
+  // std::nullopt where Make fails for the length. REQUIRES: finite means.
+  static std::optional<Eigen::Vector3d> Direction(const RayModel& ray);
 
   [[nodiscard]] CarveSample Evaluate(const Eigen::Vector3d& x) const;
   // Eq 4.7 at x0 + i·step for i = first … last (a row of leaf centres), calling
@@ -94,6 +98,16 @@ class PreparedRay {
 
   [[nodiscard]] const Eigen::Vector3d& origin() const { return origin_; }    // μ_s
   [[nodiscard]] const Eigen::Vector3d& direction() const { return dir_; }    // d, unit
+  // The lateral basis (e1, e2 ⊥ d) and, in it, the blocks of C_s and C_p across the ray
+  // (11, 12, 22) and F_p's shift k·x_⊥ = kp1·a + kp2·b: what another evaluator of eq 4.7
+  // needs (carve_map_float.h).
+  struct Lateral {
+    Eigen::Vector3d e1, e2;
+    double s11, s12, s22, p11, p12, p22, kp1, kp2;
+  };
+  [[nodiscard]] Lateral lateral() const {
+    return {e1_, e2_, ls11_, ls12_, ls22_, ls11_ + ld11_, ls12_ + ld12_, ls22_ + ld22_, kp1_, kp2_};
+  }
   [[nodiscard]] double length() const { return length_; }                    // L, m
   [[nodiscard]] double sensor_sigma_along() const { return sigma_s_par_; }   // m
   // σ of F_p: the point's range given the lateral offset (PointRangeGivenLateral).

@@ -64,6 +64,7 @@ struct ResolvedParams {
   std::string floorplan_method = "rooms";               // §3.3 rooms or §3.2 eigencrust
   bool trimmed_points = false;                          // §5.5 points.ply on request
   double min_object_volume_m3 = 0;                      // §5.6 specks; 0 = the merge's default
+  int evaluation = pb::CARVE_EVALUATION_FAST;           // eq 4.7 in the workers
 };
 
 std::string ParamsToJson(const ResolvedParams& p) {
@@ -74,7 +75,8 @@ std::string ParamsToJson(const ResolvedParams& p) {
       {"object_resolution_m", p.object_resolution_m},
       {"floorplan_method", p.floorplan_method},
       {"trimmed_points", p.trimmed_points},
-      {"min_object_volume_m3", p.min_object_volume_m3}};
+      {"min_object_volume_m3", p.min_object_volume_m3},
+      {"evaluation", p.evaluation == pb::CARVE_EVALUATION_EXACT ? "exact" : "fast"}};
   return j.dump();
 }
 
@@ -90,6 +92,11 @@ ResolvedParams ParamsFromJson(const std::string& text) {
     p.floorplan_method = j.value("floorplan_method", std::string("rooms"));
     p.trimmed_points = j.value("trimmed_points", false);
     p.min_object_volume_m3 = j.value("min_object_volume_m3", 0.0);
+    // Jobs stored before the fast evaluation existed were carved exactly: a resumed one goes
+    // on so, its tiles of one kind.
+    p.evaluation = j.value("evaluation", std::string("exact")) == "fast"
+                       ? pb::CARVE_EVALUATION_FAST
+                       : pb::CARVE_EVALUATION_EXACT;
   }
   return p;
 }
@@ -145,6 +152,17 @@ absl::StatusOr<ResolvedParams> ResolveParams(const pb::JobParams& in) {
         "min_object_volume_m3 ", in.min_object_volume_m3(), ": must be finite and ≥ 0"));
   }
   p.min_object_volume_m3 = in.min_object_volume_m3();
+  switch (in.evaluation()) {
+    case pb::CARVE_EVALUATION_UNSPECIFIED:
+    case pb::CARVE_EVALUATION_FAST:
+      p.evaluation = pb::CARVE_EVALUATION_FAST;
+      break;
+    case pb::CARVE_EVALUATION_EXACT:
+      p.evaluation = pb::CARVE_EVALUATION_EXACT;
+      break;
+    default:
+      return absl::InvalidArgumentError(absl::StrCat("unknown evaluation ", in.evaluation()));
+  }
   return p;
 }
 
@@ -162,6 +180,7 @@ void ToProto(const JobRecord& r, pb::Job& out) {
   out.mutable_params()->set_floorplan_method(p.floorplan_method);
   out.mutable_params()->set_trimmed_points(p.trimmed_points);
   out.mutable_params()->set_min_object_volume_m3(p.min_object_volume_m3);
+  out.mutable_params()->set_evaluation(static_cast<pb::CarveEvaluation>(p.evaluation));
   out.set_error(r.error);
   out.set_created_unix_ms(r.created_unix_ms);
   out.set_updated_unix_ms(r.updated_unix_ms);
@@ -1628,6 +1647,7 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
       absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(job_params.resolution_m);
       params.set_leaf_depth(grid.ok() ? grid->chunk_depth : 0);
       params.set_tile_dir(tiles_dir);
+      params.set_evaluation(static_cast<pb::CarveEvaluation>(job_params.evaluation));
       if (!region.empty()) {
         params.set_region(std::move(region));
         params.set_region_depth(region_depth);

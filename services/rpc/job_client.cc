@@ -101,6 +101,14 @@ absl::StatusOr<JobInfo> JobClient::Submit(const SubmitParams& params) {
   req.mutable_params()->set_floorplan_method(params.floorplan_method);
   req.mutable_params()->set_trimmed_points(params.trimmed_points);
   req.mutable_params()->set_min_object_volume_m3(params.min_object_volume_m3);
+  if (params.evaluation == "fast") {
+    req.mutable_params()->set_evaluation(pb::CARVE_EVALUATION_FAST);
+  } else if (params.evaluation == "exact") {
+    req.mutable_params()->set_evaluation(pb::CARVE_EVALUATION_EXACT);
+  } else if (!params.evaluation.empty()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("evaluation '", params.evaluation, "': must be fast or exact"));
+  }
   req.set_idempotency_key(params.idempotency_key);
   pb::SubmitJobResponse resp;
   if (!impl_->init.ok()) return impl_->init;

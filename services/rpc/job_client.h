@@ -46,6 +46,7 @@ struct SubmitParams {
   std::string floorplan_method;    // "rooms" (§3.3) or "eigencrust" (§3.2); "" = rooms
   bool trimmed_points = false;     // §5.5 on request: the merge also writes points.ply
   double min_object_volume_m3 = 0;  // §5.6: smaller objects are dropped, m³; 0 = default
+  std::string evaluation;           // eq 4.7 in the workers: "fast" or "exact"; "" = fast
   std::string idempotency_key;
 };
 

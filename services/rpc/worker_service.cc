@@ -308,6 +308,10 @@ absl::Status WorkerServer::Impl::Carve(const pb::Lease& lease, pb::TileInfo& til
   req.grid = *grid;
   req.wedge_payload = payload;
   req.tiles_dir = lease.params().tile_dir();
+  // UNSPECIFIED: a coordinator from before the fast evaluation (carve.proto).
+  req.evaluation = lease.params().evaluation() == pb::CARVE_EVALUATION_FAST
+                       ? CarveEvaluation::kFast
+                       : CarveEvaluation::kExact;
   std::optional<ChunkRegion> region;
   if (!lease.params().region().empty()) {
     absl::StatusOr<ChunkRegion> decoded =

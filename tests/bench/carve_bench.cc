@@ -2,15 +2,15 @@
 //   carve_bench [walk seconds = 10] [rate Hz = 10] [beam step deg = 1] [preset = office2]
 // 1. simulates the preset (seed 1, noise on) for the first seconds of its walk;
 // 2. ingests it (wedges ➜ spill files) and carves every chunk on one thread with
-//    CarveChunkToTile (decode, eq 4.8 carving, §4.3.2 simplification, tile write);
+//    CarveChunkToTile (decode, eq 4.8 carving, §4.3.2 simplification, tile write), once with
+//    each evaluation of eq 4.7 (worker/chunk_octree.h: exact, the reference, and fast), and
+//    compares the two carves' tiles (tests/support/tile_agreement.h);
 // 3. inserts the same rays into an octomap::OcTree at the same resolution with
 //    insertPointCloud (origin = the sensor position of the frame, end = the point mean; rays
 //    without return skipped), one call per frame;
-// and prints rays/s of both, their ratio, and tile/spill bytes per ray. Rays are the scan's
+// and prints rays/s of each, their ratios, and tile/spill bytes per ray. Rays are the scan's
 // returns (what both carve). Then the cost per unit of work: carvemap's leaf votes (eq 4.8)
-// against OctoMap's key updates (computeUpdate's sets, counted outside its timing), and the
-// arithmetic of a vote alone (eq 4.7 by EvaluateMany and the sums, on the scan's own rays at
-// points along them, no leaf listing): the floor that any listing of the leaves adds to.
+// against OctoMap's key updates (computeUpdate's sets, counted outside its timing).
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -25,6 +25,7 @@
 #include "coordinator/scan_ingest.h"
 #include "services/geometry/carve_map.h"
 #include "services/sim/simulator.h"
+#include "tests/support/tile_agreement.h"
 #include "storage/scan_reader.h"
 #include "storage/wedge_codec.h"
 #include "worker/chunk_carver.h"
@@ -84,67 +85,51 @@ int Main(int argc, char** argv) {
   const double ingest_cpu_s = ThreadCpuS() - ingest_c0;
   absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(resolution_m);
   if (!grid.ok()) return Fail(grid.status());
-  uint64_t spill_bytes = 0, tile_bytes = 0, leaves = 0, updates = 0, touches = 0;
-  double carve_s = 0, read_s = 0, carve_cpu_s = 0;
+  uint64_t spill_bytes = 0;
+  for (const SpilledChunk& c : ingest->chunks) spill_bytes += c.file_bytes;
+  struct Carve {
+    const char* name;
+    CarveEvaluation evaluation;
+    std::string tiles;
+    double cpu_s = 0, wall_s = 0;
+    uint64_t tile_bytes = 0, leaves = 0, updates = 0, touches = 0;
+  };
+  Carve carves[2] = {{"exact", CarveEvaluation::kExact, root + "/tiles_exact"},
+                     {"fast", CarveEvaluation::kFast, root + "/tiles_fast"}};
+  double read_s = 0;
   for (const SpilledChunk& c : ingest->chunks) {
-    spill_bytes += c.file_bytes;
     t0 = Clock::now();
     absl::StatusOr<ChunkSpillFile> f = ReadChunkSpillFile(c.path);
     if (!f.ok()) return Fail(f.status());
     read_s += Seconds(t0);
-    CarveChunkRequest req;
-    req.chunk = c.chunk;
-    req.grid = *grid;
-    req.wedge_payload = f->payload;
-    req.tiles_dir = root + "/tiles";
-    t0 = Clock::now();
-    const double c0 = ThreadCpuS();
-    absl::StatusOr<CarveChunkResult> r = CarveChunkToTile(req);
-    if (!r.ok()) return Fail(r.status());
-    carve_s += Seconds(t0);
-    carve_cpu_s += ThreadCpuS() - c0;
-    tile_bytes += r->tile_bytes;
-    leaves += r->leaves;
-    updates += r->leaf_updates;
-    touches += r->leaf_touches;
-  }
-
-  // --- The arithmetic of the votes alone: every chunk's rays prepared once, each evaluated at
-  //     kPerRay points from its sensor to 3σ past its point, up to two leaves across it as in
-  //     a wedge, into a small array of sums (in cache, as a chunk's leaves mostly are).
-  constexpr size_t kPerRay = 256;
-  std::vector<double> par(kPerRay), lat_a(kPerRay), lat_b(kPerRay), vp(kPerRay), vw(kPerRay);
-  std::vector<LeafStats> sums(kPerRay);
-  double arith_cpu_s = 0;
-  uint64_t arith_votes = 0;
-  for (const SpilledChunk& c : ingest->chunks) {
-    absl::StatusOr<ChunkSpillFile> f = ReadChunkSpillFile(c.path);
-    if (!f.ok()) return Fail(f.status());
-    absl::StatusOr<IndexedWedges> decoded = DecodeWedgePayload(f->payload);
-    if (!decoded.ok()) return Fail(decoded.status());
-    const double c0 = ThreadCpuS();
-    for (const RayModel& model : decoded->rays) {
-      absl::StatusOr<PreparedRay> ray = PreparedRay::Make(model);
-      if (!ray.ok()) continue;
-      const double end = ray->length() + 3 * ray->point_sigma_along();
-      for (size_t i = 0; i < kPerRay; ++i) {
-        par[i] = end * double(i) / kPerRay;
-        lat_a[i] = resolution_m * (double(i % 5) - 2);
-        lat_b[i] = resolution_m * (double(i % 3) - 1);
-      }
-      ray->EvaluateMany(par.data(), lat_a.data(), lat_b.data(), kPerRay, vp.data(), vw.data());
-      // Counted as the carve counts its votes: the sums a point gets (w ≥ kMinRayWeight), so
-      // points evaluated to no weight cost time but count nothing, as in the carve.
-      for (size_t i = 0; i < kPerRay; ++i) {
-        if (vw[i] < kMinRayWeight) continue;
-        sums[i].Add(vp[i], vw[i]);
-        ++arith_votes;
-      }
+    for (Carve& carve : carves) {
+      CarveChunkRequest req;
+      req.chunk = c.chunk;
+      req.grid = *grid;
+      req.wedge_payload = f->payload;
+      req.tiles_dir = carve.tiles;
+      req.evaluation = carve.evaluation;
+      t0 = Clock::now();
+      const double c0 = ThreadCpuS();
+      absl::StatusOr<CarveChunkResult> r = CarveChunkToTile(req);
+      if (!r.ok()) return Fail(r.status());
+      carve.wall_s += Seconds(t0);
+      carve.cpu_s += ThreadCpuS() - c0;
+      carve.tile_bytes += r->tile_bytes;
+      carve.leaves += r->leaves;
+      carve.updates += r->leaf_updates;
+      carve.touches += r->leaf_touches;
     }
-    arith_cpu_s += ThreadCpuS() - c0;
   }
-  double checksum = 0;  // keeps the sums alive
-  for (const LeafStats& l : sums) checksum += l.sum_wp;
+  // The fast carve against the exact one, chunk by chunk.
+  testing::TileAgreement agreement;
+  for (const SpilledChunk& c : ingest->chunks) {
+    absl::StatusOr<TileData> exact = ReadTile(carves[0].tiles + "/" + TileFileName(c.chunk));
+    absl::StatusOr<TileData> fast = ReadTile(carves[1].tiles + "/" + TileFileName(c.chunk));
+    if (!exact.ok()) return Fail(exact.status());
+    if (!fast.ok()) return Fail(fast.status());
+    testing::AddTilePair(&*exact, &*fast, agreement);
+  }
 
   // --- OctoMap on the same rays.
   absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(sim->scan_path);
@@ -187,42 +172,41 @@ int Main(int argc, char** argv) {
   }
 
   const double rays = double(ingest->returns);
-  const double ours = rays / carve_cpu_s;
   const double theirs = octomap_rays / octomap_cpu_s;
   std::printf("%s seed 1, %.0f s walk, %.1f Hz, %.2f deg beams, %.4f m: %llu rays, %llu returns\n",
               preset.c_str(), walk_s, rate_hz, beam_deg, resolution_m,
               static_cast<unsigned long long>(ingest->rays),
               static_cast<unsigned long long>(ingest->returns));
   std::printf("ingest (1 thread): %.2f CPU s (%.2f s wall), %.0f rays/s per core, %llu wedges, "
-              "%llu chunks, %llu wedge-chunk pairs\n",
+              "%llu chunks, %llu wedge-chunk pairs (+ %.2f s reading spill files)\n",
               ingest_cpu_s, ingest_s, rays / ingest_cpu_s,
               static_cast<unsigned long long>(ingest->wedges),
               static_cast<unsigned long long>(ingest->chunks.size()),
-              static_cast<unsigned long long>(ingest->wedge_chunk_pairs));
-  std::printf("carvemap carve (1 thread): %.2f CPU s (%.2f s wall), %.0f rays/s per core "
-              "(+ %.2f s reading spill files), %llu leaf updates (%.1f per ray), %llu leaf "
-              "touches (%.1f per wedge-chunk pair), %llu leaves\n",
-              carve_cpu_s, carve_s, ours, read_s, static_cast<unsigned long long>(updates),
-              updates / double(ingest->returns), static_cast<unsigned long long>(touches),
-              touches / double(ingest->wedge_chunk_pairs), static_cast<unsigned long long>(leaves));
+              static_cast<unsigned long long>(ingest->wedge_chunk_pairs), read_s);
+  for (const Carve& c : carves) {
+    std::printf("carvemap carve, %s (1 thread): %.2f CPU s (%.2f s wall), %.0f rays/s per core, "
+                "%llu leaf votes (%.1f per ray), %.1f ns per vote, %llu leaf touches (%.1f per "
+                "wedge-chunk pair), %llu leaves; ratio to octomap %.3f (carving), %.3f (ingest + "
+                "carving)\n",
+                c.name, c.cpu_s, c.wall_s, rays / c.cpu_s,
+                static_cast<unsigned long long>(c.updates), c.updates / rays,
+                1e9 * c.cpu_s / double(c.updates), static_cast<unsigned long long>(c.touches),
+                c.touches / double(ingest->wedge_chunk_pairs),
+                static_cast<unsigned long long>(c.leaves), rays / c.cpu_s / theirs,
+                rays / (ingest_cpu_s + c.cpu_s) / theirs);
+  }
+  std::printf("fast / exact: %.2fx the rays/s; labels equal on %.6f of %llu finest leaves, "
+              "|dp| <= 0.01 on %.6f of %llu stored leaves (|dp| p99 %.3g, max %.3g)\n",
+              carves[0].cpu_s / carves[1].cpu_s, agreement.LabelShare(),
+              static_cast<unsigned long long>(agreement.finest_leaves), agreement.PShare(),
+              static_cast<unsigned long long>(agreement.stored_leaves),
+              agreement.DpQuantile(0.99), agreement.max_dp);
   std::printf("octomap insertPointCloud (1 thread): %.2f CPU s (%.2f s wall), %.0f rays/s per "
-              "core, %zu nodes, %llu key updates (%.1f per ray)\n",
+              "core, %zu nodes, %llu key updates (%.1f per ray), %.1f ns per key update\n",
               octomap_cpu_s, octomap_s, theirs, tree.size(),
-              static_cast<unsigned long long>(octomap_updates), octomap_updates / double(octomap_rays));
-  // Per unit of work rather than per ray: carvemap's leaf updates are eq 4.8 votes (eq 4.7
-  // evaluated at the leaf), OctoMap's are log-odds additions to a key.
-  std::printf("time per update: carvemap %.1f ns per leaf vote, octomap %.1f ns per key update\n",
-              1e9 * carve_cpu_s / double(updates), 1e9 * octomap_cpu_s / double(octomap_updates));
-  std::printf("eq 4.7 + 4.8 arithmetic alone: %.1f ns per vote over %llu votes (checksum %.3g); "
-              "at %.1f votes per ray that is %.0f rays/s per core, %.2f of octomap's\n",
-              1e9 * arith_cpu_s / double(arith_votes),
-              static_cast<unsigned long long>(arith_votes), checksum, updates / rays,
-              double(arith_votes) / arith_cpu_s / (updates / rays),
-              double(arith_votes) / arith_cpu_s / (updates / rays) / theirs);
-  std::printf("ratio carvemap/octomap: %.3f (carving); %.3f (ingest + carving: %.0f rays/s)\n",
-              ours / theirs, rays / (ingest_cpu_s + carve_cpu_s) / theirs,
-              rays / (ingest_cpu_s + carve_cpu_s));
-  std::printf("tile bytes/ray: %.1f, spill bytes/ray: %.1f\n", tile_bytes / rays,
+              static_cast<unsigned long long>(octomap_updates),
+              octomap_updates / double(octomap_rays), 1e9 * octomap_cpu_s / double(octomap_updates));
+  std::printf("tile bytes/ray: %.1f, spill bytes/ray: %.1f\n", carves[1].tile_bytes / rays,
               spill_bytes / rays);
   fs::remove_all(root);
   return 0;
