@@ -6,6 +6,7 @@
 #include <cmath>
 #include <bit>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <utility>
@@ -201,6 +202,27 @@ struct CarveBuffers {
   std::vector<LeafStats*> cells;
   std::vector<float> row_w, row_p;
 };
+
+// Whether a multi-ray wedge's hull may reach a cell of `region`: its points' bounding box,
+// widened by the thickness a flat or collinear hull gets (wedge_geometry.cc: ≤ 1 mm), meets one.
+// A leaf the hull touches lies in the hull's bounding box, so a wedge this rejects would give
+// no runs in the region: skipping it changes no bit of the carve, and saves building its hull
+// (most wedges of a re-carved chunk pass far from its objects).
+bool MayTouchRegion(const ChunkRegion& region, const Eigen::Vector3d& chunk_origin,
+                    std::pair<const Eigen::Vector3d*, const Eigen::Vector3d*> points,
+                    const WedgeRef& ref) {
+  constexpr double kMargin = 2e-3;  // m: above wedge_geometry.cc's kMinHalfThicknessM
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d hi = -lo;
+  for (int r = 0; r < ref.num_rays; ++r) {
+    for (const Eigen::Vector3d& x : {points.first[ref.ray[r]], points.second[ref.ray[r]]}) {
+      lo = lo.cwiseMin(x);
+      hi = hi.cwiseMax(x);
+    }
+  }
+  return region.IntersectsBox(lo - chunk_origin - Eigen::Vector3d::Constant(kMargin),
+                              hi - chunk_origin + Eigen::Vector3d::Constant(kMargin));
+}
 
 // The fast path's votes of one ray in the leaves of its merged runs (sorted, along `axis`):
 // eq 4.7 by FloatRay row by row (by the double path, rounded to float, for a ray FloatRay
@@ -412,6 +434,11 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   uint64_t updates = 0, touches = 0;
   for (size_t w = 0; w < num_wedges; ++w) {
     const WedgeRef& ref = in.wedges[w];
+    if (axes_needed[w] != 0 && region != nullptr && ref.num_rays > 1 &&
+        !MayTouchRegion(*region, chunk_origin, {sensor_means.data(), far_ends.data()}, ref)) {
+      // §5.6.1's pass: the wedge's hull lies in no cell of the region, so it has no runs there.
+      axes_needed[w] = 0;
+    }
     if (axes_needed[w] != 0) {
       WedgeHull hull;
       if (ref.num_rays == 1) {
@@ -465,6 +492,7 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
           }
         }
       }
+      if (merged.empty()) continue;  // no leaf of the chunk (or of the region)
       const absl::StatusOr<PreparedRay> prepared = PreparedRay::Make(in.rays[r]);
       if (!prepared.ok()) continue;  // cannot happen: axis[r] ≥ 0 means Make succeeds
       const PreparedRay& ray = *prepared;

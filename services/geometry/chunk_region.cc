@@ -1,6 +1,8 @@
 #include "services/geometry/chunk_region.h"
 
+#include <algorithm>
 #include <cassert>
+#include <cmath>
 
 #include "absl/strings/str_cat.h"
 
@@ -48,6 +50,44 @@ bool ChunkRegion::Intersects(const ChunkNode& node) const {
   const int sh = node.depth - depth_;
   const Eigen::Vector3i cell(node.local.x() >> sh, node.local.y() >> sh, node.local.z() >> sh);
   return any_[depth_][CellIndex(cell, depth_)];
+}
+
+bool ChunkRegion::IntersectsBox(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const {
+  if (count_ == 0 || !(lo.array() <= hi.array()).all()) return false;
+  // The cells at depth() the box meets, as index ranges; cells are closed boxes, so a box
+  // whose face lies on a cell border meets the cells on both sides.
+  const double cell = kChunkSizeM / double(1 << depth_);
+  const int n = 1 << depth_;
+  Eigen::Vector3i c0, c1;
+  for (int a = 0; a < 3; ++a) {
+    const double l = std::ceil(lo[a] / cell) - 1, h = std::floor(hi[a] / cell);
+    if (h < 0 || l > n - 1) return false;
+    c0[a] = int(std::max(l, 0.0));
+    c1[a] = int(std::min(h, double(n - 1)));
+  }
+  // Depth-first over the nodes covering the ranges, only into nodes holding a cell.
+  struct Frame {
+    Eigen::Vector3i node;
+    int depth;
+  };
+  Frame stack[8 * (kMaxDepth + 1)];
+  int top = 0;
+  stack[top++] = {Eigen::Vector3i::Zero(), 0};
+  while (top > 0) {
+    const Frame f = stack[--top];
+    if (!any_[f.depth][CellIndex(f.node, f.depth)]) continue;
+    if (f.depth == depth_) return true;
+    const int sh = depth_ - f.depth - 1;
+    for (int i = 0; i < 8; ++i) {
+      const Eigen::Vector3i child = f.node * 2 + Eigen::Vector3i(i & 1, (i >> 1) & 1, i >> 2);
+      bool meets = true;
+      for (int a = 0; a < 3 && meets; ++a) {
+        meets = (child[a] << sh) <= c1[a] && ((child[a] + 1) << sh) - 1 >= c0[a];
+      }
+      if (meets) stack[top++] = {child, f.depth + 1};
+    }
+  }
+  return false;
 }
 
 std::string ChunkRegion::Encode() const {

@@ -36,6 +36,10 @@ class ChunkRegion {
   [[nodiscard]] uint64_t count() const { return count_; }  // cells set at depth()
   // True when some cell of the region lies in `node` (a node of this chunk at any depth).
   [[nodiscard]] bool Intersects(const ChunkNode& node) const;
+  // True when some cell of the region meets the closed box [lo, hi] (m, relative to the
+  // chunk's lowest corner; cells are 2 m / 2^depth() wide). Descends from the chunk, so a box
+  // over empty octants costs a few lookups.
+  [[nodiscard]] bool IntersectsBox(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const;
   // The cells as bits, x fastest, then y, then z; bit i is bit (i % 8) of byte i / 8.
   [[nodiscard]] std::string Encode() const;
   // InvalidArgument for a depth outside [0, kMaxDepth] or a size that is not (2^depth)³ / 8

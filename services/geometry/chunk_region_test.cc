@@ -1,5 +1,7 @@
 #include "services/geometry/chunk_region.h"
 
+#include <random>
+
 #include <gtest/gtest.h>
 
 namespace carvemap {
@@ -14,6 +16,34 @@ TEST(ChunkRegionTest, EmptyIntersectsNothing) {
   const ChunkRegion also_none(3, {{-1, 0, 0}, {8, 0, 0}});  // outside the chunk: ignored
   EXPECT_TRUE(also_none.empty());
   EXPECT_FALSE(also_none.Intersects(Node(0, 0, 0, 0)));
+}
+
+TEST(ChunkRegionTest, BoxesMeetTheCellsTheyOverlap) {
+  // Cells (5, 2, 7) and (0, 0, 0) at depth 3: 25 cm cells.
+  const ChunkRegion r(3, {{5, 2, 7}, {0, 0, 0}});
+  const Eigen::Vector3d c(5 * 0.25, 2 * 0.25, 7 * 0.25);  // the first cell's low corner
+  EXPECT_TRUE(r.IntersectsBox(c + Eigen::Vector3d::Constant(0.1), c + Eigen::Vector3d::Constant(0.2)));
+  EXPECT_TRUE(r.IntersectsBox(c - Eigen::Vector3d::Constant(0.3), c));  // touches its corner
+  const Eigen::Vector3d top = c + Eigen::Vector3d::Constant(0.25);   // its far corner
+  EXPECT_TRUE(r.IntersectsBox(top, top + Eigen::Vector3d::Constant(0.1)));
+  EXPECT_FALSE(r.IntersectsBox(c - Eigen::Vector3d::Constant(0.3), c - Eigen::Vector3d::Constant(0.01)));
+  EXPECT_TRUE(r.IntersectsBox(Eigen::Vector3d(-5, -5, -5), Eigen::Vector3d(0.01, 0.01, 0.01)));
+  EXPECT_FALSE(r.IntersectsBox(Eigen::Vector3d(1.0, 1.0, 0), Eigen::Vector3d(2.5, 2.5, 1.5)));
+  EXPECT_FALSE(r.IntersectsBox(Eigen::Vector3d(3, 0, 0), Eigen::Vector3d(4, 1, 1)));  // outside
+  EXPECT_FALSE(ChunkRegion().IntersectsBox(Eigen::Vector3d::Zero(), Eigen::Vector3d::Ones()));
+  // Against the cell-by-cell answer on random boxes.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.5, 2.5);
+  for (int i = 0; i < 2000; ++i) {
+    Eigen::Vector3d a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng));
+    const Eigen::Vector3d lo = a.cwiseMin(b), hi = a.cwiseMax(b);
+    bool want = false;
+    for (const Eigen::Vector3i& cell : {Eigen::Vector3i(5, 2, 7), Eigen::Vector3i(0, 0, 0)}) {
+      const Eigen::Vector3d l = cell.cast<double>() * 0.25, h = l + Eigen::Vector3d::Constant(0.25);
+      want |= (lo.array() <= h.array()).all() && (hi.array() >= l.array()).all();
+    }
+    EXPECT_EQ(r.IntersectsBox(lo, hi), want) << lo.transpose() << " / " << hi.transpose();
+  }
 }
 
 TEST(ChunkRegionTest, NodesOfEveryDepth) {
