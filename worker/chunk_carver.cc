@@ -50,6 +50,7 @@ absl::StatusOr<CarveChunkResult> CarveChunkToTile(const CarveChunkRequest& reque
   ChunkOctree tree(request.grid, chunk);
   if (request.region != nullptr) tree.RestrictTo(*request.region);
   tree.SetEvaluation(request.evaluation);
+  if (request.progress) tree.SetProgress(request.progress);
   // The whole payload in one call: eq 4.8's set of rays per leaf is exact within a call.
   if (absl::Status s = tree.CarveIndexed(*wedges); !s.ok()) return Prefixed(chunk, s);
   tree.Simplify();

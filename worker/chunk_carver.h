@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <string_view>
 
@@ -25,6 +26,9 @@ struct CarveChunkRequest {
   // Carve only inside this part of the chunk (§5.6.1's second pass); null: the whole chunk.
   const ChunkRegion* region = nullptr;
   CarveEvaluation evaluation = CarveEvaluation::kFast;  // chunk_octree.h
+  // If set, called with the wedges carved since its last call while the chunk is carved
+  // (ChunkOctree::SetProgress); the calls add up to CarveChunkResult::wedges.
+  std::function<void(uint64_t wedges)> progress;
 };
 
 struct CarveChunkResult {

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -97,6 +98,21 @@ TEST_F(ChunkCarverTest, CarvesValidTile) {
   for (const auto& e : fs::directory_iterator(*root_ + "/tiles")) {
     EXPECT_EQ(e.path().extension(), ".h5") << e.path();
   }
+}
+
+// The progress calls (what a worker's heartbeats carry) come while the chunk is carved, every
+// few thousand wedges, and add up to its wedges.
+TEST_F(ChunkCarverTest, ProgressAddsUpToTheWedges) {
+  CarveChunkRequest req = Request(*root_ + "/progress");
+  std::vector<uint64_t> calls;
+  req.progress = [&calls](uint64_t wedges) { calls.push_back(wedges); };
+  absl::StatusOr<CarveChunkResult> r = CarveChunkToTile(req);
+  ASSERT_TRUE(r.ok()) << r.status();
+  uint64_t sum = 0;
+  for (uint64_t c : calls) sum += c;
+  EXPECT_EQ(sum, r->wedges);
+  ASSERT_GT(r->wedges, 4096u);  // not vacuous: a call before the end
+  EXPECT_GE(calls.size(), size_t(r->wedges / 4096));
 }
 
 TEST_F(ChunkCarverTest, DeterministicBytes) {

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -79,6 +80,11 @@ class ChunkOctree {
   void RestrictTo(ChunkRegion region) { region_ = std::move(region); }
   // For later carving (default kFast).
   void SetEvaluation(CarveEvaluation e) { evaluation_ = e; }
+  // Called from CarveIndexed with the wedges carved since the last call, every few thousand
+  // wedges and at its end (a worker's heartbeats carry them: live progress within a chunk).
+  void SetProgress(std::function<void(uint64_t wedges)> progress) {
+    progress_ = std::move(progress);
+  }
 
   // §4.3.2, bottom-up: 8 sibling leaves merge into their parent (LeafStats::Merge, exact sums)
   // when all 8 are observed leaves with the same label (interior iff p > 0.5) and none holds a
@@ -119,6 +125,7 @@ class ChunkOctree {
   std::vector<Level> levels_;
   std::optional<ChunkRegion> region_;
   CarveEvaluation evaluation_ = CarveEvaluation::kFast;
+  std::function<void(uint64_t)> progress_;
   bool simplified_ = false;
   uint64_t num_wedges_ = 0;
   uint64_t num_leaf_updates_ = 0;

@@ -47,7 +47,8 @@ CoordinatorMetrics::CoordinatorMetrics()
                        .Add({})),
       rays_per_second_(BuildGauge()
                            .Name("carvemap_rays_per_second")
-                           .Help("Rays carved per second over the last 10 s")
+                           .Help("Rays (wedges) carved per second over the last 10 s, as the "
+                                 "workers' heartbeats report them (mid-chunk too)")
                            .Register(*registry_)
                            .Add({})),
       chunks_completed_(BuildCounter()
@@ -106,6 +107,11 @@ void CoordinatorMetrics::ChunkCompleted(int64_t rays) {
   if (rays > 0) rays_carved_.Increment(static_cast<double>(rays));
 }
 
+void CoordinatorMetrics::RaysCarvedLive(int64_t wedges) {
+  std::lock_guard<std::mutex> lock(rate_mu_);
+  if (wedges > 0) live_wedges_ += double(wedges);
+}
+
 void CoordinatorMetrics::ChunkFailed() { chunk_failures_.Increment(); }
 
 void CoordinatorMetrics::LeasesExpired(int64_t n) {
@@ -133,13 +139,13 @@ void CoordinatorMetrics::ObserveRpc(absl::string_view method, absl::string_view 
 void CoordinatorMetrics::UpdateRate(std::chrono::steady_clock::time_point now,
                                     std::chrono::steady_clock::duration window) {
   std::lock_guard<std::mutex> lock(rate_mu_);
-  rate_samples_.emplace_back(now, rays_carved_.Value());
+  rate_samples_.emplace_back(now, live_wedges_);
   while (rate_samples_.size() > 2 && now - rate_samples_[1].first >= window) {
     rate_samples_.pop_front();
   }
   const auto& [t0, v0] = rate_samples_.front();
   const double dt = std::chrono::duration<double>(now - t0).count();
-  rays_per_second_.Set(dt > 0 ? (rays_carved_.Value() - v0) / dt : 0.0);
+  rays_per_second_.Set(dt > 0 ? (live_wedges_ - v0) / dt : 0.0);
 }
 
 std::string CoordinatorMetrics::Text() const {

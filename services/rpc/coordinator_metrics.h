@@ -39,6 +39,9 @@ class CoordinatorMetrics {
   void SetActiveJobs(int64_t jobs);
 
   void ChunkCompleted(int64_t rays);
+  // Wedges a worker's heartbeat reports carved since its last one (mid-chunk too): what
+  // carvemap_rays_per_second follows. carvemap_rays_carved_total counts completed chunks only.
+  void RaysCarvedLive(int64_t wedges);
   void ChunkFailed();
   void LeasesExpired(int64_t n);
   void WorkerLost(int64_t leases_requeued);
@@ -50,8 +53,8 @@ class CoordinatorMetrics {
   // One finished RPC (for a server stream: the whole stream).
   void ObserveRpc(absl::string_view method, absl::string_view code, double seconds);
 
-  // Rays carved per second over the last `window` (carvemap_rays_per_second); called by the
-  // sweeper, which owns the clock.
+  // Rays carved per second over the last `window` (carvemap_rays_per_second, from the
+  // heartbeats' counts); called by the sweeper, which owns the clock.
   void UpdateRate(std::chrono::steady_clock::time_point now,
                   std::chrono::steady_clock::duration window = std::chrono::seconds(10));
 
@@ -79,6 +82,7 @@ class CoordinatorMetrics {
 
   std::mutex rate_mu_;
   std::deque<std::pair<std::chrono::steady_clock::time_point, double>> rate_samples_;
+  double live_wedges_ = 0;  // guarded by rate_mu_
 };
 
 }  // namespace carvemap

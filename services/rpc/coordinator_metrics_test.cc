@@ -84,7 +84,10 @@ TEST(CoordinatorMetricsTest, RaysPerSecondOverTheWindow) {
   const auto t0 = std::chrono::steady_clock::time_point{} + std::chrono::hours(1);
   m.UpdateRate(t0);
   EXPECT_EQ(SumOf(Scrape(m), "carvemap_rays_per_second"), 0);
-  m.ChunkCompleted(2000);
+  m.ChunkCompleted(2000);  // the counter of completed chunks: not the rate
+  m.UpdateRate(t0 + std::chrono::seconds(1));
+  EXPECT_EQ(SumOf(Scrape(m), "carvemap_rays_per_second"), 0);
+  m.RaysCarvedLive(2000);  // a heartbeat's count
   m.UpdateRate(t0 + std::chrono::seconds(2));
   EXPECT_DOUBLE_EQ(SumOf(Scrape(m), "carvemap_rays_per_second"), 1000);
   // Long after, with nothing carved: the window has moved past the work.

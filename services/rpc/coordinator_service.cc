@@ -29,6 +29,7 @@
 #include "absl/synchronization/notification.h"
 #include "coordinator/chunk_spill.h"
 #include "coordinator/lease_table.h"
+#include "coordinator/rate_window.h"
 #include "coordinator/scan_ingest.h"
 #include "proto/carvemap/v1/carve.grpc.pb.h"
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
@@ -345,8 +346,7 @@ class CoordinatorServer::Impl {
   // One Progress event of WatchJob; false when the client is gone.
   bool WriteProgress(grpc::ServerWriter<pb::JobEvent>& writer, pb::JobEvent e,
                      const JobRecord& job, JobState state,
-                     std::chrono::steady_clock::time_point now, int64_t& last_rays,
-                     std::chrono::steady_clock::time_point& last_rays_time);
+                     std::chrono::steady_clock::time_point now);
   absl::Status CancelJob(const Caller& caller, const pb::CancelJobRequest& req,
                          pb::CancelJobResponse& resp);
   absl::Status ListJobs(const Caller& caller, const pb::ListJobsRequest& req,
@@ -374,8 +374,12 @@ class CoordinatorServer::Impl {
     std::string output_dir;
     ResolvedParams params;
     int64_t rays_ingested = 0;
+    uint64_t frames_ingested = 0, frames_total = 0;  // the ingest's progress
+    uint64_t merge_done = 0, merge_total = 0;        // the running merge stage's counts
     int64_t rays_carved = 0;    // wedges applied by workers (CompleteChunk stats)
     int64_t rays_to_carve = 0;  // wedge-chunk pairs of the job
+    // Wedges as the workers' heartbeats report them, mid-chunk too: the live rate.
+    RateWindow carve_rate;
     // What the ingest measured (job.json "ingest"; absent for a job resumed by a restarted
     // coordinator after its ingest): rays, returns, wedges, wedge-chunk pairs, spill bytes.
     std::optional<nlohmann::json> ingest_counts;
@@ -462,6 +466,8 @@ class CoordinatorServer::Impl {
   absl::Mutex mu_;
   std::unique_ptr<LeaseTable> table_ ABSL_GUARDED_BY(mu_);
   std::map<std::string, int64_t> workers_ ABSL_GUARDED_BY(mu_);  // id → last seen (ms)
+  // The job of each worker's latest lease: whose work its heartbeats report.
+  std::map<std::string, std::string> job_of_worker_ ABSL_GUARDED_BY(mu_);
   int64_t next_worker_ ABSL_GUARDED_BY(mu_) = 1;
   std::map<std::string, JobRuntime> runtime_ ABSL_GUARDED_BY(mu_);
   std::vector<std::thread> job_threads_ ABSL_GUARDED_BY(mu_);
@@ -730,6 +736,7 @@ void CoordinatorServer::Impl::Sweep() {
       spdlog::warn("coordinator: worker {} lost (no heartbeat for {:.1f} s); {} lease(s) requeued",
                    it->first, (now - it->second) / 1000.0, lost.ok() ? *lost : -1);
       metrics_.WorkerLost(lost.ok() ? *lost : 0);
+      job_of_worker_.erase(it->first);
       it = workers_.erase(it);
     }
     // Gauges: the chunks of every job in the lease table, workers, running jobs.
@@ -911,7 +918,10 @@ absl::Status CoordinatorServer::Impl::IngestStage(const JobRecord& job) {
   absl::StatusOr<IngestResult> result =
       IngestScan(options, [this, id](const IngestProgress& p) {
         absl::MutexLock lock(&mu_);
-        runtime_[id].rays_ingested = static_cast<int64_t>(p.rays);
+        JobRuntime& rt = runtime_[id];
+        rt.rays_ingested = static_cast<int64_t>(p.rays);
+        rt.frames_ingested = p.frames_done;
+        rt.frames_total = p.frames_total;
       });
   if (!result.ok()) return scan->Rename(result.status());
   spdlog::info("coordinator: job {}: ingested {} frames, {} rays, {} wedges into {} chunks in {:.1f} s",
@@ -1026,6 +1036,7 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
     rt.tiles_dir = dir;
     rt.rays_carved = 0;
     rt.rays_to_carve = pairs;
+    rt.carve_rate = RateWindow();
   }
   spdlog::info("coordinator: job {}: carving {} object chunks again at {} m", job_id,
                chunks.size(), resolution_m);
@@ -1145,10 +1156,16 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
     std::string merge_stage;
     std::chrono::steady_clock::time_point last_check{};
     bool keep_going = true;
-    req.progress = [&](const std::string& stage, uint64_t, uint64_t) {
+    req.progress = [&](const std::string& stage, uint64_t done, uint64_t total) {
       if (stage != merge_stage) {
         merge_stage = stage;
         EnterStage(job_id, "merge/" + stage);
+      }
+      {
+        absl::MutexLock lock(&mu_);
+        JobRuntime& rt = runtime_[job_id];
+        rt.merge_done = done;
+        rt.merge_total = total;
       }
       if (stopping_) return false;
       const auto now = std::chrono::steady_clock::now();
@@ -1392,8 +1409,6 @@ absl::Status CoordinatorServer::Impl::WatchJob(const Caller& caller, grpc::Serve
   const double min_interval_s = req.min_interval_s() > 0 ? req.min_interval_s() : 1.0;
   JobState state = job->state;
   auto last_progress = std::chrono::steady_clock::now();
-  int64_t last_rays = -1;
-  auto last_rays_time = last_progress;
   while (!IsTerminal(state)) {
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
     if (ctx.IsCancelled()) return absl::CancelledError("watch cancelled by the client");
@@ -1407,7 +1422,7 @@ absl::Status CoordinatorServer::Impl::WatchJob(const Caller& caller, grpc::Serve
     // A state change is preceded by fresh counters, so a client never shows the new state with
     // old counts, and the terminal state change stays the last event.
     if (changed || std::chrono::duration<double>(now - last_progress).count() >= min_interval_s) {
-      if (!WriteProgress(writer, event(), *job, state, now, last_rays, last_rays_time)) {
+      if (!WriteProgress(writer, event(), *job, state, now)) {
         return absl::OkStatus();
       }
       last_progress = now;
@@ -1427,9 +1442,7 @@ absl::Status CoordinatorServer::Impl::WatchJob(const Caller& caller, grpc::Serve
 bool CoordinatorServer::Impl::WriteProgress(grpc::ServerWriter<pb::JobEvent>& writer,
                                             pb::JobEvent e, const JobRecord& job_record,
                                             JobState state,
-                                            std::chrono::steady_clock::time_point now,
-                                            int64_t& last_rays,
-                                            std::chrono::steady_clock::time_point& last_rays_time) {
+                                            std::chrono::steady_clock::time_point now) {
   const JobRecord* job = &job_record;
   {
     auto* p = e.mutable_progress();
@@ -1443,17 +1456,44 @@ bool CoordinatorServer::Impl::WriteProgress(grpc::ServerWriter<pb::JobEvent>& wr
       auto rt = runtime_.find(job->id);
       if (rt != runtime_.end()) {
         const JobRuntime& r = rt->second;
-        if (state == JobState::kCarving) {
-          p->set_rays_done(r.rays_carved);
-          p->set_rays_total(r.rays_to_carve);
-          if (last_rays >= 0) {
-            const double dt = std::chrono::duration<double>(now - last_rays_time).count();
-            if (dt > 0) p->set_rays_per_s((r.rays_carved - last_rays) / dt);
+        const double stage_s =
+            r.stage_start ? std::chrono::duration<double>(now - *r.stage_start).count() : 0.0;
+        p->set_eta_s(-1);
+        // The merge's re-carving of the object chunks (§5.6.1) is a carve too.
+        const bool carving = state == JobState::kCarving || !r.regions.empty();
+        if (carving) {
+          // The workers' live rate in wedges (wedge-chunk pairs) per second, in scan rays: a
+          // wedge-chunk pair stands for returns / pairs of the scan's rays.
+          double rays_per_pair = 1;
+          if (r.ingest_counts && r.ingest_counts->value("wedge_chunk_pairs", 0.0) > 0) {
+            rays_per_pair = r.ingest_counts->value("returns", 0.0) /
+                            r.ingest_counts->value("wedge_chunk_pairs", 0.0);
           }
-          last_rays = r.rays_carved;
-          last_rays_time = now;
+          const double total = double(r.rays_to_carve);
+          const double done = std::min(total, std::max(double(r.rays_carved),
+                                                        r.carve_rate.total()));
+          const double rate = r.carve_rate.Rate(now);
+          p->set_rays_done(int64_t(done * rays_per_pair));
+          p->set_rays_total(int64_t(total * rays_per_pair));
+          p->set_rays_per_s(rate * rays_per_pair);
+          if (rate > 0) p->set_eta_s((total - done) / rate);
         } else if (state == JobState::kIngesting) {
           p->set_rays_done(r.rays_ingested);
+          if (r.frames_ingested > 0 && r.frames_total > 0) {
+            const double frac = double(r.frames_ingested) / double(r.frames_total);
+            p->set_rays_total(int64_t(double(r.rays_ingested) / frac));
+            if (stage_s > 0) {
+              p->set_rays_per_s(double(r.rays_ingested) / stage_s);
+              p->set_eta_s(stage_s * (1 - frac) / frac);
+            }
+          }
+        } else if (state == JobState::kMerging && r.merge_total > 0) {
+          p->set_stage_done(int64_t(r.merge_done));
+          p->set_stage_total(int64_t(r.merge_total));
+          if (r.merge_done > 0 && stage_s > 0) {
+            p->set_eta_s(stage_s * double(r.merge_total - std::min(r.merge_done, r.merge_total)) /
+                         double(r.merge_done));
+          }
         }
         for (const std::string& name : r.stage_order) {
           const auto& [start, elapsed] = r.stages.at(name);
@@ -1571,6 +1611,17 @@ absl::Status CoordinatorServer::Impl::Heartbeat(const pb::HeartbeatRequest& req,
         absl::StrCat("worker ", req.worker_id(), " unknown or lost: register again"));
   }
   it->second = NowMs();
+  if (req.rays_carved() > 0) {
+    // The wedges carved since the worker's last heartbeat belong to the job of its latest
+    // lease (a worker carves one job's chunks at a time; a lease finished since is that job's).
+    metrics_.RaysCarvedLive(req.rays_carved());
+    if (auto job = job_of_worker_.find(req.worker_id()); job != job_of_worker_.end()) {
+      if (auto rt = runtime_.find(job->second); rt != runtime_.end()) {
+        rt->second.carve_rate.Add(std::chrono::steady_clock::now(),
+                                  double(req.rays_carved()));
+      }
+    }
+  }
   std::vector<std::string> held = table_->LeasesOf(req.worker_id());
   const std::set<std::string> reported(req.active_lease_ids().begin(),
                                        req.active_lease_ids().end());
@@ -1621,6 +1672,7 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
       if (!g.ok()) return g.status();
       grant = *g;
       if (grant) {
+        job_of_worker_[req.worker_id()] = grant->job_id;
         const JobRuntime& rt = runtime_[grant->job_id];
         job_params = rt.params;
         tiles_dir = rt.tiles_dir;

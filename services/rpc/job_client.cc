@@ -204,6 +204,9 @@ absl::StatusOr<JobInfo> JobClient::Watch(
       u.rays_total = p.rays_total();
       u.rays_per_s = p.rays_per_s();
       u.active_workers = p.active_workers();
+      u.eta_s = p.eta_s();
+      u.stage_done = p.stage_done();
+      u.stage_total = p.stage_total();
       for (const auto& st : p.stages()) {
         if (!st.finished()) {
           u.stage = st.stage();
@@ -276,25 +279,35 @@ absl::Status JobClient::Fetch(const std::string& job_id, const std::string& name
 }
 
 std::string FormatProgress(const WatchUpdate& u) {
+  const auto eta = [&u](std::string& line) {
+    if (u.eta_s >= 0) {
+      const int s = static_cast<int>(u.eta_s + 0.5);
+      absl::StrAppendFormat(&line, "  ETA %d:%02d", s / 60, s % 60);
+    } else {
+      absl::StrAppend(&line, "  ETA --:--");
+    }
+  };
   std::string line = absl::StrFormat("%-9s", u.state);
   if (u.state == "INGESTING") {
-    absl::StrAppendFormat(&line, " %.1f M rays read", u.rays_done * 1e-6);
+    if (u.rays_total > 0) {
+      absl::StrAppendFormat(&line, " %.1f/%.1f M rays read  %.2f M rays/s", u.rays_done * 1e-6,
+                            u.rays_total * 1e-6, u.rays_per_s * 1e-6);
+      eta(line);
+    } else {
+      absl::StrAppendFormat(&line, " %.1f M rays read", u.rays_done * 1e-6);
+    }
   } else if (u.chunks_total > 0) {
     constexpr int kWidth = 24;
     const int filled = static_cast<int>(kWidth * u.chunks_done / u.chunks_total);
     absl::StrAppend(&line, " [", std::string(filled, '#'), std::string(kWidth - filled, '.'), "] ");
     absl::StrAppendFormat(&line, "%d/%d chunks", u.chunks_done, u.chunks_total);
-    if (u.state == "CARVING") {
+    if (u.state == "CARVING" || u.rays_per_s > 0) {
       absl::StrAppendFormat(&line, "  %.2f M rays/s  %d worker(s)", u.rays_per_s * 1e-6,
                             u.active_workers);
-      if (u.chunks_done > 0 && u.stage == "carve") {
-        const double eta =
-            u.stage_elapsed_s * (u.chunks_total - u.chunks_done) / u.chunks_done;
-        absl::StrAppendFormat(&line, "  ETA %d:%02d", static_cast<int>(eta) / 60,
-                              static_cast<int>(eta) % 60);
-      } else {
-        absl::StrAppend(&line, "  ETA --:--");
-      }
+      eta(line);
+    } else if (u.stage_total > 0) {
+      absl::StrAppendFormat(&line, "  %d/%d", u.stage_done, u.stage_total);
+      eta(line);
     }
     if (u.chunk_retries > 0) absl::StrAppendFormat(&line, "  %d retried", u.chunk_retries);
   }

@@ -34,8 +34,10 @@ struct WatchUpdate {
   int64_t rays_done = 0, rays_total = 0;
   double rays_per_s = 0;
   int active_workers = 0;
-  std::string stage;       // the running stage ("ingest", "carve", "merge")
+  std::string stage;       // the running stage ("ingest", "carve", "merge/<stage>")
   double stage_elapsed_s = 0;
+  double eta_s = -1;       // the running stage's estimated seconds left; < 0: not known
+  int64_t stage_done = 0, stage_total = 0;  // a merge stage's own counts (0 total: none)
 };
 
 struct SubmitParams {

@@ -320,6 +320,8 @@ absl::Status WorkerServer::Impl::Carve(const pb::Lease& lease, pb::TileInfo& til
     region = std::move(*decoded);
     req.region = &*region;
   }
+  // Heartbeats carry the wedges carved since the last one, as they are carved: live rays/s.
+  req.progress = [this](uint64_t wedges) { rays_since_heartbeat_ += int64_t(wedges); };
   absl::StatusOr<CarveChunkResult> result = CarveChunkToTile(req);
   if (!result.ok()) return result.status();
   absl::StatusOr<std::string> sha = Sha256HexOfFile(result->tile_path);
@@ -421,7 +423,6 @@ void WorkerServer::Impl::CarveLoop() {
     if (!carved.ok()) {
       spdlog::error("worker {}: chunk {}: {}", *id, lease.lease_id(), carved.ToString());
     }
-    rays_since_heartbeat_ += stats.rays();
     bool revoked;
     {
       absl::MutexLock lock(&mu_);
