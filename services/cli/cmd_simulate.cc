@@ -113,6 +113,11 @@ void RegisterSimulate(CLI::App& app, int& exit_code) {
                 "stay; --noise off removes them too)");
   cmd->add_option("--range-sigma", flags->range_sigma_m,
                   "Constant part a of the range noise std-dev a + b·range, metres (default 0.01)");
+  cmd->add_option("--laps", o.walk.laps,
+                  "Walk the tour this many times in a row (a longer survey of the same "
+                  "building: each lap with fresh noise, the drift going on)")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
   cmd->add_option("--max-duration", o.max_duration_s,
                   "Stop the walk after this many seconds (0 = the whole walk)")
       ->capture_default_str();

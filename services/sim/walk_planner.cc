@@ -102,6 +102,7 @@ absl::Status WalkOptions::Validate() const {
   if (!(max_yaw_rate_dps > 1)) return absl::InvalidArgumentError("walk: max_yaw_rate_dps must be > 1");
   if (!(sample_rate_hz >= 10)) return absl::InvalidArgumentError("walk: sample_rate_hz must be >= 10");
   if (!(system_height_m > 0)) return absl::InvalidArgumentError("walk: system_height_m must be > 0");
+  if (laps < 1 || laps > 1000) return absl::InvalidArgumentError("walk: laps must be in [1, 1000]");
   return absl::OkStatus();
 }
 
@@ -607,7 +608,20 @@ absl::StatusOr<Walk> PlanWalk(const Building& building, const WalkOptions& optio
   auto route = PlanRoute(building, options);
   if (!route.ok()) return route.status();
   walk.route = *std::move(route);
-  auto path = TimeParametrize(walk.route, options);
+  // More laps: the same route again from its end, which is its start (PlanRoute), so the one
+  // time parametrization turns and paces across the joins as anywhere else.
+  WalkRoute laps = walk.route;
+  for (int lap = 1; lap < options.laps; ++lap) {
+    for (size_t i = 0; i < walk.route.points.size(); ++i) {
+      const RoutePoint& p = walk.route.points[i];
+      const RoutePoint& last = laps.points.back();
+      if (i == 0 && p.level == last.level && (p.floor_point - last.floor_point).norm() < 1e-9) {
+        continue;
+      }
+      laps.points.push_back(p);
+    }
+  }
+  auto path = TimeParametrize(laps, options);
   if (!path.ok()) return path.status();
   walk.path = *std::move(path);
   for (size_t i = 1; i < walk.path.size(); ++i) {

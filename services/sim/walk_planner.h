@@ -28,6 +28,9 @@ struct WalkOptions {
   double room_loop_radius_m = 1.2;   // largest loop walked at each visit point (shrunk to fit)
   double sample_rate_hz = 200.0;     // of the output path
   uint64_t seed = 1;                 // gait phase and speed-variation phase
+  // The tour walked this many times in a row (it ends where it starts): a longer survey of
+  // the same building, each lap with its own noise and the drift going on.
+  int laps = 1;
   [[nodiscard]] absl::Status Validate() const;
 };
 
@@ -53,7 +56,7 @@ absl::StatusOr<WalkRoute> PlanRoute(const Building& building, const WalkOptions&
 absl::StatusOr<std::vector<TimedPose>> TimeParametrize(const WalkRoute& route,
                                                        const WalkOptions& options);
 
-// Both of the above.
+// Both of the above, the route repeated options.laps times.
 struct Walk {
   WalkRoute route;
   std::vector<TimedPose> path;  // true system poses

@@ -1,6 +1,7 @@
 #include "services/sim/walk_planner.h"
 
 #include <cmath>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -85,6 +86,46 @@ TEST(PlanWalk, VisitsEveryRoomAndReturns) {
                 (p.x() < 4.85 || p.x() > 6.15 || (p.y() > 1.65 && p.y() < 2.35)))
         << p.transpose();
   }
+}
+
+// --laps: the tour again from where it ended; the same rooms, each lap as long as the first,
+// and the yaw-rate and speed limits hold across the join too.
+TEST(PlanWalk, LapsRepeatTheTour) {
+  const Building b = TwoRooms();
+  WalkOptions o;
+  auto one = PlanWalk(b, o);
+  ASSERT_TRUE(one.ok()) << one.status();
+  o.laps = 3;
+  auto three = PlanWalk(b, o);
+  ASSERT_TRUE(three.ok()) << three.status();
+  EXPECT_EQ(three->route.rooms_visited, one->route.rooms_visited);
+  EXPECT_NEAR(three->length_m, 3 * one->length_m, 0.05 * one->length_m);
+  EXPECT_NEAR(three->path.back().t, 3 * one->path.back().t, 0.1 * one->path.back().t);
+  // Each room is passed once per lap: near its visit point in each third of the walk.
+  const double lap_s = three->path.back().t / 3;
+  for (int lap = 0; lap < 3; ++lap) {
+    std::vector<TimedPose> part;
+    for (const TimedPose& tp : three->path) {
+      if (tp.t >= lap * lap_s - 5 && tp.t <= (lap + 1) * lap_s + 5) part.push_back(tp);
+    }
+    for (size_t r = 0; r < b.rooms.size(); ++r) {
+      EXPECT_LT(MinDistanceXY(part, b.visit_points[r]), 0.3) << "lap " << lap << " room " << r;
+    }
+  }
+  double max_yaw_rate = 0;
+  for (size_t i = 1; i < three->path.size(); ++i) {
+    const auto& a = three->path[i - 1];
+    const auto& c = three->path[i];
+    const Eigen::Vector3d x0 = a.pose.rotation * Eigen::Vector3d::UnitX();
+    const Eigen::Vector3d x1 = c.pose.rotation * Eigen::Vector3d::UnitX();
+    const double dyaw =
+        std::remainder(std::atan2(x1.y(), x1.x()) - std::atan2(x0.y(), x0.x()), 2 * kPi);
+    max_yaw_rate = std::max(max_yaw_rate, std::abs(dyaw) / (c.t - a.t));
+    ASSERT_LT((c.pose.translation - a.pose.translation).norm(), 0.05);  // no jump at a join
+  }
+  EXPECT_LT(max_yaw_rate, (o.max_yaw_rate_dps + 10) * kPi / 180);
+  o.laps = 0;
+  EXPECT_FALSE(PlanWalk(b, o).ok());
 }
 
 TEST(PlanWalk, GaitSpeedAndYawRate) {
