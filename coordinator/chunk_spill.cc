@@ -13,6 +13,7 @@
 #include "absl/strings/str_cat.h"
 #include "coordinator/chunk_binning.h"
 #include "services/geometry/wedge_geometry.h"
+#include "storage/crc32c.h"
 #include "storage/wedge_codec.h"
 
 namespace carvemap {
@@ -21,49 +22,6 @@ namespace {
 constexpr char kMagic[8] = {'C', 'M', 'W', 'E', 'D', 'G', 'E', 'S'};
 constexpr uint32_t kVersion = kChunkSpillVersion;
 constexpr size_t kHeaderBytes = 48;
-
-// CRC-32C (Castagnoli), as leveldb and ext4 use; table-driven, enough for spill volumes.
-struct Crc32cTable {
-  uint32_t t[256];
-  constexpr Crc32cTable() : t() {
-    for (uint32_t i = 0; i < 256; ++i) {
-      uint32_t c = i;
-      for (int k = 0; k < 8; ++k) c = (c & 1) ? (c >> 1) ^ 0x82f63b78u : c >> 1;
-      t[i] = c;
-    }
-  }
-};
-constexpr Crc32cTable kCrcTable;
-
-#if defined(__x86_64__)
-// The same checksum with SSE4.2's crc32 instruction (CRC-32C in hardware), where the CPU has
-// it: a worker reads every byte of its chunks' spill files through this, and the table costs
-// a few ns per byte.
-__attribute__((target("sse4.2"))) uint32_t Crc32cHardware(uint32_t c, std::string_view data) {
-  const char* p = data.data();
-  size_t n = data.size();
-  uint64_t c64 = c;
-  for (; n >= 8; n -= 8, p += 8) {
-    uint64_t v;
-    std::memcpy(&v, p, 8);
-    c64 = __builtin_ia32_crc32di(c64, v);
-  }
-  c = uint32_t(c64);
-  for (; n > 0; --n, ++p) c = __builtin_ia32_crc32qi(c, static_cast<unsigned char>(*p));
-  return c;
-}
-const bool kHasSse42 = __builtin_cpu_supports("sse4.2");
-#endif
-
-// Extends `crc` (of earlier bytes; 0 for none) with `data`.
-uint32_t Crc32cExtend(uint32_t crc, std::string_view data) {
-  uint32_t c = ~crc;
-#if defined(__x86_64__)
-  if (kHasSse42) return ~Crc32cHardware(c, data);
-#endif
-  for (unsigned char b : data) c = kCrcTable.t[(c ^ b) & 0xff] ^ (c >> 8);
-  return ~c;
-}
 
 void PutU32(uint32_t v, char* p) {
   for (int i = 0; i < 4; ++i) p[i] = char(v >> (8 * i));
@@ -157,8 +115,6 @@ absl::Status ChunkSpillOptions::Validate() const {
   }
   return absl::OkStatus();
 }
-
-uint32_t Crc32c(std::string_view data) { return Crc32cExtend(0, data); }
 
 std::string ChunkSpillPath(std::string_view dir, const ChunkKey& chunk) {
   return absl::StrCat(std::string(dir), "/chunk_", chunk.x(), "_", chunk.y(), "_", chunk.z(), ".wedges");

@@ -19,6 +19,7 @@
 #include "absl/status/statusor.h"
 #include "services/geometry/carving_types.h"
 #include "services/geometry/octree_keys.h"
+#include "storage/crc32c.h"  // the spill files' checksum (storage/WEDGE_FORMAT.md)
 
 namespace carvemap {
 
@@ -92,9 +93,6 @@ struct ChunkSpillFile {
   uint64_t wedge_count = 0;
   std::string payload;  // the wedge payload: what is sent to the worker
 };
-
-// CRC-32C (Castagnoli) of `data`, as the spill file headers hold it (storage/WEDGE_FORMAT.md).
-[[nodiscard]] uint32_t Crc32c(std::string_view data);
 
 // The spill file format version this build writes and reads (storage/WEDGE_FORMAT.md).
 inline constexpr uint32_t kChunkSpillVersion = 2;

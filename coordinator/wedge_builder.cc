@@ -226,7 +226,7 @@ absl::Status WedgeBuilder::EmitSingles(const SensorState& s, uint64_t frame,
 }
 
 absl::Status WedgeBuilder::AddLineFrame(SensorState& s, const ScanFrame& frame) {
-  const uint64_t cur = s.next_frame++, prev = cur - 1;
+  const uint64_t cur = frame.row, prev = s.prev_row;
   const bool joined = s.has_prev && frame.t - s.prev_t <= options_.max_frame_gap_s;
   AddSamplingCovariance(s, joined ? &s : nullptr);
   if (joined) {
@@ -265,13 +265,14 @@ absl::Status WedgeBuilder::AddLineFrame(SensorState& s, const ScanFrame& frame) 
   std::swap(s.prev_range, cur_range_);
   std::swap(s.prev_covered, cur_covered_);
   s.prev_t = frame.t;
+  s.prev_row = frame.row;
   s.has_prev = true;
   return absl::OkStatus();
 }
 
 absl::Status WedgeBuilder::AddGridFrame(SensorState& s, const ScanFrame& frame) {
   const size_t rows = s.info.rows, cols = s.info.cols;
-  const uint64_t f = s.next_frame++;
+  const uint64_t f = frame.row;
   AddSamplingCovariance(s, nullptr);
   auto id = [&](size_t i) { return RayId{s.index, f, uint32_t(i)}; };
   const auto& r = cur_range_;
@@ -307,6 +308,12 @@ absl::Status WedgeBuilder::AddFrame(const ScanFrame& frame, const FrameContext& 
   if (!std::isfinite(frame.t) || (s.has_prev && frame.t < s.prev_t)) {
     return Invalid(s.info, frame.row, absl::StrCat("time ", frame.t, " goes backwards"));
   }
+  // Rows name the rays (RayId::frame): one row twice would make two rays one.
+  if (s.seen_any && frame.row <= s.last_row) {
+    return Invalid(s.info, frame.row, absl::StrCat("row not after the previous row ", s.last_row));
+  }
+  s.seen_any = true;
+  s.last_row = frame.row;
   if (s.info.kind == SensorKind::kGrid &&
       frame.points_sensor.size() != size_t{s.info.rows} * s.info.cols) {
     return Invalid(s.info, frame.row,
@@ -320,7 +327,7 @@ absl::Status WedgeBuilder::AddFrame(const ScanFrame& frame, const FrameContext& 
     case SensorKind::kGrid:
       return AddGridFrame(s, frame);
     case SensorKind::kPoints:
-      return EmitSingles(s, s.next_frame++, cur_rays_, cur_range_, cur_covered_);
+      return EmitSingles(s, frame.row, cur_rays_, cur_range_, cur_covered_);
   }
   return absl::InternalError("wedge_builder: unknown sensor kind");
 }
@@ -328,7 +335,7 @@ absl::Status WedgeBuilder::AddFrame(const ScanFrame& frame, const FrameContext& 
 absl::Status WedgeBuilder::Finish() {
   for (SensorState& s : sensors_) {
     if (!s.has_prev) continue;
-    if (auto st = EmitSingles(s, s.next_frame - 1, s.prev_rays, s.prev_range, s.prev_covered);
+    if (auto st = EmitSingles(s, s.prev_row, s.prev_rays, s.prev_range, s.prev_covered);
         !st.ok()) {
       return st;
     }

@@ -113,9 +113,10 @@ class WedgeBuilder {
   static absl::StatusOr<WedgeBuilder> Create(std::vector<SensorInfo> sensors,
                                              const WedgeBuilderOptions& options, WedgeSink sink);
 
-  // Feeds one frame (frames of one sensor in ascending time; sensors may interleave). Emits
-  // the wedges it completes. Errors: InvalidArgument for an unknown sensor, time going
-  // backwards or a grid frame of the wrong size; or the sink's error.
+  // Feeds one frame (frames of one sensor in ascending time and row; sensors may interleave).
+  // Emits the wedges it completes; its rays' RayId::frame is frame.row. Errors:
+  // InvalidArgument for an unknown sensor, time going backwards, a row not after the sensor's
+  // previous one or a grid frame of the wrong size; or the sink's error.
   absl::Status AddFrame(const ScanFrame& frame, const FrameContext& context);
   // Emits what is still pending (single-ray wedges of each line sensor's last frame). Call once
   // at the end; AddFrame after Finish starts fresh sequences.
@@ -128,9 +129,11 @@ class WedgeBuilder {
     SensorInfo info;
     SensorNoiseParams noise;
     uint32_t index = 0;       // the sensor's index (RayId::sensor)
-    uint64_t next_frame = 0;  // RayId::frame of its next frame
+    bool seen_any = false;
+    uint64_t last_row = 0;    // the last frame's row (RayId::frame is the row)
     bool has_prev = false;
     double prev_t = 0;
+    uint64_t prev_row = 0;
     // The previous frame (line sensors): its rays, ranges (NaN = no return) and whether a
     // wedge used each ray.
     std::vector<RayModel> prev_rays;

@@ -385,9 +385,14 @@ TEST(WedgeBuilderTest, FramesFarApartAreNotJoined) {
   ASSERT_TRUE(b->Finish().ok());
   EXPECT_EQ(out.Count(4), 0);
   EXPECT_EQ(out.Count(1), 8);
-  // Time going backwards is an error.
+  // Time going backwards is an error, and so is a row not after the previous one.
+  f1.row = 2;
   EXPECT_EQ(b->AddFrame(f1, WalkContext(1)).code(), absl::StatusCode::kOk);
+  f0.row = 3;
   EXPECT_EQ(b->AddFrame(f0, WalkContext(0)).code(), absl::StatusCode::kInvalidArgument);
+  f1.row = 2;
+  f1.t += 1;
+  EXPECT_EQ(b->AddFrame(f1, WalkContext(1)).code(), absl::StatusCode::kInvalidArgument);
 }
 
 SensorInfo Grid(uint32_t rows, uint32_t cols) {
@@ -431,6 +436,7 @@ TEST(WedgeBuilderTest, GridNeighbours) {
   // and (2,0), which only those wedges held, are carved alone.
   out.wedges.clear();
   ScanFrame f = GridFrame(3, 4);
+  f.row = 1;
   f.points_sensor[1] = f.points_sensor[4] = Vector3f(kNaN, kNaN, kNaN);
   ASSERT_TRUE(b->AddFrame(f, FrameContext{}).ok());
   EXPECT_EQ(out.Count(4), 3);
@@ -439,6 +445,7 @@ TEST(WedgeBuilderTest, GridNeighbours) {
   EXPECT_NEAR((out.wedges[4].rays[0].point_mean - Vector3f(kWallX, 0, -0.2f)).norm(), 0, 1e-6);
 
   // A frame of the wrong size.
+  f.row = 2;
   f.points_sensor.pop_back();
   EXPECT_EQ(b->AddFrame(f, FrameContext{}).code(), absl::StatusCode::kInvalidArgument);
 }

@@ -1,5 +1,7 @@
 #include "storage/h5_util.h"
 
+#include "storage/hdf5_lock.h"
+
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -491,3 +493,12 @@ absl::Status WriteRows(hid_t dataset, hid_t mem_type, hsize_t cols, uint64_t fir
 }
 
 }  // namespace carvemap::h5
+
+namespace carvemap {
+
+std::mutex& Hdf5Lock() {
+  static std::mutex mu;
+  return mu;
+}
+
+}  // namespace carvemap

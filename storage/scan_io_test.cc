@@ -234,6 +234,50 @@ TEST(ScanStreamTest, GlobalTimeOrderAcrossSensors) {
 
 // Many frames of varying sizes in three sensors, written with random times and read with a
 // tiny block budget (a block boundary at nearly every frame) and a large one.
+// Row ranges: exactly the frames of those rows, in the same merged order as the whole stream;
+// bad ranges are refused. FrameRecords gives every row.
+TEST(ScanStreamTest, RowRangesStreamThoseRows) {
+  const std::string path = TempPath("scan.h5");
+  WriteScan(path, false, false);
+  auto reader = ScanReader::Open(path);
+  ASSERT_TRUE(reader.ok()) << reader.status();
+  const std::vector<ScanFrame> all = StreamAll(**reader, 4 << 20);
+  const std::vector<ScanReader::RowRange> rows = {{1, 2}, {0, 0}, {1, 3}};
+  auto stream = (*reader)->StreamFrames(rows);
+  ASSERT_TRUE(stream.ok()) << stream.status();
+  std::vector<ScanFrame> got;
+  ScanFrame f;
+  while (true) {
+    absl::StatusOr<bool> more = (*stream)->Next(f);
+    ASSERT_TRUE(more.ok()) << more.status();
+    if (!*more) break;
+    got.push_back(f);
+  }
+  std::vector<ScanFrame> want;
+  for (const ScanFrame& a : all) {
+    if (a.row >= rows[a.sensor].begin && a.row < rows[a.sensor].end) want.push_back(a);
+  }
+  ASSERT_EQ(got.size(), want.size());
+  ASSERT_EQ(got.size(), 3u);
+  for (size_t i = 0; i < got.size(); ++i) {
+    EXPECT_EQ(got[i].sensor, want[i].sensor);
+    EXPECT_EQ(got[i].row, want[i].row);
+    EXPECT_EQ(got[i].t, want[i].t);
+    EXPECT_TRUE(SamePoints(got[i].points_sensor, want[i].points_sensor));
+  }
+  const std::vector<ScanReader::RowRange> past = {{0, 3}, {0, 0}, {0, 0}};
+  EXPECT_EQ((*reader)->StreamFrames(past).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ((*reader)->StreamFrames(std::span(rows).first(2)).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  auto records = (*reader)->FrameRecords(2);
+  ASSERT_TRUE(records.ok()) << records.status();
+  ASSERT_EQ(records->size(), 3u);
+  EXPECT_EQ((*records)[0].t, 1.0);
+  EXPECT_EQ((*records)[2].t, 3.0);
+  EXPECT_EQ((*records)[1].first, (*records)[0].first + (*records)[0].count);
+  EXPECT_FALSE((*reader)->FrameRecords(3).ok());
+}
+
 TEST(ScanStreamTest, TinyBlockBudgetGivesTheSameFrames) {
   const std::string path = TempPath("scan.h5");
   std::mt19937 rng(301);

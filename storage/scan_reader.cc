@@ -424,13 +424,17 @@ namespace {
 // hyperslab reads so memory stays within the budget (plus one frame when a frame is larger).
 class SensorCursor {
  public:
-  SensorCursor(const SensorData& data, int index, size_t block_bytes)
+  // Rows [begin, end) of the sensor.
+  SensorCursor(const SensorData& data, int index, size_t block_bytes, uint64_t begin,
+               uint64_t end)
       : data_(data),
         index_(index),
         frame_block_rows_(std::max<size_t>(1, block_bytes / 2 / sizeof(FrameRecord))),
-        point_block_rows_(std::max<size_t>(1, block_bytes / 2 / sizeof(Eigen::Vector3f))) {}
+        point_block_rows_(std::max<size_t>(1, block_bytes / 2 / sizeof(Eigen::Vector3f))),
+        end_row_(std::min(end, data.frame_count)),
+        next_row_(begin) {}
 
-  [[nodiscard]] bool done() const { return next_row_ >= data_.frame_count; }
+  [[nodiscard]] bool done() const { return next_row_ >= end_row_; }
   [[nodiscard]] int index() const { return index_; }
   [[nodiscard]] uint64_t row() const { return next_row_; }
   // REQUIRES: !done() and Load() succeeded.
@@ -442,7 +446,7 @@ class SensorCursor {
       return absl::OkStatus();
     }
     frames_first_ = next_row_;
-    const uint64_t n = std::min<uint64_t>(frame_block_rows_, data_.frame_count - next_row_);
+    const uint64_t n = std::min<uint64_t>(frame_block_rows_, end_row_ - next_row_);
     return data_.ReadFrameRows(frames_first_, n, frames_);
   }
 
@@ -476,7 +480,8 @@ class SensorCursor {
   int index_;
   size_t frame_block_rows_;
   size_t point_block_rows_;
-  uint64_t next_row_ = 0;
+  uint64_t end_row_;
+  uint64_t next_row_;
   uint64_t frames_first_ = 0;
   std::vector<FrameRecord> frames_;
   uint64_t points_first_ = 0;
@@ -485,9 +490,12 @@ class SensorCursor {
 
 class MergedFrameStream : public ScanReader::FrameStream {
  public:
-  MergedFrameStream(const std::vector<SensorData>& sensors, size_t block_bytes) {
+  MergedFrameStream(const std::vector<SensorData>& sensors, size_t block_bytes,
+                    std::span<const ScanReader::RowRange> rows) {
     for (size_t i = 0; i < sensors.size(); ++i) {
-      cursors_.emplace_back(sensors[i], static_cast<int>(i), block_bytes);
+      const ScanReader::RowRange r = rows.empty() ? ScanReader::RowRange{0, sensors[i].frame_count}
+                                                  : rows[i];
+      cursors_.emplace_back(sensors[i], static_cast<int>(i), block_bytes, r.begin, r.end);
     }
   }
 
@@ -514,7 +522,44 @@ class MergedFrameStream : public ScanReader::FrameStream {
 }  // namespace
 
 std::unique_ptr<ScanReader::FrameStream> ScanReader::StreamFrames(size_t block_bytes) {
-  return std::make_unique<MergedFrameStream>(impl_->sensor_data, block_bytes);
+  return std::make_unique<MergedFrameStream>(impl_->sensor_data, block_bytes,
+                                             std::span<const RowRange>{});
+}
+
+absl::StatusOr<std::unique_ptr<ScanReader::FrameStream>> ScanReader::StreamFrames(
+    std::span<const RowRange> rows, size_t block_bytes) {
+  if (rows.size() != impl_->sensor_data.size()) {
+    return absl::InvalidArgumentError(absl::StrCat(impl_->file, ": ", rows.size(),
+                                                   " row ranges for ",
+                                                   impl_->sensor_data.size(), " sensors"));
+  }
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const SensorData& s = impl_->sensor_data[i];
+    if (rows[i].begin > rows[i].end || rows[i].end > s.frame_count) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(impl_->file, ": ", s.frames_path(), ": rows [", rows[i].begin, ", ",
+                       rows[i].end, ") outside its ", s.frame_count, " rows"));
+    }
+  }
+  return std::unique_ptr<FrameStream>(
+      std::make_unique<MergedFrameStream>(impl_->sensor_data, block_bytes, rows));
+}
+
+absl::StatusOr<std::vector<FrameRecord>> ScanReader::FrameRecords(int sensor) {
+  if (sensor < 0 || sensor >= static_cast<int>(impl_->sensor_data.size())) {
+    return absl::InvalidArgumentError(absl::StrCat(impl_->file, ": unknown sensor index ", sensor));
+  }
+  const SensorData& s = impl_->sensor_data[sensor];
+  std::vector<FrameRecord> records;
+  records.reserve(s.frame_count);
+  constexpr uint64_t kBlock = 1 << 16;
+  std::vector<FrameRecord> block;
+  for (uint64_t first = 0; first < s.frame_count; first += kBlock) {
+    const uint64_t n = std::min(kBlock, s.frame_count - first);
+    if (absl::Status st = s.ReadFrameRows(first, n, block); !st.ok()) return st;
+    records.insert(records.end(), block.begin(), block.end());
+  }
+  return records;
 }
 
 // --- Validation --------------------------------------------------------------------------

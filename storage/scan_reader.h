@@ -59,6 +59,16 @@ class ScanReader {
   // Bytes: the block budget per sensor for frame rows and points (a frame larger than the
   // budget is still read whole). REQUIRES: the reader outlives the stream.
   [[nodiscard]] std::unique_ptr<FrameStream> StreamFrames(size_t block_bytes = 4 << 20);
+  // The same over rows [begin, end) of each sensor (one range per sensor, in sensor order; an
+  // empty range streams nothing of that sensor): a time slice of the scan (scan_slices.h).
+  // InvalidArgument for a wrong count of ranges or a range past a sensor's frames.
+  struct RowRange {
+    uint64_t begin = 0, end = 0;
+  };
+  [[nodiscard]] absl::StatusOr<std::unique_ptr<FrameStream>> StreamFrames(
+      std::span<const RowRange> rows, size_t block_bytes = 4 << 20);
+  // A sensor's /frames rows (time, first point, count), read in blocks: 24 bytes per frame.
+  absl::StatusOr<std::vector<FrameRecord>> FrameRecords(int sensor);
 
   // Reads one frame's rows of a sensor directly (random access).
   absl::StatusOr<ScanFrame> ReadFrame(int sensor, uint64_t row);

@@ -11,6 +11,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "storage/h5_util.h"
+#include "storage/hdf5_lock.h"
 
 namespace carvemap {
 namespace {
@@ -24,11 +25,8 @@ constexpr int kDeflateLevel = 4;
 constexpr char kLeavesGroup[] = "leaves";
 
 // Debian's libhdf5 is not thread-safe (see header): tile I/O from several worker threads goes
-// through this one lock.
-std::mutex& TileMutex() {
-  static std::mutex mu;
-  return mu;
-}
+// through the process's one HDF5 lock.
+std::mutex& TileMutex() { return Hdf5Lock(); }
 
 // The first finest-depth cell of a node, as a Morton code at chunk_depth: the sort key that
 // puts non-overlapping leaves of mixed depths in Z-curve order.

@@ -346,6 +346,11 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
           absl::StrCat("chunk_octree: ray ", r, " has a non-finite mean or covariance"));
     }
   }
+  if (!in.votes.empty() && in.votes.size() != num_rays) {
+    return absl::InvalidArgumentError(absl::StrCat("chunk_octree: ", in.votes.size(),
+                                                   " vote flags for ", num_rays, " rays"));
+  }
+  const auto votes = [&in](size_t r) { return in.votes.empty() || in.votes[r] != 0; };
   num_wedges_ += num_wedges;
 
   // 1. Every ray's run axis and its wedges' hull points; a ray shorter than 1 µm (the only way
@@ -366,7 +371,7 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
     sensor_means[r] = in.rays[r].sensor_mean.cast<double>();
     far_ends[r] = ExtendedPointMean(in.rays[r], kWedgeHullSigmas);
     const std::optional<Eigen::Vector3d> direction = PreparedRay::Direction(in.rays[r]);
-    if (direction) axis[r] = int8_t(RunAxis(*direction));
+    if (direction && votes(r)) axis[r] = int8_t(RunAxis(*direction));
   }
 
   // 2. Each ray's wedges, and the last of them: the ray votes once that wedge is listed, and a
@@ -584,27 +589,66 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   } else {
     sparse->ForEach(keep);
   }
-  CountPoints(in.rays);
+  CountPoints(in);
   return absl::OkStatus();
 }
 
-void ChunkOctree::CountPoints(std::span<const RayModel> rays) {
-  // §4.2.3's point voxel set. A ray written twice into one payload (WedgePayloadWriter repeats
-  // rays of old frames) is one point: count each bit-identical ray once. Points in a leaf that
-  // no ray observed (the carve skipped every vote there) are not kept: an unobserved leaf
-  // stores nothing.
+void ChunkOctree::CountPoints(const IndexedWedges& in) {
+  // §4.2.3's point voxel set, of the rays that vote here. A ray written twice into one payload
+  // (WedgePayloadWriter repeats rays of old frames) is one point: count each bit-identical ray
+  // once. Points in a leaf that no ray observed (the carve skipped every vote there) are not
+  // kept: an unobserved leaf stores nothing; a part of the carve (SetPartial) keeps them until
+  // DropUnobserved, as another part may observe the leaf.
   absl::flat_hash_set<RayBits> seen;
   Level& finest = levels_[grid_.chunk_depth];
   const Eigen::Vector3i base = chunk_ * grid_.leaves_per_side();
   const int n = grid_.leaves_per_side();
-  for (const RayModel& ray : rays) {
+  for (size_t r = 0; r < in.rays.size(); ++r) {
+    if (!in.votes.empty() && !in.votes[r]) continue;
+    const RayModel& ray = in.rays[r];
     const Eigen::Vector3i local = LeafOf(grid_, ray.point_mean.cast<double>()) - base;
     if ((local.array() < 0).any() || (local.array() >= n).any()) continue;
     if (region_ && !region_->Intersects(ChunkNode{local, grid_.chunk_depth})) continue;
-    auto it = finest.find(MortonCode(local));
+    auto it = partial_ ? finest.try_emplace(MortonCode(local)).first : finest.find(MortonCode(local));
     if (it == finest.end() || !seen.insert(RayBits(ray)).second) continue;
     ++it->second.points;
   }
+}
+
+absl::Status ChunkOctree::AddFinest(std::span<const TileLeaf> leaves, uint64_t wedges) {
+  if (simplified_) return absl::FailedPreconditionError("chunk_octree: AddFinest after Simplify");
+  const int k = grid_.chunk_depth, n = grid_.leaves_per_side();
+  for (const TileLeaf& l : leaves) {
+    if (l.node.depth != k || (l.node.local.array() < 0).any() || (l.node.local.array() >= n).any()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("chunk_octree: a leaf of depth ", l.node.depth, " at (", l.node.local.x(),
+                       ",", l.node.local.y(), ",", l.node.local.z(), ") is not a finest leaf"));
+    }
+  }
+  Level& finest = levels_[k];
+  for (const TileLeaf& l : leaves) finest[MortonCode(l.node.local)].Merge(l.stats);
+  num_wedges_ += wedges;
+  return absl::OkStatus();
+}
+
+void ChunkOctree::DropUnobserved() {
+  absl::erase_if(levels_[grid_.chunk_depth],
+                 [](const auto& entry) { return entry.second.count == 0; });
+}
+
+std::vector<TileLeaf> ChunkOctree::FinestLeaves() const {
+  std::vector<TileLeaf> leaves;
+  const int k = grid_.chunk_depth;
+  leaves.reserve(levels_[k].size());
+  for (const auto& [code, stats] : levels_[k]) {
+    TileLeaf leaf;
+    leaf.node.local = MortonDecode(code);
+    leaf.node.depth = k;
+    leaf.stats = stats;
+    leaves.push_back(leaf);
+  }
+  SortTileLeaves(grid_, leaves);
+  return leaves;
 }
 
 void ChunkOctree::Simplify() {

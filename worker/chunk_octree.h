@@ -80,6 +80,19 @@ class ChunkOctree {
   void RestrictTo(ChunkRegion region) { region_ = std::move(region); }
   // For later carving (default kFast).
   void SetEvaluation(CarveEvaluation e) { evaluation_ = e; }
+  // The carves into this tree are parts of the chunk's carve (time slices of the scan,
+  // worker/slice_carver.h): a voting ray's scan point is counted in its finest leaf even when
+  // no ray of these parts observed the leaf (another part may). The parts' finest leaves are
+  // added up with AddFinest, and DropUnobserved then forgets the leaves no part observed.
+  void SetPartial(bool partial) { partial_ = partial; }
+  // Adds a part's sums of finest leaves (depth chunk_depth, any order) to the tree's, and its
+  // wedge count to num_wedges(). InvalidArgument for a leaf of another depth or outside the
+  // chunk; FailedPrecondition after Simplify().
+  absl::Status AddFinest(std::span<const TileLeaf> leaves, uint64_t wedges);
+  // Removes the finest leaves no ray observed (count 0: kept by a part for their points).
+  void DropUnobserved();
+  // The finest leaves as they are (before Simplify: a part's sums), in canonical tile order.
+  [[nodiscard]] std::vector<TileLeaf> FinestLeaves() const;
   // Called from CarveIndexed with the wedges carved since the last call, every few thousand
   // wedges and at its end (a worker's heartbeats carry them: live progress within a chunk).
   void SetProgress(std::function<void(uint64_t wedges)> progress) {
@@ -116,7 +129,7 @@ class ChunkOctree {
  private:
   using Level = absl::flat_hash_map<uint64_t, LeafStats>;  // Morton code at that depth → stats
 
-  void CountPoints(std::span<const RayModel> rays);
+  void CountPoints(const IndexedWedges& in);
 
   OctreeGrid grid_;
   ChunkKey chunk_;
@@ -125,6 +138,7 @@ class ChunkOctree {
   std::vector<Level> levels_;
   std::optional<ChunkRegion> region_;
   CarveEvaluation evaluation_ = CarveEvaluation::kFast;
+  bool partial_ = false;
   std::function<void(uint64_t)> progress_;
   bool simplified_ = false;
   uint64_t num_wedges_ = 0;

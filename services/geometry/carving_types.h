@@ -45,7 +45,8 @@ struct Wedge {
 
 // Where a ray comes from, as the wedge builder numbers them: rays with equal ids are the same
 // ray (bit-identical RayModels), and rays of one frame (sensor, frame) share their sensor
-// Gaussian. Frames count up from 0 per sensor; index is the ray's place in its frame.
+// Gaussian. frame is the frame's row in its sensor's /frames (ascending with time, so a time
+// slice of a scan names its rays as the whole scan does); index is the ray's place in it.
 struct RayId {
   uint32_t sensor = 0;
   uint64_t frame = 0;
@@ -64,6 +65,11 @@ struct WedgeRef {
 struct IndexedWedges {
   std::vector<RayModel> rays;
   std::vector<WedgeRef> wedges;
+  // Which rays vote (eq 4.8): empty, all of them; else one flag per ray. A ray that does not
+  // vote here still shapes its wedges' hulls (so that the rays that do vote have all of their
+  // wedges), and votes where it belongs: a time slice carries the wedges that join its first
+  // and last frames to its neighbours' (coordinator/scan_slices.h).
+  std::vector<uint8_t> votes;
 };
 
 // The fused statistics of one octree leaf (eq 4.8), kept as sums so that fusion is a plain

@@ -1,0 +1,154 @@
+#include "storage/partial_sums.h"
+
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <tuple>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace carvemap {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string TempPath(const std::string& name) {
+  const fs::path dir = fs::path(::testing::TempDir()) / "partial_sums_test";
+  fs::create_directories(dir);
+  return (dir / name).string();
+}
+
+std::vector<TileLeaf> RandomLeaves(std::mt19937& rng, int depth, int n) {
+  std::vector<TileLeaf> out;
+  std::uniform_int_distribution<int> c(0, (1 << depth) - 1);
+  std::uniform_real_distribution<double> u(0, 10);
+  std::set<std::tuple<int, int, int>> used;
+  while (int(out.size()) < n) {
+    TileLeaf l;
+    l.node.depth = depth;
+    l.node.local = Eigen::Vector3i(c(rng), c(rng), c(rng));
+    if (!used.insert({l.node.local.x(), l.node.local.y(), l.node.local.z()}).second) continue;
+    l.stats.sum_w = u(rng);
+    l.stats.sum_wp = u(rng);
+    l.stats.sum_wp2 = u(rng);
+    l.stats.count = uint32_t(rng() % 1000);
+    l.stats.points = uint32_t(rng() % 7);
+    out.push_back(l);
+  }
+  return out;
+}
+
+bool SameStats(const LeafStats& a, const LeafStats& b) {
+  return a.sum_w == b.sum_w && a.sum_wp == b.sum_wp && a.sum_wp2 == b.sum_wp2 &&
+         a.count == b.count && a.points == b.points;
+}
+
+TEST(PartialSumsTest, SectionsComeBackBitForBitSortedByPlace) {
+  std::mt19937 rng(3);
+  const std::string path = TempPath("slice_7.part");
+  auto w = PartialSumsWriter::Create(path, 5, 7);
+  ASSERT_TRUE(w.ok()) << w.status();
+  const std::vector<ChunkKey> chunks = {ChunkKey(-1, 2, 0), ChunkKey(3, 0, -4), ChunkKey(-1, 2, 0)};
+  std::vector<std::vector<TileLeaf>> written;
+  for (size_t i = 0; i < chunks.size(); ++i) {
+    written.push_back(RandomLeaves(rng, 5, i == 1 ? 0 : 500));
+    ASSERT_TRUE((*w)->AddSection(chunks[i], 100 + i, written.back()).ok());
+  }
+  EXPECT_FALSE(fs::exists(path));  // only the .tmp until Finish
+  absl::StatusOr<uint64_t> bytes = (*w)->Finish();
+  ASSERT_TRUE(bytes.ok()) << bytes.status();
+  EXPECT_EQ(*bytes, fs::file_size(path));
+  EXPECT_FALSE(fs::exists(path + ".tmp"));
+
+  absl::StatusOr<PartialSumsIndex> index = ReadPartialIndex(path);
+  ASSERT_TRUE(index.ok()) << index.status();
+  EXPECT_EQ(index->chunk_depth, 5);
+  EXPECT_EQ(index->slice, 7u);
+  ASSERT_EQ(index->sections.size(), 3u);
+  for (size_t i = 0; i < chunks.size(); ++i) {
+    const PartialSection& s = index->sections[i];
+    EXPECT_EQ(s.chunk, chunks[i]);
+    EXPECT_EQ(s.wedges, 100 + i);
+    std::vector<TileLeaf> got;
+    ASSERT_TRUE(ReadPartialSection(path, *index, s, got).ok());
+    ASSERT_EQ(got.size(), written[i].size());
+    std::map<std::tuple<int, int, int>, LeafStats> want;
+    for (const TileLeaf& l : written[i]) want[{l.node.local.x(), l.node.local.y(), l.node.local.z()}] = l.stats;
+    for (size_t k = 0; k < got.size(); ++k) {
+      const Eigen::Vector3i& l = got[k].node.local;
+      EXPECT_EQ(got[k].node.depth, 5);
+      ASSERT_TRUE(want.count({l.x(), l.y(), l.z()}));
+      EXPECT_TRUE(SameStats(got[k].stats, want[{l.x(), l.y(), l.z()}]));
+      if (k > 0) {  // sorted by z, then y, then x
+        const Eigen::Vector3i& p = got[k - 1].node.local;
+        EXPECT_LT(std::tuple(p.z(), p.y(), p.x()), std::tuple(l.z(), l.y(), l.x()));
+      }
+    }
+  }
+}
+
+TEST(PartialSumsTest, DamageIsDetectedAndNamesTheFile) {
+  std::mt19937 rng(4);
+  const std::string path = TempPath("slice_1.part");
+  {
+    auto w = PartialSumsWriter::Create(path, 6, 1);
+    ASSERT_TRUE(w.ok());
+    ASSERT_TRUE((*w)->AddSection(ChunkKey(0, 0, 0), 1, RandomLeaves(rng, 6, 300)).ok());
+    ASSERT_TRUE((*w)->Finish().ok());
+  }
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const auto write = [&](const std::string& name, const std::string& content) {
+    const std::string p = TempPath(name);
+    std::ofstream(p, std::ios::binary) << content;
+    return p;
+  };
+  // Truncated anywhere: the trailer no longer checks out.
+  for (size_t cut : {size_t(0), size_t(20), bytes.size() / 2, bytes.size() - 1}) {
+    const std::string p = write("cut.part", bytes.substr(0, cut));
+    absl::StatusOr<PartialSumsIndex> index = ReadPartialIndex(p);
+    ASSERT_FALSE(index.ok()) << cut;
+    EXPECT_EQ(index.status().code(), absl::StatusCode::kDataLoss) << cut;
+    EXPECT_NE(index.status().message().find(p), std::string::npos);
+  }
+  // One byte of a leaf changed: the index reads, the section does not.
+  std::string flipped = bytes;
+  flipped[32 + 36 * 10 + 15] ^= 0x40;
+  const std::string p = write("flipped.part", flipped);
+  absl::StatusOr<PartialSumsIndex> index = ReadPartialIndex(p);
+  ASSERT_TRUE(index.ok()) << index.status();
+  std::vector<TileLeaf> leaves;
+  const absl::Status s = ReadPartialSection(p, *index, index->sections[0], leaves);
+  EXPECT_EQ(s.code(), absl::StatusCode::kDataLoss);
+  EXPECT_NE(s.message().find("chunk 0,0,0"), std::string::npos) << s;
+  EXPECT_EQ(ReadPartialIndex(TempPath("none.part")).status().code(), absl::StatusCode::kNotFound);
+}
+
+TEST(PartialSumsTest, UnfinishedWriterLeavesNothingAndBadLeavesAreRefused) {
+  const std::string path = TempPath("unfinished.part");
+  {
+    auto w = PartialSumsWriter::Create(path, 5, 0);
+    ASSERT_TRUE(w.ok());
+    TileLeaf coarse;
+    coarse.node.depth = 4;
+    EXPECT_EQ((*w)->AddSection(ChunkKey(0, 0, 0), 1, {&coarse, 1}).code(),
+              absl::StatusCode::kInvalidArgument);
+    TileLeaf outside;
+    outside.node.depth = 5;
+    outside.node.local = Eigen::Vector3i(32, 0, 0);
+    EXPECT_EQ((*w)->AddSection(ChunkKey(0, 0, 0), 1, {&outside, 1}).code(),
+              absl::StatusCode::kInvalidArgument);
+  }  // destroyed without Finish
+  EXPECT_FALSE(fs::exists(path));
+  EXPECT_FALSE(fs::exists(path + ".tmp"));
+}
+
+}  // namespace
+}  // namespace carvemap

@@ -1,0 +1,394 @@
+#include "worker/slice_carver.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <limits>
+#include <utility>
+
+#include "absl/container/flat_hash_map.h"
+#include "absl/strings/str_cat.h"
+#include "coordinator/chunk_binning.h"
+#include "services/geometry/wedge_geometry.h"
+#include "storage/hdf5_lock.h"
+#include "storage/partial_sums.h"
+#include "storage/wedge_codec.h"  // ValidateWedge
+
+namespace carvemap {
+namespace {
+
+// About what the finest sums of one leaf cost in a ChunkOctree (hash entry and slack).
+constexpr size_t kBytesPerLeaf = 64;
+
+struct RayKey {
+  uint32_t sensor;
+  uint64_t frame;
+  uint32_t index;
+  bool operator==(const RayKey&) const = default;
+  template <typename H>
+  friend H AbslHashValue(H h, const RayKey& k) {
+    return H::combine(std::move(h), k.sensor, k.frame, k.index);
+  }
+};
+
+// One chunk's wedges of one batch, each ray once (eq 4.8's S(L) is a set of rays).
+struct ChunkBatch {
+  IndexedWedges wedges;
+  absl::flat_hash_map<RayKey, uint32_t> ray_index;
+};
+
+struct Batch {
+  int64_t index = 0;
+  std::map<ChunkKey, ChunkBatch, ChunkKeyLess> chunks;
+};
+
+}  // namespace
+
+absl::Status SliceCarveOptions::Validate() const {
+  if (grid.chunk_depth < kMinChunkDepth || grid.chunk_depth > kMaxChunkDepth) {
+    return absl::InvalidArgumentError(absl::StrCat("slice carve: chunk depth ", grid.chunk_depth,
+                                                   " outside [", kMinChunkDepth, ", ",
+                                                   kMaxChunkDepth, "]"));
+  }
+  if (batch_rays == 0) return absl::InvalidArgumentError("slice carve: batch_rays is 0");
+  if (memory_budget_bytes == 0) {
+    return absl::InvalidArgumentError("slice carve: memory_budget_bytes is 0");
+  }
+  return wedges.Validate();
+}
+
+struct SliceCarver::Impl {
+  std::vector<SensorInfo> sensors;
+  ScanSlice slice;
+  SliceCarveOptions options;
+  SectionSink sink;
+  std::optional<WedgeBuilder> builder;
+  SliceCarveStats stats;
+
+  // Per sensor: the batch of each own frame (by row − own.begin), the batch of the last frame
+  // fed (kAfter past the own rows), and whether its last frame to read has come (a line
+  // sensor's last frame has wedges pending until Finish even then).
+  static constexpr int64_t kAfter = std::numeric_limits<int64_t>::max();
+  std::vector<std::vector<int64_t>> frame_batch;
+  std::vector<int64_t> last_batch_fed;
+  std::vector<bool> finished;
+  std::vector<uint64_t> next_row;
+  int64_t batch = 0;           // the batch own frames go to now
+  uint64_t batch_own_rays = 0;  // own rays in it so far
+
+  std::deque<Batch> open;  // oldest first
+  int64_t carved_up_to = -1;  // batches up to this one are carved
+  std::map<ChunkKey, ChunkOctree, ChunkKeyLess> trees;
+  size_t tree_leaves = 0;
+  uint64_t flushed_updates = 0;
+
+  [[nodiscard]] bool Owned(uint32_t sensor, uint64_t row) const {
+    const ScanReader::RowRange& own = slice.own[sensor];
+    return row >= own.begin && row < own.end;
+  }
+  [[nodiscard]] int64_t BatchOf(uint32_t sensor, uint64_t row) const {
+    return frame_batch[sensor][row - slice.own[sensor].begin];
+  }
+  absl::StatusOr<Batch*> OpenBatch(int64_t b) {
+    // A batch is carved only once no sensor can add to it (CarveCompleteBatches).
+    if (b <= carved_up_to) {
+      return absl::InternalError(absl::StrCat("slice carve: a wedge for batch ", b,
+                                              ", carved already"));
+    }
+    for (Batch& x : open) {
+      if (x.index == b) return &x;
+    }
+    auto at = std::find_if(open.begin(), open.end(), [b](const Batch& x) { return x.index > b; });
+    at = open.insert(at, Batch{});
+    at->index = b;
+    return &*at;
+  }
+
+  absl::Status OnWedge(const Wedge& wedge, std::span<const RayId> ids);
+  absl::Status CarveBatch(Batch& batch);
+  absl::Status Flush();
+  absl::Status CarveCompleteBatches(bool all);
+};
+
+absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayId> ids) {
+  // The batches this wedge serves: those of its own rays.
+  int64_t batches[4];
+  int nb = 0;
+  for (int r = 0; r < wedge.num_rays; ++r) {
+    if (!Owned(ids[r].sensor, ids[r].frame)) continue;
+    const int64_t b = BatchOf(ids[r].sensor, ids[r].frame);
+    if (std::find(batches, batches + nb, b) == batches + nb) batches[nb++] = b;
+  }
+  if (nb == 0) return absl::OkStatus();  // context alone: another slice's
+  if (absl::Status s = ValidateWedge(wedge); !s.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("slice carve: sensor ",
+                                                   sensors[ids[0].sensor].name, " frame ",
+                                                   ids[0].frame, ": ", s.message()));
+  }
+  for (int r = 0; r < wedge.num_rays; ++r) {
+    for (const Eigen::Vector3f& v : {wedge.rays[r].sensor_mean, wedge.rays[r].point_mean}) {
+      if ((v.array().abs() >= float(kMaxWorldCoordinateM)).any()) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "slice carve: sensor ", sensors[ids[r].sensor].name, " frame ", ids[r].frame,
+            ": a ray reaches beyond ±", kMaxWorldCoordinateM, " m (a broken pose?)"));
+      }
+    }
+  }
+  ++stats.wedges;
+  uint64_t facets = 0;  // the hull's facets: the carve rebuilds it from them, without a search
+  const WedgeHull hull = MakeWedgeHull(wedge, kWedgeHullSigmas, &facets);
+  std::vector<ChunkKey> chunks = ChunksOfWedge(hull);
+  if (options.regions != nullptr) {
+    // §5.6.1: only chunks of the pass, and only where the hull's box meets their region.
+    std::erase_if(chunks, [&](const ChunkKey& c) {
+      auto it = options.regions->find(c);
+      if (it == options.regions->end()) return true;
+      const Eigen::Vector3d origin = c.cast<double>() * kChunkSizeM;
+      return !it->second.IntersectsBox(hull.box.min() - origin, hull.box.max() - origin);
+    });
+  }
+  for (int r = 0; r < wedge.num_rays; ++r) {
+    if (!Owned(ids[r].sensor, ids[r].frame)) continue;
+    stats.bounds.extend(wedge.rays[r].sensor_mean.cast<double>());
+    stats.bounds.extend(wedge.rays[r].point_mean.cast<double>());
+  }
+  for (int i = 0; i < nb; ++i) {
+    absl::StatusOr<Batch*> opened = OpenBatch(batches[i]);
+    if (!opened.ok()) return opened.status();
+    Batch& batch = **opened;
+    for (const ChunkKey& c : chunks) {
+      ChunkBatch& cb = batch.chunks[c];
+      WedgeRef ref;
+      ref.num_rays = wedge.num_rays;
+      ref.facets = facets;
+      for (int r = 0; r < wedge.num_rays; ++r) {
+        const RayKey key{ids[r].sensor, ids[r].frame, ids[r].index};
+        auto [it, inserted] = cb.ray_index.try_emplace(key, uint32_t(cb.wedges.rays.size()));
+        if (inserted) {
+          cb.wedges.rays.push_back(wedge.rays[r]);
+          const bool votes = Owned(ids[r].sensor, ids[r].frame) &&
+                             BatchOf(ids[r].sensor, ids[r].frame) == batches[i];
+          cb.wedges.votes.push_back(votes ? 1 : 0);
+        }
+        ref.ray[r] = it->second;
+      }
+      cb.wedges.wedges.push_back(ref);
+      ++stats.wedge_chunk_pairs;
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
+  ++stats.batches;
+  carved_up_to = batch.index;
+  for (auto& [chunk, cb] : batch.chunks) {
+    auto [it, inserted] = trees.try_emplace(chunk, options.grid, chunk);
+    ChunkOctree& tree = it->second;
+    if (inserted) {
+      tree.SetPartial(true);
+      tree.SetEvaluation(options.evaluation);
+      if (options.regions != nullptr) tree.RestrictTo(options.regions->at(chunk));
+    }
+    const size_t before = tree.num_leaves();
+    if (absl::Status s = tree.CarveIndexed(cb.wedges); !s.ok()) return s;
+    tree_leaves += tree.num_leaves() - before;
+    // The rays' geometry is done with: give the memory back now, not at the batch's end.
+    cb = ChunkBatch{};
+  }
+  if (tree_leaves * kBytesPerLeaf > options.memory_budget_bytes) return Flush();
+  return absl::OkStatus();
+}
+
+absl::Status SliceCarver::Impl::Flush() {
+  ++stats.flushes;
+  for (auto& [chunk, tree] : trees) {
+    const std::vector<TileLeaf> leaves = tree.FinestLeaves();
+    if (absl::Status s = sink(chunk, tree.num_wedges(), leaves); !s.ok()) return s;
+    ++stats.sections;
+  }
+  // The votes counted so far stay in the stats: the trees go.
+  for (const auto& [chunk, tree] : trees) flushed_updates += tree.num_leaf_updates();
+  trees.clear();
+  tree_leaves = 0;
+  return absl::OkStatus();
+}
+
+absl::Status SliceCarver::Impl::CarveCompleteBatches(bool all) {
+  while (!open.empty()) {
+    const int64_t b = open.front().index;
+    // Complete when no sensor can still emit a wedge with a ray of batch b: every sensor has
+    // fed a frame of a later batch (a line sensor's wedges to its next frame are out then), or
+    // has no frame left to read.
+    bool complete = all;
+    if (!complete) {
+      complete = true;
+      for (size_t s = 0; s < sensors.size() && complete; ++s) {
+        if (!finished[s]) {
+          complete = last_batch_fed[s] > b;
+        } else {
+          // All its frames are in; a line sensor's last frame still has its single-ray wedges
+          // to come (WedgeBuilder::Finish).
+          complete = sensors[s].kind != SensorKind::kLine || last_batch_fed[s] != b;
+        }
+      }
+    }
+    if (!complete) break;
+    Batch batch = std::move(open.front());
+    open.pop_front();
+    if (absl::Status s = CarveBatch(batch); !s.ok()) return s;
+  }
+  return absl::OkStatus();
+}
+
+SliceCarver::SliceCarver(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+SliceCarver::~SliceCarver() = default;
+
+absl::StatusOr<std::unique_ptr<SliceCarver>> SliceCarver::Create(std::vector<SensorInfo> sensors,
+                                                                 const ScanSlice& slice,
+                                                                 const SliceCarveOptions& options,
+                                                                 SectionSink sink) {
+  if (absl::Status s = options.Validate(); !s.ok()) return s;
+  if (!sink) return absl::InvalidArgumentError("slice carve: no section sink");
+  if (slice.own.size() != sensors.size() || slice.read.size() != sensors.size()) {
+    return absl::InvalidArgumentError(absl::StrCat("slice carve: slice ", slice.index, " has ",
+                                                   slice.own.size(), " row ranges for ",
+                                                   sensors.size(), " sensors"));
+  }
+  auto impl = std::make_unique<Impl>();
+  impl->sensors = sensors;
+  impl->slice = slice;
+  impl->options = options;
+  impl->sink = std::move(sink);
+  impl->stats.bounds.setEmpty();
+  const size_t n = sensors.size();
+  impl->frame_batch.resize(n);
+  impl->last_batch_fed.assign(n, -1);
+  impl->finished.assign(n, false);
+  impl->next_row.resize(n);
+  for (size_t s = 0; s < n; ++s) {
+    const ScanReader::RowRange& own = slice.own[s];
+    const ScanReader::RowRange& read = slice.read[s];
+    if (own.begin > own.end || read.begin > own.begin || read.end < own.end) {
+      return absl::InvalidArgumentError(absl::StrCat("slice carve: slice ", slice.index,
+                                                     " sensor ", s, ": own rows outside its "
+                                                     "read rows"));
+    }
+    impl->frame_batch[s].assign(own.end - own.begin, -1);
+    impl->finished[s] = read.begin == read.end;
+    impl->next_row[s] = read.begin;
+  }
+  Impl* m = impl.get();
+  absl::StatusOr<WedgeBuilder> builder = WedgeBuilder::Create(
+      std::move(sensors), options.wedges,
+      [m](const Wedge& w, std::span<const RayId> ids) { return m->OnWedge(w, ids); });
+  if (!builder.ok()) return builder.status();
+  impl->builder.emplace(*std::move(builder));
+  return std::unique_ptr<SliceCarver>(new SliceCarver(std::move(impl)));
+}
+
+absl::Status SliceCarver::AddFrame(const ScanFrame& frame, const FrameContext& context) {
+  Impl& m = *impl_;
+  if (frame.sensor < 0 || size_t(frame.sensor) >= m.sensors.size()) {
+    return absl::InvalidArgumentError(absl::StrCat("slice carve: frame of unknown sensor ",
+                                                   frame.sensor));
+  }
+  const uint32_t s = uint32_t(frame.sensor);
+  if (m.finished[s] || frame.row != m.next_row[s]) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "slice carve: sensor ", m.sensors[s].name, " row ", frame.row, " where row ",
+        m.next_row[s], " of slice ", m.slice.index, "'s rows [", m.slice.read[s].begin, ", ",
+        m.slice.read[s].end, ") was due"));
+  }
+  ++m.next_row[s];
+  if (m.Owned(s, frame.row)) {
+    // A new batch once the current one holds batch_rays own rays: at a frame, so the batches
+    // follow from the slice's frames alone.
+    if (m.batch_own_rays >= m.options.batch_rays) {
+      ++m.batch;
+      m.batch_own_rays = 0;
+    }
+    m.frame_batch[s][frame.row - m.slice.own[s].begin] = m.batch;
+    m.batch_own_rays += frame.points_sensor.size();
+    m.last_batch_fed[s] = m.batch;
+    ++m.stats.frames;
+    m.stats.rays += frame.points_sensor.size();
+    for (const Eigen::Vector3f& p : frame.points_sensor) m.stats.returns += p.allFinite();
+  } else if (frame.row >= m.slice.own[s].end) {
+    m.last_batch_fed[s] = Impl::kAfter;
+  }
+  if (absl::Status st = m.builder->AddFrame(frame, context); !st.ok()) return st;
+  if (m.next_row[s] == m.slice.read[s].end) m.finished[s] = true;
+  return m.CarveCompleteBatches(false);
+}
+
+absl::StatusOr<SliceCarveStats> SliceCarver::Finish() {
+  Impl& m = *impl_;
+  if (absl::Status s = m.builder->Finish(); !s.ok()) return s;
+  if (absl::Status s = m.CarveCompleteBatches(true); !s.ok()) return s;
+  if (absl::Status s = m.Flush(); !s.ok()) return s;
+  m.stats.leaf_updates = m.flushed_updates;
+  return m.stats;
+}
+
+absl::StatusOr<SliceCarveStats> CarveSliceToFile(ScanReader& reader, const ScanSlice& slice,
+                                                 const SliceCarveOptions& options,
+                                                 const std::string& partial_path,
+                                                 const std::function<void(uint64_t)>& progress) {
+  absl::StatusOr<std::unique_ptr<PartialSumsWriter>> writer =
+      PartialSumsWriter::Create(partial_path, options.grid.chunk_depth, slice.index);
+  if (!writer.ok()) return writer.status();
+  absl::StatusOr<std::unique_ptr<SliceCarver>> carver = SliceCarver::Create(
+      reader.sensors(), slice, options,
+      [&writer](const ChunkKey& chunk, uint64_t wedges, std::span<const TileLeaf> leaves) {
+        return (*writer)->AddSection(chunk, wedges, leaves);
+      });
+  if (!carver.ok()) return carver.status();
+  const std::vector<TimedPose>& path = reader.timed_path();
+  std::span<const PathCovariance> cov;
+  if (reader.path_covariance().has_value()) cov = *reader.path_covariance();
+  std::unique_ptr<ScanReader::FrameStream> stream;
+  {
+    std::lock_guard<std::mutex> lock(Hdf5Lock());
+    absl::StatusOr<std::unique_ptr<ScanReader::FrameStream>> s = reader.StreamFrames(slice.read);
+    if (!s.ok()) return s.status();
+    stream = *std::move(s);
+  }
+  using Clock = std::chrono::steady_clock;
+  Clock::time_point last_report = Clock::now();
+  uint64_t own_rays = 0;
+  ScanFrame frame;
+  while (true) {
+    absl::StatusOr<bool> more;
+    {
+      std::lock_guard<std::mutex> lock(Hdf5Lock());
+      more = stream->Next(frame);
+    }
+    if (!more.ok()) return more.status();
+    if (!*more) break;
+    absl::StatusOr<FrameContext> ctx = FrameContextAt(path, cov, frame.t, options.wedges.noise);
+    if (!ctx.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(reader.file(), ": frame at t=", frame.t, ": ", ctx.status().message()));
+    }
+    if (absl::Status s = (*carver)->AddFrame(frame, *ctx); !s.ok()) {
+      return absl::Status(s.code(), absl::StrCat(reader.file(), ": ", s.message()));
+    }
+    if (frame.row >= slice.own[frame.sensor].begin && frame.row < slice.own[frame.sensor].end) {
+      own_rays += frame.points_sensor.size();
+    }
+    if (progress && Clock::now() - last_report > std::chrono::milliseconds(250)) {
+      last_report = Clock::now();
+      progress(own_rays);
+    }
+  }
+  absl::StatusOr<SliceCarveStats> stats = (*carver)->Finish();
+  if (!stats.ok()) return stats.status();
+  stats->default_covariance = cov.empty();
+  if (absl::StatusOr<uint64_t> bytes = (*writer)->Finish(); !bytes.ok()) return bytes.status();
+  if (progress) progress(own_rays);
+  return stats;
+}
+
+}  // namespace carvemap

@@ -1,0 +1,276 @@
+// The carve by time slices (SliceCarver, then CombineChunkToTile) against the carve of whole
+// chunks (IngestScan's spill, CarveChunkToTile): the same votes, so the same tiles up to the
+// order of the additions; the same bytes for the same slices whatever the order they are
+// carved in; §5.6.1's restricted pass.
+#include "worker/slice_carver.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "coordinator/scan_ingest.h"
+#include "services/sim/simulator.h"
+#include "storage/partial_sums.h"
+#include "storage/tile_store.h"
+#include "tests/support/tile_agreement.h"
+#include "worker/chunk_carver.h"
+#include "worker/chunk_combiner.h"
+
+namespace carvemap {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string ReadBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+class SliceCarverTest : public ::testing::Test {
+ protected:
+  // The `office` preset at 10 Hz, 1° beams, 20 s: three line scanners, several rooms, sensors
+  // whose frames interleave (and drift, so rays are wide and wedges long).
+  static void SetUpTestSuite() {
+    root_ = new std::string(fs::path(::testing::TempDir()) / "slice_carver_test");
+    fs::remove_all(*root_);
+    SimulateOptions o;
+    o.preset = "office";
+    o.seed = 5;
+    o.rig.rate_hz = 10;
+    o.rig.beam_step_deg = 1;
+    o.max_duration_s = 20;
+    o.output_dir = *root_ + "/sim";
+    absl::StatusOr<SimulationSummary> sim = Simulate(o);
+    ASSERT_TRUE(sim.ok()) << sim.status();
+    scan_ = new std::string(sim->scan_path);
+    // The reference: whole chunks from the ingest's spill files, exactly.
+    IngestOptions io;
+    io.scan_path = *scan_;
+    io.spill_dir = *root_ + "/spill";
+    absl::StatusOr<IngestResult> ingest = IngestScan(io);
+    ASSERT_TRUE(ingest.ok()) << ingest.status();
+    reference_ = new std::map<ChunkKey, TileData, ChunkKeyLess>();
+    for (const SpilledChunk& c : ingest->chunks) {
+      absl::StatusOr<ChunkSpillFile> f = ReadChunkSpillFile(c.path);
+      ASSERT_TRUE(f.ok()) << f.status();
+      CarveChunkRequest req;
+      req.job_id = "j";
+      req.chunk = c.chunk;
+      req.grid.chunk_depth = 5;
+      req.wedge_payload = f->payload;
+      req.tiles_dir = *root_ + "/reference";
+      req.evaluation = CarveEvaluation::kExact;
+      absl::StatusOr<CarveChunkResult> r = CarveChunkToTile(req);
+      ASSERT_TRUE(r.ok()) << r.status();
+      absl::StatusOr<TileData> tile = ReadTile(r->tile_path);
+      ASSERT_TRUE(tile.ok()) << tile.status();
+      reference_->emplace(c.chunk, *std::move(tile));
+    }
+  }
+  static void TearDownTestSuite() {
+    delete root_;
+    delete scan_;
+    delete reference_;
+  }
+
+  // Plans slices of `slice_s`, carves them in `order` (indices into the plan) with `options`,
+  // combines every chunk; returns the tiles by chunk and the partial files by slice.
+  struct Carved {
+    std::map<ChunkKey, TileData, ChunkKeyLess> tiles;
+    std::vector<std::string> partials;
+    uint64_t slices = 0, leaf_updates = 0, batches = 0, flushes = 0;
+  };
+  static Carved CarveBySlices(const std::string& name, double slice_s, SliceCarveOptions options,
+                              bool reversed = false) {
+    Carved out;
+    absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(*scan_);
+    EXPECT_TRUE(reader.ok()) << reader.status();
+    std::vector<std::vector<FrameRecord>> frames;
+    std::vector<SensorKind> kinds;
+    for (size_t s = 0; s < (*reader)->sensors().size(); ++s) {
+      frames.push_back(*(*reader)->FrameRecords(int(s)));
+      kinds.push_back((*reader)->sensors()[s].kind);
+    }
+    absl::StatusOr<std::vector<ScanSlice>> slices = PlanSlices(frames, kinds, slice_s);
+    EXPECT_TRUE(slices.ok()) << slices.status();
+    out.slices = slices->size();
+    const std::string dir = *root_ + "/" + name;
+    fs::create_directories(dir);
+    std::vector<size_t> order(slices->size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = reversed ? order.size() - 1 - i : i;
+    out.partials.resize(slices->size());
+    for (size_t i : order) {
+      const ScanSlice& s = (*slices)[i];
+      out.partials[i] = dir + "/slice_" + std::to_string(s.index) + ".part";
+      absl::StatusOr<SliceCarveStats> st = CarveSliceToFile(**reader, s, options, out.partials[i]);
+      EXPECT_TRUE(st.ok()) << st.status();
+      if (!st.ok()) return out;
+      out.leaf_updates += st->leaf_updates;
+      out.batches += st->batches;
+      out.flushes += st->flushes;
+    }
+    std::vector<PartialSource> sources;
+    for (const std::string& p : out.partials) {
+      absl::StatusOr<PartialSumsIndex> index = ReadPartialIndex(p);
+      EXPECT_TRUE(index.ok()) << index.status();
+      sources.push_back({p, *index});
+    }
+    for (const auto& [chunk, sections] : GroupSections(sources)) {
+      CombineChunkRequest req;
+      req.job_id = "j";
+      req.chunk = chunk;
+      req.grid = options.grid;
+      req.sources = &sources;
+      req.sections = sections;
+      req.tiles_dir = dir + "/tiles";
+      absl::StatusOr<CarveChunkResult> r = CombineChunkToTile(req);
+      EXPECT_TRUE(r.ok()) << r.status();
+      absl::StatusOr<TileData> tile = ReadTile(r->tile_path);
+      EXPECT_TRUE(tile.ok()) << tile.status();
+      out.tiles.emplace(chunk, *std::move(tile));
+    }
+    return out;
+  }
+
+  static SliceCarveOptions Options(CarveEvaluation e) {
+    SliceCarveOptions o;
+    o.grid.chunk_depth = 5;
+    o.evaluation = e;
+    return o;
+  }
+
+  // Tiles equal node for node, counts and points equal, sums within `relative` (and the
+  // wedges carved the same, unless wedges joining slices or batches were carved twice).
+  static void ExpectSameTiles(const std::map<ChunkKey, TileData, ChunkKeyLess>& a,
+                              const std::map<ChunkKey, TileData, ChunkKeyLess>& b,
+                              double relative, bool same_wedges = true) {
+    ASSERT_EQ(a.size(), b.size());
+    size_t leaves = 0;
+    for (const auto& [chunk, tile] : a) {
+      auto it = b.find(chunk);
+      ASSERT_NE(it, b.end()) << chunk.transpose();
+      ASSERT_EQ(tile.leaves.size(), it->second.leaves.size()) << chunk.transpose();
+      if (same_wedges) {
+        EXPECT_EQ(tile.params.num_wedges, it->second.params.num_wedges) << chunk.transpose();
+      } else {
+        EXPECT_GE(it->second.params.num_wedges, tile.params.num_wedges) << chunk.transpose();
+      }
+      for (size_t i = 0; i < tile.leaves.size(); ++i) {
+        const TileLeaf& x = tile.leaves[i];
+        const TileLeaf& y = it->second.leaves[i];
+        ASSERT_EQ(x.node.local, y.node.local) << chunk.transpose();
+        ASSERT_EQ(x.node.depth, y.node.depth);
+        ASSERT_EQ(x.stats.count, y.stats.count);
+        ASSERT_EQ(x.stats.points, y.stats.points);
+        const auto close = [relative](double u, double v) {
+          return std::abs(u - v) <= relative * std::max(1.0, std::abs(u));
+        };
+        ASSERT_TRUE(close(x.stats.sum_w, y.stats.sum_w)) << x.stats.sum_w << " " << y.stats.sum_w;
+        ASSERT_TRUE(close(x.stats.sum_wp, y.stats.sum_wp));
+        ASSERT_TRUE(close(x.stats.sum_wp2, y.stats.sum_wp2));
+        ++leaves;
+      }
+    }
+    EXPECT_GT(leaves, 10000u);
+  }
+
+  static std::string* root_;
+  static std::string* scan_;
+  static std::map<ChunkKey, TileData, ChunkKeyLess>* reference_;
+};
+std::string* SliceCarverTest::root_ = nullptr;
+std::string* SliceCarverTest::scan_ = nullptr;
+std::map<ChunkKey, TileData, ChunkKeyLess>* SliceCarverTest::reference_ = nullptr;
+
+// One slice in one batch: the very sums of the whole chunks, in the same order.
+TEST_F(SliceCarverTest, OneSliceIsTheWholeChunksCarve) {
+  SliceCarveOptions o = Options(CarveEvaluation::kExact);
+  o.batch_rays = uint64_t{1} << 40;
+  const Carved c = CarveBySlices("one", 1e6, o);
+  EXPECT_EQ(c.slices, 1u);
+  EXPECT_EQ(c.batches, 1u);
+  ExpectSameTiles(*reference_, c.tiles, 0);
+}
+
+// Many slices, many batches per slice and a memory budget small enough to flush several times:
+// the same votes, so the same nodes, counts and points; the sums within rounding.
+TEST_F(SliceCarverTest, SlicesBatchesAndFlushesChangeOnlyTheRounding) {
+  SliceCarveOptions o = Options(CarveEvaluation::kExact);
+  o.batch_rays = 10'000;
+  o.memory_budget_bytes = 8u << 20;
+  const Carved c = CarveBySlices("many", 4.0, o);
+  EXPECT_EQ(c.slices, 5u);
+  EXPECT_GT(c.batches, 2 * c.slices);
+  EXPECT_GT(c.flushes, c.slices);
+  ExpectSameTiles(*reference_, c.tiles, 1e-12, /*same_wedges=*/false);
+}
+
+// The same slices carved in another order (as workers finish them) give the same bytes.
+TEST_F(SliceCarverTest, SameSlicesSameBytesWhateverTheOrder) {
+  const SliceCarveOptions o = Options(CarveEvaluation::kFast);
+  const Carved a = CarveBySlices("fwd", 6.0, o, false);
+  const Carved b = CarveBySlices("rev", 6.0, o, true);
+  ASSERT_EQ(a.partials.size(), b.partials.size());
+  for (size_t i = 0; i < a.partials.size(); ++i) {
+    EXPECT_EQ(ReadBytes(a.partials[i]), ReadBytes(b.partials[i])) << i;
+  }
+  ExpectSameTiles(a.tiles, b.tiles, 0);
+  // And the fast evaluation agrees with the exact reference as the chunk carve does.
+  testing::TileAgreement agreement;
+  for (const auto& [chunk, tile] : *reference_) {
+    auto it = a.tiles.find(chunk);
+    testing::AddTilePair(&tile, it == a.tiles.end() ? nullptr : &it->second, agreement);
+  }
+  EXPECT_GE(agreement.LabelShare(), 0.99999);
+  EXPECT_LT(agreement.DpQuantile(0.99), 1e-5);
+}
+
+// §5.6.1: with regions, only the chunks listed, only inside their regions: the whole carve's
+// leaves there (the combine's sums within rounding).
+TEST_F(SliceCarverTest, RegionsCarveOnlyThere) {
+  // Two busy chunks, in each its lower half at depth 1 (octants z = 0).
+  std::vector<ChunkKey> busiest;
+  for (const auto& [chunk, tile] : *reference_) busiest.push_back(chunk);
+  std::sort(busiest.begin(), busiest.end(), [](const ChunkKey& x, const ChunkKey& y) {
+    return reference_->at(x).leaves.size() > reference_->at(y).leaves.size() ||
+           (reference_->at(x).leaves.size() == reference_->at(y).leaves.size() &&
+            ChunkKeyLess()(x, y));
+  });
+  busiest.resize(2);
+  std::map<ChunkKey, ChunkRegion, ChunkKeyLess> regions;
+  for (const ChunkKey& c : busiest) {
+    regions.emplace(c, ChunkRegion(1, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}}));
+  }
+  SliceCarveOptions o = Options(CarveEvaluation::kExact);
+  o.regions = &regions;
+  const Carved c = CarveBySlices("regions", 6.0, o);
+  ASSERT_EQ(c.tiles.size(), 2u);
+  for (const ChunkKey& chunk : busiest) {
+    ASSERT_TRUE(c.tiles.count(chunk));
+    // The reference tile's leaves in the region, against the region's tile: the finest leaves
+    // agree (simplification may merge differently at the region's border).
+    testing::TileAgreement agreement;
+    TileData inside = reference_->at(chunk);
+    std::erase_if(inside.leaves, [](const TileLeaf& l) {  // keep those within octants z = 0
+      return l.node.depth < 1 || (l.node.local.z() >> (l.node.depth - 1)) != 0;
+    });
+    testing::AddTilePair(&inside, &c.tiles.at(chunk), agreement);
+    EXPECT_EQ(agreement.LabelShare(), 1.0) << chunk.transpose();
+    EXPECT_LT(agreement.max_dp, 1e-9) << chunk.transpose();
+    for (const TileLeaf& l : c.tiles.at(chunk).leaves) {
+      EXPECT_TRUE(regions.at(chunk).Intersects(l.node)) << l.node.local.transpose();
+    }
+  }
+}
+
+}  // namespace
+}  // namespace carvemap
