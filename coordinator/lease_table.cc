@@ -21,7 +21,6 @@ class SystemClock final : public LeaseTable::Clock {
   }
 };
 
-std::string KeyText(const ChunkCoord& k) { return absl::StrCat("(", k.x, ",", k.y, ",", k.z, ")"); }
 
 struct ParsedLease {
   std::string job_id;
@@ -180,8 +179,29 @@ std::optional<int64_t> LeaseTable::Heartbeat(absl::string_view worker_id) {
   return deadline;
 }
 
+absl::Status LeaseTable::Add(absl::string_view job_id, std::span<const ChunkRecord> chunks) {
+  auto it = jobs_.find(job_id);
+  if (it == jobs_.end()) return absl::NotFoundError(absl::StrCat("add: job ", job_id, " is not loaded"));
+  JobEntry& job = it->second;
+  for (const ChunkRecord& c : chunks) {
+    if (job.chunks.count(c.key)) {
+      return absl::AlreadyExistsError(
+          absl::StrCat("add: job ", job.id, " has ", TaskText(c.key), " already"));
+    }
+  }
+  if (absl::Status s = store_.AddChunks(job_id, chunks); !s.ok()) return s;
+  for (const ChunkRecord& c : chunks) {
+    ChunkRecord record = c;
+    record.job_id = job.id;
+    record.state = ChunkState::kQueued;
+    job.queued.insert(record.key);
+    job.chunks.emplace(record.key, std::move(record));
+  }
+  return absl::OkStatus();
+}
+
 absl::Status LeaseTable::Requeue(absl::string_view job_id, const std::vector<ChunkCoord>& keys,
-                                 absl::string_view reason) {
+                                 absl::string_view reason, bool held) {
   auto it = jobs_.find(job_id);
   if (it == jobs_.end()) {
     return absl::NotFoundError(absl::StrCat("requeue: job ", job_id, " is not loaded"));
@@ -193,7 +213,7 @@ absl::Status LeaseTable::Requeue(absl::string_view job_id, const std::vector<Chu
     auto c = job.chunks.find(key);
     if (c == job.chunks.end()) {
       return absl::NotFoundError(
-          absl::StrCat("requeue: job ", job.id, " has no chunk ", KeyText(key)));
+          absl::StrCat("requeue: job ", job.id, " has no ", TaskText(key)));
     }
     ChunkUpdate u{c->second, c->second.generation};
     u.chunk.state = ChunkState::kQueued;
@@ -212,7 +232,32 @@ absl::Status LeaseTable::Requeue(absl::string_view job_id, const std::vector<Chu
     ChunkRecord& current = job.chunks.at(u.chunk.key);
     if (current.state == ChunkState::kLeased) ForgetLease(current);
     current = u.chunk;
-    job.queued.insert(current.key);
+    if (held) {
+      job.queued.erase(current.key);
+      job.held.insert(current.key);
+    } else {
+      job.held.erase(current.key);
+      job.queued.insert(current.key);
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status LeaseTable::Release(absl::string_view job_id, const std::vector<ChunkCoord>& keys) {
+  auto it = jobs_.find(job_id);
+  if (it == jobs_.end()) {
+    return absl::NotFoundError(absl::StrCat("release: job ", job_id, " is not loaded"));
+  }
+  JobEntry& job = it->second;
+  for (const ChunkCoord& key : keys) {
+    if (!job.held.count(key)) {
+      return absl::NotFoundError(
+          absl::StrCat("release: job ", job.id, " holds no ", TaskText(key)));
+    }
+  }
+  for (const ChunkCoord& key : keys) {
+    job.held.erase(key);
+    job.queued.insert(key);
   }
   return absl::OkStatus();
 }
@@ -238,17 +283,17 @@ absl::Status LeaseTable::Complete(absl::string_view lease_id, int64_t generation
   auto c = job.chunks.find(parsed->chunk);
   if (c == job.chunks.end()) {
     return absl::NotFoundError(absl::StrCat("complete ", lease_id, ": job ", job.id,
-                                            " has no chunk ", KeyText(parsed->chunk)));
+                                            " has no ", TaskText(parsed->chunk)));
   }
   const ChunkRecord& current = c->second;
   if (current.state == ChunkState::kDone) {
     return absl::FailedPreconditionError(
-        absl::StrCat("complete ", lease_id, ": chunk ", KeyText(current.key),
+        absl::StrCat("complete ", lease_id, ": ", TaskText(current.key),
                      " already committed by lease ", current.lease_id));
   }
   if (current.generation != generation) {
     return absl::FailedPreconditionError(
-        absl::StrCat("complete ", lease_id, ": stale lease, chunk ", KeyText(current.key),
+        absl::StrCat("complete ", lease_id, ": stale lease, ", TaskText(current.key),
                      " was leased again (generation ", current.generation, ")"));
   }
   // Same generation: either still LEASED (in time or past its deadline) or QUEUED after expiry
@@ -345,8 +390,8 @@ absl::Status LeaseTable::RequeueOrFail(
     if (!fail && (force_fail || current.attempts >= options_.max_attempts)) {
       fail = JobTransition{
           JobState::kFailed,
-          force_fail ? absl::StrCat("chunk ", KeyText(key), ": ", why, " (not retryable)")
-                     : absl::StrCat("chunk ", KeyText(key), ": attempt ", current.attempts,
+          force_fail ? absl::StrCat(TaskText(key), ": ", why, " (not retryable)")
+                     : absl::StrCat(TaskText(key), ": attempt ", current.attempts,
                                     " of ", options_.max_attempts, " failed: ", why),
           now};
     }
@@ -390,11 +435,13 @@ absl::StatusOr<LeaseTable::Progress> LeaseTable::GetProgress(absl::string_view j
   return p;
 }
 
-bool LeaseTable::AllDone(absl::string_view job_id) const {
+bool LeaseTable::AllDone(absl::string_view job_id, bool except_held) const {
   auto it = jobs_.find(job_id);
   if (it == jobs_.end() || it->second.failed) return false;
   for (const auto& [key, c] : it->second.chunks) {
-    if (c.state != ChunkState::kDone) return false;
+    if (c.state != ChunkState::kDone && !(except_held && it->second.held.count(key))) {
+      return false;
+    }
   }
   return true;
 }

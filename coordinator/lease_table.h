@@ -16,6 +16,7 @@
 #include <utility>
 #include <optional>
 #include <set>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -49,8 +50,8 @@ class LeaseTable {
     static Clock& System();
   };
 
-  // A lease handed to a worker (carve.proto Lease, without the payload: the service adds the
-  // carve parameters and the wedges from the chunk spill).
+  // A lease handed to a worker (carve.proto Lease, without the task: the service adds the
+  // carve parameters and the slice or chunk the key names).
   struct Grant {
     std::string job_id;
     ChunkCoord chunk;
@@ -92,13 +93,23 @@ class LeaseTable {
   // unknown: completing them is NOT_FOUND. No store write: the job's state is the caller's.
   void DropJob(absl::string_view job_id);
 
+  // Adds new chunks (tasks) to a loaded job, queued: one store transaction (JobStore::AddChunks).
+  // ALREADY_EXISTS naming the key if the job has one of them already (nothing changes then);
+  // NOT_FOUND if the job is not loaded.
+  absl::Status Add(absl::string_view job_id, std::span<const ChunkRecord> chunks);
+
   // Puts chunks of a loaded job back in the queue for another pass over them (§5.6.1: the
   // object chunks carved again at a finer resolution), whatever their state, with a fresh
   // attempt budget. Their generation is raised by one, so no lease of an earlier pass can
   // complete them. `reason` is stored as last_error. One store transaction. NOT_FOUND if the
   // job is not loaded or a key is not one of its chunks (then nothing changes).
+  // held: the chunks count as not done from now on but are not leased until Release: a pass
+  // whose second step must wait for its first (slices, then the chunks they feed) shows its
+  // whole size at once, never "all done" in between. Held is memory only: LoadJob queues them.
   absl::Status Requeue(absl::string_view job_id, const std::vector<ChunkCoord>& keys,
-                       absl::string_view reason);
+                       absl::string_view reason, bool held = false);
+  // Makes held chunks leasable. NOT_FOUND if the job is not loaded or a key is not held.
+  absl::Status Release(absl::string_view job_id, const std::vector<ChunkCoord>& keys);
 
   // The next QUEUED chunk for `worker_id`, or nullopt if nothing is queued. Jobs in load order
   // (oldest first), chunks by key (x, y, z): deterministic. The chunk becomes LEASED with
@@ -136,8 +147,9 @@ class LeaseTable {
 
   // NOT_FOUND if the job is not loaded.
   absl::StatusOr<Progress> GetProgress(absl::string_view job_id) const;
-  // True when every chunk of the job is DONE (also for a job with no chunks).
-  [[nodiscard]] bool AllDone(absl::string_view job_id) const;
+  // True when every chunk of the job is DONE (also for a job with no chunks); with
+  // `except_held`, every chunk but the held ones.
+  [[nodiscard]] bool AllDone(absl::string_view job_id, bool except_held = false) const;
   // The lease ids a worker holds, in key order.
   [[nodiscard]] std::vector<std::string> LeasesOf(absl::string_view worker_id) const;
 
@@ -151,6 +163,7 @@ class LeaseTable {
     std::string id;
     std::map<ChunkCoord, ChunkRecord> chunks;
     std::set<ChunkCoord> queued;  // ordered: the lease order
+    std::set<ChunkCoord> held;    // QUEUED but not leased until Release
     bool failed = false;
     std::string error;
   };

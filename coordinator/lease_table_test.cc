@@ -232,6 +232,66 @@ TEST_F(LeaseTableTest, RequeueStartsAnotherPassThatEarlierLeasesCannotComplete) 
   EXPECT_EQ(job->counters.chunks_done, 3);
 }
 
+// A loaded job gets more tasks (the chunks to combine once its slices are carved): queued, in
+// key order with the rest, persisted (a restart finds them), never twice.
+TEST_F(LeaseTableTest, AddQueuesNewChunksOfALoadedJob) {
+  AddJob("j", 1);
+  const LeaseTable::Grant first = MustLease("w1");
+  ASSERT_TRUE(table_->Complete(first.lease_id, first.generation, TileFor(first)).ok());
+  EXPECT_TRUE(table_->AllDone("j"));
+  std::vector<ChunkRecord> more(2);
+  more[0].key = {5, 0, 0};
+  more[1].key = {-5, 1, 0};
+  ASSERT_TRUE(table_->Add("j", more).ok());
+  EXPECT_FALSE(table_->AllDone("j"));
+  EXPECT_EQ(MustLease("w1").chunk, (ChunkCoord{-5, 1, 0}));
+  EXPECT_EQ(MustLease("w2").chunk, (ChunkCoord{5, 0, 0}));
+  absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress("j");
+  ASSERT_TRUE(p.ok());
+  EXPECT_EQ(p->chunks_total, 3);
+  EXPECT_EQ(p->chunks_leased, 2);
+  EXPECT_EQ(table_->Add("j", more).code(), absl::StatusCode::kAlreadyExists);
+  EXPECT_EQ(table_->Add("other", more).code(), absl::StatusCode::kNotFound);
+  Restart();
+  ASSERT_TRUE(table_->LoadJob("j").ok());
+  p = table_->GetProgress("j");
+  ASSERT_TRUE(p.ok());
+  EXPECT_EQ(p->chunks_total, 3);
+  EXPECT_EQ(p->chunks_done, 1);
+  EXPECT_EQ(p->chunks_queued, 2);  // the leases of before the restart, requeued
+}
+
+// A pass's second step, held back until its first is done: counted as not done at once (so
+// the job never looks finished in between), leased only after Release.
+TEST_F(LeaseTableTest, HeldChunksCountButWaitForRelease) {
+  AddJob("j", 2);
+  for (int i = 0; i < 2; ++i) {
+    const LeaseTable::Grant g = MustLease("w1");
+    ASSERT_TRUE(table_->Complete(g.lease_id, g.generation, TileFor(g)).ok());
+  }
+  std::vector<ChunkRecord> slices(1);
+  slices[0].key = {-9, 0, 0};
+  ASSERT_TRUE(table_->Add("j", slices).ok());
+  ASSERT_TRUE(table_->Requeue("j", {{0, 0, 1}}, "next pass", /*held=*/true).ok());
+  const LeaseTable::Grant s = MustLease("w1");
+  EXPECT_EQ(s.chunk, (ChunkCoord{-9, 0, 0}));
+  EXPECT_FALSE(table_->Lease("w2")->has_value());  // {0,0,1} is held
+  EXPECT_FALSE(table_->AllDone("j", /*except_held=*/true));
+  ASSERT_TRUE(table_->Complete(s.lease_id, s.generation, TileFor(s)).ok());
+  EXPECT_FALSE(table_->AllDone("j"));
+  EXPECT_TRUE(table_->AllDone("j", /*except_held=*/true));
+  absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress("j");
+  ASSERT_TRUE(p.ok());
+  EXPECT_EQ(p->chunks_total, 3);
+  EXPECT_EQ(p->chunks_done, 2);
+  EXPECT_EQ(table_->Release("j", {{0, 0, 0}}).code(), absl::StatusCode::kNotFound);
+  ASSERT_TRUE(table_->Release("j", {{0, 0, 1}}).ok());
+  const LeaseTable::Grant c = MustLease("w2");
+  EXPECT_EQ(c.chunk, (ChunkCoord{0, 0, 1}));
+  ASSERT_TRUE(table_->Complete(c.lease_id, c.generation, TileFor(c)).ok());
+  EXPECT_TRUE(table_->AllDone("j"));
+}
+
 TEST_F(LeaseTableTest, HeartbeatExtendsAllLeasesOfTheWorker) {
   AddJob("j-1", 3);
   MustLease("w-1");

@@ -10,6 +10,14 @@
 #include "absl/strings/str_split.h"
 
 namespace carvemap {
+
+std::string TaskText(const ChunkCoord& key) {
+  if (IsSliceTask(key)) {
+    return key.z == 0 ? absl::StrCat("slice ", key.y)
+                      : absl::StrCat("slice ", key.y, " of pass ", key.z);
+  }
+  return absl::StrCat("chunk (", key.x, ",", key.y, ",", key.z, ")");
+}
 namespace {
 
 // PRAGMA application_id marks the file as a carvemap job store ("CVJS"), so opening some other

@@ -9,6 +9,7 @@
 
 #include <compare>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <span>
@@ -59,6 +60,17 @@ struct ChunkCoord {
   int32_t z = 0;
   auto operator<=>(const ChunkCoord&) const = default;
 };
+
+// A job's tasks are stored as chunk rows: a chunk to combine under its key, and slice k of
+// carve pass p (docs/RPC.md "Slices") under {kSliceTaskX, k, p}. No chunk has that x: world
+// coordinates are bounded by ±1000 km, chunk keys by ±500 000.
+inline constexpr int32_t kSliceTaskX = std::numeric_limits<int32_t>::min();
+inline ChunkCoord SliceTaskKey(uint32_t index, int pass) {
+  return {kSliceTaskX, static_cast<int32_t>(index), pass};
+}
+inline bool IsSliceTask(const ChunkCoord& key) { return key.x == kSliceTaskX; }
+// "chunk (x,y,z)" or "slice k" / "slice k of pass p": how errors name a task.
+std::string TaskText(const ChunkCoord& key);
 
 // Counters derived from the chunk rows, kept on the job row in the same transaction as every
 // chunk change (so GetJob is one row read).
