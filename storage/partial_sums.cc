@@ -336,4 +336,78 @@ absl::Status ReadPartialSection(const std::string& path, const PartialSumsIndex&
   return absl::OkStatus();
 }
 
+namespace {
+constexpr char kRegionsMagic[8] = {'C', 'M', 'R', 'E', 'G', 'N', 'S', '1'};
+}  // namespace
+
+absl::Status WriteRegionsFile(const std::string& path, const ChunkRegions& regions) {
+  std::string bytes(kRegionsMagic, 8);
+  char u[4];
+  const auto put = [&](uint32_t v) {
+    PutU32(v, u);
+    bytes.append(u, 4);
+  };
+  put(uint32_t(regions.size()));
+  for (const auto& [chunk, region] : regions) {
+    for (int a = 0; a < 3; ++a) put(uint32_t(chunk[a]));
+    put(uint32_t(region.depth()));
+    const std::string cells = region.Encode();
+    put(uint32_t(cells.size()));
+    bytes += cells;
+  }
+  put(Crc32c(bytes));
+  const std::string tmp = path + ".tmp";
+  Fd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644));
+  if (fd.get() < 0) return IoError("create", tmp);
+  if (absl::Status s = WriteAll(fd.get(), bytes.data(), bytes.size(), tmp); !s.ok()) return s;
+  if (::fsync(fd.get()) != 0) return IoError("fsync", tmp);
+  if (::close(fd.release()) != 0) return IoError("close", tmp);
+  if (::rename(tmp.c_str(), path.c_str()) != 0) return IoError("rename", tmp);
+  return absl::OkStatus();
+}
+
+absl::StatusOr<ChunkRegions> ReadRegionsFile(const std::string& path) {
+  Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+  if (fd.get() < 0) {
+    if (errno == ENOENT) return absl::NotFoundError(absl::StrCat("regions file ", path,
+                                                                 " does not exist"));
+    return IoError("open", path);
+  }
+  struct stat st;
+  if (::fstat(fd.get(), &st) != 0) return IoError("stat", path);
+  std::string bytes(size_t(st.st_size), '\0');
+  absl::StatusOr<size_t> got = ReadAt(fd.get(), bytes.data(), bytes.size(), 0, path);
+  if (!got.ok()) return got.status();
+  const auto corrupt = [&path](std::string_view what) {
+    return absl::DataLossError(absl::StrCat("regions file ", path, ": ", std::string(what)));
+  };
+  if (*got != bytes.size() || bytes.size() < 16 || std::memcmp(bytes.data(), kRegionsMagic, 8) != 0) {
+    return corrupt("not a regions file, or truncated");
+  }
+  if (GetU32(bytes.data() + bytes.size() - 4) !=
+      Crc32c(std::string_view(bytes.data(), bytes.size() - 4))) {
+    return corrupt("checksum mismatch");
+  }
+  const char* p = bytes.data() + 8;
+  const char* end = bytes.data() + bytes.size() - 4;
+  const uint32_t count = GetU32(p);
+  p += 4;
+  ChunkRegions out;
+  for (uint32_t i = 0; i < count; ++i) {
+    if (end - p < 20) return corrupt(absl::StrCat("region ", i, " truncated"));
+    ChunkKey chunk;
+    for (int a = 0; a < 3; ++a) chunk[a] = int32_t(GetU32(p + 4 * a));
+    const int depth = int(GetU32(p + 12));
+    const uint32_t size = GetU32(p + 16);
+    p += 20;
+    if (uint64_t(end - p) < size) return corrupt(absl::StrCat("region ", i, " truncated"));
+    absl::StatusOr<ChunkRegion> region = ChunkRegion::Decode(depth, std::string_view(p, size));
+    if (!region.ok()) return corrupt(absl::StrCat("region ", i, ": ", region.status().message()));
+    p += size;
+    out.emplace(chunk, *std::move(region));
+  }
+  if (p != end) return corrupt("bytes after the last region");
+  return out;
+}
+
 }  // namespace carvemap

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <span>
 #include <string>
@@ -12,6 +13,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "services/geometry/chunk_region.h"
 #include "services/geometry/octree_keys.h"
 #include "storage/tile_store.h"
 
@@ -66,5 +68,13 @@ class PartialSumsWriter {
 [[nodiscard]] absl::Status ReadPartialSection(const std::string& path, const PartialSumsIndex& index,
                                               const PartialSection& section,
                                               std::vector<TileLeaf>& out);
+
+// §5.6.1's re-carving pass: the chunks to carve again and each one's region, in one file that
+// every slice of the pass reads (storage/PARTIAL_FORMAT.md "Regions"). Written through
+// "<path>.tmp" and renamed; I/O errors name the file. The reader: NotFound for a missing file,
+// DataLoss naming the file for a damaged one.
+using ChunkRegions = std::map<ChunkKey, ChunkRegion, ChunkKeyLess>;
+[[nodiscard]] absl::Status WriteRegionsFile(const std::string& path, const ChunkRegions& regions);
+[[nodiscard]] absl::StatusOr<ChunkRegions> ReadRegionsFile(const std::string& path);
 
 }  // namespace carvemap

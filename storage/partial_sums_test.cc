@@ -150,5 +150,32 @@ TEST(PartialSumsTest, UnfinishedWriterLeavesNothingAndBadLeavesAreRefused) {
   EXPECT_FALSE(fs::exists(path + ".tmp"));
 }
 
+TEST(PartialSumsTest, RegionsFileRoundTripAndDamage) {
+  ChunkRegions regions;
+  regions.emplace(ChunkKey(-3, 0, 7), ChunkRegion(3, {{1, 2, 3}, {7, 7, 7}}));
+  regions.emplace(ChunkKey(0, 0, 0), ChunkRegion(5, {{31, 0, 0}}));
+  const std::string path = TempPath("regions.bin");
+  ASSERT_TRUE(WriteRegionsFile(path, regions).ok());
+  absl::StatusOr<ChunkRegions> back = ReadRegionsFile(path);
+  ASSERT_TRUE(back.ok()) << back.status();
+  ASSERT_EQ(back->size(), 2u);
+  for (const auto& [chunk, region] : regions) {
+    ASSERT_TRUE(back->count(chunk));
+    EXPECT_EQ(back->at(chunk).depth(), region.depth());
+    EXPECT_EQ(back->at(chunk).Encode(), region.Encode());
+  }
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  for (size_t cut : {size_t(3), bytes.size() / 2, bytes.size() - 1}) {
+    std::ofstream(path, std::ios::binary) << bytes.substr(0, cut);
+    EXPECT_EQ(ReadRegionsFile(path).status().code(), absl::StatusCode::kDataLoss) << cut;
+  }
+  EXPECT_EQ(ReadRegionsFile(TempPath("no_regions.bin")).status().code(),
+            absl::StatusCode::kNotFound);
+}
+
 }  // namespace
 }  // namespace carvemap

@@ -1,6 +1,6 @@
 // The carving acceptance test (issue 3): a simulated `office` is carved through the real
-// pipeline (IngestScan ➜ spill files ➜ CarveChunkToTile ➜ tiles) and the tiles are compared
-// with the exact truth solids of the building (MakePresetBuilding("office", 1)).
+// pipeline (time slices ➜ partial sums ➜ combined tiles, worker/scan_carver.h) and the tiles
+// are compared with the exact truth solids of the building (MakePresetBuilding("office", 1)).
 //
 // Truth labels of a leaf (its box B, closed):
 //   FREE   B's interior meets no solid and B lies inside the building's envelope (the AABB of
@@ -35,13 +35,12 @@
 #include <gtest/gtest.h>
 
 #include "absl/container/flat_hash_map.h"
-#include "coordinator/scan_ingest.h"
 #include "services/building/building.h"
 #include "services/building/building_presets.h"
 #include "services/geometry/octree_keys.h"
 #include "services/sim/simulator.h"
 #include "storage/tile_store.h"
-#include "worker/spilled_chunk_carver.h"
+#include "worker/scan_carver.h"
 
 namespace carvemap {
 namespace {
@@ -59,39 +58,29 @@ double EnvDouble(const char* name, double fallback) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The pipeline, in process: ingest into <work>/spill, carve every chunk on `threads` threads
-// into <work>/tiles. (The distributed test runs the same stages through the services.)
+// The pipeline, in process: the scan carved by time slices on `threads` threads into
+// <work>/tiles (worker/scan_carver.h). (The distributed test runs the same stages through the
+// services.)
 struct PipelineRun {
-  IngestResult ingest;
   std::vector<std::string> tile_paths;
-  double ingest_s = 0, carve_s = 0;
+  double carve_s = 0;
 };
 
 absl::StatusOr<PipelineRun> RunPipeline(const std::string& scan, const std::string& work,
                                         const OctreeGrid& grid, int threads) {
   PipelineRun run;
   fs::remove_all(work);
-  Clock::time_point t0 = Clock::now();
-  IngestOptions io;
-  io.scan_path = scan;
-  io.spill_dir = work + "/spill";
-  absl::StatusOr<IngestResult> ingest = IngestScan(io);
-  if (!ingest.ok()) return ingest.status();
-  run.ingest = *std::move(ingest);
-  run.ingest_s = SecondsSince(t0);
-
-  t0 = Clock::now();
-  SpilledChunkCarveOptions options;
+  const Clock::time_point t0 = Clock::now();
+  ScanCarveOptions options;
   options.grid = grid;
   options.job_id = "carve_accuracy";
+  options.partials_dir = work + "/partials";
   options.tiles_dir = work + "/tiles";
   options.threads = threads;
-  fs::create_directories(options.tiles_dir);
-  absl::StatusOr<SpilledChunkCarveTotals> carved = CarveSpilledChunks(run.ingest.chunks, options);
+  absl::StatusOr<ScanCarveTotals> carved = CarveScan(scan, options);
   if (!carved.ok()) return carved.status();
   run.tile_paths = std::move(carved->tile_paths);
   run.carve_s = SecondsSince(t0);
-  fs::remove_all(work + "/spill");  // hundreds of MB; the tiles are what is checked
   return run;
 }
 
@@ -401,8 +390,7 @@ absl::StatusOr<PipelineRun> RunHarness(const std::string& scan, const std::strin
                                "; its output is in " + log);
   }
   PipelineRun run;
-  run.carve_s = SecondsSince(t0);  // the whole `carvemap run`: ingest, carve, merge
-  run.ingest_s = std::nan("");     // inside the coordinator, not measured apart
+  run.carve_s = SecondsSince(t0);  // the whole `carvemap run`: carve and merge
   for (const auto& e : fs::directory_iterator(out + "/tiles")) {
     if (e.path().extension() == ".h5") run.tile_paths.push_back(e.path().string());
   }
@@ -454,10 +442,10 @@ void CheckOfficeAgainstTruth(bool drift, bool via_harness = false) {
 
   std::printf(
       "office seed 1, drift %s, %s, %.0f s walk, %.0f Hz, %.2f deg beams: %llu rays; simulate "
-      "%.1f s, ingest %.1f s, carve %.1f s (%d threads), evaluate %.1f s\n",
+      "%.1f s, carve %.1f s (%d threads), evaluate %.1f s\n",
       drift ? "on" : "off", via_harness ? "carvemap run --workers 2" : "in process", o.max_duration_s > 0 ? o.max_duration_s : sim->duration_s, o.rig.rate_hz, o.rig.beam_step_deg,
       static_cast<unsigned long long>(sim->rays),
-      sim_s, run->ingest_s, run->carve_s, threads, eval_s);
+      sim_s, run->carve_s, threads, eval_s);
   std::printf(
       "labels: %.2f %% correct of %llu labelled observed leaves (free %llu/%llu = %.2f %%, "
       "solid %llu/%llu = %.2f %%); %llu straddling leaves excluded; by volume %.2f %% of "

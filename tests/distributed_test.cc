@@ -6,12 +6,15 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
 #include <thread>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
 
 #include "proto/carvemap/v1/carve.grpc.pb.h"
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
@@ -206,7 +209,17 @@ TEST_F(DistributedTest, JobRunsToSucceededWithAWorker) {
   EXPECT_TRUE(fs::exists(out / "octree.bt"));
   int tiles = 0;
   for (const auto& e : fs::directory_iterator(out / "tiles")) tiles += e.path().extension() == ".h5";
-  EXPECT_EQ(tiles, done->chunks_total);
+  // The job's tasks: its time slices (job.json "carve"), one chunk per tile, and the slices
+  // of the merge's re-carve (§5.6.1), when the merge asked for one.
+  std::ifstream in(out / "job.json");
+  const nlohmann::json doc = nlohmann::json::parse(in, nullptr, false);
+  ASSERT_TRUE(doc.is_object());
+  const int slices = doc["carve"].value("slices", -1);
+  EXPECT_GE(slices, 1);
+  const bool recarved = doc["counts"].value("recarved_chunks", 0) > 0;
+  EXPECT_EQ(tiles + slices * (recarved ? 2 : 1), done->chunks_total);
+  EXPECT_GT(doc["carve"].value("rays", 0), 0);
+  EXPECT_EQ(doc["carve"].value("rays", 0), doc.value("rays_carved", -1));
 
   // Fetch checks the server's SHA-256.
   const fs::path fetched = root_ / "fetched.json";

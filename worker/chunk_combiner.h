@@ -5,6 +5,7 @@
 // additions follows the slices), and the same bytes whatever worker combines them.
 #pragma once
 
+#include <cstdint>
 #include <map>
 #include <string>
 #include <vector>
@@ -12,9 +13,15 @@
 #include "absl/status/statusor.h"
 #include "services/geometry/octree_keys.h"
 #include "storage/partial_sums.h"
-#include "worker/chunk_carver.h"
 
 namespace carvemap {
+
+struct CarveChunkResult {
+  std::string tile_path;
+  uint64_t tile_bytes = 0;
+  uint64_t wedges = 0, leaves = 0;
+  double elapsed_s = 0;
+};
 
 // One slice's partial sums file and its index (ReadPartialIndex).
 struct PartialSource {

@@ -437,13 +437,7 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   auto& row_p = buf.row_p;
   Wedge wedge;
   uint64_t updates = 0, touches = 0;
-  constexpr size_t kProgressEvery = 4096;  // wedges
-  size_t reported = 0;
   for (size_t w = 0; w < num_wedges; ++w) {
-    if (progress_ && w - reported >= kProgressEvery) {
-      progress_(w - reported);
-      reported = w;
-    }
     const WedgeRef& ref = in.wedges[w];
     if (axes_needed[w] != 0 && region != nullptr && ref.num_rays > 1 &&
         !MayTouchRegion(*region, chunk_origin, {sensor_means.data(), far_ends.data()}, ref)) {
@@ -577,7 +571,6 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
       }
     }
   }
-  if (progress_ && num_wedges > reported) progress_(num_wedges - reported);
   num_leaf_touches_ += touches;
   num_leaf_updates_ += updates;
   Level& finest = levels_[grid_.chunk_depth];

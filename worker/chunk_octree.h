@@ -11,7 +11,6 @@
 #pragma once
 
 #include <cstdint>
-#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -39,10 +38,10 @@ inline constexpr double kMinRayWeight = 1e-15;
 //   kExact — double precision (carve_map.h): the reference, what the tests of the model run.
 //   kFast  — single precision, four leaves at a time (carve_map_float.h), summed in double
 //            into a dense array of the chunk's leaves: the default. The tolerance it is held to
-//            against kExact (chunk_carver_test, carve_bench): ≥ 99.9 % of finest leaves with
+//            against kExact (slice_carver_test, carve_bench): ≥ 99.9 % of finest leaves with
 //            the same label and |Δp| ≤ 0.01 on ≥ 99 % of stored leaves. What it gives: the
-//            same votes, every label the same and |Δp| < 1e−6 on the simulated office2 and on
-//            chunk_carver_test's room (docs/BENCHMARKS.md).
+//            same votes, every label the same and |Δp| < 1e−6 on the simulated office2
+//            (docs/BENCHMARKS.md), ≥ 99.999 % of labels on slice_carver_test's office.
 // Both are deterministic: the same input gives the same bytes on any x86-64 worker.
 enum class CarveEvaluation { kExact, kFast };
 
@@ -93,11 +92,6 @@ class ChunkOctree {
   void DropUnobserved();
   // The finest leaves as they are (before Simplify: a part's sums), in canonical tile order.
   [[nodiscard]] std::vector<TileLeaf> FinestLeaves() const;
-  // Called from CarveIndexed with the wedges carved since the last call, every few thousand
-  // wedges and at its end (a worker's heartbeats carry them: live progress within a chunk).
-  void SetProgress(std::function<void(uint64_t wedges)> progress) {
-    progress_ = std::move(progress);
-  }
 
   // §4.3.2, bottom-up: 8 sibling leaves merge into their parent (LeafStats::Merge, exact sums)
   // when all 8 are observed leaves with the same label (interior iff p > 0.5) and none holds a
@@ -139,7 +133,6 @@ class ChunkOctree {
   std::optional<ChunkRegion> region_;
   CarveEvaluation evaluation_ = CarveEvaluation::kFast;
   bool partial_ = false;
-  std::function<void(uint64_t)> progress_;
   bool simplified_ = false;
   uint64_t num_wedges_ = 0;
   uint64_t num_leaf_updates_ = 0;

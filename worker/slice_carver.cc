@@ -13,7 +13,6 @@
 #include "services/geometry/wedge_geometry.h"
 #include "storage/hdf5_lock.h"
 #include "storage/partial_sums.h"
-#include "storage/wedge_codec.h"  // ValidateWedge
 
 namespace carvemap {
 namespace {

@@ -1,7 +1,8 @@
 // The carve by time slices (SliceCarver, then CombineChunkToTile) against the carve of whole
-// chunks (IngestScan's spill, CarveChunkToTile): the same votes, so the same tiles up to the
-// order of the additions; the same bytes for the same slices whatever the order they are
-// carved in; §5.6.1's restricted pass.
+// chunks (every wedge of the scan binned into its chunks in scan order, each chunk carved in
+// one ChunkOctree call): the same votes, so the same tiles up to the order of the additions;
+// the same bytes for the same slices whatever the order they are carved in; §5.6.1's
+// restricted pass.
 #include "worker/slice_carver.h"
 
 #include <algorithm>
@@ -9,18 +10,22 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <span>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
 
-#include "coordinator/scan_ingest.h"
+#include "absl/container/flat_hash_map.h"
+#include "coordinator/chunk_binning.h"
+#include "coordinator/wedge_builder.h"
+#include "services/geometry/wedge_geometry.h"
 #include "services/sim/simulator.h"
 #include "storage/partial_sums.h"
 #include "storage/tile_store.h"
 #include "tests/support/tile_agreement.h"
-#include "worker/chunk_carver.h"
 #include "worker/chunk_combiner.h"
 
 namespace carvemap {
@@ -52,28 +57,43 @@ class SliceCarverTest : public ::testing::Test {
     absl::StatusOr<SimulationSummary> sim = Simulate(o);
     ASSERT_TRUE(sim.ok()) << sim.status();
     scan_ = new std::string(sim->scan_path);
-    // The reference: whole chunks from the ingest's spill files, exactly.
-    IngestOptions io;
-    io.scan_path = *scan_;
-    io.spill_dir = *root_ + "/spill";
-    absl::StatusOr<IngestResult> ingest = IngestScan(io);
-    ASSERT_TRUE(ingest.ok()) << ingest.status();
+    // The reference: whole chunks, exactly. Every wedge binned into the chunks its hull
+    // touches, in scan order, each ray once per chunk (eq 4.8's set); one carve per chunk.
+    std::map<ChunkKey, IndexedWedges, ChunkKeyLess> bins;
+    std::map<ChunkKey, absl::flat_hash_map<std::tuple<uint32_t, uint64_t, uint32_t>, uint32_t>,
+             ChunkKeyLess>
+        ray_index;
+    absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(*scan_);
+    ASSERT_TRUE(reader.ok()) << reader.status();
+    absl::StatusOr<WedgeBuilderStats> built = BuildWedges(
+        **reader, WedgeBuilderOptions{},
+        [&](const Wedge& wedge, std::span<const RayId> ids) -> absl::Status {
+          uint64_t facets = 0;
+          for (const ChunkKey& c : ChunksOfWedge(MakeWedgeHull(wedge, 3.0, &facets))) {
+            IndexedWedges& bin = bins[c];
+            WedgeRef ref;
+            ref.num_rays = wedge.num_rays;
+            ref.facets = facets;
+            for (int r = 0; r < wedge.num_rays; ++r) {
+              auto [it, inserted] = ray_index[c].try_emplace(
+                  {ids[r].sensor, ids[r].frame, ids[r].index}, uint32_t(bin.rays.size()));
+              if (inserted) bin.rays.push_back(wedge.rays[r]);
+              ref.ray[r] = it->second;
+            }
+            bin.wedges.push_back(ref);
+          }
+          return absl::OkStatus();
+        });
+    ASSERT_TRUE(built.ok()) << built.status();
     reference_ = new std::map<ChunkKey, TileData, ChunkKeyLess>();
-    for (const SpilledChunk& c : ingest->chunks) {
-      absl::StatusOr<ChunkSpillFile> f = ReadChunkSpillFile(c.path);
-      ASSERT_TRUE(f.ok()) << f.status();
-      CarveChunkRequest req;
-      req.job_id = "j";
-      req.chunk = c.chunk;
-      req.grid.chunk_depth = 5;
-      req.wedge_payload = f->payload;
-      req.tiles_dir = *root_ + "/reference";
-      req.evaluation = CarveEvaluation::kExact;
-      absl::StatusOr<CarveChunkResult> r = CarveChunkToTile(req);
-      ASSERT_TRUE(r.ok()) << r.status();
-      absl::StatusOr<TileData> tile = ReadTile(r->tile_path);
-      ASSERT_TRUE(tile.ok()) << tile.status();
-      reference_->emplace(c.chunk, *std::move(tile));
+    for (const auto& [chunk, bin] : bins) {
+      OctreeGrid grid;
+      grid.chunk_depth = 5;
+      ChunkOctree tree(grid, chunk);
+      tree.SetEvaluation(CarveEvaluation::kExact);
+      ASSERT_TRUE(tree.CarveIndexed(bin).ok());
+      tree.Simplify();
+      reference_->emplace(chunk, tree.ToTile("j"));
     }
   }
   static void TearDownTestSuite() {

@@ -3,7 +3,7 @@
 // the job over RPC, shows its progress, and stops them.
 //
 // OUT/ gets the outputs (tiles/, octree.bt, level_0/, job.json); OUT/.carvemap/ holds the job
-// store, the spill files while the job runs, the servers' logs and their pid/port files.
+// store, the partial sums while the job runs, the servers' logs and their pid/port files.
 #include <sys/wait.h>
 #include <unistd.h>
 

@@ -229,7 +229,7 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
   cmd->add_option("--storage-root", s.storage_root,
                   "Tiles go to <storage-root>/<job>/tiles (default: <output>/tiles)");
   cmd->add_option("--work-dir", s.work_dir,
-                  "Job store and spill files (default: <storage-root or output-root>/.carvemap)");
+                  "Job store and partial sums (default: <storage-root or output-root>/.carvemap)");
   cmd->add_option("--heartbeat-interval-s", s.heartbeat_interval_s, "Worker heartbeat interval")
       ->capture_default_str();
   cmd->add_option("--worker-timeout-s", s.worker_timeout_s,
@@ -239,10 +239,8 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--max-attempts", s.max_attempts, "Leases per chunk before the job fails")
       ->capture_default_str();
-  cmd->add_option("--max-inline-wedge-bytes", s.max_inline_wedge_bytes,
-                  "Send wedges up to this size inside the lease (0: always by spill path)")
-      ->capture_default_str();
-  cmd->add_flag("--keep-spill", s.keep_spill, "Keep the spill files after a job ends");
+  cmd->add_flag("--keep-partials", s.keep_partials,
+                "Keep the slices' partial sums after a job ends (<work dir>/<job>/partials)");
   // The merge service (DESIGN §8; docs/RPC.md "MergeService").
   MergeClientSpec& m = flags->merge;
   cmd->add_option("--merge-server", m.addresses,
@@ -317,6 +315,7 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
 
 struct WorkerFlags {
   WorkerSpec spec;
+  size_t slice_memory_mb = 256;
   SecurityFlags security;
   std::string log_format = "text";
   bool verbose = false;
@@ -327,7 +326,10 @@ absl::Status RunWorker(WorkerFlags flags) {
   if (!security.ok()) return security.status();
   flags.spec.security = *std::move(security);
   return ServeUntilSignal<WorkerServer>(
-      "worker", [&] { return WorkerServer::Start(flags.spec); },
+      "worker", [&] {
+        flags.spec.slice_memory_bytes = flags.slice_memory_mb << 20;
+        return WorkerServer::Start(flags.spec);
+      },
       [](WorkerServer&) { return absl::OkStatus(); });
 }
 
@@ -342,7 +344,12 @@ void RegisterWorker(CLI::App& app, int& exit_code) {
   cmd->add_option("--listen", s.listen_address,
                   "host:port for the health endpoint (port 0: any; empty: none)")
       ->capture_default_str();
-  cmd->add_option("--threads", s.threads, "Chunks carved in parallel")->capture_default_str();
+  cmd->add_option("--threads", s.threads, "Tasks (slices, chunks) run in parallel")
+      ->capture_default_str();
+  cmd->add_option("--slice-memory-mb", flags->slice_memory_mb,
+                  "Memory for a slice's chunk sums before they are written out, MB per thread")
+      ->check(CLI::Range(16, 1 << 16))
+      ->capture_default_str();
   cmd->add_option("--coordinator-lost-s", s.coordinator_lost_s,
                   "Exit when the coordinator has been unreachable this long")
       ->capture_default_str();

@@ -8,6 +8,7 @@
 
 #include <Eigen/Eigenvalues>
 
+#include "absl/strings/str_cat.h"
 #include "services/geometry/carve_map.h"
 
 namespace carvemap {
@@ -383,6 +384,30 @@ bool HullIntersectsBox(const WedgeHull& hull, const Eigen::AlignedBox3d& box) {
     if (lo > q[3]) return false;
   }
   return true;
+}
+
+absl::Status ValidateWedge(const Wedge& wedge) {
+  if (wedge.num_rays < 1 || wedge.num_rays > 4) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("wedge has num_rays ", int(wedge.num_rays), ", want 1 to 4"));
+  }
+  for (int r = 0; r < wedge.num_rays; ++r) {
+    const RayModel& ray = wedge.rays[r];
+    const std::pair<const char*, bool> fields[] = {
+        {"sensor_mean", ray.sensor_mean.allFinite()},
+        {"point_mean", ray.point_mean.allFinite()},
+        {"sensor_cov", std::all_of(ray.sensor_cov.begin(), ray.sensor_cov.end(),
+                                   [](float v) { return std::isfinite(v); })},
+        {"point_cov", std::all_of(ray.point_cov.begin(), ray.point_cov.end(),
+                                  [](float v) { return std::isfinite(v); })}};
+    for (const auto& [name, finite] : fields) {
+      if (!finite) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("wedge ray ", r, " has a non-finite ", name));
+      }
+    }
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace carvemap

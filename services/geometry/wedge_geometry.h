@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "absl/status/status.h"
 #include "services/geometry/carving_types.h"
 
 namespace carvemap {
@@ -47,6 +48,10 @@ struct WedgeHull {
 // offset across the ray, PointRangeGivenLateral; d the unit direction from sensor to point): the
 // far end of the wedge's volume. A zero-length ray is not moved.
 [[nodiscard]] Eigen::Vector3d ExtendedPointMean(const RayModel& ray, double sigmas = 3.0);
+
+// OK iff num_rays is in [1, 4] and every value of its rays is finite; InvalidArgument naming
+// the ray and the field otherwise.
+[[nodiscard]] absl::Status ValidateWedge(const Wedge& wedge);
 
 // Whether x satisfies every half-space of the hull (and lies in its box).
 [[nodiscard]] bool HullContainsPoint(const WedgeHull& hull, const Eigen::Vector3d& x);

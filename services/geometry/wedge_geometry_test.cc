@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -354,6 +355,27 @@ TEST(WedgeHullTest, Timing) {
               "%.0f%% hits\n",
               ns_hull, ns_box, double(planes) / hulls.size(), 10.0 * hits / boxes.size());
   EXPECT_GT(hits, 0u);
+}
+
+TEST(WedgeGeometryTest, ValidateNamesTheBadRayAndField) {
+  Wedge w;
+  for (int r = 0; r < 4; ++r) {
+    w.rays[r].sensor_mean = Eigen::Vector3f(0, 0, 0);
+    w.rays[r].point_mean = Eigen::Vector3f(1, float(r), 0);
+    w.rays[r].sensor_cov = {1e-4f, 0, 0, 1e-4f, 0, 1e-4f};
+    w.rays[r].point_cov = {1e-4f, 0, 0, 1e-4f, 0, 1e-4f};
+  }
+  EXPECT_TRUE(ValidateWedge(w).ok());
+  w.num_rays = 0;
+  EXPECT_NE(ValidateWedge(w).message().find("num_rays 0"), std::string::npos);
+  w.num_rays = 5;
+  EXPECT_EQ(ValidateWedge(w).code(), absl::StatusCode::kInvalidArgument);
+  w.num_rays = 4;
+  w.rays[2].point_cov[3] = std::numeric_limits<float>::infinity();
+  EXPECT_NE(ValidateWedge(w).message().find("ray 2 has a non-finite point_cov"),
+            std::string::npos);
+  w.num_rays = 2;  // unused rays are not checked
+  EXPECT_TRUE(ValidateWedge(w).ok());
 }
 
 }  // namespace

@@ -85,7 +85,6 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   o.rate_hz = EnvOr("CARVEMAP_SEG_RATE_HZ", pc.rate_hz);
   o.beam_step_deg = EnvOr("CARVEMAP_SEG_BEAM_DEG", 1.0);
   o.threads = 2;
-  o.keep_spill = true;  // for §5.6.1's re-carving of the object chunks
   const std::string root = testing::FreshDir();
   const auto t0 = std::chrono::steady_clock::now();
   // Exploring only: CARVEMAP_SEG_REUSE_ROOT=<a kept run's …/carve> (CARVEMAP_KEEP_TEST_TMPDIR=1)
@@ -97,7 +96,6 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
     p.scan_path = std::string(reuse) + "/sim/scan.h5";
     p.gt_dir = std::string(reuse) + "/sim/gt";
     p.tiles_dir = std::string(reuse) + "/tiles";
-    p.spill_dir = std::string(reuse) + "/spill";
     p.grid = *OctreeGrid::FromResolution(o.resolution_m);
     carved = p;
   } else {
@@ -110,7 +108,7 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   m.output_dir = root + "/out";
   m.scan_path = carved->scan_path;
   m.object_resolution_m = EnvOr("CARVEMAP_SEG_OBJECT_RES", pc.object_resolution_m);
-  m.recarve = testing::InProcessRecarve(carved->spill_dir, root + "/object_tiles", o.threads);
+  m.recarve = testing::InProcessRecarve(carved->scan_path, root + "/object_tiles", o.threads);
   m.trimmed_points = pc.trimmed_points;  // §5.5 for the point cloud too (checked below)
   absl::StatusOr<MergeSummary> merged = RunMerge(m);
   ASSERT_TRUE(merged.ok()) << merged.status();

@@ -27,10 +27,12 @@
 #include "absl/strings/str_split.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/synchronization/notification.h"
-#include "coordinator/chunk_spill.h"
 #include "coordinator/lease_table.h"
 #include "coordinator/rate_window.h"
-#include "coordinator/scan_ingest.h"
+#include "coordinator/scan_slices.h"
+#include "storage/hdf5_lock.h"
+#include "storage/partial_sums.h"
+#include "storage/scan_reader.h"
 #include "proto/carvemap/v1/carve.grpc.pb.h"
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
 #include "services/floorplan/floorplan_pipeline.h"  // FloorPlanMethod names
@@ -56,6 +58,10 @@ constexpr int kMinJobChunkDepth = 5;  // 6.25 cm
 constexpr int kMaxJobChunkDepth = 8;  // 0.78 cm
 
 int64_t NowMs() { return LeaseTable::Clock::System().NowUnixMs(); }
+
+std::string PartialPath(const std::string& dir, uint32_t index) {
+  return (fs::path(dir) / absl::StrCat("slice_", index, ".part")).string();
+}
 
 struct ResolvedParams {
   double resolution_m = kDefaultResolutionM;
@@ -264,9 +270,6 @@ absl::Status CoordinatorSpec::Validate() const {
     return absl::InvalidArgumentError("lease_timeout_s and sweep_interval_s must be > 0");
   }
   if (max_attempts < 1) return absl::InvalidArgumentError("max_attempts must be >= 1");
-  if (max_inline_wedge_bytes < 0 || max_inline_wedge_bytes > (3 << 20)) {
-    return absl::InvalidArgumentError("max_inline_wedge_bytes must be in [0, 3 MiB]");
-  }
   // ---- security
   if (tls_cert_file.empty() != tls_key_file.empty()) {
     return absl::InvalidArgumentError("TLS needs both --tls-cert and --tls-key");
@@ -370,21 +373,30 @@ class CoordinatorServer::Impl {
   // live counters that are not worth a store write (rays).
   struct JobRuntime {
     std::string tiles_dir;
-    std::string spill_dir;
+    std::string partials_dir;  // <work>/<job>/partials: every pass's slices' partial sums
     std::string output_dir;
+    std::string tenant_dir, input_path;  // the scan as the job names it (JobRecord)
     ResolvedParams params;
-    int64_t rays_ingested = 0;
-    uint64_t frames_ingested = 0, frames_total = 0;  // the ingest's progress
-    uint64_t merge_done = 0, merge_total = 0;        // the running merge stage's counts
-    int64_t rays_carved = 0;    // wedges applied by workers (CompleteChunk stats)
-    int64_t rays_to_carve = 0;  // wedge-chunk pairs of the job
-    // Wedges as the workers' heartbeats report them, mid-chunk too: the live rate.
+    // The plan (scan_slices.h): made in INGESTING, made again (the same) by a restarted
+    // coordinator. Slice k of pass p is the task SliceTaskKey(k, p).
+    std::vector<ScanSlice> slices;
+    double slice_s = 0;
+    // The pass being carved: 0 the job's; ≥ 1 a re-carve of the merge (§5.6.1), whose partial
+    // sums go to pass_dir and whose chunks and regions are in regions_path.
+    int pass = 0;
+    int passes = 0;  // re-carves so far
+    std::string pass_dir, regions_path;
+    std::vector<ChunkCoord> pass_chunks;  // a re-carve's chunks
+    uint64_t merge_done = 0, merge_total = 0;  // the running merge stage's counts
+    int64_t rays_carved = 0;    // the slices' own rays, as completed (CompleteChunk stats)
+    int64_t rays_to_carve = 0;  // the slices' own rays, planned
+    // Rays as the workers' heartbeats report them, mid-slice too: the live rate.
     RateWindow carve_rate;
-    // What the ingest measured (job.json "ingest"; absent for a job resumed by a restarted
-    // coordinator after its ingest): rays, returns, wedges, wedge-chunk pairs, spill bytes.
-    std::optional<nlohmann::json> ingest_counts;
-    // During RecarveStage: the part of each chunk to carve (its depth, ChunkRegion::Encode).
-    std::map<ChunkCoord, std::pair<int, std::string>> regions;
+    // What the slices of the job's carve measured (job.json "carve"): frames, rays, returns,
+    // wedges, wedge-chunk pairs, votes, partial bytes; from `slices_counted` slices (fewer
+    // than all after a restart: then job.json has no counts).
+    nlohmann::json carve_counts = nlohmann::json::object();
+    size_t slices_counted = 0;
     std::map<std::string, std::pair<std::chrono::steady_clock::time_point, double>> stages;
     std::vector<std::string> stage_order;
     std::optional<std::chrono::steady_clock::time_point> stage_start;
@@ -408,8 +420,8 @@ class CoordinatorServer::Impl {
     if (spec_.storage_root.empty()) return (fs::path(OutputDir(job)) / "tiles").string();
     return (fs::path(spec_.storage_root) / job.id / "tiles").string();
   }
-  std::string SpillDir(const JobRecord& job) const {
-    return (fs::path(work_dir_) / job.id / "spill").string();
+  std::string PartialsDir(const JobRecord& job) const {
+    return (fs::path(work_dir_) / job.id / "partials").string();
   }
 
   void StartJobThread(const std::string& job_id) {
@@ -417,13 +429,21 @@ class CoordinatorServer::Impl {
     job_threads_.emplace_back([this, job_id] { RunJob(job_id); });
   }
   void RunJob(const std::string& job_id);
-  absl::Status IngestStage(const JobRecord& job);
-  // Waits until every chunk is committed. OK: go on to merge; CANCELLED: the job is already
-  // terminal (cancelled or failed by the lease table) or the coordinator stops.
+  // INGESTING: the scan checked (every row) and cut into time slices, one task each.
+  absl::Status PlanStage(const JobRecord& job);
+  // The plan of a job again, for a coordinator that resumes it (the same slices: PlanSlices
+  // depends on the scan and the parameters only).
+  absl::Status EnsurePlan(const JobRecord& job);
+  // The slices carved, then every chunk they touched combined into its tile. OK: go on to
+  // merge; CANCELLED: the job is already terminal (cancelled or failed by the lease table) or
+  // the coordinator stops.
   absl::Status CarveStage(const std::string& job_id);
-  // Polls until every chunk of a job loaded in the lease table is committed (then drops it
-  // from the table). Cancelled as CarveStage.
-  absl::Status WaitForChunks(const std::string& job_id);
+  // Polls until every task of a job loaded in the lease table is committed. Cancelled as
+  // CarveStage.
+  // Until every task of the job is done (or, with except_held, every task not held).
+  absl::Status WaitForChunks(const std::string& job_id, bool except_held = false);
+  // The chunks the pass's slices carved into, from their partial sums' indexes.
+  absl::StatusOr<std::vector<ChunkCoord>> ChunksOfPass(const std::string& job_id);
   // §5.6.1, called by the merge: `chunks` leased to the workers once more, at `resolution_m`,
   // into <job dir>/object_tiles; returns that directory once every one is committed.
   absl::StatusOr<std::string> RecarveStage(const std::string& job_id,
@@ -472,8 +492,8 @@ class CoordinatorServer::Impl {
   std::map<std::string, JobRuntime> runtime_ ABSL_GUARDED_BY(mu_);
   std::vector<std::thread> job_threads_ ABSL_GUARDED_BY(mu_);
   absl::Mutex shutdown_mu_;
-  // HDF5 (scan reading in ingest, tile reading in the merge) is not thread-safe in the
-  // Debian build: one job at a time uses it in this process.
+  // HDF5 (scan reading when planning, the in-process merge) is not thread-safe in the Debian
+  // build: one job at a time uses it in this process (and each call takes Hdf5Lock()).
   absl::Mutex hdf5_mu_;
 };
 
@@ -831,7 +851,7 @@ std::string CoordinatorServer::Impl::TenantView(const JobRuntime& rt, std::strin
   // Longest first: the tiles live inside the output folder unless --storage-root moves them.
   std::vector<std::pair<std::string, std::string>> dirs = {
       {ObjectTilesDir(rt.tiles_dir), "object_tiles"}, {rt.tiles_dir, "tiles"},
-      {rt.spill_dir, "spill"}, {rt.output_dir, "."},
+      {rt.partials_dir, "partials"}, {rt.output_dir, "."},
       {fs::absolute(work_dir_).lexically_normal().string(), "work"}};
   std::sort(dirs.begin(), dirs.end(),
             [](const auto& a, const auto& b) { return a.first.size() > b.first.size(); });
@@ -872,15 +892,17 @@ void CoordinatorServer::Impl::CleanUp(const std::string& job_id, bool succeeded)
   if (absl::StatusOr<JobRecord> job = store_->GetJob(job_id); job.ok() && IsTerminal(job->state)) {
     metrics_.JobFinished(JobStateName(job->state));
   }
-  std::string tiles, spill;
+  std::string tiles, partials;
   {
     absl::MutexLock lock(&mu_);
     table_->DropJob(job_id);
     tiles = runtime_[job_id].tiles_dir;
-    spill = runtime_[job_id].spill_dir;
+    partials = runtime_[job_id].partials_dir;
   }
   std::error_code ec;
-  if (!spec_.keep_spill && !spill.empty()) fs::remove_all(fs::path(spill).parent_path(), ec);
+  if (!spec_.keep_partials && !partials.empty()) {
+    fs::remove_all(fs::path(partials).parent_path(), ec);
+  }
   // A failed or cancelled job leaves no tiles that could pass for a complete set.
   if (!succeeded && !tiles.empty()) {
     fs::remove_all(tiles, ec);
@@ -889,102 +911,164 @@ void CoordinatorServer::Impl::CleanUp(const std::string& job_id, bool succeeded)
   EnterStage(job_id, "");
 }
 
-absl::Status CoordinatorServer::Impl::IngestStage(const JobRecord& job) {
-  std::string spill, tiles;
+absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
   {
     absl::MutexLock lock(&mu_);
-    spill = runtime_[job.id].spill_dir;
-    tiles = runtime_[job.id].tiles_dir;
+    if (!runtime_[job.id].slices.empty()) return absl::OkStatus();
   }
-  // Ingest starts from scratch (also after a restart): half-written spill files are useless,
-  // and stale tiles of an earlier attempt must not mix with this run's.
-  std::error_code ec;
-  fs::remove_all(spill, ec);
-  fs::remove_all(tiles, ec);
-  fs::create_directories(tiles, ec);
-  if (ec) return absl::FailedPreconditionError(absl::StrCat("tiles dir ", tiles, ": ", ec.message()));
-
-  // Checked again (the submit's check was then): the scan is read through the descriptor
-  // opened here, so a symlink swapped meanwhile cannot point the ingest elsewhere, and errors
-  // name the path as the tenant gave it.
+  // Checked again (the submit's check was then), through the descriptor opened here, so a
+  // symlink swapped meanwhile cannot point the plan elsewhere, and errors name the path as the
+  // tenant gave it. Workers open it the same way (SliceTask.scan_root, scan_path).
   absl::StatusOr<ConfinedFile> scan =
       ConfinedFile::Open(DataDir(job.tenant_dir), job.input_path, "input_path");
   if (!scan.ok()) return scan.status();
-  IngestOptions options;
-  options.scan_path = scan->path();
-  options.spill_dir = spill;
-  const std::string id = job.id;
-  absl::MutexLock hdf5_lock(&hdf5_mu_);
-  absl::StatusOr<IngestResult> result =
-      IngestScan(options, [this, id](const IngestProgress& p) {
-        absl::MutexLock lock(&mu_);
-        JobRuntime& rt = runtime_[id];
-        rt.rays_ingested = static_cast<int64_t>(p.rays);
-        rt.frames_ingested = p.frames_done;
-        rt.frames_total = p.frames_total;
-      });
-  if (!result.ok()) return scan->Rename(result.status());
-  spdlog::info("coordinator: job {}: ingested {} frames, {} rays, {} wedges into {} chunks in {:.1f} s",
-               job.id, result->frames, result->rays, result->wedges, result->chunks.size(),
-               result->elapsed_s);
-  if (stopping_) return absl::CancelledError("coordinator stopping");
-  absl::StatusOr<JobRecord> now = store_->GetJob(job.id);
-  if (!now.ok()) return now.status();
-  if (IsTerminal(now->state)) return absl::CancelledError("job ended during ingest");
-
-  std::vector<ChunkRecord> chunks;
-  chunks.reserve(result->chunks.size());
-  int64_t pairs = 0;
-  for (const SpilledChunk& c : result->chunks) {
-    ChunkRecord r;
-    r.job_id = job.id;
-    r.key = {c.chunk.x(), c.chunk.y(), c.chunk.z()};
-    r.wedge_count = static_cast<int64_t>(c.wedge_count);
-    pairs += r.wedge_count;
-    chunks.push_back(std::move(r));
-  }
-  if (absl::Status s = store_->AddChunks(job.id, chunks); !s.ok()) return s;
+  std::vector<std::vector<FrameRecord>> frames;
+  std::vector<SensorKind> kinds;
   {
-    uint64_t spill_bytes = 0;
-    for (const SpilledChunk& c : result->chunks) spill_bytes += c.file_bytes;
-    absl::MutexLock lock(&mu_);
-    runtime_[job.id].rays_to_carve = pairs;
-    runtime_[job.id].ingest_counts = nlohmann::json{
-        {"frames", result->frames},
-        {"rays", result->rays},
-        {"returns", result->returns},
-        {"wedges", result->wedges},
-        {"wedge_chunk_pairs", result->wedge_chunk_pairs},
-        {"spill_bytes", spill_bytes},
-        {"spill_bytes_per_ray",
-         result->rays > 0 ? double(spill_bytes) / double(result->rays) : 0.0}};
+    absl::MutexLock hdf5_lock(&hdf5_mu_);
+    std::lock_guard<std::mutex> lock(Hdf5Lock());
+    absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan->path());
+    if (!reader.ok()) return scan->Rename(reader.status());
+    // Every row: a bad one found by a worker half-way through the carve would cost the job
+    // its carve so far; named now, it costs nothing.
+    if (absl::Status s = (*reader)->Validate(); !s.ok()) return scan->Rename(s);
+    for (size_t i = 0; i < (*reader)->sensors().size(); ++i) {
+      absl::StatusOr<std::vector<FrameRecord>> f = (*reader)->FrameRecords(int(i));
+      if (!f.ok()) return scan->Rename(f.status());
+      frames.push_back(*std::move(f));
+      kinds.push_back((*reader)->sensors()[i].kind);
+    }
   }
+  uint64_t rays = 0;
+  double t0 = std::numeric_limits<double>::infinity(), t1 = -t0;
+  for (const std::vector<FrameRecord>& f : frames) {
+    for (const FrameRecord& r : f) rays += r.count;
+    if (!f.empty()) {
+      t0 = std::min(t0, f.front().t);
+      t1 = std::max(t1, f.back().t);
+    }
+  }
+  SlicePlanOptions options;
+  const double slice_s = SliceSeconds(options, rays, t1 > t0 ? t1 - t0 : 0.0);
+  absl::StatusOr<std::vector<ScanSlice>> slices = PlanSlices(frames, kinds, slice_s);
+  if (!slices.ok()) return scan->Rename(slices.status());
+  absl::MutexLock lock(&mu_);
+  JobRuntime& rt = runtime_[job.id];
+  rt.slices = *std::move(slices);
+  rt.slice_s = slice_s;
+  rt.rays_to_carve = 0;
+  for (const ScanSlice& s : rt.slices) rt.rays_to_carve += int64_t(s.own_rays);
   return absl::OkStatus();
 }
 
-absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
+absl::Status CoordinatorServer::Impl::PlanStage(const JobRecord& job) {
+  std::string partials, tiles;
   {
     absl::MutexLock lock(&mu_);
-    if (absl::Status s = table_->LoadJob(job_id); !s.ok() && !absl::IsAlreadyExists(s)) return s;
-    int64_t pairs = 0;
-    if (absl::StatusOr<std::vector<ChunkRecord>> chunks = store_->ListChunks(job_id); chunks.ok()) {
-      for (const ChunkRecord& c : *chunks) pairs += c.wedge_count;
-    }
-    runtime_[job_id].rays_to_carve = pairs;
+    partials = runtime_[job.id].partials_dir;
+    tiles = runtime_[job.id].tiles_dir;
   }
-  return WaitForChunks(job_id);
+  // Planning starts from scratch (also after a restart): an earlier attempt's partial sums and
+  // tiles must not mix with this run's.
+  std::error_code ec;
+  fs::remove_all(partials, ec);
+  fs::remove_all(tiles, ec);
+  fs::create_directories(tiles, ec);
+  if (!ec) fs::create_directories(partials, ec);
+  if (ec) {
+    return absl::FailedPreconditionError(absl::StrCat("tiles dir ", tiles, ": ", ec.message()));
+  }
+  if (absl::Status s = EnsurePlan(job); !s.ok()) return s;
+  if (stopping_) return absl::CancelledError("coordinator stopping");
+  absl::StatusOr<JobRecord> now = store_->GetJob(job.id);
+  if (!now.ok()) return now.status();
+  if (IsTerminal(now->state)) return absl::CancelledError("job ended while planned");
+  std::vector<ChunkRecord> records;
+  {
+    absl::MutexLock lock(&mu_);
+    const JobRuntime& rt = runtime_[job.id];
+    for (const ScanSlice& s : rt.slices) {
+      ChunkRecord r;
+      r.job_id = job.id;
+      r.key = SliceTaskKey(s.index, 0);
+      r.wedge_count = int64_t(s.own_rays);  // the task's size, for the store's listing
+      records.push_back(std::move(r));
+    }
+    spdlog::info("coordinator: job {}: {} rays in {} slices of {:.1f} s", job.id,
+                 rt.rays_to_carve, rt.slices.size(), rt.slice_s);
+  }
+  return store_->AddChunks(job.id, records);
 }
 
-absl::Status CoordinatorServer::Impl::WaitForChunks(const std::string& job_id) {
+absl::StatusOr<std::vector<ChunkCoord>> CoordinatorServer::Impl::ChunksOfPass(
+    const std::string& job_id) {
+  std::vector<std::string> paths;
+  {
+    absl::MutexLock lock(&mu_);
+    const JobRuntime& rt = runtime_[job_id];
+    for (const ScanSlice& s : rt.slices) paths.push_back(PartialPath(rt.pass_dir, s.index));
+  }
+  std::set<ChunkCoord> chunks;
+  for (const std::string& p : paths) {
+    absl::StatusOr<PartialSumsIndex> index = ReadPartialIndex(p);
+    if (!index.ok()) return index.status();
+    for (const PartialSection& s : index->sections) {
+      chunks.insert({s.chunk.x(), s.chunk.y(), s.chunk.z()});
+    }
+  }
+  return std::vector<ChunkCoord>(chunks.begin(), chunks.end());
+}
+
+absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
+  absl::StatusOr<JobRecord> job = store_->GetJob(job_id);
+  if (!job.ok()) return job.status();
+  if (absl::Status s = EnsurePlan(*job); !s.ok()) return s;
+  bool combines = false;
+  {
+    absl::MutexLock lock(&mu_);
+    JobRuntime& rt = runtime_[job_id];
+    rt.pass = 0;
+    rt.pass_dir = rt.partials_dir;
+    rt.regions_path.clear();
+    if (absl::Status s = table_->LoadJob(job_id); !s.ok() && !absl::IsAlreadyExists(s)) return s;
+    // A restarted coordinator may find the chunks to combine stored already.
+    if (absl::StatusOr<std::vector<ChunkRecord>> chunks = store_->ListChunks(job_id); chunks.ok()) {
+      for (const ChunkRecord& c : *chunks) combines |= !IsSliceTask(c.key);
+    }
+  }
+  // The slices (and any chunks stored already).
+  if (absl::Status s = WaitForChunks(job_id); !s.ok()) return s;
+  if (!combines) {
+    absl::StatusOr<std::vector<ChunkCoord>> chunks = ChunksOfPass(job_id);
+    if (!chunks.ok()) return chunks.status();
+    std::vector<ChunkRecord> records;
+    for (const ChunkCoord& c : *chunks) {
+      ChunkRecord r;
+      r.job_id = job_id;
+      r.key = c;
+      records.push_back(std::move(r));
+    }
+    {
+      absl::MutexLock lock(&mu_);
+      if (absl::Status s = table_->Add(job_id, records); !s.ok()) return s;
+    }
+    spdlog::info("coordinator: job {}: slices carved; combining {} chunks", job_id,
+                 records.size());
+    if (absl::Status s = WaitForChunks(job_id); !s.ok()) return s;
+  }
+  absl::MutexLock lock(&mu_);
+  table_->DropJob(job_id);
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::WaitForChunks(const std::string& job_id,
+                                                    bool except_held) {
   while (!stopping_) {
     {
       absl::MutexLock lock(&mu_);
       absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
       if (!p.ok() || p->failed) return absl::CancelledError("job ended while carving");
-      if (table_->AllDone(job_id)) {
-        table_->DropJob(job_id);
-        return absl::OkStatus();
-      }
+      if (table_->AllDone(job_id, except_held)) return absl::OkStatus();
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
@@ -995,61 +1079,115 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
     const std::string& job_id, const std::vector<RecarveChunk>& chunks, double resolution_m) {
   absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(resolution_m);
   if (!grid.ok()) return grid.status();
+  absl::StatusOr<JobRecord> job = store_->GetJob(job_id);
+  if (!job.ok()) return job.status();
+  if (absl::Status s = EnsurePlan(*job); !s.ok()) return s;
   JobRuntime saved;
+  int pass = 0;
   {
     absl::MutexLock lock(&mu_);
-    saved = runtime_[job_id];
+    JobRuntime& rt = runtime_[job_id];
+    saved = rt;
+    pass = ++rt.passes;
   }
   const std::string dir = ObjectTilesDir(saved.tiles_dir);
+  // A pass's partial sums go to a folder of their own (a merge asking again, after a restart
+  // too, gets fresh files: a worker caches the indexes of the files it combines).
+  const std::string pass_dir =
+      (fs::path(saved.partials_dir) / absl::StrCat("p", pass, "-", RandomHex(4))).string();
   std::error_code ec;
   fs::remove_all(dir, ec);  // an earlier (interrupted) merge's: not this pass's
   fs::create_directories(dir, ec);
+  if (!ec) fs::create_directories(pass_dir, ec);
   if (ec) {
     return absl::FailedPreconditionError(absl::StrCat(dir, ": cannot create: ", ec.message()));
   }
+  ChunkRegions regions;
   std::vector<ChunkCoord> keys;
-  keys.reserve(chunks.size());
-  int64_t pairs = 0;
-  {
-    absl::MutexLock lock(&mu_);
-    if (absl::Status s = table_->LoadJob(job_id); !s.ok() && !absl::IsAlreadyExists(s)) return s;
-    std::map<ChunkCoord, int64_t> wedges;
-    if (absl::StatusOr<std::vector<ChunkRecord>> all = store_->ListChunks(job_id); all.ok()) {
-      for (const ChunkRecord& c : *all) wedges[c.key] = c.wedge_count;
-    }
-    JobRuntime& rt = runtime_[job_id];
-    rt.regions.clear();
-    for (const RecarveChunk& c : chunks) {
-      keys.push_back({c.chunk.x(), c.chunk.y(), c.chunk.z()});
-      pairs += wedges[keys.back()];
-      rt.regions[keys.back()] = {c.region.depth(), c.region.Encode()};
-    }
-    if (absl::Status s = table_->Requeue(
-            job_id, keys, absl::StrCat("queued again: objects at ", resolution_m, " m (§5.6.1)"));
-        !s.ok()) {
-      table_->DropJob(job_id);
-      rt.regions.clear();
-      return s;
-    }
-    // Leases of this pass carry the finer grid and write into `dir` (LeaseChunk reads these).
-    rt.params.resolution_m = grid->resolution_m();
-    rt.tiles_dir = dir;
-    rt.rays_carved = 0;
-    rt.rays_to_carve = pairs;
-    rt.carve_rate = RateWindow();
+  for (const RecarveChunk& c : chunks) {
+    regions.emplace(c.chunk, c.region);
+    keys.push_back({c.chunk.x(), c.chunk.y(), c.chunk.z()});
   }
-  spdlog::info("coordinator: job {}: carving {} object chunks again at {} m", job_id,
-               chunks.size(), resolution_m);
-  absl::Status s = WaitForChunks(job_id);
-  {
+  const std::string regions_path = (fs::path(pass_dir) / "regions.bin").string();
+  if (absl::Status s = WriteRegionsFile(regions_path, regions); !s.ok()) return s;
+  const auto restore = [&] {
     absl::MutexLock lock(&mu_);
     JobRuntime& rt = runtime_[job_id];
     rt.params = saved.params;
     rt.tiles_dir = saved.tiles_dir;
     rt.rays_carved = saved.rays_carved;
     rt.rays_to_carve = saved.rays_to_carve;
-    rt.regions.clear();
+    rt.carve_rate = saved.carve_rate;
+    rt.pass = 0;
+    rt.pass_dir = saved.partials_dir;
+    rt.regions_path.clear();
+    rt.pass_chunks.clear();
+  };
+  {
+    absl::MutexLock lock(&mu_);
+    if (absl::Status s = table_->LoadJob(job_id); !s.ok() && !absl::IsAlreadyExists(s)) return s;
+    JobRuntime& rt = runtime_[job_id];
+    // Leases of this pass carry the finer grid, read the regions and write into `dir`
+    // (LeaseChunk reads these).
+    rt.params.resolution_m = grid->resolution_m();
+    rt.tiles_dir = dir;
+    rt.pass = pass;
+    rt.pass_dir = pass_dir;
+    rt.regions_path = regions_path;
+    rt.pass_chunks = keys;
+    rt.rays_carved = 0;
+    rt.carve_rate = RateWindow();
+    // The pass's slices: tasks of their own, or those of an earlier pass of this number (a
+    // merge retried) put back in the queue.
+    std::vector<ChunkRecord> fresh;
+    std::vector<ChunkCoord> again;
+    absl::StatusOr<std::vector<ChunkRecord>> stored = store_->ListChunks(job_id);
+    std::set<ChunkCoord> existing;
+    if (stored.ok()) {
+      for (const ChunkRecord& c : *stored) existing.insert(c.key);
+    }
+    for (const ScanSlice& s : rt.slices) {
+      const ChunkCoord key = SliceTaskKey(s.index, pass);
+      if (existing.count(key)) {
+        again.push_back(key);
+      } else {
+        ChunkRecord r;
+        r.job_id = job_id;
+        r.key = key;
+        r.wedge_count = int64_t(s.own_rays);
+        fresh.push_back(std::move(r));
+      }
+    }
+    absl::Status s = table_->Add(job_id, fresh);
+    if (s.ok() && !again.empty()) {
+      s = table_->Requeue(job_id, again, absl::StrCat("queued again: re-carve pass ", pass));
+    }
+    // The chunks, combined from this pass's sums into `dir` once the slices are carved: held
+    // until then, but counted now, so the pass never looks done in between.
+    if (s.ok()) {
+      s = table_->Requeue(job_id, keys,
+                          absl::StrCat("queued again: objects at ", resolution_m, " m (§5.6.1)"),
+                          /*held=*/true);
+    }
+    if (!s.ok()) {
+      table_->DropJob(job_id);
+      rt.pass = 0;
+      return s;
+    }
   }
+  spdlog::info("coordinator: job {}: carving {} object chunks again at {} m (pass {})", job_id,
+               chunks.size(), resolution_m, pass);
+  absl::Status s = WaitForChunks(job_id, /*except_held=*/true);
+  if (s.ok()) {
+    absl::MutexLock lock(&mu_);
+    s = table_->Release(job_id, keys);
+  }
+  if (s.ok()) s = WaitForChunks(job_id);
+  {
+    absl::MutexLock lock(&mu_);
+    table_->DropJob(job_id);
+  }
+  restore();
   if (!s.ok()) return s;
   return dir;
 }
@@ -1065,7 +1203,10 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
     absl::MutexLock lock(&mu_);
     JobRuntime& rt = runtime_[job_id];
     rt.tiles_dir = fs::absolute(TilesDir(*job)).lexically_normal().string();
-    rt.spill_dir = fs::absolute(SpillDir(*job)).lexically_normal().string();
+    rt.partials_dir = fs::absolute(PartialsDir(*job)).lexically_normal().string();
+    rt.pass_dir = rt.partials_dir;
+    rt.tenant_dir = job->tenant_dir;
+    rt.input_path = job->input_path;
     rt.output_dir = fs::absolute(OutputDir(*job)).lexically_normal().string();
     rt.params = ParamsFromJson(job->params_json);
   }
@@ -1080,8 +1221,8 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
   };
 
   if (state == JobState::kIngesting) {
-    // A restart during ingest: the chunks may already be stored (the crash came between
-    // AddChunks and the move to CARVING); then carving can go on, otherwise ingest again.
+    // A restart during ingest: the slices may already be stored (the crash came between
+    // AddChunks and the move to CARVING); then carving can go on, otherwise plan again.
     absl::StatusOr<std::vector<ChunkRecord>> chunks = store_->ListChunks(job_id);
     if (chunks.ok() && !chunks->empty()) {
       if (!move_to(JobState::kCarving).ok()) return;
@@ -1090,7 +1231,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
   if (state == JobState::kQueued || state == JobState::kIngesting) {
     if (state == JobState::kQueued && !move_to(JobState::kIngesting).ok()) return;
     EnterStage(job_id, "ingest");
-    absl::Status s = IngestStage(*job);
+    absl::Status s = PlanStage(*job);
     if (absl::IsCancelled(s)) {
       if (!stopping_) CleanUp(job_id, false);
       return;
@@ -1148,7 +1289,23 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       nlohmann::json stages = nlohmann::json::object();
       for (const auto& [name, timing] : rt.stages) stages[name] = timing.second;
       doc["stage_seconds"] = stages;
-      if (rt.ingest_counts) doc["ingest"] = *rt.ingest_counts;
+      nlohmann::json carve = nlohmann::json::object();
+      if (rt.slices_counted == rt.slices.size()) {
+        carve = rt.carve_counts;
+        if (carve.value("rays", 0.0) > 0) {
+          carve["partial_bytes_per_ray"] =
+              carve.value("partial_bytes", 0.0) / carve.value("rays", 1.0);
+        }
+        // The counts earlier versions wrote as "ingest", for readers of that key.
+        nlohmann::json ingest = nlohmann::json::object();
+        for (const char* k : {"frames", "rays", "returns", "wedges", "wedge_chunk_pairs"}) {
+          if (carve.contains(k)) ingest[k] = carve[k];
+        }
+        doc["ingest"] = ingest;
+      }
+      carve["slices"] = rt.slices.size();
+      carve["slice_s"] = rt.slice_s;
+      doc["carve"] = carve;
       req.job_json = doc.dump();
     }
     // Merge stages show as "merge/<stage>" in the job's stage timings (WatchJob); a cancelled
@@ -1460,33 +1617,18 @@ bool CoordinatorServer::Impl::WriteProgress(grpc::ServerWriter<pb::JobEvent>& wr
             r.stage_start ? std::chrono::duration<double>(now - *r.stage_start).count() : 0.0;
         p->set_eta_s(-1);
         // The merge's re-carving of the object chunks (§5.6.1) is a carve too.
-        const bool carving = state == JobState::kCarving || !r.regions.empty();
+        const bool carving = state == JobState::kCarving || r.pass > 0;
         if (carving) {
-          // The workers' live rate in wedges (wedge-chunk pairs) per second, in scan rays: a
-          // wedge-chunk pair stands for returns / pairs of the scan's rays.
-          double rays_per_pair = 1;
-          if (r.ingest_counts && r.ingest_counts->value("wedge_chunk_pairs", 0.0) > 0) {
-            rays_per_pair = r.ingest_counts->value("returns", 0.0) /
-                            r.ingest_counts->value("wedge_chunk_pairs", 0.0);
-          }
+          // The slices' own rays: carved so far as the workers' heartbeats report them (mid-slice
+          // too), and planned.
           const double total = double(r.rays_to_carve);
-          const double done = std::min(total, std::max(double(r.rays_carved),
-                                                        r.carve_rate.total()));
+          const double done =
+              std::min(total, std::max(double(r.rays_carved), r.carve_rate.total()));
           const double rate = r.carve_rate.Rate(now);
-          p->set_rays_done(int64_t(done * rays_per_pair));
-          p->set_rays_total(int64_t(total * rays_per_pair));
-          p->set_rays_per_s(rate * rays_per_pair);
+          p->set_rays_done(int64_t(done));
+          p->set_rays_total(int64_t(total));
+          p->set_rays_per_s(rate);
           if (rate > 0) p->set_eta_s((total - done) / rate);
-        } else if (state == JobState::kIngesting) {
-          p->set_rays_done(r.rays_ingested);
-          if (r.frames_ingested > 0 && r.frames_total > 0) {
-            const double frac = double(r.frames_ingested) / double(r.frames_total);
-            p->set_rays_total(int64_t(double(r.rays_ingested) / frac));
-            if (stage_s > 0) {
-              p->set_rays_per_s(double(r.rays_ingested) / stage_s);
-              p->set_eta_s(stage_s * (1 - frac) / frac);
-            }
-          }
         } else if (state == JobState::kMerging && r.merge_total > 0) {
           p->set_stage_done(int64_t(r.merge_done));
           p->set_stage_total(int64_t(r.merge_total));
@@ -1659,8 +1801,10 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
     if (stopping_) return absl::UnavailableError("coordinator shutting down");
     std::optional<LeaseTable::Grant> grant;
     ResolvedParams job_params;
-    std::string tiles_dir, spill_dir, region;
-    int region_depth = 0;
+    std::string tiles_dir, pass_dir, regions_path, scan_root, scan_input;
+    int pass = 0;
+    std::optional<ScanSlice> slice;
+    std::vector<uint32_t> slice_indices;  // a combine: every slice of the pass, in order
     {
       absl::MutexLock lock(&mu_);
       if (!workers_.count(req.worker_id())) {
@@ -1676,9 +1820,16 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
         const JobRuntime& rt = runtime_[grant->job_id];
         job_params = rt.params;
         tiles_dir = rt.tiles_dir;
-        spill_dir = rt.spill_dir;
-        if (auto r = rt.regions.find(grant->chunk); r != rt.regions.end()) {
-          std::tie(region_depth, region) = r->second;
+        pass_dir = rt.pass_dir;
+        pass = rt.pass;
+        regions_path = rt.regions_path;
+        scan_root = fs::absolute(DataDir(rt.tenant_dir)).lexically_normal().string();
+        scan_input = rt.input_path;
+        if (IsSliceTask(grant->chunk)) {
+          const uint32_t index = uint32_t(grant->chunk.y);
+          if (index < rt.slices.size()) slice = rt.slices[index];
+        } else {
+          for (const ScanSlice& s : rt.slices) slice_indices.push_back(s.index);
         }
       }
     }
@@ -1700,24 +1851,32 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
       params.set_leaf_depth(grid.ok() ? grid->chunk_depth : 0);
       params.set_tile_dir(tiles_dir);
       params.set_evaluation(static_cast<pb::CarveEvaluation>(job_params.evaluation));
-      if (!region.empty()) {
-        params.set_region(std::move(region));
-        params.set_region_depth(region_depth);
-      }
-      pb::WedgePayload& wedges = *lease.mutable_wedges();
-      wedges.set_wedge_count(grant->wedge_count);
-      const std::string path = ChunkSpillPath(
-          spill_dir, ChunkKey(grant->chunk.x, grant->chunk.y, grant->chunk.z));
-      std::error_code ec;
-      const auto size = fs::file_size(path, ec);
-      if (!ec && spec_.max_inline_wedge_bytes > 0 &&
-          size <= static_cast<uintmax_t>(spec_.max_inline_wedge_bytes)) {
-        absl::StatusOr<ChunkSpillFile> file = ReadChunkSpillFile(path);
-        if (!file.ok()) return file.status();
-        wedges.set_inline_wedges(std::move(file->payload));
+      if (IsSliceTask(grant->chunk)) {
+        if (!slice) {
+          return absl::InternalError(absl::StrCat("lease ", grant->lease_id, ": no slice ",
+                                                  grant->chunk.y, " in the job's plan"));
+        }
+        pb::SliceTask& task = *lease.mutable_slice();
+        task.set_index(slice->index);
+        task.set_pass(pass);
+        task.set_scan_root(scan_root);
+        task.set_scan_path(scan_input);
+        for (const ScanReader::RowRange& r : slice->own) {
+          pb::RowRange* o = task.add_own();
+          o->set_begin(r.begin);
+          o->set_end(r.end);
+        }
+        for (const ScanReader::RowRange& r : slice->read) {
+          pb::RowRange* o = task.add_read();
+          o->set_begin(r.begin);
+          o->set_end(r.end);
+        }
+        task.set_own_rays(int64_t(slice->own_rays));
+        task.set_partial_path(PartialPath(pass_dir, slice->index));
+        task.set_regions_path(regions_path);
       } else {
-        // The whole spill file; it carries its own checksums, which the worker checks.
-        wedges.mutable_location()->set_path(path);
+        pb::CombineTask& task = *lease.mutable_combine();
+        for (uint32_t k : slice_indices) task.add_partial_paths(PartialPath(pass_dir, k));
       }
       spdlog::debug("coordinator: lease {} -> {} (attempt {})", grant->lease_id, req.worker_id(),
                     grant->attempt);
@@ -1766,8 +1925,20 @@ absl::Status CoordinatorServer::Impl::CompleteChunk(const pb::CompleteChunkReque
                  req.worker_id(), s.ToString());
     return s;
   }
-  runtime_[job_id].rays_carved += req.stats().rays();
+  JobRuntime& rt = runtime_[job_id];
+  rt.rays_carved += req.stats().rays();
   metrics_.ChunkCompleted(req.stats().rays());
+  if (rt.pass == 0 && req.stats().rays() > 0) {
+    // A slice of the job's carve: its counts for job.json "carve".
+    const pb::CarveStats& st = req.stats();
+    for (const auto& [name, value] :
+         {std::pair{"frames", st.frames()}, {"rays", st.rays()}, {"returns", st.returns()},
+          {"wedges", st.wedges()}, {"wedge_chunk_pairs", st.wedge_chunk_pairs()},
+          {"leaf_updates", st.leaf_updates()}, {"partial_bytes", st.partial_bytes()}}) {
+      rt.carve_counts[name] = rt.carve_counts.value(name, int64_t{0}) + value;
+    }
+    ++rt.slices_counted;
+  }
   absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
   if (p.ok()) {
     resp.mutable_progress()->set_chunks_total(p->chunks_total);

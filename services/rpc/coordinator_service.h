@@ -1,7 +1,7 @@
 // The coordinator server (DESIGN §5, §8): JobService (public) and CarveTaskService (internal)
 // on one gRPC port, over the SQLite job store and the lease table. A job runs in a background
-// thread: INGESTING (scan ➜ per-chunk spill files) ➜ CARVING (chunks leased to workers) ➜
-// MERGING ➜ SUCCEEDED, or FAILED with the reason.
+// thread: INGESTING (validate the scan, plan its time slices) ➜ CARVING (slices, then the chunks
+// they touch, leased to workers) ➜ MERGING ➜ SUCCEEDED, or FAILED with the reason.
 //
 // Shape of a tensorstore service: Spec (config, Validate) ➜ Start ➜ port() ➜ Wait/Shutdown.
 // gRPC stays behind the pimpl so this header is cheap to include.
@@ -34,7 +34,7 @@ struct CoordinatorSpec {
   // Empty: tiles go to <output_root>/<output_name>/tiles. Set: <storage_root>/<job_id>/tiles
   // (a shared volume for a cluster).
   std::string storage_root;
-  // The job store (jobs.db) and the spill files (<work_dir>/<job_id>/spill). Empty:
+  // The job store (jobs.db) and the partial sums (<work_dir>/<job_id>/partials). Empty:
   // <storage_root or output_root>/.carvemap.
   std::string work_dir;
   double heartbeat_interval_s = 5.0;
@@ -43,11 +43,9 @@ struct CoordinatorSpec {
   int max_attempts = 3;
   // Sweeps expired leases and lost workers this often.
   double sweep_interval_s = 0.5;
-  // Wedges up to this size go inline in the lease; larger ones by spill path. 0: always by
-  // path (local processes and a cluster's shared volume both see the spill files).
-  int64_t max_inline_wedge_bytes = 0;
-  // Keep the spill files after a job ends (debugging). Default: removed when the job ends.
-  bool keep_spill = false;
+  // Keep the slices' partial sums after a job ends (debugging). Default: removed when the job
+  // ends.
+  bool keep_partials = false;
   // The merge step; empty: MERGING is skipped with a warning (tiles only). `carvemap
   // coordinator` gives RemoteMerge (a merge service, services/rpc/merge_client.h); tests may
   // give LocalMerge() or their own.

@@ -6,6 +6,8 @@
 #include <atomic>
 #include <chrono>
 #include <filesystem>
+#include <map>
+#include <mutex>
 #include <optional>
 #include <set>
 #include <thread>
@@ -18,7 +20,7 @@
 #include "absl/synchronization/mutex.h"
 #include "absl/synchronization/notification.h"
 #include "absl/time/time.h"
-#include "coordinator/chunk_spill.h"
+#include "coordinator/scan_slices.h"
 #include "proto/carvemap/v1/carve.grpc.pb.h"
 #include "services/geometry/octree_keys.h"
 #include "services/grpc_server_common.h"
@@ -26,7 +28,12 @@
 #include "services/rpc/file_hash.h"
 #include "services/rpc/grpc_security.h"
 #include "services/rpc/server_log.h"
-#include "worker/chunk_carver.h"
+#include "storage/confined_path.h"
+#include "storage/hdf5_lock.h"
+#include "storage/partial_sums.h"
+#include "storage/scan_reader.h"
+#include "worker/chunk_combiner.h"
+#include "worker/slice_carver.h"
 
 namespace carvemap {
 namespace fs = std::filesystem;
@@ -42,6 +49,30 @@ bool IsTransient(const absl::Status& s) {
   return absl::IsUnavailable(s) || absl::IsDeadlineExceeded(s) || absl::IsAborted(s) ||
          absl::IsResourceExhausted(s);
 }
+
+// The indexes of partial sums files a worker combines chunks from: every chunk of a pass reads
+// the same few dozen files' indexes, so they are read once (a file is written once, under its
+// final name; a new pass writes other files). Thread-safe; bounded.
+class PartialIndexCache {
+ public:
+  absl::StatusOr<PartialSumsIndex> Get(const std::string& path) {
+    {
+      absl::MutexLock lock(&mu_);
+      if (auto it = cache_.find(path); it != cache_.end()) return it->second;
+    }
+    absl::StatusOr<PartialSumsIndex> index = ReadPartialIndex(path);
+    if (!index.ok()) return index;
+    absl::MutexLock lock(&mu_);
+    if (cache_.size() >= kMaxEntries) cache_.clear();
+    cache_.emplace(path, *index);
+    return index;
+  }
+
+ private:
+  static constexpr size_t kMaxEntries = 1024;
+  absl::Mutex mu_;
+  std::map<std::string, PartialSumsIndex> cache_ ABSL_GUARDED_BY(mu_);
+};
 
 std::string HostName() {
   char name[256] = {};
@@ -116,6 +147,7 @@ class WorkerServer::Impl {
   std::thread heartbeat_thread_;
   std::atomic<int64_t> unreachable_since_ms_{-1};
   std::atomic<int64_t> rays_since_heartbeat_{0};
+  PartialIndexCache partial_indexes_;
   absl::Mutex shutdown_mu_;
 
   absl::Mutex mu_;
@@ -280,59 +312,106 @@ void WorkerServer::Impl::HeartbeatLoop() {
 
 absl::Status WorkerServer::Impl::Carve(const pb::Lease& lease, pb::TileInfo& tile,
                                        pb::CarveStats& stats) {
-  const ChunkKey chunk(lease.chunk().x(), lease.chunk().y(), lease.chunk().z());
-  std::string payload;
-  switch (lease.wedges().source_case()) {
-    case pb::WedgePayload::kInlineWedges:
-      payload = lease.wedges().inline_wedges();
-      break;
-    case pb::WedgePayload::kLocation: {
-      // The spill file carries its own checksums; ReadChunkSpillFile checks them (DATA_LOSS).
-      absl::StatusOr<ChunkSpillFile> file = ReadChunkSpillFile(lease.wedges().location().path());
-      if (!file.ok()) return file.status();
-      if (file->chunk != chunk) {
-        return absl::DataLossError(absl::StrCat("spill file ", lease.wedges().location().path(),
-                                                " holds another chunk"));
-      }
-      payload = std::move(file->payload);
-      break;
-    }
-    default:
-      return absl::InvalidArgumentError("lease without wedges");
-  }
+  const auto t0 = std::chrono::steady_clock::now();
   absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(lease.params().resolution_m());
-  if (!grid.ok()) return grid.status();
-  CarveChunkRequest req;
-  req.job_id = lease.job_id();
-  req.chunk = chunk;
-  req.grid = *grid;
-  req.wedge_payload = payload;
-  req.tiles_dir = lease.params().tile_dir();
+  if (!grid.ok()) return grid.status();  // not retryable: the lease itself is bad
   // UNSPECIFIED: a coordinator from before the fast evaluation (carve.proto).
-  req.evaluation = lease.params().evaluation() == pb::CARVE_EVALUATION_FAST
-                       ? CarveEvaluation::kFast
-                       : CarveEvaluation::kExact;
-  std::optional<ChunkRegion> region;
-  if (!lease.params().region().empty()) {
-    absl::StatusOr<ChunkRegion> decoded =
-        ChunkRegion::Decode(lease.params().region_depth(), lease.params().region());
-    if (!decoded.ok()) return decoded.status();  // not retryable: the lease itself is bad
-    region = std::move(*decoded);
-    req.region = &*region;
+  const CarveEvaluation evaluation = lease.params().evaluation() == pb::CARVE_EVALUATION_FAST
+                                         ? CarveEvaluation::kFast
+                                         : CarveEvaluation::kExact;
+  std::string written;  // the file the task made
+  if (lease.has_slice()) {
+    const pb::SliceTask& task = lease.slice();
+    ScanSlice slice;
+    slice.index = task.index();
+    slice.own_rays = uint64_t(task.own_rays());
+    for (const pb::RowRange& r : task.own()) slice.own.push_back({r.begin(), r.end()});
+    for (const pb::RowRange& r : task.read()) slice.read.push_back({r.begin(), r.end()});
+    ChunkRegions regions;
+    SliceCarveOptions options;
+    options.grid = *grid;
+    options.evaluation = evaluation;
+    options.memory_budget_bytes = spec_.slice_memory_bytes;
+    if (!task.regions_path().empty()) {
+      absl::StatusOr<ChunkRegions> read = ReadRegionsFile(task.regions_path());
+      if (!read.ok()) return read.status();
+      regions = *std::move(read);
+      options.regions = &regions;
+    }
+    // Confined to the tenant's folder as the coordinator checked it, and read through the
+    // descriptor opened here (storage/confined_path.h): errors name the path as the tenant
+    // gave it.
+    if (task.scan_root().empty() || !fs::path(task.scan_root()).is_absolute()) {
+      return absl::InvalidArgumentError("slice without an absolute scan root");
+    }
+    absl::StatusOr<ConfinedFile> scan =
+        ConfinedFile::Open(task.scan_root(), task.scan_path(), "input_path");
+    if (!scan.ok()) return scan.status();
+    std::unique_ptr<ScanReader> reader;
+    {
+      std::lock_guard<std::mutex> lock(Hdf5Lock());
+      absl::StatusOr<std::unique_ptr<ScanReader>> r = ScanReader::Open(scan->path());
+      if (!r.ok()) return scan->Rename(r.status());
+      reader = *std::move(r);
+    }
+    fs::create_directories(fs::path(task.partial_path()).parent_path());
+    // Heartbeats carry the slice's rays read since the last one, as they are carved.
+    uint64_t reported = 0;
+    absl::StatusOr<SliceCarveStats> result = CarveSliceToFile(
+        *reader, slice, options, task.partial_path(), [this, &reported](uint64_t rays) {
+          rays_since_heartbeat_ += int64_t(rays - reported);
+          reported = rays;
+        });
+    {
+      std::lock_guard<std::mutex> lock(Hdf5Lock());
+      reader.reset();
+    }
+    if (!result.ok()) return scan->Rename(result.status());
+    written = task.partial_path();
+    std::error_code ec;
+    stats.set_rays(int64_t(result->rays));
+    stats.set_frames(int64_t(result->frames));
+    stats.set_returns(int64_t(result->returns));
+    stats.set_wedges(int64_t(result->wedges));
+    stats.set_wedge_chunk_pairs(int64_t(result->wedge_chunk_pairs));
+    stats.set_leaf_updates(int64_t(result->leaf_updates));
+    stats.set_partial_bytes(int64_t(fs::file_size(written, ec)));
+    tile.set_path(fs::path(written).filename().string());
+  } else if (lease.has_combine()) {
+    const ChunkKey chunk(lease.chunk().x(), lease.chunk().y(), lease.chunk().z());
+    std::vector<PartialSource> sources;
+    for (const std::string& path : lease.combine().partial_paths()) {
+      absl::StatusOr<PartialSumsIndex> index = partial_indexes_.Get(path);
+      if (!index.ok()) return index.status();
+      sources.push_back({path, *std::move(index)});
+    }
+    CombineChunkRequest req;
+    req.job_id = lease.job_id();
+    req.chunk = chunk;
+    req.grid = *grid;
+    req.sources = &sources;
+    for (size_t i = 0; i < sources.size(); ++i) {
+      const std::vector<PartialSection>& sections = sources[i].index.sections;
+      for (size_t k = 0; k < sections.size(); ++k) {
+        if (sections[k].chunk == chunk) req.sections.push_back({i, k});
+      }
+    }
+    req.tiles_dir = lease.params().tile_dir();
+    absl::StatusOr<CarveChunkResult> result = CombineChunkToTile(req);
+    if (!result.ok()) return result.status();
+    written = result->tile_path;
+    stats.set_leaves(static_cast<int64_t>(result->leaves));
+    tile.set_path(fs::path(written).lexically_relative(req.tiles_dir).string());
+  } else {
+    return absl::InvalidArgumentError("lease with neither a slice nor a chunk to combine");
   }
-  // Heartbeats carry the wedges carved since the last one, as they are carved: live rays/s.
-  req.progress = [this](uint64_t wedges) { rays_since_heartbeat_ += int64_t(wedges); };
-  absl::StatusOr<CarveChunkResult> result = CarveChunkToTile(req);
-  if (!result.ok()) return result.status();
-  absl::StatusOr<std::string> sha = Sha256HexOfFile(result->tile_path);
+  absl::StatusOr<std::string> sha = Sha256HexOfFile(written);
   if (!sha.ok()) return sha.status();
   std::error_code ec;
-  tile.set_path(fs::path(result->tile_path).lexically_relative(req.tiles_dir).string());
-  tile.set_size_bytes(static_cast<int64_t>(result->tile_bytes));
+  tile.set_size_bytes(static_cast<int64_t>(fs::file_size(written, ec)));
   tile.set_sha256_hex(*sha);
-  stats.set_rays(static_cast<int64_t>(result->wedges));
-  stats.set_leaves(static_cast<int64_t>(result->leaves));
-  stats.set_carve_s(result->elapsed_s);
+  stats.set_carve_s(
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   return absl::OkStatus();
 }
 

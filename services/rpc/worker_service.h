@@ -17,7 +17,9 @@ namespace carvemap {
 struct WorkerSpec {
   std::string coordinator_address;          // "host:port" of the CarveTaskService
   std::string listen_address = "127.0.0.1:0";  // health endpoint; "" = none
-  int threads = 1;                          // chunks carved in parallel
+  int threads = 1;                          // tasks (slices, chunks) run in parallel
+  // A slice's chunk sums held before they are written out (worker/slice_carver.h), per thread.
+  size_t slice_memory_bytes = 256u << 20;
   // Give up (Wait returns UNAVAILABLE) after the coordinator has been unreachable this long.
   double coordinator_lost_s = 20.0;
   // How to reach the coordinator: `security.bearer` is the cluster secret (sent on every

@@ -100,9 +100,9 @@ run_one() {  # name variant
     scores="truth_rooms=? predicted_rooms=0 matched=0 precision=0 recall=0 f1=0 bormann_recall=0 bormann_precision=0 plan_rooms=0"
   fi
   # levels.json's entries (the building has one level: more is a levels-stage error), and
-  # the rays the coordinator ingested.
+  # the rays the workers carved.
   levels=$(python3 -c "import json,sys; print(len(json.load(open(sys.argv[1]))))" "$out/levels.json")
-  rays=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1])).get('ingest', {}).get('rays', 0))" "$out/job.json")
+  rays=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1])).get('carve', {}).get('rays', 0))" "$out/job.json")
   read -r u s e < "$work/$tag.run.time"
   read -r su ss se < "$work/$tag.sim.time"
   echo "$name $variant $scores levels=$levels rays=$rays run_cpu_s=$(python3 -c "print(round($u+$s,1))") run_wall_s=$e sim_cpu_s=$(python3 -c "print(round($su+$ss,1))")" >> "$results"

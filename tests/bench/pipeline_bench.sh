@@ -4,7 +4,7 @@
 #   2. peak RSS of the coordinator, of each worker and of the merge service for the same
 #      building and walk scanned at 1×, 2× and 4× the data (scanner rate 10, 20, 40 Hz: the same
 #      volume, more rays);
-#   3. bytes per ray spilled for the workers and stored in tiles.
+#   3. bytes per ray of the partial sums the slices write and of the tiles.
 # Prints Markdown tables for docs/BENCHMARKS.md.
 #
 # Usage: tests/bench/pipeline_bench.sh [PRESET] [WALK_S] [BEAM_DEG] [WORK_DIR]
@@ -30,7 +30,7 @@ simulate() {  # rate → scan path
   echo "$dir/scan.h5"
 }
 
-# run SCAN WORKERS NAME → prints: wall_s carve_s rays spill_B/ray tile_B/ray coord_rss
+# run SCAN WORKERS NAME → prints: wall_s carve_s rays partial_B/ray tile_B/ray coord_rss
 #   max_worker_rss merger_rss
 run() {
   local scan=$1 workers=$2 out=$work/$3
@@ -43,8 +43,8 @@ run() {
 import json, os, re, sys
 out, t0, t1 = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
 job = json.load(open(os.path.join(out, "job.json")))
-ingest = job.get("ingest", {})
-rays = ingest.get("rays", 0)
+carve = job.get("carve", {})
+rays = carve.get("rays", 0)
 tiles = os.path.join(out, "tiles")
 tile_bytes = sum(os.path.getsize(os.path.join(tiles, f)) for f in os.listdir(tiles))
 def rss(log):
@@ -53,7 +53,7 @@ def rss(log):
 logs = os.path.join(out, ".carvemap")
 workers = [rss(os.path.join(logs, f)) for f in sorted(os.listdir(logs)) if f.startswith("worker-") and f.endswith(".log")]
 print(f"{t1 - t0:.1f} {job['stage_seconds'].get('carve', 0):.1f} {rays} "
-      f"{ingest.get('spill_bytes_per_ray', 0):.0f} {tile_bytes / max(rays, 1):.1f} "
+      f"{carve.get('partial_bytes_per_ray', 0):.1f} {tile_bytes / max(rays, 1):.1f} "
       f"{rss(os.path.join(logs, 'coordinator.log')):.0f} {max(workers) if workers else float('nan'):.0f} "
       f"{rss(os.path.join(logs, 'merger.log')):.0f}")
 PY
@@ -70,7 +70,7 @@ echo "| 1 | $rays | $w1 | $c1 | 1 |"
 "$py" -c "print(f'| 2 | $rays | $w2 | $c2 | {$w1/$w2:.2f} / {$c1/max($c2,1e-9):.2f} |')"
 
 echo
-echo "| scanner rate | rays | coordinator peak RSS MiB | largest worker peak RSS MiB | merge service peak RSS MiB | spill B/ray | tile B/ray |"
+echo "| scanner rate | rays | coordinator peak RSS MiB | largest worker peak RSS MiB | merge service peak RSS MiB | partial sums B/ray | tile B/ray |"
 echo "|---|---|---|---|---|---|---|"
 echo "| 10 Hz (1×) | $rays | $cr2 | $wr2 | $mr2 | $sp1 | $tb1 |"
 for rate in 20 40; do

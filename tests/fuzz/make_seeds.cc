@@ -16,8 +16,11 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
+#include <span>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -27,7 +30,7 @@
 #include "storage/png_io.h"
 #include "storage/scan_writer.h"
 #include "storage/tile_store.h"
-#include "storage/wedge_codec.h"
+#include "storage/partial_sums.h"
 #include "tests/fuzz/h5_script.h"
 
 namespace carvemap {
@@ -482,7 +485,7 @@ void TumSeeds(const std::string& data_dir, const fs::path& out) {
   WriteBytes(out / "fr2_poses_only", text);
 }
 
-// --- Meshes, walks, wedges -------------------------------------------------------------------
+// --- Meshes, walks, partial sums ----------------------------------------------------------------
 
 void MeshSeeds(const fs::path& out) {
   TriangleMesh cube;
@@ -532,23 +535,45 @@ void PathSeeds(const std::vector<Node>& nodes, const fs::path& out) {
   WriteBytes(out / "walk_spaces.txt", spaced);
 }
 
-// A single-ray wedge and a four-ray wedge from real points (sensor at the node's pose).
-void WedgeSeeds(const std::vector<Node>& nodes, const fs::path& out) {
-  auto ray = [&](const Node& n, size_t i) {
-    RayModel r;
-    r.sensor_mean = Eigen::Vector3f(n.pose.x, n.pose.y, n.pose.z);
-    r.point_mean = World(n.pose, n.points[i % n.points.size()]).cast<float>();
-    r.sensor_cov = {1e-4f, 0, 0, 1e-4f, 0, 1e-4f};
-    r.point_cov = {4e-4f, 1e-5f, 0, 4e-4f, 0, 9e-4f};
-    return r;
-  };
-  Wedge one;
-  one.num_rays = 1;
-  one.rays[0] = ray(nodes[0], 0);
-  Wedge four;
-  for (int i = 0; i < 4; ++i) four.rays[i] = ray(nodes[i / 2], i);
-  const std::vector<Wedge> wedges = {one, four};
-  WriteBytes(out / "one_and_four.bin", EncodeWedges(wedges));
+// A slice's partial sums of two chunks (one flushed twice) from real points (the leaves holding
+// the scan's points, with sums), and a regions file.
+void PartialSumsSeeds(const std::vector<Node>& nodes, const fs::path& out) {
+  fs::create_directories(out);
+  OctreeGrid grid;
+  grid.chunk_depth = 5;
+  std::map<ChunkKey, std::map<std::tuple<int, int, int>, LeafStats>, ChunkKeyLess> leaves;
+  for (const Node& n : nodes) {
+    for (size_t i = 0; i < n.points.size(); i += 7) {
+      const Eigen::Vector3d p = World(n.pose, n.points[i]);
+      const LeafKey key = LeafOf(grid, p);
+      const ChunkKey chunk = ChunkOfLeaf(grid, key);
+      const Eigen::Vector3i local = key - chunk * grid.leaves_per_side();
+      LeafStats& s = leaves[chunk][{local.x(), local.y(), local.z()}];
+      s.Add(0.25, 0.75);
+      ++s.points;
+    }
+  }
+  const fs::path path = out / "two_chunks.part";
+  auto writer = PartialSumsWriter::Create(path.string(), grid.chunk_depth, 3);
+  Check(writer.status());
+  int written = 0;
+  ChunkRegions regions;
+  for (const auto& [chunk, cells] : leaves) {
+    if (written++ == 2) break;
+    std::vector<TileLeaf> list;
+    for (const auto& [xyz, stats] : cells) {
+      TileLeaf l;
+      l.node.depth = grid.chunk_depth;
+      l.node.local = Eigen::Vector3i(std::get<0>(xyz), std::get<1>(xyz), std::get<2>(xyz));
+      l.stats = stats;
+      list.push_back(l);
+    }
+    Check((*writer)->AddSection(chunk, 40, list));
+    Check((*writer)->AddSection(chunk, 1, std::span(list).first(list.size() / 2)));
+    regions.emplace(chunk, ChunkRegion(2, {{0, 0, 0}, {3, 1, 2}}));
+  }
+  Check((*writer)->Finish().status());
+  Check(WriteRegionsFile((out / "regions.bin").string(), regions));
 }
 
 }  // namespace
@@ -572,6 +597,6 @@ int main(int argc, char** argv) {
   TumSeeds(data, out / "tum_import");
   MeshSeeds(out / "ply_mesh");
   PathSeeds(nodes, out / "path_csv");
-  WedgeSeeds(nodes, out / "wedge_codec");
+  PartialSumsSeeds(nodes, out / "partial_sums");
   return 0;
 }

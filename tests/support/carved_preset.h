@@ -1,17 +1,18 @@
-// Test support: a simulated building carved to tiles in this process (simulate → ingest →
-// carve every chunk), for the tests of the merge stages that need a real octree with ground
-// truth. Link: carvemap_sim carvemap_worker (which brings the coordinator).
+// Test support: a simulated building carved to tiles in this process (simulate → carve by time
+// slices → combine, worker/scan_carver.h), for the tests of the merge stages that need a real
+// octree with ground truth. Link: carvemap_sim carvemap_worker (which brings the coordinator).
 #pragma once
 
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "coordinator/scan_ingest.h"
+#include "services/geometry/chunk_region.h"
 #include "services/geometry/octree_keys.h"
 #include "services/sim/simulator.h"
-#include "worker/spilled_chunk_carver.h"
+#include "worker/scan_carver.h"
 
 namespace carvemap::testing {
 
@@ -24,21 +25,18 @@ struct CarvedPresetOptions {
   bool drift = false;          // localization drift (§2.2) on /path; range noise + jitter stay on
   double resolution_m = 0.0625;
   int threads = 2;
-  // Keep the ingest's spill (<root>/spill) so the chunks can be carved again (§5.6.1).
-  bool keep_spill = false;
 };
 
 struct CarvedPreset {
   std::string scan_path;   // <root>/sim/scan.h5
   std::string gt_dir;      // <root>/sim/gt (building.json, surfaces.ply, objects.ply)
   std::string tiles_dir;   // <root>/tiles
-  std::string spill_dir;   // <root>/spill, when kept
   OctreeGrid grid;
   SimulationSummary simulation;
   std::vector<std::string> tile_paths;
 };
 
-// Simulates into `root`/sim, carves into `root`/tiles (the spill is removed afterwards).
+// Simulates into `root`/sim, carves into `root`/tiles (the partial sums are removed afterwards).
 inline absl::StatusOr<CarvedPreset> CarvePreset(const CarvedPresetOptions& options,
                                                 const std::string& root) {
   namespace fs = std::filesystem;
@@ -62,49 +60,37 @@ inline absl::StatusOr<CarvedPreset> CarvePreset(const CarvedPresetOptions& optio
   out.scan_path = summary->scan_path;
   out.gt_dir = summary->gt_dir;
 
-  IngestOptions ingest;
-  ingest.scan_path = out.scan_path;
-  ingest.spill_dir = root + "/spill";
-  absl::StatusOr<IngestResult> spilled = IngestScan(ingest);
-  if (!spilled.ok()) return spilled.status();
-
-  SpilledChunkCarveOptions carve;
+  ScanCarveOptions carve;
   carve.grid = out.grid;
   carve.job_id = "carved_preset";
+  carve.partials_dir = root + "/partials";
   carve.tiles_dir = out.tiles_dir = root + "/tiles";
   carve.threads = options.threads;
-  fs::create_directories(carve.tiles_dir);
-  absl::StatusOr<SpilledChunkCarveTotals> carved = CarveSpilledChunks(spilled->chunks, carve);
+  absl::StatusOr<ScanCarveTotals> carved = CarveScan(out.scan_path, carve);
   if (!carved.ok()) return carved.status();
   out.tile_paths = std::move(carved->tile_paths);
-  if (options.keep_spill) {
-    out.spill_dir = root + "/spill";
-  } else {
-    fs::remove_all(root + "/spill");
-  }
   return out;
 }
 
-// MergeOptions::recarve done in this process, as the coordinator's workers would: the chunks
-// from the spill in `spill_dir`, carved into `tiles_dir` (replaced).
-inline auto InProcessRecarve(std::string spill_dir, std::string tiles_dir, int threads) {
+// MergeOptions::recarve done in this process, as the coordinator's workers would: the scan's
+// slices carved again at the finer grid, only in the chunks' regions, into `tiles_dir`
+// (replaced).
+inline auto InProcessRecarve(std::string scan_path, std::string tiles_dir, int threads) {
   return [=](const std::vector<RecarveChunk>& chunks,
              double resolution_m) -> absl::StatusOr<std::string> {
     absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(resolution_m);
     if (!grid.ok()) return grid.status();
-    std::vector<ChunkKey> keys;
-    for (const RecarveChunk& c : chunks) keys.push_back(c.chunk);
-    absl::StatusOr<std::vector<SpilledChunk>> spilled = FindSpilledChunks(spill_dir, keys);
-    if (!spilled.ok()) return spilled.status();
     std::filesystem::remove_all(tiles_dir);
-    std::filesystem::create_directories(tiles_dir);
-    SpilledChunkCarveOptions carve;
+    std::map<ChunkKey, ChunkRegion, ChunkKeyLess> regions;
+    for (const RecarveChunk& c : chunks) regions.emplace(c.chunk, c.region);
+    ScanCarveOptions carve;
     carve.grid = *grid;
     carve.job_id = "carved_preset";
+    carve.partials_dir = tiles_dir + ".partials";
     carve.tiles_dir = tiles_dir;
     carve.threads = threads;
-    for (const RecarveChunk& c : chunks) carve.regions.emplace(c.chunk, c.region);
-    absl::StatusOr<SpilledChunkCarveTotals> carved = CarveSpilledChunks(*spilled, carve);
+    carve.regions = &regions;
+    absl::StatusOr<ScanCarveTotals> carved = CarveScan(scan_path, carve);
     if (!carved.ok()) return carved.status();
     return tiles_dir;
   };
