@@ -17,7 +17,7 @@ inline constexpr double kMaxWorldCoordinateM = 1e6;
 // The chunks whose boxes the hull intersects, sorted by ChunkKeyLess, without duplicates.
 // Descends halves of the chunk range of the hull's box, so long wedges cost about their length,
 // not their box's volume. An empty or non-finite hull box, or one reaching beyond
-// ±kMaxWorldCoordinateM, gives no chunks (ChunkSpiller::Add rejects such wedges first).
+// ±kMaxWorldCoordinateM, gives no chunks (ValidateWedge rejects such wedges first).
 [[nodiscard]] std::vector<ChunkKey> ChunksOfWedge(const WedgeHull& hull);
 // Same, for the wedge's hull with `sigmas` extension (MakeWedgeHull).
 [[nodiscard]] std::vector<ChunkKey> ChunksOfWedge(const Wedge& wedge, double sigmas = 3.0);

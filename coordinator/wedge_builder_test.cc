@@ -123,7 +123,7 @@ TEST(WedgeBuilderTest, LineSensorSweepingAWall) {
   }
 }
 
-// The ids let the spill store each ray once: equal ids are the same ray, bit for bit, and
+// The ids let a slice store each ray once: equal ids are the same ray, bit for bit, and
 // rays of one frame share their sensor Gaussian.
 TEST(WedgeBuilderTest, RayIdsNameRaysAndFrames) {
   constexpr int kRays = 9, kFrames = 6;

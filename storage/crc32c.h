@@ -1,5 +1,5 @@
-// CRC-32C (Castagnoli): the checksum of the files carvemap writes for itself (chunk spill files,
-// partial sums). Plain (unmasked), initial value 0xffffffff and final inversion, as leveldb's
+// CRC-32C (Castagnoli): the checksum of the files carvemap writes for itself (partial sums and
+// the regions of a re-carve pass). Plain (unmasked), initial value 0xffffffff and final inversion, as leveldb's
 // crc32c::Value and iSCSI; "123456789" checksums to 0xe3069283.
 #pragma once
 

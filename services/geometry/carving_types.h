@@ -25,8 +25,8 @@ using SymCov3f = std::array<float, 6>;
 
 // One scan ray in the world frame as two Gaussians (§4.1.1): the sensor position
 // N(sensor_mean, sensor_cov) = eq 4.5 and the scan point N(point_mean, point_cov) = eq 4.6.
-// Floats: world coordinates within ±10 km keep sub-millimetre precision, and a ray is sent to
-// workers and spilled to disk millions of times.
+// Floats: world coordinates within ±10 km keep sub-millimetre precision, and a survey holds
+// hundreds of millions of rays.
 struct RayModel {
   Eigen::Vector3f sensor_mean;  // m, world
   Eigen::Vector3f point_mean;   // m, world
@@ -54,8 +54,8 @@ struct RayId {
   bool operator==(const RayId&) const = default;
 };
 
-// Wedges that share rays, each distinct ray stored once: the form the wedge payload decodes to
-// (storage/WEDGE_FORMAT.md). Wedge w joins rays[wedges[w].ray[0 … num_rays)]; neighbouring
+// Wedges that share rays, each distinct ray stored once: how a slice holds its wedges
+// (worker/slice_carver.h). Wedge w joins rays[wedges[w].ray[0 … num_rays)]; neighbouring
 // wedges of a line or grid sensor share edges, so each ray belongs to up to four of them.
 struct WedgeRef {
   std::array<uint32_t, 4> ray{};

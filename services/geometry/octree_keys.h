@@ -25,7 +25,7 @@ inline constexpr int kMaxChunkDepth = 10;  // 1.95 mm leaves; Morton codes fit 3
 using ChunkKey = Eigen::Vector3i;  // floor(x / 2 m)
 using LeafKey = Eigen::Vector3i;   // floor(x / resolution)
 
-// Strict weak order on chunk keys: x, then y, then z. Spill listings, tile sets and the lease
+// Strict weak order on chunk keys: x, then y, then z. Partial-sum sections, tile sets and the lease
 // table all list chunks in this order.
 struct ChunkKeyLess {
   bool operator()(const ChunkKey& a, const ChunkKey& b) const {
