@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <random>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -16,6 +17,13 @@
 
 namespace carvemap {
 namespace {
+
+// A temporary name of this writer's own: a worker declared lost may still be writing the same
+// file when another one carves the slice again, and the two must not share a temporary file.
+std::string TempPathFor(const std::string& path) {
+  thread_local std::mt19937_64 random{std::random_device{}()};
+  return absl::StrCat(path, ".", absl::Hex(random(), absl::kZeroPad16), ".tmp");
+}
 
 constexpr char kMagic[8] = {'C', 'M', 'P', 'A', 'R', 'T', 'L', '1'};
 constexpr uint32_t kVersion = 1;
@@ -140,10 +148,10 @@ absl::StatusOr<std::unique_ptr<PartialSumsWriter>> PartialSumsWriter::Create(
   }
   auto impl = std::make_unique<Impl>();
   impl->path = path;
-  impl->tmp = path + ".tmp";
+  impl->tmp = TempPathFor(path);
   impl->depth = chunk_depth;
   impl->slice = slice;
-  impl->fd = ::open(impl->tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  impl->fd = ::open(impl->tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
   if (impl->fd < 0) return IoError("create", impl->tmp);
   char header[kHeaderBytes] = {};
   std::memcpy(header, kMagic, 8);
@@ -356,8 +364,8 @@ absl::Status WriteRegionsFile(const std::string& path, const ChunkRegions& regio
     bytes += cells;
   }
   put(Crc32c(bytes));
-  const std::string tmp = path + ".tmp";
-  Fd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644));
+  const std::string tmp = TempPathFor(path);
+  Fd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644));
   if (fd.get() < 0) return IoError("create", tmp);
   if (absl::Status s = WriteAll(fd.get(), bytes.data(), bytes.size(), tmp); !s.ok()) return s;
   if (::fsync(fd.get()) != 0) return IoError("fsync", tmp);

@@ -35,8 +35,8 @@ struct PartialSumsIndex {
   std::vector<PartialSection> sections;  // in file order
 };
 
-// Writes a file through "<path>.tmp": sections as they come, the index last, then fsync and a
-// rename, so a file under its final name is complete. Not thread-safe.
+// Writes a file through "<path>.<random>.tmp": sections as they come, the index last, then
+// fsync and a rename, so a file under its final name is complete. Not thread-safe.
 class PartialSumsWriter {
  public:
   static absl::StatusOr<std::unique_ptr<PartialSumsWriter>> Create(const std::string& path,
@@ -71,8 +71,8 @@ class PartialSumsWriter {
 
 // §5.6.1's re-carving pass: the chunks to carve again and each one's region, in one file that
 // every slice of the pass reads (storage/PARTIAL_FORMAT.md "Regions"). Written through
-// "<path>.tmp" and renamed; I/O errors name the file. The reader: NotFound for a missing file,
-// DataLoss naming the file for a damaged one.
+// "<path>.<random>.tmp" and renamed; I/O errors name the file. The reader: NotFound for a
+// missing file, DataLoss naming the file for a damaged one.
 using ChunkRegions = std::map<ChunkKey, ChunkRegion, ChunkKeyLess>;
 [[nodiscard]] absl::Status WriteRegionsFile(const std::string& path, const ChunkRegions& regions);
 [[nodiscard]] absl::StatusOr<ChunkRegions> ReadRegionsFile(const std::string& path);
