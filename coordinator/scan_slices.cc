@@ -11,8 +11,10 @@ namespace carvemap {
 double SliceSeconds(const SlicePlanOptions& options, uint64_t rays, double duration_s) {
   if (options.slice_s > 0) return options.slice_s;
   if (rays == 0 || !(duration_s > 0)) return std::max(options.min_slice_s, 1.0);
-  return std::max(options.min_slice_s,
-                  duration_s * double(options.target_rays) / double(rays));
+  const double by_rays =
+      std::max(options.min_slice_s, duration_s * double(options.target_rays) / double(rays));
+  return std::min(by_rays, std::max(options.shortest_slice_s,
+                                    duration_s / std::max(options.min_slices, 1)));
 }
 
 absl::StatusOr<std::vector<ScanSlice>> PlanSlices(std::span<const std::vector<FrameRecord>> frames,

@@ -37,10 +37,14 @@ inline constexpr uint64_t kSliceFramesAfter = 1;
 
 struct SlicePlanOptions {
   // Length of a slice in scan time, s; 0: the scan's duration split so that a slice holds about
-  // target_rays rays, but at least min_slice_s (~30 s of the full-rate backpack, 4 M rays).
+  // target_rays rays (~30 s of the full-rate backpack), but at least min_slice_s; and a short
+  // scan still in min_slices slices (so that several workers share it), down to
+  // shortest_slice_s. A slice costs its context frames and a section per chunk it touches.
   double slice_s = 0;
   uint64_t target_rays = 4'000'000;
   double min_slice_s = 10;
+  int min_slices = 8;
+  double shortest_slice_s = 2;
 };
 
 // The slice length `options` give for a scan of `rays` rays over `duration_s` seconds.

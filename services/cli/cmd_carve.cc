@@ -159,8 +159,8 @@ void RegisterCarve(CLI::App& app, int& exit_code) {
       ->check(CLI::Range(16, 1 << 16))
       ->capture_default_str();
   cmd->add_option("--slice-s", flags->slice_s,
-                  "Length of a time slice, s (0: the scan's length over slices of ~4 M rays, "
-                  "at least 10 s)")
+                  "Length of a time slice, s (0: slices of ~4 M rays, at least 10 s, but at "
+                  "least 8 slices for a short scan, each at least 2 s)")
       ->capture_default_str();
   cmd->add_option("--evaluation", flags->evaluation,
                   "How eq 4.7 is evaluated: fast (single precision, the default) or exact (double "
