@@ -275,7 +275,8 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   const fs::path tiles = flags.storage_root.empty()
                              ? out / "tiles"
                              : fs::absolute(flags.storage_root) / done->job_id / "tiles";
-  std::printf("carvemap run: job %s SUCCEEDED in %.1f s: %lld chunks (%lld retried)\n",
+  std::printf("carvemap run: job %s SUCCEEDED in %.1f s: %lld tasks (slices and chunks; %lld "
+              "retried)\n",
               done->job_id.c_str(), elapsed, static_cast<long long>(done->chunks_total),
               static_cast<long long>(done->chunk_retries));
   std::printf("  outputs in %s\n  tiles in %s\n", out.c_str(), tiles.c_str());

@@ -25,7 +25,8 @@ CoordinatorMetrics::CoordinatorMetrics()
     : registry_(std::make_shared<prometheus::Registry>()),
       chunks_(BuildGauge()
                   .Name("carvemap_chunks")
-                  .Help("Chunks of the jobs being carved, by state (queued, leased, done)")
+                  .Help("Tasks (slices and chunks) of the jobs being carved, by state (queued, "
+                        "leased, done)")
                   .Register(*registry_)),
       chunks_queued_(chunks_.Add({{"state", "queued"}})),
       chunks_leased_(chunks_.Add({{"state", "leased"}})),
@@ -42,18 +43,18 @@ CoordinatorMetrics::CoordinatorMetrics()
                        .Add({})),
       rays_carved_(BuildCounter()
                        .Name("carvemap_rays_carved_total")
-                       .Help("Rays (wedges) applied to chunks by workers, from completed chunks")
+                       .Help("Rays of the scan carved by workers, from completed slices")
                        .Register(*registry_)
                        .Add({})),
       rays_per_second_(BuildGauge()
                            .Name("carvemap_rays_per_second")
-                           .Help("Rays (wedges) carved per second over the last 10 s, as the "
-                                 "workers' heartbeats report them (mid-chunk too)")
+                           .Help("Rays of the scan carved per second over the last 10 s, as the "
+                                 "workers' heartbeats report them (mid-slice too)")
                            .Register(*registry_)
                            .Add({})),
       chunks_completed_(BuildCounter()
                             .Name("carvemap_chunks_completed_total")
-                            .Help("Chunk tiles committed")
+                            .Help("Tasks committed (slices' partial sums and chunks' tiles)")
                             .Register(*registry_)
                             .Add({})),
       chunk_failures_(BuildCounter()

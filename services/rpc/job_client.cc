@@ -288,21 +288,15 @@ std::string FormatProgress(const WatchUpdate& u) {
     }
   };
   std::string line = absl::StrFormat("%-9s", u.state);
-  if (u.state == "INGESTING") {
-    if (u.rays_total > 0) {
-      absl::StrAppendFormat(&line, " %.1f/%.1f M rays read  %.2f M rays/s", u.rays_done * 1e-6,
-                            u.rays_total * 1e-6, u.rays_per_s * 1e-6);
-      eta(line);
-    } else {
-      absl::StrAppendFormat(&line, " %.1f M rays read", u.rays_done * 1e-6);
-    }
-  } else if (u.chunks_total > 0) {
+  if (u.chunks_total > 0) {
     constexpr int kWidth = 24;
     const int filled = static_cast<int>(kWidth * u.chunks_done / u.chunks_total);
     absl::StrAppend(&line, " [", std::string(filled, '#'), std::string(kWidth - filled, '.'), "] ");
-    absl::StrAppendFormat(&line, "%d/%d chunks", u.chunks_done, u.chunks_total);
+    // Tasks: a carve's slices, then its chunks (docs/RPC.md "Slices").
+    absl::StrAppendFormat(&line, "%d/%d tasks", u.chunks_done, u.chunks_total);
     if (u.state == "CARVING" || u.rays_per_s > 0) {
-      absl::StrAppendFormat(&line, "  %.2f M rays/s  %d worker(s)", u.rays_per_s * 1e-6,
+      absl::StrAppendFormat(&line, "  %.1f/%.1f M rays  %.2f M rays/s  %d worker(s)",
+                            u.rays_done * 1e-6, u.rays_total * 1e-6, u.rays_per_s * 1e-6,
                             u.active_workers);
       eta(line);
     } else if (u.stage_total > 0) {
@@ -316,7 +310,7 @@ std::string FormatProgress(const WatchUpdate& u) {
 }
 
 std::string FormatJob(const JobInfo& j) {
-  std::string line = absl::StrFormat("%-18s %-10s %5d/%-5d chunks  %-24s -> %s", j.job_id, j.state,
+  std::string line = absl::StrFormat("%-18s %-10s %5d/%-5d tasks  %-24s -> %s", j.job_id, j.state,
                                      j.chunks_done, j.chunks_total, j.input_path, j.output_name);
   if (!j.error.empty()) absl::StrAppend(&line, "\n    ", j.error);
   return line;

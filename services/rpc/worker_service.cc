@@ -355,7 +355,7 @@ absl::Status WorkerServer::Impl::Carve(const pb::Lease& lease, pb::TileInfo& til
       reader = *std::move(r);
     }
     fs::create_directories(fs::path(task.partial_path()).parent_path());
-    // Heartbeats carry the slice's rays read since the last one, as they are carved.
+    // Heartbeats carry the slice's rays carved since the last one.
     uint64_t reported = 0;
     absl::StatusOr<SliceCarveStats> result = CarveSliceToFile(
         *reader, slice, options, task.partial_path(), [this, &reported](uint64_t rays) {
