@@ -33,6 +33,9 @@ struct MergeOptions {
   // carve timings/counts. MergeFirstOutputs adds its own entries (see MergeSummary::job) and
   // writes the result as job.json; keys it does not own are kept as given.
   nlohmann::json job = nlohmann::json::object();
+  // Seconds the caller's merge spent before these outputs (RunMerge's stages): job.json's
+  // "merge.total" and, when the caller's document has one, "stage_seconds"."merge" count them.
+  double seconds_before = 0;
   // Bound on the decoded tiles held in memory at once (TileSet's LRU cache). At least one
   // chunk is always held, whatever the budget.
   uint64_t cache_budget_bytes = uint64_t{256} << 20;

@@ -49,6 +49,19 @@ class FirstOutputsTest : public ::testing::Test {
   std::string dir_, tiles_dir_;
 };
 
+TEST_F(FirstOutputsTest, MergeTimeCountsTheStagesBeforeIt) {
+  MergeOptions o = Options();
+  o.job["stage_seconds"] = {{"carve", 5.0}, {"merge", 0.0}};
+  o.seconds_before = 40.0;
+  auto summary = MergeFirstOutputs(o, nullptr);
+  ASSERT_TRUE(summary.ok()) << summary.status();
+  const nlohmann::json& t = summary->job["timings_s"];
+  EXPECT_DOUBLE_EQ(t["merge.total"].get<double>(), 40.0 + t["merge.first_outputs"].get<double>());
+  EXPECT_DOUBLE_EQ(summary->job["stage_seconds"]["merge"].get<double>(),
+                   t["merge.total"].get<double>());
+  EXPECT_DOUBLE_EQ(summary->job["stage_seconds"]["carve"].get<double>(), 5.0);
+}
+
 TEST_F(FirstOutputsTest, WritesAllOutputs) {
   std::vector<std::string> stages;
   auto summary = MergeFirstOutputs(Options(), [&](const MergeProgress& p) {
@@ -91,7 +104,8 @@ TEST_F(FirstOutputsTest, WritesAllOutputs) {
   EXPECT_EQ(job["versions"]["tile_format"], "carvemap-tile/2");
   EXPECT_TRUE(job["versions"].contains("carvemap"));
   EXPECT_DOUBLE_EQ(job["parameters"]["merge"]["resolution_m"].get<double>(), 0.125);
-  for (const char* t : {"merge.index", "merge.octree_bt", "merge.topdown_png", "merge.total"}) {
+  for (const char* t : {"merge.index", "merge.octree_bt", "merge.topdown_png",
+                        "merge.first_outputs", "merge.total"}) {
     EXPECT_TRUE(job["timings_s"].contains(t)) << t;
   }
   EXPECT_EQ(job["outputs"], (nlohmann::json{"scan.h5", "octree.bt", "job.json",

@@ -619,6 +619,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   job["outputs"] = listed;
   if (!warnings.empty()) job["warnings"] = warnings;
   first.job = std::move(job);
+  first.seconds_before = SecondsSince(t_start);
   absl::StatusOr<MergeSummary> summary = MergeFirstOutputs(first, progress);
   if (!summary.ok()) return summary.status();
   summary->num_boundary_faces = faces->size();
