@@ -5,7 +5,7 @@
 # token for the job API, cluster secret for the workers (docs/RPC.md, "Authentication"). The
 # merge service stays on this machine's loopback (the coordinator is its only caller), with
 # the cluster secret too.
-# Workers share this machine's filesystem (the spill files and tiles), as pods share a volume.
+# Workers share this machine's filesystem (the scan, partial sums and tiles), as pods share a volume.
 # Needs root (network namespaces) and iproute2.
 # Usage: deploy/local/run-netns.sh SCAN.h5 OUT [CARVEMAP] [WORKERS (default 2)]
 set -euo pipefail

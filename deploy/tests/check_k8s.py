@@ -268,7 +268,7 @@ def check(label, objs, carvemap):
     if c_state is None:
         where(f"coordinator must mount the job store PVC {STATE_PVC}")
     else:
-        # jobs.db lives in --work-dir (on the shared volume, for the spill files); an init
+        # jobs.db lives in --work-dir (on the shared volume, for the partial sums); an init
         # container must link it to the state volume.
         work = flag(cargs, "--work-dir") or ""
         link = f"{work.rstrip('/')}/jobs.db"

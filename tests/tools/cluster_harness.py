@@ -152,7 +152,7 @@ def write_private(path, text):
 
 
 class Cluster:
-    """A coordinator, workers and merge services over one work dir (job store, spill, logs,
+    """A coordinator, workers and merge services over one work dir (job store, partial sums, logs,
     secrets).
 
     tenants: {tenant: token}; with one tenant the folders are shared (--shared-dirs) unless
