@@ -95,15 +95,20 @@ int Main(int argc, char** argv) {
   absl::StatusOr<std::vector<ScanSlice>> slices = PlanSlices(frames, kinds, 1e9);
   if (!slices.ok() || slices->size() != 1) return Fail(absl::InternalError("no slice"));
   struct Carve {
-    const char* name;
-    CarveEvaluation evaluation;
+    const char* name = "";
+    CarveEvaluation evaluation = CarveEvaluation::kFast;
     std::string dir;
     double cpu_s = 0, wall_s = 0, combine_cpu_s = 0;
     uint64_t tile_bytes = 0, leaves = 0, updates = 0, pairs = 0, partial_bytes = 0;
     std::map<ChunkKey, TileData, ChunkKeyLess> tiles;
   };
-  Carve carves[2] = {{"exact", CarveEvaluation::kExact, root + "/exact"},
-                     {"fast", CarveEvaluation::kFast, root + "/fast"}};
+  Carve carves[2];
+  carves[0].name = "exact";
+  carves[0].evaluation = CarveEvaluation::kExact;
+  carves[0].dir = root + "/exact";
+  carves[1].name = "fast";
+  carves[1].evaluation = CarveEvaluation::kFast;
+  carves[1].dir = root + "/fast";
   uint64_t returns = 0;
   for (Carve& carve : carves) {
     fs::create_directories(carve.dir);
