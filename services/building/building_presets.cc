@@ -795,17 +795,25 @@ class PresetBuilder {
 
 // One office floor: a hallway (y 5.5–7.9) with rooms south and north of it, a lobby at the
 // east end whose east wall is curved, an open-plan room with two columns. `north` lists the
-// x splits and kinds of the north rooms.
+// x splits and kinds of the north rooms. A wing is such a floor moved north by `y0`.
 struct FloorPlan {
   int level = 0;
   std::vector<double> north_x;
   std::vector<Kind> north_kinds;
   std::vector<double> ceilings;  // cycled over the rooms, m
+  double y0 = 0;                 // the wing's south wall
+  std::string wing;              // prefix of its room names
+  bool stair_bottom = false;     // its stair room (if any) is a flight's foot, else its top
+  bool south_window = true, north_window = true;  // in its exterior walls
 };
+
+// The floor's depth (south wall to north wall), m.
+constexpr double kFloorDepth = 13.0;
 
 void AddOfficeFloor(const FloorPlan& plan, Layout& L) {
   const int level = plan.level;
-  const double kHallY0 = 5.5, kHallY1 = 7.9, kDepthN = 13.0, kEnd = 32.0;
+  const double y0 = plan.y0, kHallY0 = y0 + 5.5, kHallY1 = y0 + 7.9, kDepthN = y0 + kFloorDepth;
+  const double kEnd = 32.0;
   const std::vector<double> south_x = {0, 4, 8, 16, 20, 24, 28, kEnd};
   const std::vector<Kind> south_kinds = {Kind::kOffice,  Kind::kOffice, Kind::kOpen,  Kind::kOffice,
                                          Kind::kMeeting, Kind::kOffice, Kind::kOffice};
@@ -814,27 +822,27 @@ void AddOfficeFloor(const FloorPlan& plan, Layout& L) {
   const auto ceiling = [&] { return plan.ceilings[cycle++ % plan.ceilings.size()]; };
 
   const int hall = static_cast<int>(L.rooms.size());
-  const RoomSpec h = NewRoom(absl::StrCat("hallway", level), level, Kind::kHall,
+  const RoomSpec h = NewRoom(absl::StrCat(plan.wing, "hallway", level), level, Kind::kHall,
                              Rect(0, kHallY0, kEnd, kHallY1), 2.7);
   L.rooms.push_back(h);
 
   int w = 0;
   for (size_t i = 0; i + 1 < south_x.size(); ++i) {
-    RoomSpec r = NewRoom(absl::StrCat("s", level, "_", i), level, south_kinds[i],
-                         Rect(south_x[i], 0, south_x[i + 1], kHallY0), ceiling());
+    RoomSpec r = NewRoom(absl::StrCat(plan.wing, "s", level, "_", i), level, south_kinds[i],
+                         Rect(south_x[i], y0, south_x[i + 1], kHallY0), ceiling());
     r.back = Side::kSouth;
     const double width = widths[w++ % widths.size()];
     // Doors alternate between the east and west ends of the hallway wall.
     double at = i % 2 ? south_x[i + 1] - 0.35 - width / 2 : south_x[i] + 0.35 + width / 2;
     if (r.kind == Kind::kOpen) {  // one square and one round column; a central door
-      r.columns = {{{10.7, 2.75}, false, 0.4}, {{13.3, 2.75}, true, 0.4}};
+      r.columns = {{{10.7, y0 + 2.75}, false, 0.4}, {{13.3, y0 + 2.75}, true, 0.4}};
       at = r.rect.center().x();
     }
     L.rooms.push_back(r);
     L.doors.push_back({hall, int(L.rooms.size()) - 1, at, width});
   }
   for (size_t i = 0; i + 1 < plan.north_x.size(); ++i) {
-    RoomSpec r = NewRoom(absl::StrCat("n", level, "_", i), level, plan.north_kinds[i],
+    RoomSpec r = NewRoom(absl::StrCat(plan.wing, "n", level, "_", i), level, plan.north_kinds[i],
                          Rect(plan.north_x[i], kHallY1, plan.north_x[i + 1], kDepthN), ceiling());
     r.back = Side::kNorth;
     double width = widths[w++ % widths.size()];
@@ -842,9 +850,9 @@ void AddOfficeFloor(const FloorPlan& plan, Layout& L) {
     if (r.kind == Kind::kStorage) r.entered = false;  // seen only through its open door
     if (r.kind == Kind::kStair) {
       r.back = Side::kNorth;
-      if (level == 0) {
+      if (plan.stair_bottom) {
         r.open_to_level_above = true;
-        r.ceiling_h = L.levels[0].height - kSlabT;
+        r.ceiling_h = L.levels[level].height - kSlabT;
         width = 1.0, at = plan.north_x[i] + 0.9;  // near the foot of the flight
       } else {
         width = 1.2, at = plan.north_x[i + 1] - 1.1;  // near the top landing
@@ -853,14 +861,14 @@ void AddOfficeFloor(const FloorPlan& plan, Layout& L) {
     L.rooms.push_back(r);
     L.doors.push_back({hall, int(L.rooms.size()) - 1, at, width});
   }
-  RoomSpec lobby =
-      NewRoom(absl::StrCat("lobby", level), level, Kind::kLobby, Rect(kEnd, 0, 36, kDepthN), 3.2);
+  RoomSpec lobby = NewRoom(absl::StrCat(plan.wing, "lobby", level), level, Kind::kLobby,
+                           Rect(kEnd, y0, 36, kDepthN), 3.2);
   lobby.east_arc_sagitta = 1.5;  // the curved wall
   L.rooms.push_back(lobby);
   L.doors.push_back({hall, int(L.rooms.size()) - 1, 0.5 * (kHallY0 + kHallY1), 1.8});
   // Windows in the exterior walls of the first south and north rooms.
-  L.windows.push_back({hall + 1, Side::kSouth, 2.0, 1.2});
-  L.windows.push_back({hall + int(south_x.size()), Side::kNorth, 2.5, 1.5});
+  if (plan.south_window) L.windows.push_back({hall + 1, Side::kSouth, 2.0, 1.2});
+  if (plan.north_window) L.windows.push_back({hall + int(south_x.size()), Side::kNorth, 2.5, 1.5});
 }
 
 Layout RoomLayout() {
@@ -889,7 +897,9 @@ Layout Office2Layout() {
   const std::vector<double> north_x = {0, 5, 9, 13, 18, 23, 32};
   const std::vector<Kind> north_kinds = {Kind::kOffice, Kind::kMeeting, Kind::kOffice,
                                          Kind::kOffice, Kind::kMeeting, Kind::kStair};
-  AddOfficeFloor({0, north_x, north_kinds, {2.5, 3.2, 2.8, 3.0, 2.6, 2.9}}, L);
+  FloorPlan ground{0, north_x, north_kinds, {2.5, 3.2, 2.8, 3.0, 2.6, 2.9}};
+  ground.stair_bottom = true;
+  AddOfficeFloor(ground, L);
   const int bottom = static_cast<int>(L.rooms.size()) - 2;  // the stair room, before the lobby
   AddOfficeFloor({1, north_x, north_kinds, {3.1, 2.5, 2.7, 2.9, 2.6}}, L);
   const int top = static_cast<int>(L.rooms.size()) - 2;
@@ -898,9 +908,57 @@ Layout Office2Layout() {
   return L;
 }
 
+// Four levels of three wings side by side (south to north), 12 office floors: a survey of a
+// large building, several times office2's walk. On each level the wings' lobbies open into
+// each other; the flight from level k to k + 1 is in wing k, so the walk crosses the wings to
+// climb.
+Layout Office4Layout() {
+  constexpr int kLevels = 4, kWings = 3;
+  Layout L;
+  for (int k = 0; k < kLevels; ++k) L.levels.push_back({3.5 * k, 3.5});
+  // Each wing its own rooms (storage rooms are not entered); the last north room is a stair
+  // room where a flight starts or ends, else an office.
+  const std::vector<std::vector<double>> north_x = {
+      {0, 5, 9, 13, 18, 23, 32}, {0, 4, 9, 14, 18, 23, 32}, {0, 6, 10, 14, 19, 23, 32}};
+  const std::vector<std::vector<Kind>> north_kinds = {
+      {Kind::kOffice, Kind::kMeeting, Kind::kOffice, Kind::kOffice, Kind::kMeeting},
+      {Kind::kMeeting, Kind::kOffice, Kind::kStorage, Kind::kOffice, Kind::kOffice},
+      {Kind::kOffice, Kind::kOffice, Kind::kMeeting, Kind::kOffice, Kind::kMeeting}};
+  const std::vector<std::vector<double>> ceilings = {
+      {2.5, 3.2, 2.8, 3.0, 2.6, 2.9}, {3.1, 2.5, 2.7, 2.9, 2.6}, {2.7, 3.0, 2.6, 2.8}};
+  std::vector<int> foot(kLevels, -1), head(kLevels, -1);  // stair rooms of each flight
+  for (int level = 0; level < kLevels; ++level) {
+    int previous_lobby = -1;
+    for (int w = 0; w < kWings; ++w) {
+      FloorPlan plan{level, north_x[w], north_kinds[w], ceilings[(level + w) % ceilings.size()]};
+      plan.y0 = w * kFloorDepth;
+      plan.wing = absl::StrCat("w", w, "_");
+      plan.south_window = w == 0;
+      plan.north_window = w == kWings - 1;
+      const bool flight_foot = w == level && level + 1 < kLevels;
+      const bool flight_head = w == level - 1;
+      plan.stair_bottom = flight_foot;
+      plan.north_kinds.push_back(flight_foot || flight_head ? Kind::kStair : Kind::kOffice);
+      AddOfficeFloor(plan, L);
+      const int lobby = static_cast<int>(L.rooms.size()) - 1;
+      if (flight_foot) foot[level] = lobby - 1;
+      if (flight_head) head[level - 1] = lobby - 1;
+      if (previous_lobby >= 0) L.doors.push_back({previous_lobby, lobby, 34.0, 1.8});
+      previous_lobby = lobby;
+    }
+  }
+  for (int k = 0; k + 1 < kLevels; ++k) {
+    const double y0 = k * kFloorDepth;
+    L.stairs.push_back({foot[k], head[k], 24.3, y0 + 11.5, y0 + kFloorDepth - kHalfT, 20});
+  }
+  return L;
+}
+
 }  // namespace
 
-std::vector<std::string_view> PresetBuildingNames() { return {"room", "office", "office2"}; }
+std::vector<std::string_view> PresetBuildingNames() {
+  return {"room", "office", "office2", "office4"};
+}
 
 absl::StatusOr<Building> MakePresetBuilding(std::string_view name, uint64_t seed) {
   Layout layout;
@@ -910,9 +968,11 @@ absl::StatusOr<Building> MakePresetBuilding(std::string_view name, uint64_t seed
     layout = OfficeLayout();
   } else if (name == "office2") {
     layout = Office2Layout();
+  } else if (name == "office4") {
+    layout = Office4Layout();
   } else {
-    return absl::NotFoundError(
-        absl::StrCat("building preset '", std::string(name), "': unknown (room, office, office2)"));
+    return absl::NotFoundError(absl::StrCat("building preset '", std::string(name),
+                                            "': unknown (room, office, office2, office4)"));
   }
   return PresetBuilder(layout, seed).Build(std::string(name));
 }

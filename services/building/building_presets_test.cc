@@ -237,7 +237,8 @@ TEST_P(PresetTest, SameLayoutForEverySeed) {
               ObjectsMesh(a).triangles.size());
 }
 
-INSTANTIATE_TEST_SUITE_P(All, PresetTest, ::testing::Values("room", "office", "office2"));
+INSTANTIATE_TEST_SUITE_P(All, PresetTest,
+                         ::testing::Values("room", "office", "office2", "office4"));
 
 TEST(PresetsTest, UnknownNameIsNotFound) {
   EXPECT_EQ(MakePresetBuilding("castle", 1).status().code(), absl::StatusCode::kNotFound);
@@ -365,6 +366,51 @@ TEST(PresetsTest, Office2HasTwoLevelsAndStairs) {
   for (const RoomTruth& r : b.rooms) holes += int(r.holes.size());
   EXPECT_GE(holes, 1);
   EXPECT_EQ(CastRay(b, {2.0, 2.5, 1.5}, {0, -1, 0}), INFINITY);
+}
+
+TEST(PresetsTest, Office4IsALargeBuildingOfFourLevelsAndThreeWings) {
+  const Building b = Make("office4");
+  ASSERT_EQ(b.levels.size(), 4u);
+  double floor_area = 0;
+  std::vector<int> on_level(4, 0);
+  for (const RoomTruth& r : b.rooms) {
+    ++on_level[r.level];
+    floor_area += std::abs(SignedArea(r.polygon));
+    for (const auto& hole : r.holes) floor_area -= std::abs(SignedArea(hole));
+  }
+  EXPECT_GE(floor_area, 5000.0);
+  for (int level = 0; level < 4; ++level) {
+    EXPECT_GE(on_level[level], 40) << level;
+    EXPECT_NEAR(b.levels[level].floor_z, 3.5 * level, 1e-9);
+    // Three wings side by side: the level spans their depth.
+    const Eigen::AlignedBox2d e = LevelExtent(b, level);
+    EXPECT_GE(e.sizes().y(), 3 * 13.0) << level;
+  }
+  // A flight from each level to the next, each in its own wing; every entered room reachable
+  // (PresetTest checks the visit points).
+  ASSERT_EQ(b.stairs.size(), 3u);
+  std::set<double> wings;
+  for (int k = 0; k < 3; ++k) {
+    const StairTruth& s = b.stairs[k];
+    EXPECT_EQ(s.from_level, k);
+    EXPECT_EQ(s.to_level, k + 1);
+    EXPECT_NEAR(s.centerline.front().z(), b.levels[k].floor_z, 1e-9);
+    EXPECT_NEAR(s.centerline.back().z(), b.levels[k + 1].floor_z, 1e-9);
+    wings.insert(std::floor(s.centerline.front().y() / 13.0));
+  }
+  EXPECT_EQ(wings.size(), 3u);
+  // The lobbies of neighbouring wings open into each other on every level.
+  int lobby_doors = 0;
+  for (const DoorTruth& d : b.doors) {
+    const RoomTruth &a = b.rooms[d.room_a], &c = b.rooms[d.room_b];
+    if (std::abs(d.p0.y() - d.p1.y()) < 1e-9 && a.polygon[0].x() > 31 && c.polygon[0].x() > 31) {
+      ++lobby_doors;
+    }
+  }
+  EXPECT_EQ(lobby_doors, 4 * 2);
+  int objects = 0;
+  for (const ObjectTruth& o : b.objects) objects += o.parts.empty() ? 0 : 1;
+  EXPECT_GE(objects, 300);
 }
 
 }  // namespace

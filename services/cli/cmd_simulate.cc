@@ -79,7 +79,8 @@ void RegisterSimulate(CLI::App& app, int& exit_code) {
   cmd->add_option("-o,--output", o.output_dir, "Output directory (created if missing)")
       ->required();
   auto* preset = cmd->add_option("--preset", o.preset,
-                                 "Preset building: room, office (16 rooms), office2 (2 levels)")
+                                 "Preset building: room, office (16 rooms), office2 (2 levels), office4 (4 levels "
+                                 "of 3 wings, 180 rooms)")
                      ->capture_default_str();
   auto* floormap = cmd->add_option("--floormap", o.floormap_png,
                                    "2D floor map PNG to extrude instead of a preset")
