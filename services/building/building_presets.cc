@@ -807,6 +807,16 @@ struct FloorPlan {
   bool south_window = true, north_window = true;  // in its exterior walls
 };
 
+FloorPlan Floor(int level, std::vector<double> north_x, std::vector<Kind> north_kinds,
+                std::vector<double> ceilings) {
+  FloorPlan plan;
+  plan.level = level;
+  plan.north_x = std::move(north_x);
+  plan.north_kinds = std::move(north_kinds);
+  plan.ceilings = std::move(ceilings);
+  return plan;
+}
+
 // The floor's depth (south wall to north wall), m.
 constexpr double kFloorDepth = 13.0;
 
@@ -882,11 +892,10 @@ Layout RoomLayout() {
 Layout OfficeLayout() {
   Layout L;
   L.levels = {{0.0, 3.5}};
-  AddOfficeFloor({0,
-                  {0, 5, 9, 13, 17, 22, 27, 32},
-                  {Kind::kOffice, Kind::kMeeting, Kind::kOffice, Kind::kStorage, Kind::kOffice,
-                   Kind::kMeeting, Kind::kOffice},
-                  {2.6, 2.8, 3.0, 2.7, 2.9}},
+  AddOfficeFloor(Floor(0, {0, 5, 9, 13, 17, 22, 27, 32},
+                       {Kind::kOffice, Kind::kMeeting, Kind::kOffice, Kind::kStorage,
+                        Kind::kOffice, Kind::kMeeting, Kind::kOffice},
+                       {2.6, 2.8, 3.0, 2.7, 2.9}),
                  L);
   return L;
 }
@@ -897,11 +906,11 @@ Layout Office2Layout() {
   const std::vector<double> north_x = {0, 5, 9, 13, 18, 23, 32};
   const std::vector<Kind> north_kinds = {Kind::kOffice, Kind::kMeeting, Kind::kOffice,
                                          Kind::kOffice, Kind::kMeeting, Kind::kStair};
-  FloorPlan ground{0, north_x, north_kinds, {2.5, 3.2, 2.8, 3.0, 2.6, 2.9}};
+  FloorPlan ground = Floor(0, north_x, north_kinds, {2.5, 3.2, 2.8, 3.0, 2.6, 2.9});
   ground.stair_bottom = true;
   AddOfficeFloor(ground, L);
   const int bottom = static_cast<int>(L.rooms.size()) - 2;  // the stair room, before the lobby
-  AddOfficeFloor({1, north_x, north_kinds, {3.1, 2.5, 2.7, 2.9, 2.6}}, L);
+  AddOfficeFloor(Floor(1, north_x, north_kinds, {3.1, 2.5, 2.7, 2.9, 2.6}), L);
   const int top = static_cast<int>(L.rooms.size()) - 2;
   // 20 risers of 0.175 m and 19 treads of 0.28 m along the stair room's north wall.
   L.stairs.push_back({bottom, top, 24.3, 11.5, 13.0 - kHalfT, 20});
@@ -930,7 +939,8 @@ Layout Office4Layout() {
   for (int level = 0; level < kLevels; ++level) {
     int previous_lobby = -1;
     for (int w = 0; w < kWings; ++w) {
-      FloorPlan plan{level, north_x[w], north_kinds[w], ceilings[(level + w) % ceilings.size()]};
+      FloorPlan plan =
+          Floor(level, north_x[w], north_kinds[w], ceilings[(level + w) % ceilings.size()]);
       plan.y0 = w * kFloorDepth;
       plan.wing = absl::StrCat("w", w, "_");
       plan.south_window = w == 0;
