@@ -4,8 +4,12 @@
 
 #include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <string>
 #include <thread>
+#include <utility>
 
 #include <spdlog/spdlog.h>
 
@@ -34,6 +38,21 @@ constexpr auto kProgressInterval = std::chrono::milliseconds(200);
 // A RecarveRequest part holds about this many bytes of regions (gRPC's default limit on what
 // the coordinator accepts is 4 MiB; RemoteMerge raises it, and parts stay well below).
 constexpr size_t kRecarvePartBytes = size_t{1} << 20;
+
+// The process's resident and peak resident memory, MiB (/proc/self/status; 0 where there is
+// none). Logged as each merge stage starts: the stage during which the peak rose is the one
+// that sizes the merge service (deploy/k8s/base/merger.yaml).
+std::pair<double, double> ResidentMiB() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  double rss = 0, peak = 0;
+  while (std::getline(status, line)) {
+    double kib = 0;
+    if (std::sscanf(line.c_str(), "VmRSS: %lf kB", &kib) == 1) rss = kib / 1024;
+    if (std::sscanf(line.c_str(), "VmHWM: %lf kB", &kib) == 1) peak = kib / 1024;
+  }
+  return {rss, peak};
+}
 
 absl::Status ValidateJob(const pb::MergeJob& job) {
   if (job.job_id().empty() || job.job_id().size() > 128) {
@@ -323,7 +342,11 @@ absl::Status MergeServer::Impl::Serve(grpc::ServerContext& ctx, Stream& stream) 
         caller_gone = true;
         return false;
       }
-      if (stage != last_stage) spdlog::debug("merger: job {}: {}", job.job_id(), stage);
+      if (stage != last_stage) {
+        const auto [rss, peak] = ResidentMiB();
+        spdlog::info("merger: job {}: {} (resident {:.0f} MiB, peak so far {:.0f} MiB)",
+                     job.job_id(), stage, rss, peak);
+      }
       last_stage = stage;
       last_sent = now;
     }
@@ -348,7 +371,9 @@ absl::Status MergeServer::Impl::Serve(grpc::ServerContext& ctx, Stream& stream) 
     return absl::UnavailableError("merge service shutting down; the merge was stopped");
   }
   if (merged.ok()) {
-    spdlog::info("merger: job {}: merge done in {:.1f} s", job.job_id(), seconds);
+    const auto [rss, peak] = ResidentMiB();
+    spdlog::info("merger: job {}: merge done in {:.1f} s (resident {:.0f} MiB, peak {:.0f} MiB)",
+                 job.job_id(), seconds, rss, peak);
   } else {
     spdlog::error("merger: job {}: merge failed after {:.1f} s: {}", job.job_id(), seconds,
                   merged.ToString());
