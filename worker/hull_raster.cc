@@ -5,6 +5,7 @@
 #include <cassert>
 #include <cmath>
 #include <limits>
+#include <span>
 
 #include "absl/container/inlined_vector.h"
 
@@ -37,6 +38,8 @@ class Rasterizer {
         s_(grid.resolution_m()), origin_(chunk.cast<double>() * kChunkSizeM),
         depth_(grid.chunk_depth), region_(region), out_(out) {
     n_ = grid.leaves_per_side();
+    // A region no finer than the leaves is read row by row; a finer one leaf by leaf.
+    if (region_ != nullptr && depth_ >= region_->depth()) region_shift_ = depth_ - region_->depth();
   }
 
   size_t Run() {
@@ -174,6 +177,12 @@ class Rasterizer {
   }
 
   void Row(int u, int v) {
+    // §5.6.1's restricted pass: a row outside the region costs one lookup.
+    std::span<const ChunkRegion::CellRun> region_runs;
+    if (region_shift_ >= 0) {
+      region_runs = region_->RowRuns(a_, u >> region_shift_, v >> region_shift_);
+      if (region_runs.empty()) return;
+    }
     double lo = -std::numeric_limits<double>::infinity(), hi = -lo, flat = hi;
     for (const IndexPlane& p : planes_) {
       const double w = p.g - p.b * u - p.c * v;
@@ -205,16 +214,26 @@ class Rasterizer {
       t1 = std::min(hi_[a_], t1 + 1);
       while (t1 >= t0 && !Touched(t1, u, v)) --t1;
     }
-    if (t0 <= t1) Emit(u, v, t0, t1);
+    if (t0 <= t1) Emit(u, v, t0, t1, region_runs);
   }
 
-  void Emit(int u, int v, int lo, int hi) {
+  void Emit(int u, int v, int lo, int hi, std::span<const ChunkRegion::CellRun> region_runs) {
     if (region_ == nullptr) {
       out_.push_back(MakeLeafRun(u, v, lo, hi));
       count_ += size_t(hi - lo + 1);
       return;
     }
-    // §5.6.1's restricted pass: split the run at the region's boundary.
+    if (region_shift_ >= 0) {  // the run clipped to each of the row's region runs
+      for (const ChunkRegion::CellRun& r : region_runs) {
+        const int first = std::max(lo, int(r.first) << region_shift_);
+        const int last = std::min(hi, ((int(r.last) + 1) << region_shift_) - 1);
+        if (first > last) continue;
+        out_.push_back(MakeLeafRun(u, v, first, last));
+        count_ += size_t(last - first + 1);
+      }
+      return;
+    }
+    // A region finer than the leaves: split the run at the region's boundary leaf by leaf.
     ChunkNode leaf;
     leaf.depth = depth_;
     leaf.local[u_] = u;
@@ -241,6 +260,7 @@ class Rasterizer {
   const Eigen::Vector3d origin_;
   const int depth_;
   const ChunkRegion* region_;
+  int region_shift_ = -1;  // leaf depth − region depth when ≥ 0
   std::vector<LeafRun>& out_;
   int n_ = 0;
   std::array<int, 3> lo_{}, hi_{};

@@ -129,6 +129,40 @@ TEST(HullRasterTest, RegionKeepsOnlyItsLeaves) {
   EXPECT_GT(total, 100u);
 }
 
+// Regions at, above and below the leaves' depth (read row by row, or leaf by leaf when finer
+// than the leaves), with random cells: the runs list exactly the leaves HullIntersectsBox
+// accepts inside the region.
+TEST(HullRasterTest, RegionsOfEveryDepthKeepOnlyTheirLeaves) {
+  std::mt19937 rng(19);
+  OctreeGrid grid;
+  grid.chunk_depth = 4;
+  const ChunkKey chunk(1, -1, 0);
+  size_t total = 0;
+  for (int depth : {2, 4, 5}) {
+    const int n = 1 << depth;
+    std::vector<Eigen::Vector3i> cells;
+    std::bernoulli_distribution keep(0.3);
+    for (int z = 0; z < n; ++z)
+      for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x)
+          if (keep(rng)) cells.emplace_back(x, y, z);
+    const ChunkRegion region(depth, cells);
+    for (int trial = 0; trial < 15; ++trial) {
+      const WedgeHull hull = MakeWedgeHull(RandomWedge(rng, chunk, trial % 4 == 0), 3.0);
+      const auto expected = BruteForce(hull, grid, chunk, &region);
+      for (int axis = 0; axis < 3; ++axis) {
+        std::vector<LeafRun> runs;
+        EXPECT_EQ(RasterizeHull(hull, grid, chunk, axis, &region, runs), expected.size())
+            << depth << " " << trial << " " << axis;
+        EXPECT_TRUE(std::is_sorted(runs.begin(), runs.end()));
+        EXPECT_EQ(FromRuns(runs, axis), expected);
+      }
+      total += expected.size();
+    }
+  }
+  EXPECT_GT(total, 300u);
+}
+
 TEST(HullRasterTest, HullOutsideTheChunkListsNothing) {
   std::mt19937 rng(11);
   OctreeGrid grid;

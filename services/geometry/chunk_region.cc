@@ -31,6 +31,33 @@ void ChunkRegion::Build(std::vector<bool> cells) {
   for (bool b : cells) count_ += b;
   any_.assign(depth_ + 1, {});
   any_[depth_] = std::move(cells);
+  const int n = 1 << depth_;
+  for (int axis = 0; axis < 3; ++axis) {
+    std::vector<uint32_t>& start = row_start_[axis];
+    std::vector<CellRun>& runs = row_runs_[axis];
+    start.assign(size_t(n) * n + 1, 0);
+    runs.clear();
+    if (count_ == 0) continue;
+    Eigen::Vector3i c;
+    for (int v = 0; v < n; ++v) {
+      for (int u = 0; u < n; ++u) {
+        start[(size_t(v) << depth_) + size_t(u)] = uint32_t(runs.size());
+        c[(axis + 1) % 3] = u;
+        c[(axis + 2) % 3] = v;
+        int first = -1;
+        for (int t = 0; t <= n; ++t) {
+          c[axis] = t;
+          const bool in = t < n && any_[depth_][CellIndex(c, depth_)];
+          if (in && first < 0) first = t;
+          if (!in && first >= 0) {
+            runs.push_back({uint16_t(first), uint16_t(t - 1)});
+            first = -1;
+          }
+        }
+      }
+    }
+    start.back() = uint32_t(runs.size());
+  }
   for (int d = depth_ - 1; d >= 0; --d) {
     const int n = 1 << d;
     any_[d].assign(size_t(n) * n * n, false);
@@ -42,6 +69,14 @@ void ChunkRegion::Build(std::vector<bool> cells) {
           }
         }
   }
+}
+
+std::span<const ChunkRegion::CellRun> ChunkRegion::RowRuns(int axis, int u, int v) const {
+  if (count_ == 0) return {};
+  assert(axis >= 0 && axis < 3);
+  const size_t row = (size_t(v) << depth_) + size_t(u);
+  const std::vector<uint32_t>& start = row_start_[axis];
+  return std::span<const CellRun>(row_runs_[axis]).subspan(start[row], start[row + 1] - start[row]);
 }
 
 bool ChunkRegion::Intersects(const ChunkNode& node) const {

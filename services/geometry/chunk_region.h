@@ -8,7 +8,9 @@
 // nodes hold a set cell.
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -40,6 +42,14 @@ class ChunkRegion {
   // chunk's lowest corner; cells are 2 m / 2^depth() wide). Descends from the chunk, so a box
   // over empty octants costs a few lookups.
   [[nodiscard]] bool IntersectsBox(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const;
+  // The region's cells along `axis` (0 x, 1 y, 2 z) in the row of cells at depth() whose other
+  // coordinates are u (axis + 1 mod 3) and v (axis + 2 mod 3), as maximal runs of cell indices,
+  // ascending: a raster of rows intersects these instead of asking cell by cell.
+  // REQUIRES: 0 ≤ u, v < 2^depth().
+  struct CellRun {
+    uint16_t first, last;
+  };
+  [[nodiscard]] std::span<const CellRun> RowRuns(int axis, int u, int v) const;
   // The cells as bits, x fastest, then y, then z; bit i is bit (i % 8) of byte i / 8.
   [[nodiscard]] std::string Encode() const;
   // InvalidArgument for a depth outside [0, kMaxDepth] or a size that is not (2^depth)³ / 8
@@ -53,6 +63,9 @@ class ChunkRegion {
   uint64_t count_ = 0;
   // any_[d]: the nodes of depth d holding a cell, indexed like Encode; any_[depth_] = cells.
   std::vector<std::vector<bool>> any_;
+  // Per axis: the runs of each row (v · 2^depth + u), row r's at [row_start_[r], row_start_[r+1]).
+  std::array<std::vector<uint32_t>, 3> row_start_;
+  std::array<std::vector<CellRun>, 3> row_runs_;
 };
 
 // One chunk of a second carving pass and the part of it to carve.

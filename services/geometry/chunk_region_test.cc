@@ -63,6 +63,40 @@ TEST(ChunkRegionTest, NodesOfEveryDepth) {
   EXPECT_FALSE(r.Intersects(Node(5, 6 * 4, 2 * 4, 7 * 4)));
 }
 
+TEST(ChunkRegionTest, RowRunsAreTheRowsCells) {
+  std::mt19937 rng(5);
+  std::bernoulli_distribution keep(0.4);
+  const int depth = 3, n = 1 << depth;
+  std::vector<Eigen::Vector3i> cells;
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x)
+        if (keep(rng)) cells.emplace_back(x, y, z);
+  const ChunkRegion region(depth, cells);
+  for (int axis = 0; axis < 3; ++axis) {
+    for (int v = 0; v < n; ++v) {
+      for (int u = 0; u < n; ++u) {
+        std::vector<bool> in_runs(n, false);
+        int previous_last = -2;
+        for (const ChunkRegion::CellRun& r : region.RowRuns(axis, u, v)) {
+          EXPECT_LE(r.first, r.last);
+          EXPECT_GT(int(r.first), previous_last + 1);  // ascending and maximal
+          previous_last = r.last;
+          for (int t = r.first; t <= r.last; ++t) in_runs[t] = true;
+        }
+        for (int t = 0; t < n; ++t) {
+          Eigen::Vector3i c;
+          c[axis] = t;
+          c[(axis + 1) % 3] = u;
+          c[(axis + 2) % 3] = v;
+          EXPECT_EQ(in_runs[t], region.Intersects(ChunkNode{c, depth})) << axis << u << v << t;
+        }
+      }
+    }
+  }
+  EXPECT_TRUE(ChunkRegion().RowRuns(0, 0, 0).empty());
+}
+
 TEST(ChunkRegionTest, EncodeDecodeRoundTrip) {
   const ChunkRegion r(5, {{0, 0, 0}, {31, 31, 31}, {3, 17, 9}, {4, 17, 9}});
   const std::string bits = r.Encode();
