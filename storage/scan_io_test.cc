@@ -340,6 +340,50 @@ TEST(ScanReaderTest, PoseAtInterpolates) {
   EXPECT_TRUE((*reader)->PoseAt(99).translation.isApprox(Eigen::Vector3d(5, 1, 1.5)));
 }
 
+// Only the poses around some frames: the same poses, covariances and angular velocities at
+// those frames' times as from the whole path, from fewer rows.
+TEST(ScanReaderTest, PathAroundFramesGivesTheSamePoses) {
+  const std::string path = TempPath("scan.h5");
+  WriteScan(path, true, true);
+  auto whole = ScanReader::Open(path);
+  ASSERT_TRUE(whole.ok()) << whole.status();
+  ScanReader::OpenOptions options;
+  options.path_rows = ScanReader::PathRows::kFrames;
+  // h0 row 1 (t 1.5), cam row 1 (2.5), cloud row 0 (1.0).
+  options.frame_rows = {{1, 2}, {1, 2}, {0, 1}};
+  auto part = ScanReader::Open(path, options);
+  ASSERT_TRUE(part.ok()) << part.status();
+  const std::vector<TimedPose>& poses = (*part)->timed_path();
+  ASSERT_EQ(poses.size(), 5u);  // t 0..4: one row more either way of [1, 3]
+  EXPECT_EQ(poses.front().t, 0.0);
+  EXPECT_EQ(poses.back().t, 4.0);
+  ASSERT_TRUE((*part)->path_covariance().has_value());
+  EXPECT_EQ((*part)->path_covariance()->size(), poses.size());
+  EXPECT_EQ((*part)->path_covariance()->front(), (*whole)->path_covariance()->at(0));
+  EXPECT_FALSE((*part)->magnetometer().has_value());
+  for (double t : {1.0, 1.5, 2.0, 2.5}) {
+    const Pose a = (*whole)->PoseAt(t), b = (*part)->PoseAt(t);
+    EXPECT_EQ(a.translation, b.translation) << t;
+    EXPECT_EQ(a.rotation.coeffs(), b.rotation.coeffs()) << t;
+  }
+  // Near the path's start the rows begin at its first pose; a wrong count of ranges is an error.
+  options.frame_rows = {{0, 1}, {0, 0}, {0, 0}};  // t 0.5
+  auto head = ScanReader::Open(path, options);
+  ASSERT_TRUE(head.ok()) << head.status();
+  ASSERT_EQ((*head)->timed_path().size(), 3u);
+  EXPECT_EQ((*head)->timed_path().front().t, 0.0);
+  EXPECT_EQ((*head)->PoseAt(0.5).translation, (*whole)->PoseAt(0.5).translation);
+  options.frame_rows = {{0, 1}};
+  EXPECT_THAT(ScanReader::Open(path, options).status().message(), HasSubstr("3 sensors"));
+  // No path at all: frames still stream, and Validate still reads the path's rows.
+  options.path_rows = ScanReader::PathRows::kNone;
+  auto none = ScanReader::Open(path, options);
+  ASSERT_TRUE(none.ok()) << none.status();
+  EXPECT_TRUE((*none)->timed_path().empty());
+  EXPECT_EQ((*none)->FrameRecords(0)->size(), 2u);
+  EXPECT_TRUE((*none)->Validate().ok());
+}
+
 TEST(ScanWriterTest, NoFileWhenNotClosed) {
   const std::string path = TempPath("scan.h5");
   {

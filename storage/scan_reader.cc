@@ -126,11 +126,20 @@ struct ScanReader::Impl {
   std::optional<std::vector<MagnetometerRecord>> magnetometer;
   std::vector<SensorData> sensor_data;
   std::vector<SensorInfo> sensors;
+  // The file's path tables (what path, path_cov and magnetometer hold may be part of them).
+  uint64_t path_rows = 0;
+  bool has_path_cov = false;
+  uint64_t magnetometer_rows = 0;
+  bool has_magnetometer = false;
 
   absl::StatusOr<Hid> OpenDataset(const std::string& name) const;
   absl::Status CheckRoot() const;
-  absl::Status LoadPath();
-  absl::Status LoadPathCov();
+  absl::Status CheckPathTables();
+  // Rows [first, first + n) of /path (and /path_cov when there is one).
+  absl::Status LoadPath(uint64_t first, uint64_t n);
+  absl::Status LoadPathCov(uint64_t first, uint64_t n);
+  absl::Status LoadPathAroundFrames(std::span<const RowRange> rows);
+  absl::StatusOr<PathRecord> PathRow(uint64_t row) const;
   absl::Status LoadMagnetometer();
   absl::Status LoadSensors();
   absl::Status LoadSensor(hid_t sensors_group, const std::string& name);
@@ -174,16 +183,106 @@ absl::Status ScanReader::Impl::CheckRoot() const {
   return absl::OkStatus();
 }
 
-absl::Status ScanReader::Impl::LoadPath() {
+absl::Status ScanReader::Impl::CheckPathTables() {
   auto dataset = OpenDataset("/path");
   if (!dataset.ok()) return dataset.status();
   auto rows = CheckCompoundTable(dataset->get(), h5::PathFields());
   if (!rows.ok()) return Invalid(file, "/path", rows.status().message());
-  path.resize(*rows);
+  path_rows = *rows;
+  if (h5::Exists(fid.get(), "/path_cov")) {
+    auto cov = OpenDataset("/path_cov");
+    if (!cov.ok()) return cov.status();
+    auto cov_rows = CheckNumericMatrix(cov->get(), 12);
+    if (!cov_rows.ok()) return Invalid(file, "/path_cov", cov_rows.status().message());
+    if (*cov_rows != path_rows) {
+      return Invalid(file, "/path_cov",
+                     absl::StrCat(*cov_rows, " rows, but /path has ", path_rows));
+    }
+    has_path_cov = true;
+  }
+  if (h5::Exists(fid.get(), "/magnetometer")) {
+    auto mag = OpenDataset("/magnetometer");
+    if (!mag.ok()) return mag.status();
+    auto mag_rows = CheckCompoundTable(mag->get(), h5::MagnetometerFields());
+    if (!mag_rows.ok()) return Invalid(file, "/magnetometer", mag_rows.status().message());
+    magnetometer_rows = *mag_rows;
+    has_magnetometer = true;
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<PathRecord> ScanReader::Impl::PathRow(uint64_t row) const {
+  auto dataset = OpenDataset("/path");
+  if (!dataset.ok()) return dataset.status();
+  PathRecord record;
   Hid mem = h5::PathMemType();
-  if (absl::Status s = h5::ReadRows(dataset->get(), mem.get(), 0, 0, *rows, path.data()); !s.ok()) {
+  if (absl::Status s = h5::ReadRows(dataset->get(), mem.get(), 0, row, 1, &record); !s.ok()) {
+    return h5::Prefixed(absl::StrCat(file, ": /path row ", row), s);
+  }
+  return record;
+}
+
+absl::Status ScanReader::Impl::LoadPathAroundFrames(std::span<const RowRange> rows) {
+  if (rows.size() != sensor_data.size()) {
+    return absl::InvalidArgumentError(absl::StrCat(file, ": ", rows.size(),
+                                                   " frame row ranges for ",
+                                                   sensor_data.size(), " sensors"));
+  }
+  double t_first = std::numeric_limits<double>::infinity(), t_last = -t_first;
+  std::vector<FrameRecord> record;
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const SensorData& sd = sensor_data[i];
+    if (rows[i].begin >= rows[i].end) continue;
+    if (rows[i].end > sd.frame_count) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(file, ": ", sd.frames_path(), ": rows [", rows[i].begin, ", ",
+                       rows[i].end, ") outside its ", sd.frame_count, " rows"));
+    }
+    for (uint64_t row : {rows[i].begin, rows[i].end - 1}) {
+      if (absl::Status st = sd.ReadFrameRows(row, 1, record); !st.ok()) return st;
+      t_first = std::min(t_first, record[0].t);
+      t_last = std::max(t_last, record[0].t);
+    }
+  }
+  if (path_rows == 0 || !(t_first <= t_last)) return LoadPath(0, 0);
+  // The first row whose time is above t (path_rows when none), by bisection: ~2·log2(rows)
+  // single-row reads instead of the whole table.
+  const auto first_above = [&](double t, bool or_equal) -> absl::StatusOr<uint64_t> {
+    uint64_t lo = 0, hi = path_rows;
+    while (lo < hi) {
+      const uint64_t mid = lo + (hi - lo) / 2;
+      absl::StatusOr<PathRecord> r = PathRow(mid);
+      if (!r.ok()) return r.status();
+      if (r->t > t || (or_equal && r->t == t)) {
+        hi = mid;
+      } else {
+        lo = mid + 1;
+      }
+    }
+    return lo;
+  };
+  absl::StatusOr<uint64_t> after_first = first_above(t_first, false);
+  if (!after_first.ok()) return after_first.status();
+  absl::StatusOr<uint64_t> at_last = first_above(t_last, true);
+  if (!at_last.ok()) return at_last.status();
+  // The pose at or before t_first is row after_first − 1, the one at or after t_last row
+  // at_last; one more row either way.
+  const uint64_t begin = *after_first >= 2 ? *after_first - 2 : 0;
+  const uint64_t end = std::min(path_rows, *at_last + 2);
+  if (absl::Status st = LoadPath(begin, end - begin); !st.ok()) return st;
+  return has_path_cov ? LoadPathCov(begin, end - begin) : absl::OkStatus();
+}
+
+absl::Status ScanReader::Impl::LoadPath(uint64_t first, uint64_t n) {
+  auto dataset = OpenDataset("/path");
+  if (!dataset.ok()) return dataset.status();
+  path.resize(n);
+  Hid mem = h5::PathMemType();
+  if (absl::Status s = h5::ReadRows(dataset->get(), mem.get(), 0, first, n, path.data());
+      !s.ok()) {
     return h5::Prefixed(absl::StrCat(file, ": /path"), s);
   }
+  timed_path.clear();
   timed_path.reserve(path.size());
   for (const PathRecord& p : path) {
     Eigen::Quaterniond q(p.qw, p.qx, p.qy, p.qz);
@@ -194,31 +293,24 @@ absl::Status ScanReader::Impl::LoadPath() {
   return absl::OkStatus();
 }
 
-absl::Status ScanReader::Impl::LoadPathCov() {
-  if (!h5::Exists(fid.get(), "/path_cov")) return absl::OkStatus();
+absl::Status ScanReader::Impl::LoadPathCov(uint64_t first, uint64_t n) {
   auto dataset = OpenDataset("/path_cov");
   if (!dataset.ok()) return dataset.status();
-  auto rows = CheckNumericMatrix(dataset->get(), 12);
-  if (!rows.ok()) return Invalid(file, "/path_cov", rows.status().message());
-  if (*rows != path.size()) {
-    return Invalid(file, "/path_cov", absl::StrCat(*rows, " rows, but /path has ", path.size()));
-  }
-  path_cov.emplace(*rows);
+  path_cov.emplace(n);
   return h5::Prefixed(
       absl::StrCat(file, ": /path_cov"),
-      h5::ReadRows(dataset->get(), H5T_NATIVE_FLOAT, 12, 0, *rows, path_cov->data()));
+      h5::ReadRows(dataset->get(), H5T_NATIVE_FLOAT, 12, first, n, path_cov->data()));
 }
 
 absl::Status ScanReader::Impl::LoadMagnetometer() {
-  if (!h5::Exists(fid.get(), "/magnetometer")) return absl::OkStatus();
+  if (!has_magnetometer) return absl::OkStatus();
   auto dataset = OpenDataset("/magnetometer");
   if (!dataset.ok()) return dataset.status();
-  auto rows = CheckCompoundTable(dataset->get(), h5::MagnetometerFields());
-  if (!rows.ok()) return Invalid(file, "/magnetometer", rows.status().message());
-  magnetometer.emplace(*rows);
+  magnetometer.emplace(magnetometer_rows);
   Hid mem = h5::MagnetometerMemType();
   return h5::Prefixed(absl::StrCat(file, ": /magnetometer"),
-                      h5::ReadRows(dataset->get(), mem.get(), 0, 0, *rows, magnetometer->data()));
+                      h5::ReadRows(dataset->get(), mem.get(), 0, 0, magnetometer_rows,
+                                   magnetometer->data()));
 }
 
 namespace {
@@ -343,6 +435,11 @@ ScanReader::ScanReader(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 ScanReader::~ScanReader() = default;
 
 absl::StatusOr<std::unique_ptr<ScanReader>> ScanReader::Open(const std::string& path) {
+  return Open(path, OpenOptions());
+}
+
+absl::StatusOr<std::unique_ptr<ScanReader>> ScanReader::Open(const std::string& path,
+                                                          const OpenOptions& options) {
   h5::Init();
   std::error_code error;
   if (!std::filesystem::is_regular_file(path, error)) {
@@ -363,10 +460,22 @@ absl::StatusOr<std::unique_ptr<ScanReader>> ScanReader::Open(const std::string& 
   }
   impl->fid = Hid(fid);
   absl::Status s = impl->CheckRoot();
-  if (s.ok()) s = impl->LoadPath();
-  if (s.ok()) s = impl->LoadPathCov();
-  if (s.ok()) s = impl->LoadMagnetometer();
+  if (s.ok()) s = impl->CheckPathTables();
   if (s.ok()) s = impl->LoadSensors();
+  if (s.ok()) {
+    switch (options.path_rows) {
+      case PathRows::kAll:
+        s = impl->LoadPath(0, impl->path_rows);
+        if (s.ok() && impl->has_path_cov) s = impl->LoadPathCov(0, impl->path_rows);
+        if (s.ok()) s = impl->LoadMagnetometer();
+        break;
+      case PathRows::kFrames:
+        s = impl->LoadPathAroundFrames(options.frame_rows);
+        break;
+      case PathRows::kNone:
+        break;
+    }
+  }
   if (!s.ok()) return s;
   return std::unique_ptr<ScanReader>(new ScanReader(std::move(impl)));
 }
@@ -564,37 +673,67 @@ absl::StatusOr<std::vector<FrameRecord>> ScanReader::FrameRecords(int sensor) {
 
 // --- Validation --------------------------------------------------------------------------
 
+// The path tables are read in blocks of this many rows, whatever Open kept of them: memory
+// does not grow with the survey's length.
+constexpr uint64_t kPathBlockRows = 1 << 16;
+
 absl::Status ScanReader::Impl::ValidatePath() const {
-  if (path.empty()) return Invalid(file, "/path", "no poses");
-  for (size_t i = 0; i < path.size(); ++i) {
-    const PathRecord& p = path[i];
-    const std::array<double, 8> values = {p.t, p.x, p.y, p.z, p.qw, p.qx, p.qy, p.qz};
-    if (!AllFinite(values)) return RowError(file, "/path", i, "non-finite value");
-    if (i > 0 && !(p.t > path[i - 1].t)) {
-      return RowError(
-          file, "/path", i,
-          absl::StrCat("time ", p.t, " is not after row ", i - 1, "'s ", path[i - 1].t));
+  if (path_rows == 0) return Invalid(file, "/path", "no poses");
+  auto dataset = OpenDataset("/path");
+  if (!dataset.ok()) return dataset.status();
+  Hid mem = h5::PathMemType();
+  std::vector<PathRecord> block;
+  double previous_t = 0;
+  for (uint64_t first = 0; first < path_rows; first += block.size()) {
+    block.resize(std::min(kPathBlockRows, path_rows - first));
+    if (absl::Status s =
+            h5::ReadRows(dataset->get(), mem.get(), 0, first, block.size(), block.data());
+        !s.ok()) {
+      return h5::Prefixed(absl::StrCat(file, ": /path"), s);
     }
-    const double norm = std::sqrt(p.qw * p.qw + p.qx * p.qx + p.qy * p.qy + p.qz * p.qz);
-    if (std::abs(norm - 1.0) > kQuaternionNormTolerance) {
-      return RowError(file, "/path", i, absl::StrCat("non-unit quaternion (norm ", norm, ")"));
+    for (size_t k = 0; k < block.size(); ++k) {
+      const uint64_t i = first + k;
+      const PathRecord& p = block[k];
+      const std::array<double, 8> values = {p.t, p.x, p.y, p.z, p.qw, p.qx, p.qy, p.qz};
+      if (!AllFinite(values)) return RowError(file, "/path", i, "non-finite value");
+      if (i > 0 && !(p.t > previous_t)) {
+        return RowError(file, "/path", i,
+                        absl::StrCat("time ", p.t, " is not after row ", i - 1, "'s ", previous_t));
+      }
+      previous_t = p.t;
+      const double norm = std::sqrt(p.qw * p.qw + p.qx * p.qx + p.qy * p.qy + p.qz * p.qz);
+      if (std::abs(norm - 1.0) > kQuaternionNormTolerance) {
+        return RowError(file, "/path", i, absl::StrCat("non-unit quaternion (norm ", norm, ")"));
+      }
     }
   }
   return absl::OkStatus();
 }
 
 absl::Status ScanReader::Impl::ValidatePathCov() const {
-  if (!path_cov.has_value()) return absl::OkStatus();
+  if (!has_path_cov) return absl::OkStatus();
+  auto dataset = OpenDataset("/path_cov");
+  if (!dataset.ok()) return dataset.status();
   constexpr std::array<int, 6> kDiagonal = {0, 3, 5, 6, 9, 11};  // xx yy zz of both blocks
-  for (size_t i = 0; i < path_cov->size(); ++i) {
-    const PathCovariance& c = (*path_cov)[i];
-    if (!std::all_of(c.begin(), c.end(), [](float v) { return std::isfinite(v); })) {
-      return RowError(file, "/path_cov", i, "non-finite value");
+  std::vector<PathCovariance> block;
+  for (uint64_t first = 0; first < path_rows; first += block.size()) {
+    block.resize(std::min(kPathBlockRows, path_rows - first));
+    if (absl::Status s = h5::ReadRows(dataset->get(), H5T_NATIVE_FLOAT, 12, first, block.size(),
+                                      block.data());
+        !s.ok()) {
+      return h5::Prefixed(absl::StrCat(file, ": /path_cov"), s);
     }
-    for (int d : kDiagonal) {
-      if (c[d] < 0) {
-        return RowError(file, "/path_cov", i,
-                        absl::StrCat("negative variance ", c[d], " in column ", d));
+    for (size_t k = 0; k < block.size(); ++k) {
+      const uint64_t i = first + k;
+      const PathCovariance& c = block[k];
+      if (!std::all_of(c.begin(), c.end(), [](float v) { return std::isfinite(v); })) {
+        return RowError(file, "/path_cov", i, "non-finite value");
+      }
+      for (int d : kDiagonal) {
+        if (c[d] < 0) {
+          return RowError(file, "/path_cov", i,
+                          absl::StrCat("negative variance ", c[d], " in column ", d));
+        }
       }
     }
   }
@@ -602,18 +741,36 @@ absl::Status ScanReader::Impl::ValidatePathCov() const {
 }
 
 absl::Status ScanReader::Impl::ValidateMagnetometer() const {
-  if (!magnetometer.has_value()) return absl::OkStatus();
-  for (size_t i = 0; i < magnetometer->size(); ++i) {
-    const MagnetometerRecord& m = (*magnetometer)[i];
-    const std::array<double, 4> values = {m.t, m.mx, m.my, m.mz};
-    if (!AllFinite(values)) return RowError(file, "/magnetometer", i, "non-finite value");
+  if (!has_magnetometer) return absl::OkStatus();
+  auto dataset = OpenDataset("/magnetometer");
+  if (!dataset.ok()) return dataset.status();
+  Hid mem = h5::MagnetometerMemType();
+  std::vector<MagnetometerRecord> block;
+  for (uint64_t first = 0; first < magnetometer_rows; first += block.size()) {
+    block.resize(std::min(kPathBlockRows, magnetometer_rows - first));
+    if (absl::Status s =
+            h5::ReadRows(dataset->get(), mem.get(), 0, first, block.size(), block.data());
+        !s.ok()) {
+      return h5::Prefixed(absl::StrCat(file, ": /magnetometer"), s);
+    }
+    for (size_t k = 0; k < block.size(); ++k) {
+      const MagnetometerRecord& m = block[k];
+      const std::array<double, 4> values = {m.t, m.mx, m.my, m.mz};
+      if (!AllFinite(values)) {
+        return RowError(file, "/magnetometer", first + k, "non-finite value");
+      }
+    }
   }
   return absl::OkStatus();
 }
 
 absl::Status ScanReader::Impl::ValidateFrames(const SensorData& s, size_t block_rows) const {
-  const double t_begin = path.front().t;
-  const double t_end = path.back().t;
+  absl::StatusOr<PathRecord> first_pose = PathRow(0);
+  if (!first_pose.ok()) return first_pose.status();
+  absl::StatusOr<PathRecord> last_pose = PathRow(path_rows - 1);
+  if (!last_pose.ok()) return last_pose.status();
+  const double t_begin = first_pose->t;
+  const double t_end = last_pose->t;
   const std::string dataset = s.frames_path();
   std::vector<FrameRecord> block;
   double previous_t = 0;

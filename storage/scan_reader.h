@@ -6,6 +6,7 @@
 // is unsafe: serialize every HDF5 call in the process (all ScanReader/ScanWriter use included).
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <span>
@@ -21,9 +22,31 @@ namespace carvemap {
 
 class ScanReader {
  public:
+  // Rows [begin, end) of one sensor's frames.
+  struct RowRange {
+    uint64_t begin = 0, end = 0;
+  };
+  // How much of the path (/path, /path_cov, /magnetometer) Open holds. The whole path is
+  // ~190 bytes per pose in memory (270 MB for a two-hour walk logged at 200 Hz): a process that
+  // needs only part of it, or none, should not grow with the survey.
+  enum class PathRows {
+    kAll,     // every pose, covariance and magnetometer reading
+    kFrames,  // the poses and covariances around the frames of `frame_rows`; no magnetometer
+    kNone,    // none (path() and timed_path() empty; Validate() still reads and checks it all)
+  };
+  struct OpenOptions {
+    PathRows path_rows = PathRows::kAll;
+    // kFrames: one range per sensor (as StreamFrames takes). The poses read run from the last
+    // at or before the earliest of those frames to the first at or after the latest, one more
+    // either way: PoseAt, the covariance and the angular velocity at any of those frames'
+    // times (each reads the two poses around it) come out as from the whole path.
+    std::vector<RowRange> frame_rows;
+  };
   // Errors name the file and the dataset, e.g.
   // "scan.h5: /sensors/h0/frames: missing field 'count'".
-  static absl::StatusOr<std::unique_ptr<ScanReader>> Open(const std::string& path);
+  static absl::StatusOr<std::unique_ptr<ScanReader>> Open(const std::string& path,
+                                                          const OpenOptions& options);
+  static absl::StatusOr<std::unique_ptr<ScanReader>> Open(const std::string& path);  // kAll
   ~ScanReader();
   ScanReader(const ScanReader&) = delete;
   ScanReader& operator=(const ScanReader&) = delete;
@@ -34,7 +57,7 @@ class ScanReader {
   absl::Status Validate();
 
   [[nodiscard]] const std::string& file() const;
-  // The path is small (poses, not rays) and held whole.
+  // The poses Open read (OpenOptions::path_rows): the whole path by default.
   [[nodiscard]] const std::vector<PathRecord>& path() const;
   [[nodiscard]] const std::vector<TimedPose>& timed_path() const;
   [[nodiscard]] const std::optional<std::vector<PathCovariance>>& path_covariance() const;
@@ -62,9 +85,6 @@ class ScanReader {
   // The same over rows [begin, end) of each sensor (one range per sensor, in sensor order; an
   // empty range streams nothing of that sensor): a time slice of the scan (scan_slices.h).
   // InvalidArgument for a wrong count of ranges or a range past a sensor's frames.
-  struct RowRange {
-    uint64_t begin = 0, end = 0;
-  };
   [[nodiscard]] absl::StatusOr<std::unique_ptr<FrameStream>> StreamFrames(
       std::span<const RowRange> rows, size_t block_bytes = 4 << 20);
   // A sensor's /frames rows (time, first point, count), read in blocks: 24 bytes per frame.

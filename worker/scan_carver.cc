@@ -87,7 +87,9 @@ absl::StatusOr<ScanCarveTotals> CarveScan(
   std::vector<SensorKind> kinds;
   {
     std::lock_guard<std::mutex> lock(Hdf5Lock());
-    absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan_path);
+    ScanReader::OpenOptions open;
+    open.path_rows = ScanReader::PathRows::kNone;  // the frame tables only
+    absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan_path, open);
     if (!reader.ok()) return reader.status();
     // A bad row found half-way through would leave half a carve: name it up front.
     if (absl::Status s = (*reader)->Validate(); !s.ok()) return s;
@@ -157,7 +159,8 @@ absl::StatusOr<ScanCarveTotals> CarveScan(
         std::unique_ptr<ScanReader> reader;
         {
           std::lock_guard<std::mutex> lock(Hdf5Lock());
-          absl::StatusOr<std::unique_ptr<ScanReader>> r = ScanReader::Open(scan_path);
+          absl::StatusOr<std::unique_ptr<ScanReader>> r =
+              ScanReader::Open(scan_path, SliceOpenOptions(s));
           if (!r.ok()) return r.status();
           reader = *std::move(r);
         }

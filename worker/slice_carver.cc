@@ -331,6 +331,13 @@ absl::StatusOr<SliceCarveStats> SliceCarver::Finish() {
   return m.stats;
 }
 
+ScanReader::OpenOptions SliceOpenOptions(const ScanSlice& slice) {
+  ScanReader::OpenOptions options;
+  options.path_rows = ScanReader::PathRows::kFrames;
+  options.frame_rows = slice.read;
+  return options;
+}
+
 absl::StatusOr<SliceCarveStats> CarveSliceToFile(ScanReader& reader, const ScanSlice& slice,
                                                  const SliceCarveOptions& options,
                                                  const std::string& partial_path,

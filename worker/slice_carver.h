@@ -86,7 +86,12 @@ class SliceCarver {
   std::unique_ptr<Impl> impl_;
 };
 
-// The I/O around it: streams slice.read from `reader`, writes the sections to `partial_path`
+// How to open the scan for `slice`: only the poses around its frames (a worker's memory does
+// not grow with the survey's path).
+[[nodiscard]] ScanReader::OpenOptions SliceOpenOptions(const ScanSlice& slice);
+
+// The I/O around it: streams slice.read from `reader` (opened with SliceOpenOptions, or with
+// the whole path), writes the sections to `partial_path`
 // (storage/partial_sums.h, atomically: nothing under that name unless complete). `progress`,
 // if set, gets the own rays read so far, about every 0.25 s. REQUIRES: HDF5 calls serialized
 // (scan_reader.h): the reader is used from this thread only.

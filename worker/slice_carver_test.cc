@@ -109,8 +109,10 @@ class SliceCarverTest : public ::testing::Test {
     std::vector<std::string> partials;
     uint64_t slices = 0, leaf_updates = 0, batches = 0, flushes = 0;
   };
+  // `own_poses`: each slice through a reader holding only its poses (SliceOpenOptions), as
+  // the workers read; else one reader of the whole path.
   static Carved CarveBySlices(const std::string& name, double slice_s, SliceCarveOptions options,
-                              bool reversed = false) {
+                              bool reversed = false, bool own_poses = false) {
     Carved out;
     absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(*scan_);
     EXPECT_TRUE(reader.ok()) << reader.status();
@@ -131,7 +133,17 @@ class SliceCarverTest : public ::testing::Test {
     for (size_t i : order) {
       const ScanSlice& s = (*slices)[i];
       out.partials[i] = dir + "/slice_" + std::to_string(s.index) + ".part";
-      absl::StatusOr<SliceCarveStats> st = CarveSliceToFile(**reader, s, options, out.partials[i]);
+      ScanReader* from = reader->get();
+      std::unique_ptr<ScanReader> own;
+      if (own_poses) {
+        absl::StatusOr<std::unique_ptr<ScanReader>> r = ScanReader::Open(*scan_, SliceOpenOptions(s));
+        EXPECT_TRUE(r.ok()) << r.status();
+        if (!r.ok()) return out;
+        own = *std::move(r);
+        EXPECT_LT(own->timed_path().size(), (*reader)->timed_path().size());
+        from = own.get();
+      }
+      absl::StatusOr<SliceCarveStats> st = CarveSliceToFile(*from, s, options, out.partials[i]);
       EXPECT_TRUE(st.ok()) << st.status();
       if (!st.ok()) return out;
       out.leaf_updates += st->leaf_updates;
@@ -252,6 +264,19 @@ TEST_F(SliceCarverTest, SameSlicesSameBytesWhateverTheOrder) {
   }
   EXPECT_GE(agreement.LabelShare(), 0.99999);
   EXPECT_LT(agreement.DpQuantile(0.99), 1e-5);
+}
+
+// A slice read with only the poses around its frames carves the same bytes as with the whole
+// path (a pose, its covariance and the angular velocity read the two poses around a time).
+TEST_F(SliceCarverTest, OnlyTheSlicesPosesSameBytes) {
+  const SliceCarveOptions o = Options(CarveEvaluation::kFast);
+  const Carved whole = CarveBySlices("whole_path", 5.0, o);
+  const Carved own = CarveBySlices("own_poses", 5.0, o, false, /*own_poses=*/true);
+  ASSERT_GT(whole.partials.size(), 2u);
+  ASSERT_EQ(whole.partials.size(), own.partials.size());
+  for (size_t i = 0; i < whole.partials.size(); ++i) {
+    EXPECT_EQ(ReadBytes(whole.partials[i]), ReadBytes(own.partials[i])) << i;
+  }
 }
 
 // §5.6.1: with regions, only the chunks listed, only inside their regions: the whole carve's

@@ -939,7 +939,11 @@ absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
   {
     absl::MutexLock hdf5_lock(&hdf5_mu_);
     std::lock_guard<std::mutex> lock(Hdf5Lock());
-    absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan->path());
+    // The frame tables only: the path is validated in blocks and not held (the workers read
+    // the poses their slices need).
+    ScanReader::OpenOptions open;
+    open.path_rows = ScanReader::PathRows::kNone;
+    absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan->path(), open);
     if (!reader.ok()) return scan->Rename(reader.status());
     // Every row: a bad one found by a worker half-way through the carve would cost the job
     // its carve so far; named now, it costs nothing.

@@ -350,7 +350,8 @@ absl::Status WorkerServer::Impl::Carve(const pb::Lease& lease, pb::TileInfo& til
     std::unique_ptr<ScanReader> reader;
     {
       std::lock_guard<std::mutex> lock(Hdf5Lock());
-      absl::StatusOr<std::unique_ptr<ScanReader>> r = ScanReader::Open(scan->path());
+      absl::StatusOr<std::unique_ptr<ScanReader>> r =
+          ScanReader::Open(scan->path(), SliceOpenOptions(slice));
       if (!r.ok()) return scan->Rename(r.status());
       reader = *std::move(r);
     }
