@@ -41,6 +41,17 @@ namespace pb = ::carvemap::v1;
 
 namespace {
 
+// How the log names a lease's task: "slice k" (of pass p for a re-carve) or "chunk (x,y,z)".
+std::string TaskName(const pb::Lease& lease) {
+  if (lease.has_slice()) {
+    const pb::SliceTask& t = lease.slice();
+    return t.pass() == 0 ? absl::StrCat("slice ", t.index())
+                         : absl::StrCat("slice ", t.index(), " of pass ", t.pass());
+  }
+  return absl::StrCat("chunk (", lease.chunk().x(), ",", lease.chunk().y(), ",",
+                      lease.chunk().z(), ")");
+}
+
 constexpr char kVersion[] = "0.1.0";
 constexpr double kRpcTimeoutS = 10.0;
 
@@ -433,9 +444,10 @@ void WorkerServer::Impl::Report(const std::string& worker_id, const pb::Lease& l
       pb::CompleteChunkResponse resp;
       s = FromGrpcStatus(stub_->CompleteChunk(ctx.get(), req, &resp));
       if (s.ok()) {
-        spdlog::info("worker {}: chunk {} done ({} rays, {:.2f} s; {}/{} chunks)", worker_id,
-                     lease.lease_id(), stats.rays(), stats.carve_s(),
-                     resp.progress().chunks_done(), resp.progress().chunks_total());
+        spdlog::info("worker {}: {} done ({} rays, {:.2f} s; {}/{} tasks of the job; lease {})",
+                     worker_id, TaskName(lease), stats.rays(), stats.carve_s(),
+                     resp.progress().chunks_done(), resp.progress().chunks_total(),
+                     lease.lease_id());
       }
     } else {
       pb::FailChunkRequest req;
@@ -501,7 +513,8 @@ void WorkerServer::Impl::CarveLoop() {
     pb::CarveStats stats;
     absl::Status carved = Carve(lease, tile, stats);
     if (!carved.ok()) {
-      spdlog::error("worker {}: chunk {}: {}", *id, lease.lease_id(), carved.ToString());
+      spdlog::error("worker {}: {} (lease {}): {}", *id, TaskName(lease), lease.lease_id(),
+                    carved.ToString());
     }
     bool revoked;
     {
