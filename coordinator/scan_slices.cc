@@ -13,8 +13,8 @@ double SliceSeconds(const SlicePlanOptions& options, uint64_t rays, double durat
   if (rays == 0 || !(duration_s > 0)) return std::max(options.min_slice_s, 1.0);
   const double by_rays =
       std::max(options.min_slice_s, duration_s * double(options.target_rays) / double(rays));
-  return std::min(by_rays, std::max(options.shortest_slice_s,
-                                    duration_s / std::max(options.min_slices, 1)));
+  return std::min(by_rays,
+                  std::max(options.shortest_slice_s, duration_s / std::max(options.min_slices, 1)));
 }
 
 absl::StatusOr<std::vector<ScanSlice>> PlanSlices(std::span<const std::vector<FrameRecord>> frames,

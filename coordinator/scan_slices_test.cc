@@ -60,9 +60,9 @@ TEST(ScanSlicesTest, LengthsAndErrors) {
   SlicePlanOptions o;
   // The backpack at full rate: 151 M rays in 1164 s → about 31 s per 4 M rays.
   EXPECT_NEAR(SliceSeconds(o, 151'000'000, 1164), 1164 * 4.0 / 151, 1e-9);
-  EXPECT_EQ(SliceSeconds(o, 1'000'000, 600), 75);        // a sparse scan: still 8 slices
-  EXPECT_EQ(SliceSeconds(o, 400'000'000, 100), 10);      // a dense one: not below min_slice_s
-  EXPECT_EQ(SliceSeconds(o, 200'000, 8), 2);             // a short one: not below 2 s
+  EXPECT_EQ(SliceSeconds(o, 1'000'000, 600), 75);    // a sparse scan: still 8 slices
+  EXPECT_EQ(SliceSeconds(o, 400'000'000, 100), 10);  // a dense one: not below min_slice_s
+  EXPECT_EQ(SliceSeconds(o, 200'000, 8), 2);         // a short one: not below 2 s
   o.slice_s = 7;
   EXPECT_EQ(SliceSeconds(o, 151'000'000, 1164), 7);
   const std::vector<std::vector<FrameRecord>> one = {Frames(0, 1, 5, 10)};

@@ -224,9 +224,8 @@ absl::StatusOr<PathRecord> ScanReader::Impl::PathRow(uint64_t row) const {
 
 absl::Status ScanReader::Impl::LoadPathAroundFrames(std::span<const RowRange> rows) {
   if (rows.size() != sensor_data.size()) {
-    return absl::InvalidArgumentError(absl::StrCat(file, ": ", rows.size(),
-                                                   " frame row ranges for ",
-                                                   sensor_data.size(), " sensors"));
+    return absl::InvalidArgumentError(absl::StrCat(
+        file, ": ", rows.size(), " frame row ranges for ", sensor_data.size(), " sensors"));
   }
   double t_first = std::numeric_limits<double>::infinity(), t_last = -t_first;
   std::vector<FrameRecord> record;
@@ -234,9 +233,9 @@ absl::Status ScanReader::Impl::LoadPathAroundFrames(std::span<const RowRange> ro
     const SensorData& sd = sensor_data[i];
     if (rows[i].begin >= rows[i].end) continue;
     if (rows[i].end > sd.frame_count) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(file, ": ", sd.frames_path(), ": rows [", rows[i].begin, ", ",
-                       rows[i].end, ") outside its ", sd.frame_count, " rows"));
+      return absl::InvalidArgumentError(absl::StrCat(file, ": ", sd.frames_path(), ": rows [",
+                                                     rows[i].begin, ", ", rows[i].end,
+                                                     ") outside its ", sd.frame_count, " rows"));
     }
     for (uint64_t row : {rows[i].begin, rows[i].end - 1}) {
       if (absl::Status st = sd.ReadFrameRows(row, 1, record); !st.ok()) return st;
@@ -278,8 +277,7 @@ absl::Status ScanReader::Impl::LoadPath(uint64_t first, uint64_t n) {
   if (!dataset.ok()) return dataset.status();
   path.resize(n);
   Hid mem = h5::PathMemType();
-  if (absl::Status s = h5::ReadRows(dataset->get(), mem.get(), 0, first, n, path.data());
-      !s.ok()) {
+  if (absl::Status s = h5::ReadRows(dataset->get(), mem.get(), 0, first, n, path.data()); !s.ok()) {
     return h5::Prefixed(absl::StrCat(file, ": /path"), s);
   }
   timed_path.clear();
@@ -308,9 +306,9 @@ absl::Status ScanReader::Impl::LoadMagnetometer() {
   if (!dataset.ok()) return dataset.status();
   magnetometer.emplace(magnetometer_rows);
   Hid mem = h5::MagnetometerMemType();
-  return h5::Prefixed(absl::StrCat(file, ": /magnetometer"),
-                      h5::ReadRows(dataset->get(), mem.get(), 0, 0, magnetometer_rows,
-                                   magnetometer->data()));
+  return h5::Prefixed(
+      absl::StrCat(file, ": /magnetometer"),
+      h5::ReadRows(dataset->get(), mem.get(), 0, 0, magnetometer_rows, magnetometer->data()));
 }
 
 namespace {
@@ -439,7 +437,7 @@ absl::StatusOr<std::unique_ptr<ScanReader>> ScanReader::Open(const std::string& 
 }
 
 absl::StatusOr<std::unique_ptr<ScanReader>> ScanReader::Open(const std::string& path,
-                                                          const OpenOptions& options) {
+                                                             const OpenOptions& options) {
   h5::Init();
   std::error_code error;
   if (!std::filesystem::is_regular_file(path, error)) {
@@ -718,8 +716,8 @@ absl::Status ScanReader::Impl::ValidatePathCov() const {
   std::vector<PathCovariance> block;
   for (uint64_t first = 0; first < path_rows; first += block.size()) {
     block.resize(std::min(kPathBlockRows, path_rows - first));
-    if (absl::Status s = h5::ReadRows(dataset->get(), H5T_NATIVE_FLOAT, 12, first, block.size(),
-                                      block.data());
+    if (absl::Status s =
+            h5::ReadRows(dataset->get(), H5T_NATIVE_FLOAT, 12, first, block.size(), block.data());
         !s.ok()) {
       return h5::Prefixed(absl::StrCat(file, ": /path_cov"), s);
     }

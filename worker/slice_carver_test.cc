@@ -136,7 +136,8 @@ class SliceCarverTest : public ::testing::Test {
       ScanReader* from = reader->get();
       std::unique_ptr<ScanReader> own;
       if (own_poses) {
-        absl::StatusOr<std::unique_ptr<ScanReader>> r = ScanReader::Open(*scan_, SliceOpenOptions(s));
+        absl::StatusOr<std::unique_ptr<ScanReader>> r =
+            ScanReader::Open(*scan_, SliceOpenOptions(s));
         EXPECT_TRUE(r.ok()) << r.status();
         if (!r.ok()) return out;
         own = *std::move(r);

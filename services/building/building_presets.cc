@@ -893,8 +893,8 @@ Layout OfficeLayout() {
   Layout L;
   L.levels = {{0.0, 3.5}};
   AddOfficeFloor(Floor(0, {0, 5, 9, 13, 17, 22, 27, 32},
-                       {Kind::kOffice, Kind::kMeeting, Kind::kOffice, Kind::kStorage,
-                        Kind::kOffice, Kind::kMeeting, Kind::kOffice},
+                       {Kind::kOffice, Kind::kMeeting, Kind::kOffice, Kind::kStorage, Kind::kOffice,
+                        Kind::kMeeting, Kind::kOffice},
                        {2.6, 2.8, 3.0, 2.7, 2.9}),
                  L);
   return L;

@@ -18,7 +18,8 @@ namespace carvemap {
 [[nodiscard]] std::vector<std::string_view> PresetBuildingNames();
 
 // Builds preset `name` (NotFound for an unknown name). rooms[0] is where the walk starts (the
-// hallway in "office"/"office2", the south wing's on level 0 in "office4"); nav grids are 0.1 m with 0.25 m clearance.
+// hallway in "office"/"office2", the south wing's on level 0 in "office4"); nav grids are 0.1 m
+// with 0.25 m clearance.
 absl::StatusOr<Building> MakePresetBuilding(std::string_view name, uint64_t seed);
 
 }  // namespace carvemap

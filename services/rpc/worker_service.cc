@@ -48,8 +48,8 @@ std::string TaskName(const pb::Lease& lease) {
     return t.pass() == 0 ? absl::StrCat("slice ", t.index())
                          : absl::StrCat("slice ", t.index(), " of pass ", t.pass());
   }
-  return absl::StrCat("chunk (", lease.chunk().x(), ",", lease.chunk().y(), ",",
-                      lease.chunk().z(), ")");
+  return absl::StrCat("chunk (", lease.chunk().x(), ",", lease.chunk().y(), ",", lease.chunk().z(),
+                      ")");
 }
 
 constexpr char kVersion[] = "0.1.0";
