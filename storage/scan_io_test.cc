@@ -382,6 +382,14 @@ TEST(ScanReaderTest, PathAroundFramesGivesTheSamePoses) {
   EXPECT_TRUE((*none)->timed_path().empty());
   EXPECT_EQ((*none)->FrameRecords(0)->size(), 2u);
   EXPECT_TRUE((*none)->Validate().ok());
+  // The positions alone are still read whole, from the file, not from what Open kept.
+  absl::StatusOr<std::vector<Eigen::Vector3d>> positions = (*none)->PathPositions();
+  ASSERT_TRUE(positions.ok()) << positions.status();
+  ASSERT_EQ(positions->size(), (*whole)->path().size());
+  for (size_t i = 0; i < positions->size(); ++i) {
+    const PathRecord& r = (*whole)->path()[i];
+    EXPECT_EQ((*positions)[i], Eigen::Vector3d(r.x, r.y, r.z)) << i;
+  }
 }
 
 TEST(ScanWriterTest, NoFileWhenNotClosed) {

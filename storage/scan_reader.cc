@@ -675,6 +675,25 @@ absl::StatusOr<std::vector<FrameRecord>> ScanReader::FrameRecords(int sensor) {
 // does not grow with the survey's length.
 constexpr uint64_t kPathBlockRows = 1 << 16;
 
+absl::StatusOr<std::vector<Eigen::Vector3d>> ScanReader::PathPositions() {
+  auto dataset = impl_->OpenDataset("/path");
+  if (!dataset.ok()) return dataset.status();
+  Hid mem = h5::PathMemType();
+  std::vector<Eigen::Vector3d> positions;
+  positions.reserve(impl_->path_rows);
+  std::vector<PathRecord> block;
+  for (uint64_t first = 0; first < impl_->path_rows; first += block.size()) {
+    block.resize(std::min(kPathBlockRows, impl_->path_rows - first));
+    if (absl::Status s =
+            h5::ReadRows(dataset->get(), mem.get(), 0, first, block.size(), block.data());
+        !s.ok()) {
+      return h5::Prefixed(absl::StrCat(impl_->file, ": /path"), s);
+    }
+    for (const PathRecord& p : block) positions.emplace_back(p.x, p.y, p.z);
+  }
+  return positions;
+}
+
 absl::Status ScanReader::Impl::ValidatePath() const {
   if (path_rows == 0) return Invalid(file, "/path", "no poses");
   auto dataset = OpenDataset("/path");

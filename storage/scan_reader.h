@@ -87,6 +87,9 @@ class ScanReader {
   // InvalidArgument for a wrong count of ranges or a range past a sensor's frames.
   [[nodiscard]] absl::StatusOr<std::unique_ptr<FrameStream>> StreamFrames(
       std::span<const RowRange> rows, size_t block_bytes = 4 << 20);
+  // Every pose's position (/path x, y, z), read in blocks whatever Open kept of the path: 24
+  // bytes per pose where the whole path is ~190.
+  absl::StatusOr<std::vector<Eigen::Vector3d>> PathPositions();
   // A sensor's /frames rows (time, first point, count), read in blocks: 24 bytes per frame.
   absl::StatusOr<std::vector<FrameRecord>> FrameRecords(int sensor);
 
