@@ -53,14 +53,13 @@ ChunkProgressFn StageProgress(const MergeProgressCallback& progress, const char*
 
 
 // The recorded system path of the job's scan (DESIGN §3 /path): the scanner positions of the
-// floor plans (§3.3.1). Small (poses, not rays), so read whole.
+// floor plans (§3.3.1), 24 bytes per pose; the poses' other fields are not read.
 absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string& scan_path) {
-  absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan_path);
+  ScanReader::OpenOptions open;
+  open.path_rows = ScanReader::PathRows::kNone;
+  absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan_path, open);
   if (!reader.ok()) return reader.status();
-  std::vector<Eigen::Vector3d> positions;
-  positions.reserve((*reader)->path().size());
-  for (const PathRecord& r : (*reader)->path()) positions.emplace_back(r.x, r.y, r.z);
-  return positions;
+  return (*reader)->PathPositions();
 }
 
 // Floor plans per level (DESIGN §6 stages 4–5; seed §5.3, §3.3) ➜ level_<k>/floorplan.geojson,
@@ -318,6 +317,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
       SegmentTiles(tiles, *volume, seg_options, (work / "building").string(),
                    (work / "objects").string(), StageProgress(progress, "segmentation"));
   if (!segmented.ok()) return segmented.status();
+  tiles.ReleaseCache();  // the job's tiles are read again only by the first outputs, in order
   counts["segmented_chunks"] = segmented->chunks;
   counts["object_cells"] = segmented->object_cells;
   counts["unobserved_object_cells"] = segmented->unobserved_object_cells;
@@ -350,6 +350,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
     absl::StatusOr<std::vector<BoundaryFace>> bfaces =
         CollectBoundaryFaces(**btiles, StageProgress(progress, "building_faces"));
     if (!bfaces.ok()) return bfaces.status();
+    (*btiles)->ReleaseCache();  // read again only by the dense fallback below
     if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
     // These regions only shape the planar mesh, so they are grown for it (mesh_growth:
     // fewer, bigger regions, §4.3.3); the floor plans were made from the job's own regions.
@@ -422,7 +423,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   TriangleMesh all_objects;
   std::vector<int> object_of_face;
   nlohmann::json listed = nlohmann::json::array();
-  for (const SegmentedObject& o : objects) {
+  for (SegmentedObject& o : objects) {
     const std::string name = absl::StrCat("mesh/objects/", o.id, ".ply");
     if (absl::Status s = WritePly((out / name).string(), o.mesh); !s.ok()) return s;
     outputs.push_back(name);
@@ -436,6 +437,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
                       {"volume_m3", o.volume_m3},
                       {"triangles", o.mesh.triangles.size()},
                       {"mesh", name}});
+    o.mesh = TriangleMesh{};  // in all_objects now
   }
   if (absl::Status s = WritePly((out / "mesh" / "objects.ply").string(), all_objects,
                                 &object_of_face, "object");
@@ -444,7 +446,8 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   }
   outputs.push_back("mesh/objects.ply");
   // combined = building + objects; face property `object`: −1 for the building.
-  TriangleMesh combined = building ? *building : TriangleMesh{};
+  TriangleMesh combined = building ? std::move(*building) : TriangleMesh{};
+  building.reset();
   std::vector<int> combined_object(combined.triangles.size(), -1);
   combined.Append(all_objects);
   combined_object.insert(combined_object.end(), object_of_face.begin(), object_of_face.end());
@@ -549,6 +552,13 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
     return InStage("floorplan", s);
   }
 
+  // The building's faces and regions grow with its size and, once the floor plans are made,
+  // serve only the planar mesh of a job without plans (which fits its own regions).
+  const size_t num_boundary_faces = faces->size();
+  const size_t num_planar_regions = regions->regions.size();
+  regions = PlanarRegionSet{};
+  if (!plans.empty()) faces = std::vector<BoundaryFace>{};
+
   // dense mesh (§4.3.3) ➜ mesh/dense.ply; scoped: the mesh can be large and is not kept.
   t0 = Clock::now();
   uint64_t dense_triangles = 0;
@@ -622,8 +632,8 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   first.seconds_before = SecondsSince(t_start);
   absl::StatusOr<MergeSummary> summary = MergeFirstOutputs(first, progress);
   if (!summary.ok()) return summary.status();
-  summary->num_boundary_faces = faces->size();
-  summary->num_planar_regions = regions->regions.size();
+  summary->num_boundary_faces = num_boundary_faces;
+  summary->num_planar_regions = num_planar_regions;
   summary->num_levels = levels->levels.size();
   summary->dense_triangles = dense_triangles;
   summary->building_triangles = building_triangles;

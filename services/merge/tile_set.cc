@@ -104,6 +104,12 @@ absl::StatusOr<std::shared_ptr<const TileData>> TileSet::Get(const ChunkKey& chu
   return cache_.at(chunk).tile;
 }
 
+void TileSet::ReleaseCache() {
+  cache_.clear();
+  lru_.clear();
+  cached_bytes_ = 0;
+}
+
 absl::Status TileSet::Insert(const ChunkKey& chunk, TileData tile) {
   const std::string path = PathOf(chunk);
   if (tile.chunk != chunk) {

@@ -60,6 +60,10 @@ class TileSet {
   // The stored leaf covering `x_world`; chunks without a tile answer `stored = false`.
   absl::StatusOr<LeafQuery> Query(const Eigen::Vector3d& x_world);
 
+  // Drops every cached tile (pointers handed out stay valid): for a stage that is done with
+  // this set while later stages still hold it open.
+  void ReleaseCache();
+
   [[nodiscard]] uint64_t tile_reads() const { return tile_reads_; }  // cache misses
   [[nodiscard]] uint64_t cached_bytes() const { return cached_bytes_; }
 

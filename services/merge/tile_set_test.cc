@@ -107,6 +107,12 @@ TEST_F(TileSetTest, CacheIsBoundedAndLru) {
   EXPECT_GT((*big)->cached_bytes(), 0u);
   EXPECT_EQ((*first)->leaves.size(), 2u);  // still valid
   EXPECT_EQ((*big)->Get(ChunkKey(7, 7, 7)).status().code(), absl::StatusCode::kNotFound);
+
+  (*big)->ReleaseCache();
+  EXPECT_EQ((*big)->cached_bytes(), 0u);
+  EXPECT_EQ((*first)->leaves.size(), 2u);  // still valid
+  ASSERT_TRUE((*big)->Get(ChunkKey(-1, 0, 0)).ok());
+  EXPECT_EQ((*big)->tile_reads(), 3u);  // read again
 }
 
 TEST_F(TileSetTest, CorruptOrMisnamedOrForeignTilesAreRejectedNamingTheFile) {
