@@ -79,4 +79,34 @@ absl::StatusOr<std::vector<ScanSlice>> PlanSlices(std::span<const std::vector<Fr
   return slices;
 }
 
+absl::StatusOr<ScanSlicePlan> PlanScanSlices(ScanReader& reader,
+                                             const SlicePlanOptions& options) {
+  if (absl::Status s = reader.Validate(); !s.ok()) return s;
+  std::vector<std::vector<FrameRecord>> frames;
+  std::vector<SensorKind> kinds;
+  for (size_t i = 0; i < reader.sensors().size(); ++i) {
+    absl::StatusOr<std::vector<FrameRecord>> f = reader.FrameRecords(int(i));
+    if (!f.ok()) return f.status();
+    frames.push_back(*std::move(f));
+    kinds.push_back(reader.sensors()[i].kind);
+  }
+  ScanSlicePlan plan;
+  double t0 = std::numeric_limits<double>::infinity(), t1 = -t0;
+  for (const std::vector<FrameRecord>& f : frames) {
+    for (const FrameRecord& r : f) plan.rays += r.count;
+    if (!f.empty()) {
+      t0 = std::min(t0, f.front().t);
+      t1 = std::max(t1, f.back().t);
+    }
+  }
+  plan.slice_s = SliceSeconds(options, plan.rays, t1 > t0 ? t1 - t0 : 0.0);
+  absl::StatusOr<std::vector<ScanSlice>> slices = PlanSlices(frames, kinds, plan.slice_s);
+  if (!slices.ok()) {
+    return absl::Status(slices.status().code(),
+                        absl::StrCat(reader.file(), ": ", slices.status().message()));
+  }
+  plan.slices = *std::move(slices);
+  return plan;
+}
+
 }  // namespace carvemap

@@ -60,4 +60,16 @@ struct SlicePlanOptions {
     std::span<const std::vector<FrameRecord>> frames, std::span<const SensorKind> kinds,
     double slice_s);
 
+// A scan's slices as the carve plans them (SliceSeconds, PlanSlices), from `reader`'s frame
+// tables, after Validate() has checked every row: a bad row found by a worker half-way through
+// would cost the job its carve so far. `reader` may hold no path (PathRows::kNone); memory is
+// the frame tables', 24 bytes per frame. Errors name the file.
+struct ScanSlicePlan {
+  std::vector<ScanSlice> slices;
+  double slice_s = 0;
+  uint64_t rays = 0;
+};
+[[nodiscard]] absl::StatusOr<ScanSlicePlan> PlanScanSlices(ScanReader& reader,
+                                                          const SlicePlanOptions& options);
+
 }  // namespace carvemap

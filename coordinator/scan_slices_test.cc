@@ -1,8 +1,12 @@
 #include "coordinator/scan_slices.h"
 
+#include <filesystem>
+#include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
+
+#include "services/sim/simulator.h"
 
 namespace carvemap {
 namespace {
@@ -77,6 +81,55 @@ TEST(ScanSlicesTest, LengthsAndErrors) {
   absl::StatusOr<std::vector<ScanSlice>> empty = PlanSlices(none, line, 1);
   ASSERT_TRUE(empty.ok());
   EXPECT_TRUE(empty->empty());
+}
+
+// The plan read from a file: the same slices as PlanSlices over the file's frame tables, the
+// scan's rays counted, the options honoured.
+TEST(ScanSlicesTest, PlanScanSlicesReadsTheFramesTablesOfAFile) {
+  const std::string root =
+      (std::filesystem::path(::testing::TempDir()) / "scan_slices_test").string();
+  std::filesystem::remove_all(root);
+  SimulateOptions sim;
+  sim.preset = "office";
+  sim.rig.rate_hz = 3;
+  sim.rig.beam_step_deg = 2;
+  sim.max_duration_s = 12;
+  sim.output_dir = root;
+  absl::StatusOr<SimulationSummary> simulated = Simulate(sim);
+  ASSERT_TRUE(simulated.ok()) << simulated.status();
+  ScanReader::OpenOptions open;
+  open.path_rows = ScanReader::PathRows::kNone;
+  absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(simulated->scan_path, open);
+  ASSERT_TRUE(reader.ok()) << reader.status();
+
+  SlicePlanOptions options;
+  options.slice_s = 2.5;
+  absl::StatusOr<ScanSlicePlan> plan = PlanScanSlices(**reader, options);
+  ASSERT_TRUE(plan.ok()) << plan.status();
+  EXPECT_EQ(plan->slice_s, 2.5);
+  std::vector<std::vector<FrameRecord>> frames;
+  std::vector<SensorKind> kinds;
+  uint64_t rays = 0;
+  for (size_t i = 0; i < (*reader)->sensors().size(); ++i) {
+    frames.push_back(*(*reader)->FrameRecords(int(i)));
+    kinds.push_back((*reader)->sensors()[i].kind);
+    for (const FrameRecord& r : frames.back()) rays += r.count;
+  }
+  EXPECT_EQ(plan->rays, rays);
+  EXPECT_GT(rays, 0u);
+  absl::StatusOr<std::vector<ScanSlice>> expected = PlanSlices(frames, kinds, 2.5);
+  ASSERT_TRUE(expected.ok());
+  ASSERT_EQ(plan->slices.size(), expected->size());
+  EXPECT_GE(plan->slices.size(), 4u);
+  for (size_t k = 0; k < expected->size(); ++k) {
+    EXPECT_EQ(plan->slices[k].own_rays, (*expected)[k].own_rays) << k;
+    EXPECT_EQ(plan->slices[k].t_begin, (*expected)[k].t_begin) << k;
+  }
+  // The default length: SliceSeconds of the file's rays and duration.
+  absl::StatusOr<ScanSlicePlan> by_default = PlanScanSlices(**reader, SlicePlanOptions{});
+  ASSERT_TRUE(by_default.ok()) << by_default.status();
+  EXPECT_EQ(by_default->rays, rays);
+  EXPECT_GE(by_default->slices.size(), 2u);
 }
 
 }  // namespace

@@ -83,38 +83,19 @@ absl::StatusOr<ScanCarveTotals> CarveScan(
   totals.bounds.setEmpty();
 
   // The plan: every sensor's frame rows, cut by time.
-  std::vector<std::vector<FrameRecord>> frames;
-  std::vector<SensorKind> kinds;
+  absl::StatusOr<ScanSlicePlan> plan;
   {
     std::lock_guard<std::mutex> lock(Hdf5Lock());
     ScanReader::OpenOptions open;
     open.path_rows = ScanReader::PathRows::kNone;  // the frame tables only
     absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan_path, open);
     if (!reader.ok()) return reader.status();
-    // A bad row found half-way through would leave half a carve: name it up front.
-    if (absl::Status s = (*reader)->Validate(); !s.ok()) return s;
-    for (size_t s = 0; s < (*reader)->sensors().size(); ++s) {
-      absl::StatusOr<std::vector<FrameRecord>> f = (*reader)->FrameRecords(int(s));
-      if (!f.ok()) return f.status();
-      frames.push_back(*std::move(f));
-      kinds.push_back((*reader)->sensors()[s].kind);
-    }
+    plan = PlanScanSlices(**reader, options.slices);
   }
-  uint64_t rays = 0;
-  double t_lo = std::numeric_limits<double>::infinity(), t_hi = -t_lo;
-  for (const std::vector<FrameRecord>& f : frames) {
-    for (const FrameRecord& r : f) rays += r.count;
-    if (!f.empty()) {
-      t_lo = std::min(t_lo, f.front().t);
-      t_hi = std::max(t_hi, f.back().t);
-    }
-  }
-  totals.slice_s = SliceSeconds(options.slices, rays, t_hi > t_lo ? t_hi - t_lo : 0.0);
-  absl::StatusOr<std::vector<ScanSlice>> slices = PlanSlices(frames, kinds, totals.slice_s);
-  if (!slices.ok()) return absl::Status(slices.status().code(),
-                                        absl::StrCat(scan_path, ": ", slices.status().message()));
-  totals.slices = slices->size();
-  frames.clear();
+  if (!plan.ok()) return plan.status();
+  totals.slice_s = plan->slice_s;
+  std::vector<ScanSlice>& slices = plan->slices;
+  totals.slices = slices.size();
 
   std::error_code ec;
   fs::create_directories(options.partials_dir, ec);
@@ -129,15 +110,15 @@ absl::StatusOr<ScanCarveTotals> CarveScan(
   so.wedges = options.wedges;
   so.regions = options.regions;
   so.memory_budget_bytes = options.memory_budget_bytes;
-  std::vector<std::string> partials(slices->size());
-  std::vector<SliceCarveStats> stats(slices->size());
-  std::vector<std::atomic<uint64_t>> slice_rays(slices->size());
+  std::vector<std::string> partials(slices.size());
+  std::vector<SliceCarveStats> stats(slices.size());
+  std::vector<std::atomic<uint64_t>> slice_rays(slices.size());
   uint64_t rays_total = 0;
-  for (const ScanSlice& s : *slices) rays_total += s.own_rays;
-  std::vector<size_t> order(slices->size());
+  for (const ScanSlice& s : slices) rays_total += s.own_rays;
+  std::vector<size_t> order(slices.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return (*slices)[a].own_rays > (*slices)[b].own_rays;
+    return slices[a].own_rays > slices[b].own_rays;
   });
   std::atomic<uint64_t> slices_done{0};
   const auto tick_slices = [&] {
@@ -145,7 +126,7 @@ absl::StatusOr<ScanCarveTotals> CarveScan(
     ScanCarveProgress p;
     p.stage = "slices";
     p.done = slices_done.load();
-    p.total = slices->size();
+    p.total = slices.size();
     for (const auto& r : slice_rays) p.rays_done += r.load();
     p.rays_total = rays_total;
     progress(p);
@@ -153,7 +134,7 @@ absl::StatusOr<ScanCarveTotals> CarveScan(
   absl::Status carved = RunPool(
       order, options.threads,
       [&](size_t i) -> absl::Status {
-        const ScanSlice& s = (*slices)[i];
+        const ScanSlice& s = slices[i];
         partials[i] = (fs::path(options.partials_dir) / absl::StrCat("slice_", s.index, ".part"))
                           .string();
         std::unique_ptr<ScanReader> reader;

@@ -934,8 +934,7 @@ absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
   absl::StatusOr<ConfinedFile> scan =
       ConfinedFile::Open(DataDir(job.tenant_dir), job.input_path, "input_path");
   if (!scan.ok()) return scan.status();
-  std::vector<std::vector<FrameRecord>> frames;
-  std::vector<SensorKind> kinds;
+  absl::StatusOr<ScanSlicePlan> plan;
   {
     absl::MutexLock hdf5_lock(&hdf5_mu_);
     std::lock_guard<std::mutex> lock(Hdf5Lock());
@@ -945,33 +944,13 @@ absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
     open.path_rows = ScanReader::PathRows::kNone;
     absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan->path(), open);
     if (!reader.ok()) return scan->Rename(reader.status());
-    // Every row: a bad one found by a worker half-way through the carve would cost the job
-    // its carve so far; named now, it costs nothing.
-    if (absl::Status s = (*reader)->Validate(); !s.ok()) return scan->Rename(s);
-    for (size_t i = 0; i < (*reader)->sensors().size(); ++i) {
-      absl::StatusOr<std::vector<FrameRecord>> f = (*reader)->FrameRecords(int(i));
-      if (!f.ok()) return scan->Rename(f.status());
-      frames.push_back(*std::move(f));
-      kinds.push_back((*reader)->sensors()[i].kind);
-    }
+    plan = PlanScanSlices(**reader, SlicePlanOptions{});
   }
-  uint64_t rays = 0;
-  double t0 = std::numeric_limits<double>::infinity(), t1 = -t0;
-  for (const std::vector<FrameRecord>& f : frames) {
-    for (const FrameRecord& r : f) rays += r.count;
-    if (!f.empty()) {
-      t0 = std::min(t0, f.front().t);
-      t1 = std::max(t1, f.back().t);
-    }
-  }
-  SlicePlanOptions options;
-  const double slice_s = SliceSeconds(options, rays, t1 > t0 ? t1 - t0 : 0.0);
-  absl::StatusOr<std::vector<ScanSlice>> slices = PlanSlices(frames, kinds, slice_s);
-  if (!slices.ok()) return scan->Rename(slices.status());
+  if (!plan.ok()) return scan->Rename(plan.status());
   absl::MutexLock lock(&mu_);
   JobRuntime& rt = runtime_[job.id];
-  rt.slices = *std::move(slices);
-  rt.slice_s = slice_s;
+  rt.slices = std::move(plan->slices);
+  rt.slice_s = plan->slice_s;
   rt.rays_to_carve = 0;
   for (const ScanSlice& s : rt.slices) rt.rays_to_carve += int64_t(s.own_rays);
   return absl::OkStatus();
