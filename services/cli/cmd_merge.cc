@@ -105,6 +105,11 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
                   "Octree resolution in m (2 m / 2^k); default: the tiles'");
   cmd->add_option("--cache-mb", flags->cache_mb, "Decoded-tile cache budget in MiB")
       ->capture_default_str();
+  cmd->add_option("--threads", flags->options.threads,
+                  "Threads for the per-chunk stages (boundary faces, dense meshes); 0 = one per "
+                  "core. The outputs do not depend on it")
+      ->check(CLI::Range(0, 1024))
+      ->capture_default_str();
   cmd->add_option("--topdown-max-m", flags->options.topdown_max_height_m,
                   "Open height drawn as white (255) in topdown.png")
       ->capture_default_str();

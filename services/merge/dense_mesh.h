@@ -3,8 +3,12 @@
 // fetched through the TileSet's bounded cache, then a small global step (the vertex weld, or
 // concatenation of faces). No logging and no files written here; the merge shell does that.
 //
-// Memory: the cache budget plus one neighbourhood (at most 27 decoded tiles, held while their
-// chunk is processed) plus the output (the per-chunk meshes until welded).
+// Chunks are computed on `threads` threads (the tiles are read on the caller's); the output is
+// the same whatever their number.
+//
+// Memory: the cache budget plus a batch of four neighbourhoods per thread (at most 27 decoded
+// tiles each, held while their chunk is processed) plus the output (the per-chunk meshes until
+// welded).
 #pragma once
 
 #include <array>
@@ -45,11 +49,11 @@ struct DenseMeshResult {
 // TileSet::Get (NotFound, DataLoss, InvalidArgument naming the file), of the per-chunk stage,
 // or Cancelled.
 [[nodiscard]] absl::StatusOr<DenseMeshResult> BuildDenseMesh(
-    TileSet& tiles, const ChunkProgressFn& progress = nullptr);
+    TileSet& tiles, const ChunkProgressFn& progress = nullptr, int threads = 1);
 
 // All boundary faces of `tiles` (services/mesh/boundary_faces.h): the chunks' faces in
 // ChunkKeyLess order of their interior leaf's chunk, each chunk's in its deterministic order.
 [[nodiscard]] absl::StatusOr<std::vector<BoundaryFace>> CollectBoundaryFaces(
-    TileSet& tiles, const ChunkProgressFn& progress = nullptr);
+    TileSet& tiles, const ChunkProgressFn& progress = nullptr, int threads = 1);
 
 }  // namespace carvemap

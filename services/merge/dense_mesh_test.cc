@@ -107,6 +107,45 @@ TEST(DenseMesh, TinyCacheGivesTheSameMeshAsALargeOne) {
   EXPECT_NEAR(area, FinestBoundaryFaces(tiles, k) * res * res, 1e-9);
 }
 
+TEST(DenseMesh, ThreadsGiveTheSameMeshAndFacesAsOne) {
+  const std::string dir = FreshDir();
+  WriteRandomTiles(dir, 4, 13);
+  auto set = TileSet::Open(dir, 0, 1);  // the newest tile only: batches hold their own
+  ASSERT_TRUE(set.ok());
+  auto one = BuildDenseMesh(**set);
+  auto one_faces = CollectBoundaryFaces(**set);
+  ASSERT_TRUE(one.ok() && one_faces.ok());
+  ASSERT_GT(one->mesh.triangles.size(), 1000u);
+  for (int threads : {2, 3}) {
+    uint64_t last = 0;
+    auto many = BuildDenseMesh(**set, [&](uint64_t done, uint64_t) {
+      EXPECT_EQ(done, last + 1);  // in chunk order, one call per chunk
+      last = done;
+      return true;
+    }, threads);
+    ASSERT_TRUE(many.ok()) << many.status();
+    EXPECT_EQ(last, one->chunks);
+    EXPECT_EQ(many->mesh.vertices, one->mesh.vertices) << threads;
+    EXPECT_EQ(many->mesh.triangles, one->mesh.triangles) << threads;
+    EXPECT_EQ(many->vertex_observed, one->vertex_observed) << threads;
+    auto faces = CollectBoundaryFaces(**set, nullptr, threads);
+    ASSERT_TRUE(faces.ok()) << faces.status();
+    ASSERT_EQ(faces->size(), one_faces->size());
+    for (size_t i = 0; i < faces->size(); ++i) {
+      ASSERT_EQ((*faces)[i].isosurface, (*one_faces)[i].isosurface) << i;
+      ASSERT_EQ((*faces)[i].interior.min_cell, (*one_faces)[i].interior.min_cell) << i;
+    }
+  }
+  // Cancelled in a batch: no later chunk is reported.
+  uint64_t calls = 0;
+  auto cancelled = BuildDenseMesh(**set, [&](uint64_t done, uint64_t) {
+    ++calls;
+    return done < 5;
+  }, 2);
+  EXPECT_EQ(cancelled.status().code(), absl::StatusCode::kCancelled);
+  EXPECT_EQ(calls, 5u);
+}
+
 TEST(DenseMesh, ProgressCanCancel) {
   const std::string dir = FreshDir();
   WriteRandomTiles(dir, 3, 5);

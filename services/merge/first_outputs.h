@@ -39,6 +39,9 @@ struct MergeOptions {
   // Bound on the decoded tiles held in memory at once (TileSet's LRU cache). At least one
   // chunk is always held, whatever the budget.
   uint64_t cache_budget_bytes = uint64_t{256} << 20;
+  // RunMerge only: threads for the per-chunk stages (boundary faces, dense meshes); ≤ 0: the
+  // machine's. The outputs do not depend on it.
+  int threads = 0;
   // Gray scale of topdown.png: 0 = no open height, 255 = ≥ this many metres (linear).
   double topdown_max_height_m = 3.0;
   // The elevations of each level (§5.2, services/levels): level_<k>/topdown.png integrates

@@ -1,11 +1,13 @@
 #include "services/merge/merge_job.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <limits>
 #include <optional>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -41,6 +43,11 @@ double SecondsSince(Clock::time_point t0) {
 absl::Status InStage(const char* stage, const absl::Status& s) {
   if (s.ok() || absl::IsCancelled(s)) return s;
   return absl::Status(s.code(), absl::StrCat("merge ", stage, ": ", s.message()));
+}
+
+int MergeThreads(const MergeOptions& options) {
+  return options.threads > 0 ? options.threads
+                             : std::max(1, int(std::thread::hardware_concurrency()));
 }
 
 // Adapts a stage's (done, total) progress to the merge's callback.
@@ -348,7 +355,8 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
                       options.cache_budget_bytes);
     if (!btiles.ok()) return btiles.status();
     absl::StatusOr<std::vector<BoundaryFace>> bfaces =
-        CollectBoundaryFaces(**btiles, StageProgress(progress, "building_faces"));
+        CollectBoundaryFaces(**btiles, StageProgress(progress, "building_faces"),
+                         MergeThreads(options));
     if (!bfaces.ok()) return bfaces.status();
     (*btiles)->ReleaseCache();  // read again only by the dense fallback below
     if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
@@ -366,7 +374,8 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
       // The planar mesher failed (its reason is in the warnings): the building volume's dense
       // mesh stands in, watertight by construction, so combined.ply stays whole.
       absl::StatusOr<DenseMeshResult> dense =
-          BuildDenseMesh(**btiles, StageProgress(progress, "building_dense_mesh"));
+          BuildDenseMesh(**btiles, StageProgress(progress, "building_dense_mesh"),
+                         MergeThreads(options));
       if (!dense.ok()) return dense.status();
       if (absl::Status s = WritePly((out / "mesh" / "building.ply").string(), dense->mesh);
           !s.ok()) {
@@ -407,7 +416,8 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
         TileSet::Open(source.dir, source.resolution_m, options.cache_budget_bytes);
     if (!otiles.ok()) return otiles.status();
     absl::StatusOr<DenseMeshResult> dense =
-        BuildDenseMesh(**otiles, StageProgress(progress, "object_mesh"));
+        BuildDenseMesh(**otiles, StageProgress(progress, "object_mesh"),
+                         MergeThreads(options));
     if (!dense.ok()) return dense.status();
     objects = SplitObjects(dense->mesh, source.finer_volume ? *source.finer_volume : *volume,
                            SplitOptionsFor(options, grid), &split_report);
@@ -501,7 +511,8 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   // boundary faces (stage 1)
   Clock::time_point t0 = Clock::now();
   absl::StatusOr<std::vector<BoundaryFace>> faces =
-      CollectBoundaryFaces(tiles, StageProgress(progress, "boundary_faces"));
+      CollectBoundaryFaces(tiles, StageProgress(progress, "boundary_faces"),
+                         MergeThreads(options));
   if (!faces.ok()) return InStage("boundary_faces", faces.status());
   double face_area = 0;
   for (const BoundaryFace& f : *faces) face_area += f.area_m2();
@@ -564,7 +575,8 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   uint64_t dense_triangles = 0;
   {
     absl::StatusOr<DenseMeshResult> dense =
-        BuildDenseMesh(tiles, StageProgress(progress, "dense_mesh"));
+        BuildDenseMesh(tiles, StageProgress(progress, "dense_mesh"),
+                         MergeThreads(options));
     if (!dense.ok()) return InStage("dense_mesh", dense.status());
     if (absl::Status s = WritePly((out / "mesh" / "dense.ply").string(), dense->mesh); !s.ok()) {
       return InStage("dense_mesh", s);
