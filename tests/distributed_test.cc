@@ -230,6 +230,54 @@ TEST_F(DistributedTest, JobRunsToSucceededWithAWorker) {
   (*worker)->Shutdown();
 }
 
+// A lease the coordinator grants under a worker's id that never reaches the worker (its lease
+// call gave up waiting, or the answer was lost) is given back through the worker's own
+// heartbeats, which list the leases it holds; the job does not wait on it for ever.
+TEST_F(DistributedTest, ALeaseTheWorkerNeverReceivedIsGivenBack) {
+  const std::string scan = SimulateScan();
+  JobClient client(address_);
+  SubmitParams params;
+  params.input_path = scan;
+  params.output_name = "room";
+  auto job = client.Submit(params);
+  ASSERT_TRUE(job.ok()) << job.status();
+  WorkerSpec ws;
+  ws.coordinator_address = address_;
+  auto worker = WorkerServer::Start(ws);
+  ASSERT_TRUE(worker.ok()) << worker.status();
+  std::string id;
+  for (int i = 0; i < 200 && id.empty(); ++i) {
+    id = (*worker)->worker_id();
+    if (id.empty()) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_FALSE(id.empty());
+  // A task leased in the worker's name, as if its own call had timed out before the answer.
+  std::string stolen;
+  for (int i = 0; i < 100 && stolen.empty(); ++i) {
+    pb::LeaseChunkRequest req;
+    req.set_worker_id(id);
+    req.set_wait_s(0.2);
+    pb::LeaseChunkResponse resp;
+    grpc::ClientContext ctx;
+    ASSERT_TRUE(carve_->LeaseChunk(&ctx, req, &resp).ok());
+    if (resp.has_lease()) stolen = resp.lease().lease_id();
+  }
+  ASSERT_FALSE(stolen.empty());
+  // Its heartbeats extend every lease it lists; this one it does not list, so it goes back
+  // to the queue at once (the lease timeout is 30 s, which heartbeats would keep pushing on).
+  const auto t0 = std::chrono::steady_clock::now();
+  std::string state;
+  while (std::chrono::steady_clock::now() - t0 < std::chrono::seconds(120)) {
+    auto status = client.Get(job->job_id);
+    ASSERT_TRUE(status.ok()) << status.status();
+    state = status->state;
+    if (state == "SUCCEEDED" || state == "FAILED" || state == "CANCELLED") break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  EXPECT_EQ(state, "SUCCEEDED") << "lease " << stolen << " was never given back";
+  (*worker)->Shutdown();
+}
+
 // §5.6.1: during the merge, chunks go to the workers once more at a finer resolution, into
 // <job dir>/object_tiles; the job's own tiles and counters are as before afterwards. The
 // request goes from the merge service to the coordinator on the merge's stream and the

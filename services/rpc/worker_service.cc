@@ -120,6 +120,10 @@ class WorkerServer::Impl {
     return end_status_;
   }
   int port() const { return port_; }
+  std::string worker_id() {
+    absl::MutexLock lock(&mu_);
+    return worker_id_;
+  }
 
  private:
   // Registers if not registered yet. UNAVAILABLE once the coordinator has been unreachable for
@@ -165,6 +169,12 @@ class WorkerServer::Impl {
   std::string worker_id_ ABSL_GUARDED_BY(mu_);
   double heartbeat_interval_s_ ABSL_GUARDED_BY(mu_) = 5.0;
   std::set<std::string> active_ ABSL_GUARDED_BY(mu_);
+  // A lease call in flight, or a finished lease whose result is being reported: while one is,
+  // active_ may not name every lease the coordinator counts as ours.
+  int unsettled_ ABSL_GUARDED_BY(mu_) = 0;
+  // A heartbeat that reports our leases is in flight: no lease call starts meanwhile, so the
+  // coordinator cannot grant one that the report, arriving after it, would call abandoned.
+  bool reporting_ ABSL_GUARDED_BY(mu_) = false;
   std::set<std::string> revoked_ ABSL_GUARDED_BY(mu_);
   absl::Status end_status_ ABSL_GUARDED_BY(mu_);
   bool ended_set_ ABSL_GUARDED_BY(mu_) = false;
@@ -284,21 +294,33 @@ absl::StatusOr<std::string> WorkerServer::Impl::EnsureRegistered() {
 void WorkerServer::Impl::HeartbeatLoop() {
   while (true) {
     double interval;
+    {
+      absl::MutexLock lock(&mu_);
+      interval = heartbeat_interval_s_;
+    }
+    if (heartbeat_stop_.WaitForNotificationWithTimeout(absl::Seconds(interval))) return;
     std::string id;
     pb::HeartbeatRequest req;
     {
       absl::MutexLock lock(&mu_);
-      interval = heartbeat_interval_s_;
       id = worker_id_;
       for (const std::string& lease : active_) req.add_active_lease_ids(lease);
+      // Our leases, exactly, unless a call is in flight: the coordinator then gives back any
+      // other lease it counts as ours, e.g. one granted after our lease call had given up
+      // waiting for it, which heartbeats would otherwise extend for ever.
+      req.set_report_leases(unsettled_ == 0 && !id.empty());
+      reporting_ = req.report_leases();
     }
-    if (heartbeat_stop_.WaitForNotificationWithTimeout(absl::Seconds(interval))) return;
     if (id.empty()) continue;
     req.set_worker_id(id);
     req.set_rays_carved(rays_since_heartbeat_.exchange(0));
     pb::HeartbeatResponse resp;
     auto ctx = Context();
     absl::Status s = FromGrpcStatus(stub_->Heartbeat(ctx.get(), req, &resp));
+    {
+      absl::MutexLock lock(&mu_);
+      reporting_ = false;
+    }
     if (absl::IsNotFound(s)) {
       // The coordinator declared us lost (or restarted): register again under a new id.
       spdlog::warn("worker {}: unknown to the coordinator; registering again", id);
@@ -481,8 +503,17 @@ void WorkerServer::Impl::CarveLoop() {
     req.set_worker_id(*id);
     req.set_wait_s(1.0);
     pb::LeaseChunkResponse resp;
+    mu_.LockWhen(absl::Condition(
+        +[](bool* reporting) { return !*reporting; }, &reporting_));
+    ++unsettled_;
+    mu_.Unlock();
     auto ctx = Context(kRpcTimeoutS + 2.0);
     absl::Status s = FromGrpcStatus(stub_->LeaseChunk(ctx.get(), req, &resp));
+    {
+      absl::MutexLock lock(&mu_);
+      if (s.ok() && resp.has_lease()) active_.insert(resp.lease().lease_id());
+      --unsettled_;
+    }
     if (absl::IsNotFound(s)) {
       absl::MutexLock lock(&mu_);
       if (worker_id_ == *id) worker_id_.clear();
@@ -505,10 +536,6 @@ void WorkerServer::Impl::CarveLoop() {
     }
     const pb::Lease& lease = resp.lease();
     LogScope log_scope(LeaseLogFields(lease.lease_id(), *id));  // JSON logs: job, chunk
-    {
-      absl::MutexLock lock(&mu_);
-      active_.insert(lease.lease_id());
-    }
     pb::TileInfo tile;
     pb::CarveStats stats;
     absl::Status carved = Carve(lease, tile, stats);
@@ -521,12 +548,17 @@ void WorkerServer::Impl::CarveLoop() {
       absl::MutexLock lock(&mu_);
       active_.erase(lease.lease_id());
       revoked = revoked_.erase(lease.lease_id()) > 0;
+      if (!revoked) ++unsettled_;
     }
     if (revoked) {
       spdlog::info("worker {}: lease {} was revoked; result dropped", *id, lease.lease_id());
       continue;
     }
     Report(*id, lease, carved, tile, stats);
+    {
+      absl::MutexLock lock(&mu_);
+      --unsettled_;
+    }
   }
 }
 
@@ -542,6 +574,7 @@ absl::StatusOr<std::unique_ptr<WorkerServer>> WorkerServer::Start(WorkerSpec spe
 }
 
 int WorkerServer::port() const { return impl_->port(); }
+std::string WorkerServer::worker_id() const { return impl_->worker_id(); }
 void WorkerServer::Shutdown() { impl_->Shutdown(); }
 absl::Status WorkerServer::Wait() { return impl_->Wait(); }
 

@@ -38,6 +38,8 @@ class WorkerServer {
   WorkerServer& operator=(const WorkerServer&) = delete;
 
   [[nodiscard]] int port() const;  // 0 without a health endpoint
+  // The id the coordinator gave it; empty until registered (and again while registering anew).
+  [[nodiscard]] std::string worker_id() const;
   // Stops leasing; a carve in progress finishes (its lease is then completed). Idempotent.
   void Shutdown();
   // Blocks until Shutdown() or until the coordinator is gone for good; returns why it ended
