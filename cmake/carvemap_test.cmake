@@ -16,7 +16,7 @@ function(carvemap_add_test name)
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} carvemap_test_main)
   target_compile_definitions(${name} PRIVATE
-      CARVEMAP_SHARED_DIR="${CARVEMAP_SHARED_DIR}"
+      CARVEMAP_TEST_DATA_DIR="${CARVEMAP_TEST_DATA_DIR}"
       CARVEMAP_BINARY_DIR="${PROJECT_BINARY_DIR}")
   gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES TIMEOUT ${ARG_TIMEOUT})
 endfunction()

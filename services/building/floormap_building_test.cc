@@ -12,7 +12,7 @@
 namespace carvemap {
 namespace {
 
-const std::string kMaps = std::string(CARVEMAP_SHARED_DIR) + "/data/floormaps";
+const std::string kMaps = std::string(CARVEMAP_TEST_DATA_DIR) + "/floormaps";
 
 struct MapCase {
   std::string name;

@@ -30,7 +30,7 @@
 namespace carvemap {
 namespace {
 
-const std::string kMaps = std::string(CARVEMAP_SHARED_DIR) + "/data/floormaps";
+const std::string kMaps = std::string(CARVEMAP_TEST_DATA_DIR) + "/floormaps";
 
 struct EvalCase {
   std::string name;

@@ -267,7 +267,7 @@ TEST(GridMapWallSamplesTest, FreeStandingClutterGivesNoSamplesButStillBlocks) {
 
 // The real map Freiburg52_scan (SOURCES.md) with the walk the simulator would take.
 TEST(GridMapWallSamplesTest, Freiburg52RealMap) {
-  const std::string dir = std::string(CARVEMAP_SHARED_DIR) + "/data/floormaps";
+  const std::string dir = std::string(CARVEMAP_TEST_DATA_DIR) + "/floormaps";
   auto im = ReadPngGray8(dir + "/Freiburg52_scan.png");
   ASSERT_TRUE(im.ok()) << im.status();
   auto building = MakeFloormapBuilding(FloormapOptionsFor(dir, "Freiburg52_scan"));
