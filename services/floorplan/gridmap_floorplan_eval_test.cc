@@ -1,5 +1,5 @@
-// Issue 5 evaluation, 2D route (seed §3.1.2 + §3.3): every real floor map of
-// ../shared/data/floormaps (plain and furnished) used directly as wall samples, with the walk
+// Issue 5 evaluation, 2D route (§3.1.2 + §3.3): every real floor map of
+// tests/data/floormaps (plain and furnished) used directly as wall samples, with the walk
 // the simulator plans through it, through the whole floor-plan pipeline; the rooms are scored
 // against the maps' ground-truth segmentation (SOURCES.md: room F1 at IoU > 0.5, Bormann et
 // al.'s recall and precision). The floors asserted sit a little below what the pipeline reaches

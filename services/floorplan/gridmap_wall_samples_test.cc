@@ -23,7 +23,7 @@ void FillPx(Image<uint8_t>& im, int col0, int row0, int col1, int row1, uint8_t 
   for (int r = row0; r < row1; ++r)
     for (int c = col0; c < col1; ++c) im.at(r, c) = v;
 }
-// World point → (row, col) of an H-row image with lower-left origin (DESIGN §4).
+// World point → (row, col) of an H-row image with lower-left origin (docs/DESIGN.md §4).
 Eigen::Vector2i PixelOf(const Image<uint8_t>& im, const Eigen::Vector2d& p) {
   const int col = static_cast<int>(std::floor(p.x() / kRes));
   const int iy = static_cast<int>(std::floor(p.y() / kRes));

@@ -1,4 +1,4 @@
-// Wall samples from the octree (seed §5.3.1, §5.3.3): a hand-made wall with a shelf in front
+// Wall samples from the octree (§5.3.1, §5.3.3): a hand-made wall with a shelf in front
 // and two doorways (no carving), then a real carved preset against gt/building.json.
 #include "services/floorplan/octree_wall_samples.h"
 

@@ -1,4 +1,4 @@
-// Tests of the wall samples from a point cloud (seed §3.1.1): each rule on small clouds made here
+// Tests of the wall samples from a point cloud (§3.1.1): each rule on small clouds made here
 // whose neighbourhoods are known exactly (d_s grid, |N_g| ≥ 50, vertical support ≥ H = 2 m, the
 // 16-bin height histogram, the PCA normal's confidence ≥ 0.15 and its orientation, the median
 // inside the cell), then the whole route on the simulator's `room` and `office` presets: the

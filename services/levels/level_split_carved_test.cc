@@ -1,4 +1,4 @@
-// Levels of a real carved octree (DESIGN §6 stages 1–3): the office2 preset (two levels) is
+// Levels of a real carved octree (docs/DESIGN.md §6 stages 1–3): the office2 preset (two levels) is
 // simulated and carved in process, its boundary faces are found chunk by chunk
 // (ChunkBoundaryFaces over 27-tile neighbourhoods), fitted into planar regions (§4.2.4) and
 // split into levels (§5.2); the result is checked against gt/building.json.

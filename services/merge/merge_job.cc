@@ -52,8 +52,8 @@ ChunkProgressFn StageProgress(const MergeProgressCallback& progress, const char*
 }
 
 
-// The recorded system path of the job's scan (DESIGN §3 /path): the scanner positions of the
-// floor plans (§3.3.1), 24 bytes per pose; the poses' other fields are not read.
+// The recorded system path of the job's scan (docs/DESIGN.md §3 /path): the scanner positions of
+// the floor plans (§3.3.1), 24 bytes per pose; the poses' other fields are not read.
 absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string& scan_path) {
   ScanReader::OpenOptions open;
   open.path_rows = ScanReader::PathRows::kNone;
@@ -62,7 +62,7 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string
   return (*reader)->PathPositions();
 }
 
-// Floor plans per level (DESIGN §6 stages 4–5; seed §5.3, §3.3) ➜ level_<k>/floorplan.geojson,
+// Floor plans per level (docs/DESIGN.md §6 stages 4–5; §5.3, §3.3) ➜ level_<k>/floorplan.geojson,
 // floorplan.svg, extruded.ply. A level whose plan cannot be made is not fatal: the other outputs
 // stand and job.json says why under "warnings".
 absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
@@ -290,7 +290,7 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
   return absl::OkStatus();
 }
 
-// DESIGN §6 stages 6–8 (seed §5.5, §5.6): the tiles segmented against the extruded plans into
+// docs/DESIGN.md §6 stages 6–8 (§5.5, §5.6): the tiles segmented against the extruded plans into
 // building and object tiles (in <out>/.segment, removed afterwards), the building tiles' faces,
 // regions and planar mesh, the object tiles' dense mesh split into objects, and combined.ply.
 absl::StatusOr<SegmentStageResult> SegmentStage(

@@ -86,8 +86,8 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
   EXPECT_NE(s->warnings[1].find("segmentation: no floor plan"), std::string::npos)
       << s->warnings[1];
 
-  // levels.json (DESIGN §7): the floor and ceiling are the isosurfaces of Fig 4.9, between the
-  // shell's and the room's leaf centres: p 0.1 → 0.9 crosses 0.5 halfway, on the leaf border.
+  // levels.json (docs/DESIGN.md §7): the floor and ceiling are the isosurfaces of Fig 4.9, between
+  // the shell's and the room's leaf centres: p 0.1 → 0.9 crosses 0.5 halfway, on the leaf border.
   const nlohmann::json levels = ReadJson(options.output_dir + "/levels.json");
   ASSERT_EQ(levels.size(), 1u);
   EXPECT_EQ(levels[0]["index"], 0);

@@ -1,4 +1,4 @@
-// Issue 6's evaluation on simulated buildings (seed §5.5, §5.6): a preset carved in this process
+// Issue 6's evaluation on simulated buildings (§5.5, §5.6): a preset carved in this process
 // and merged with its scan's path, so the floor plans and the segmentation run as in a job; the
 // objects of job.json are compared with the simulator's objects (gt/building.json), the
 // building mesh with the true walls (gt/surfaces.ply), and the meshes inside the rooms the walk

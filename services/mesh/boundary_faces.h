@@ -1,4 +1,4 @@
-// Boundary faces of the merged octree (seed §4.3.2, §4.3.3, Fig 4.9; DESIGN §6 stage 1): the
+// Boundary faces of the merged octree (§4.3.2, §4.3.3, Fig 4.9; docs/DESIGN.md §6 stage 1): the
 // faces between an interior leaf (p > 0.5) and an exterior leaf (p ≤ 0.5, or unobserved) that
 // abut, of any sizes, across chunk borders.
 //

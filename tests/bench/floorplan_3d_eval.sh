@@ -24,7 +24,7 @@
 #   --min-f1 F     as a test: exit 1 unless every map run has room F1 >= F
 #   --levels N     as a test: exit 1 unless every map run has N levels in levels.json
 # Environment: CARVEMAP, FLOORPLAN_SCORE (binaries), MAPS (floor map folder), NICE (default 15).
-# Build first: /work/tools/nb carvemap floorplan_score (or scripts/build.sh).
+# Build first: scripts/build.sh carvemap floorplan_score.
 set -euo pipefail
 
 here=$(cd "$(dirname "$0")/../.." && pwd)

@@ -5,8 +5,8 @@
 //   <fuzz build>/make_seeds tests/data tests/fuzz/corpus
 // HDF5: the structure-aware targets (scan_reader, tile_reader) get scripts (h5_script.h)
 // decompiled from files our writers wrote (ScanWriter, WriteTile) and from a "foreign" scan
-// with contiguous datasets and fixed-length strings (as h5py and others may write, DESIGN §3);
-// the *_raw targets get files: the foreign scans (10 KiB; ScanWriter's 100–200 KiB chunks
+// with contiguous datasets and fixed-length strings (as h5py and others may write, docs/DESIGN.md
+// §3); the *_raw targets get files: the foreign scans (10 KiB; ScanWriter's 100–200 KiB chunks
 // make 400 KiB files) and WriteTile's tiles.
 #include <png.h>
 
@@ -174,7 +174,8 @@ std::string BinaryPly(const std::vector<Node>& nodes, bool big) {
                       body);
 }
 
-// --- scan.h5 (DESIGN §3) with contiguous datasets -------------------------------------------
+// --- scan.h5 (docs/DESIGN.md §3) with contiguous datasets
+// -------------------------------------------
 
 Hid Contiguous(hid_t loc, const char* name, hid_t file_type, hsize_t rows, hsize_t cols) {
   const hsize_t dims[2] = {rows, cols};
