@@ -19,7 +19,7 @@
 namespace carvemap {
 
 inline constexpr char kTileFormat[] = "carvemap-tile";
-// 2 adds /leaves/points (2026-11-26); version 1 tiles still read, with no points.
+// 2 adds /leaves/points; version 1 tiles still read, with no points.
 inline constexpr int kTileVersion = 2;
 
 // One leaf of a chunk octree: a node of the chunk (depth ≤ chunk_depth) and its fused

@@ -1,4 +1,4 @@
-// The coordinator's Prometheus metrics (issue 7, docs/DESIGN.md §8 "expose counters") read over
+// The coordinator's Prometheus metrics (docs/DESIGN.md §8 "expose counters") read over
 // HTTP as Prometheus would: a real coordinator on 127.0.0.1:0 with --metrics-listen, a lease left
 // to expire by a worker that never heartbeats, then a real worker carving a whole job. The
 // counters must agree with what the job itself reports (job.json, WatchJob), and the text

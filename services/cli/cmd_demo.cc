@@ -28,7 +28,7 @@
 namespace carvemap {
 namespace {
 
-// The short summary of a finished job (issue 6): levels, rooms with areas, objects, triangle
+// The short summary of a finished job: levels, rooms with areas, objects, triangle
 // counts and time per stage, from its levels.json and job.json. A file that cannot be read is
 // skipped: the outputs list below still says where everything is.
 void PrintJobSummary(const std::string& out_dir) {

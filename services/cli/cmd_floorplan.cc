@@ -1,5 +1,5 @@
-// `carvemap floorplan --gridmap MAP.png --resolution 0.05 --path PATH.csv -o OUT`: the 2D route
-// of issue 5: a SLAM grid map used directly as wall samples (§3.1.2), the walk for the lines
+// `carvemap floorplan --gridmap MAP.png --resolution 0.05 --path PATH.csv -o OUT`: the 2D route:
+// a SLAM grid map used directly as wall samples (§3.1.2), the walk for the lines
 // of sight, then the floor plan with rooms (§3.3) and its 2.5D extrusion.
 // `carvemap floorplan --cloud SCAN.h5 -o OUT`: the point-cloud route (§3.1.1): every return of
 // the scan as a cloud, its levels from the points' height histograms (§2.5), wall samples per

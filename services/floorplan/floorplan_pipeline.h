@@ -66,7 +66,7 @@ struct LevelFloorPlan {
                                                                  int level,
                                                                  const FloorPlanOptions& options);
 
-// job.json's "rooms" entries (issue 5): one object per room {level, room, area_m2, floor_z,
+// job.json's "rooms" entries: one object per room {level, room, area_m2, floor_z,
 // ceiling_z, centroid [x, y]} in room order.
 [[nodiscard]] nlohmann::json RoomsToJson(const LevelFloorPlan& result);
 

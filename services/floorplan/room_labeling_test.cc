@@ -749,7 +749,7 @@ TEST(RoomLabelingTest, DISABLED_TimingOnALargeBuilding) {
   for (const FloorPlanRoom& room : plan->rooms) good += std::abs(room.area_m2 - 142.5) < 0.03 * 142.5;
   EXPECT_EQ(good, 2 * kRooms);
 
-  // Issue 5's speed item: floor plan + rooms + extrusion for ≥ 30 k wall samples ≤ 1 s (the
+  // The speed goal: floor plan + rooms + extrusion for ≥ 30 k wall samples ≤ 1 s (the
   // dissertation: 8.5 s for 33.6 k). The whole level as the merge makes it (floorplan_pipeline.h).
   const auto t1 = std::chrono::steady_clock::now();
   absl::StatusOr<LevelFloorPlan> level = BuildLevelFloorPlan(set, 0, FloorPlanOptions{});

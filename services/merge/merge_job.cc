@@ -159,7 +159,7 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
 }
 
 // Regions for the planar mesh only (§4.3.3): mesh_growth gives less than half the triangles
-// of the default growth on the simulated office (issue 4's ≤ 10 % of dense), but its vertical
+// of the default growth on the simulated office (the goal: ≤ 10 % of dense), but its vertical
 // regions make worse wall samples (§5.3.1), so the levels and floor plans keep the default.
 // Its bigger planes also sit a little farther from the true walls (object_segmentation_test:
 // wall cover within 5 cm 63.1 → 59.5 %; docs/BENCHMARKS.md "Dense vs planar meshes").
@@ -578,7 +578,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
 
   // §5.5–§5.6 segmentation against the floor plans, then the building's planar mesh and the
   // objects' dense meshes ➜ mesh/building.ply, mesh/objects.ply, mesh/objects/<id>.ply,
-  // mesh/combined.ply. Without floor plans the building mesh holds everything (issue 4's).
+  // mesh/combined.ply. Without floor plans the building mesh holds everything.
   t0 = Clock::now();
   uint64_t building_triangles = 0, object_count = 0;
   {

@@ -105,7 +105,7 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
   EXPECT_TRUE(CheckMesh(building->mesh).watertight()) << CheckMesh(building->mesh).ToString();
   ASSERT_EQ(building->face_values.size(), 1u);
   EXPECT_EQ(building->face_values[0].first, "region");
-  // The planar mesh is far lighter than the dense one (issue 4: ≤ 10 %).
+  // The planar mesh is far lighter than the dense one (the goal: ≤ 10 %).
   EXPECT_LE(10 * building->mesh.triangles.size(), dense->mesh.triangles.size());
   for (const Eigen::Vector3f& v : building->mesh.vertices) {
     for (int a = 0; a < 3; ++a) {

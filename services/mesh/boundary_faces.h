@@ -77,8 +77,8 @@ struct ChunkNeighbourhood {
 // simplified leaf's p is the mean over its whole volume (§4.3.2 merges the children's sums),
 // not a value at its centre. Interpolating from the centres of the big leaves that cover a
 // floor and the solid below it moved office2's floor faces up 4.4 cm on average at 6.25 cm;
-// from the finest cells, −0.2 cm (docs/BENCHMARKS.md, "Dense vs planar meshes", fourth
-// session).
+// from the finest cells, −0.2 cm (docs/BENCHMARKS.md, "Dense vs planar
+// meshes").
 // Clamped to [−limit_m, +limit_m]. Why the clamp: an unobserved or p = 0.5 exterior puts the
 // crossing exactly on the exterior cell's centre, with no evidence there; a barely interior
 // leaf (p → 0.5⁺) puts it on the interior cell's centre, where the six faces of a lone cell

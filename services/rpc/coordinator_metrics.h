@@ -1,4 +1,4 @@
-// The coordinator's Prometheus metrics (docs/DESIGN.md §8 "expose counters"; issue 7): chunks
+// The coordinator's Prometheus metrics (docs/DESIGN.md §8 "expose counters"): chunks
 // queued, leased and done, workers, rays carved and rays/s, lease expiries and lost workers,
 // refused calls, and the latency of every RPC. prometheus-cpp (Debian's prometheus-cpp-dev) keeps
 // the values; `--metrics-listen` serves them at /metrics, and `carvemap watch --metrics` shows

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The floor plan's 3D route on the real floor maps (issue 5, "Evaluation"): for each map of
+# The floor plan's 3D route on the real floor maps : for each map of
 # tests/data/floormaps, `carvemap simulate --floormap … [--furniture …] --rooms …`, then
 # `carvemap run SCAN -o OUT`, then OUT/level_0/floorplan.geojson scored against the map's
 # *_gt_segmentation.png by build/tests/bench/floorplan_score (services/floorplan/room_scoring.h:

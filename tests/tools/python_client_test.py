@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""An independent client of the job API (issue 7): Python, Debian's python3-grpcio, stubs
+"""An independent client of the job API: Python, Debian's python3-grpcio, stubs
 generated from proto/ at test time with python3-grpc-tools; it knows only the .proto files and
 docs/RPC.md, none of carvemap's C++.
 
