@@ -1,5 +1,5 @@
-// Binning wedges into the 2 m chunks they touch (§4.3.1, DESIGN §5). A chunk gets a wedge iff
-// HullIntersectsBox(hull, ChunkBox(chunk)); the test is monotone in the box, so every leaf the
+// Binning wedges into the 2 m chunks they touch (§4.3.1, docs/DESIGN.md §5). A chunk gets a wedge
+// iff HullIntersectsBox(hull, ChunkBox(chunk)); the test is monotone in the box, so every leaf the
 // worker finds intersecting the hull lies in a chunk that got the wedge.
 #pragma once
 

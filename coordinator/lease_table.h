@@ -1,5 +1,5 @@
-// The coordinator's chunk scheduling (DESIGN §5, §8): which chunk goes to which worker, with
-// leases that expire, retries with a bound, and a chunk committed exactly once.
+// The coordinator's chunk scheduling (docs/DESIGN.md §5, §8): which chunk goes to which worker,
+// with leases that expire, retries with a bound, and a chunk committed exactly once.
 //
 // Plain code: no RPC, no threads, no sleeping. Time comes from an injected Clock. Every change
 // is written through the JobStore before it takes effect in memory, so a coordinator that
@@ -124,8 +124,8 @@ class LeaseTable {
   // Commits the chunk of `lease_id` with `tile`. Accepted when `generation` is the chunk's
   // current generation and the chunk is not DONE, including when the lease has expired (or its
   // worker was declared lost) but the chunk has not been leased again: a carve of a chunk
-  // gives the same bytes whoever does it (DESIGN §5), so the late result is as good as a new
-  // one and saves a re-carve. Errors: NOT_FOUND (unknown lease or job not loaded),
+  // gives the same bytes whoever does it (docs/DESIGN.md §5), so the late result is as good as a
+  // new one and saves a re-carve. Errors: NOT_FOUND (unknown lease or job not loaded),
   // FAILED_PRECONDITION (already committed, stale generation, job failed), INVALID_ARGUMENT
   // (malformed lease id or generation not matching the id).
   absl::Status Complete(absl::string_view lease_id, int64_t generation, const Tile& tile);

@@ -1,5 +1,5 @@
-// Time slices of a scan: the carve's units of work (DESIGN §5, docs/RPC.md "Slices"). Any worker
-// carves a slice's rays into partial sums per chunk (worker/slice_carver.h); every chunk's
+// Time slices of a scan: the carve's units of work (docs/DESIGN.md §5, docs/RPC.md "Slices"). Any
+// worker carves a slice's rays into partial sums per chunk (worker/slice_carver.h); every chunk's
 // partial sums are then added in slice order and simplified into its tile
 // (worker/chunk_combiner.h). Eq 4.8's sums are additive over disjoint sets of rays, so this is
 // the whole scan's carve up to floating-point rounding, whatever the slice length, and the same

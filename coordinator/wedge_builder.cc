@@ -120,7 +120,7 @@ void WedgeBuilder::ComputeRays(const SensorState& s, const ScanFrame& frame,
   for (size_t i = 0; i < n; ++i) {
     const Eigen::Vector3f& p = frame.points_sensor[i];
     const float range = p.norm();
-    // NaN rows have no return (DESIGN §3); a return at the sensor has no direction.
+    // NaN rows have no return (docs/DESIGN.md §3); a return at the sensor has no direction.
     if (!p.allFinite() || !(range >= options_.min_range_m)) {
       cur_range_[i] = kNoReturn;
       ++stats_.rays_without_return;

@@ -1,5 +1,5 @@
-// Turns the frames of a scan into wedges (seed §4.2.1, §4.3.1; DESIGN §3, §5): every ray gets its
-// noise model (§4.1.1, eqs 4.1–4.6) once, and neighbouring rays are joined into wedges:
+// Turns the frames of a scan into wedges (§4.2.1, §4.3.1; docs/DESIGN.md §3, §5): every ray gets
+// its noise model (§4.1.1, eqs 4.1–4.6) once, and neighbouring rays are joined into wedges:
 //   line   — rays j, j+1 of frames i and i+1 of one sensor:
 //            rays = {(i, j), (i, j+1), (i+1, j), (i+1, j+1)}
 //   grid   — pixels of one frame: rays = {(r, c), (r, c+1), (r+1, c), (r+1, c+1)}

@@ -6,7 +6,7 @@ set -euo pipefail
 PACKAGES=(
   build-essential cmake ninja-build pkg-config
   liboctomap-dev octomap-tools libeigen3-dev libcgal-dev
-  libspectra-dev  # services/floorplan/eigencrust.cc: generalized sparse eigensolver (seed §3.2.2)
+  libspectra-dev  # services/floorplan/eigencrust.cc: generalized sparse eigensolver (§3.2.2)
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libhdf5-dev hdf5-tools libspdlog-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev

@@ -1,4 +1,4 @@
-// Setup shared by every carvemap gRPC server (DESIGN §8): the standard health service
+// Setup shared by every carvemap gRPC server (docs/DESIGN.md §8): the standard health service
 // (grpc.health.v1.Health), server reflection, and the start and stop of a service's server
 // with its optional plaintext health port. Included by the services' .cc files only (gRPC
 // headers are slow to compile; the service headers keep gRPC behind their pimpl).

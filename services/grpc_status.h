@@ -1,4 +1,4 @@
-// The one place where absl::Status and grpc::Status meet (STYLE habit 5, tensorstore's
+// The one place where absl::Status and grpc::Status meet (as tensorstore's
 // AbslStatusToGrpcStatus). Services use absl::Status inside and convert at the RPC boundary.
 #ifndef CARVEMAP_SERVICES_GRPC_STATUS_H_
 #define CARVEMAP_SERVICES_GRPC_STATUS_H_

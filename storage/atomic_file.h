@@ -1,4 +1,4 @@
-// Files that appear complete or not at all (DESIGN §5, "a failed job leaves no half-written
+// Files that appear complete or not at all (docs/DESIGN.md §5, "a failed job leaves no half-written
 // output that looks complete"): data goes to "<path>.partial", renamed into place when done.
 #pragma once
 

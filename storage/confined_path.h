@@ -1,5 +1,5 @@
-// Paths named by a client, confined to a root directory (DESIGN §8: "a token sees only its own
-// tenant's jobs and paths"). A client may name a file under its root, through symlinks that
+// Paths named by a client, confined to a root directory (docs/DESIGN.md §8: "a token sees only its
+// own tenant's jobs and paths"). A client may name a file under its root, through symlinks that
 // stay under the root; nothing it names may reach a file outside, and no answer may tell it
 // whether a file outside exists.
 //

@@ -80,7 +80,7 @@ absl::Status WriteDoublesAttr(hid_t obj, const char* name, std::span<const doubl
 bool HasAttr(hid_t obj, const char* name);
 // Fixed- or variable-length strings.
 absl::StatusOr<std::string> ReadStringAttr(hid_t obj, const char* name);
-// Integer attributes only (a float "version" is an error, DESIGN §3).
+// Integer attributes only (a float "version" is an error, docs/DESIGN.md §3).
 absl::StatusOr<int64_t> ReadIntAttr(hid_t obj, const char* name);
 // Any numeric attribute with exactly `n` values (scalar when n == 1).
 absl::StatusOr<std::vector<double>> ReadDoublesAttr(hid_t obj, const char* name, size_t n);

@@ -69,7 +69,7 @@ CREATE INDEX chunks_by_state ON chunks (job_id, state);
 INSERT INTO schema_version (version) VALUES (1);
 )sql";
 
-// Version 2 (tenants, DESIGN §8): every job has a tenant, and the folder of its files.
+// Version 2 (tenants, docs/DESIGN.md §8): every job has a tenant, and the folder of its files.
 // Jobs from before tenants existed belong to the default tenant and keep their files at the
 // roots (tenant_dir '').
 constexpr char kMigrateV1ToV2[] = R"sql(

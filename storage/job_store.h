@@ -1,5 +1,6 @@
 // The job store: jobs and their chunk states in an embedded SQLite database, so a restarted
-// coordinator resumes where it stopped (DESIGN §8). Schema and durability: docs/JOB_STORE.md.
+// coordinator resumes where it stopped (docs/DESIGN.md §8). Schema and durability:
+// docs/JOB_STORE.md.
 //
 // Plain structs in, plain structs out; every method returns absl::Status(Or). The store does
 // not read the clock: callers pass times (UNIX epoch milliseconds), so tests control them.
@@ -120,7 +121,7 @@ struct ChunkRecord {
 };
 
 // One conditional chunk write: applied only if the stored generation equals
-// `expected_generation` (compare-and-set, STYLE habit 12).
+// `expected_generation` (compare-and-set).
 struct ChunkUpdate {
   ChunkRecord chunk;
   int64_t expected_generation = 0;

@@ -1,4 +1,4 @@
-// A walk as a text file (issue 5: `carvemap floorplan --path PATH.csv`): one scanner position
+// A walk as a text file (`carvemap floorplan --path PATH.csv`): one scanner position
 // per line, "x,y" or "x y" in metres (more columns, e.g. z or time, are ignored). Blank lines
 // and lines starting with '#' are skipped; a first line that is not numbers is a header.
 #pragma once

@@ -1,4 +1,4 @@
-// Triangle meshes as binary little-endian PLY (DESIGN §7): `vertex` float x y z and
+// Triangle meshes as binary little-endian PLY (docs/DESIGN.md §7): `vertex` float x y z and
 // `face` list uchar int vertex_indices, optionally one extra int property per face.
 #pragma once
 
@@ -34,7 +34,7 @@ struct PlyMesh {
   std::vector<std::pair<std::string, std::vector<int>>> face_values;  // one value per triangle
 };
 
-// Reads binary little-endian PLY as WritePly writes it and as DESIGN §7 specifies: vertex
+// Reads binary little-endian PLY as WritePly writes it and as docs/DESIGN.md §7 specifies: vertex
 // properties of which the first three are float x y z (more scalar properties are skipped),
 // faces as a `list uchar int` (polygons are fanned into triangles) followed by scalar
 // properties, of which the int/uint/short/ushort/char/uchar ones are returned. Errors name the

@@ -18,7 +18,7 @@ struct Image {
 };
 
 // Any PNG (gray, gray+alpha, RGB, RGBA, palette, 1–16 bit) converted to 8-bit gray, as the
-// floor maps need (../shared/data/SOURCES.md).
+// floor maps need (tests/data/SOURCES.md).
 absl::StatusOr<Image<uint8_t>> ReadPngGray8(const std::string& path);
 // A 16-bit single-channel PNG (depth images); raw values, no gamma conversion.
 absl::StatusOr<Image<uint16_t>> ReadPngGray16(const std::string& path);

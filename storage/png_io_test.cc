@@ -17,7 +17,7 @@ namespace {
 
 using ::testing::HasSubstr;
 
-const std::string kData = std::string(CARVEMAP_SHARED_DIR) + "/data";
+const std::string kData = std::string(CARVEMAP_TEST_DATA_DIR);
 
 std::string ReadAll(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

@@ -1,4 +1,4 @@
-// Round trips through ScanWriter and ScanReader (DESIGN §3), streaming order and block
+// Round trips through ScanWriter and ScanReader (docs/DESIGN.md §3), streaming order and block
 // boundaries, pose interpolation, the .partial protocol and byte-identical output.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>

@@ -1,5 +1,5 @@
-// Reads scan.h5 (carvemap-scan v1, DESIGN §3). Open() checks the structure (format, version,
-// datasets, attributes, dtypes); Validate() also checks every row. Frames stream in time
+// Reads scan.h5 (carvemap-scan v1, docs/DESIGN.md §3). Open() checks the structure (format,
+// version, datasets, attributes, dtypes); Validate() also checks every row. Frames stream in time
 // order across sensors with bounded memory: /points is read in blocks, never whole.
 //
 // Thread safety: Debian's libhdf5 is built without thread-safety, so even one reader per thread
@@ -51,7 +51,7 @@ class ScanReader {
   ScanReader(const ScanReader&) = delete;
   ScanReader& operator=(const ScanReader&) = delete;
 
-  // Every check of DESIGN §3 on every row: finite poses, ascending time, unit quaternions,
+  // Every check of docs/DESIGN.md §3 on every row: finite poses, ascending time, unit quaternions,
   // covariances, frame ranges inside /points, grid frame sizes, frames within the path's time
   // span, point rows finite or all-NaN. The first error names file, dataset and row.
   absl::Status Validate();

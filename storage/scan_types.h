@@ -1,4 +1,4 @@
-// Plain records of the carvemap-scan format (../shared/DESIGN.md §3), as read and written.
+// Plain records of the carvemap-scan format (docs/DESIGN.md §3), as read and written.
 #pragma once
 
 #include <array>

@@ -111,7 +111,7 @@ absl::Status ValidateSensorInfo(const SensorInfo& info) {
 absl::Status WriteSensorAttrs(hid_t group, const SensorInfo& info) {
   std::array<double, 9> r;
   for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) r[3 * i + j] = info.R_s2c(i, j);  // row-major, DESIGN §3
+    for (int j = 0; j < 3; ++j) r[3 * i + j] = info.R_s2c(i, j);  // row-major, docs/DESIGN.md §3
   }
   const std::array<double, 3> t = {info.T_s2c.x(), info.T_s2c.y(), info.T_s2c.z()};
   absl::Status s = h5::WriteStringAttr(group, "kind", std::string(SensorKindName(info.kind)));

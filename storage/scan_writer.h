@@ -1,4 +1,4 @@
-// Writes scan.h5 (carvemap-scan v1, DESIGN §3) as a stream: path, sensors and frames are
+// Writes scan.h5 (carvemap-scan v1, docs/DESIGN.md §3) as a stream: path, sensors and frames are
 // appended in any amount; memory stays bounded by an internal buffer. Equal content gives
 // byte-identical files (no HDF5 time stamps).
 //

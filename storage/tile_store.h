@@ -1,5 +1,5 @@
-// Tiles (DESIGN §5): one HDF5 file per carved 2 m chunk holding the leaves of its simplified
-// octree (§4.3.2) as columns. Layout: storage/TILE_FORMAT.md (format "carvemap-tile",
+// Tiles (docs/DESIGN.md §5): one HDF5 file per carved 2 m chunk holding the leaves of its
+// simplified octree (§4.3.2) as columns. Layout: storage/TILE_FORMAT.md (format "carvemap-tile",
 // version 2). Equal TileData gives byte-identical files, so a retried carve task is harmless.
 //
 // Thread safety: Debian 12's libhdf5 is built without --enable-threadsafe. WriteTile/ReadTile
@@ -19,7 +19,7 @@
 namespace carvemap {
 
 inline constexpr char kTileFormat[] = "carvemap-tile";
-// 2 adds /leaves/points (2026-11-26); version 1 tiles still read, with no points.
+// 2 adds /leaves/points; version 1 tiles still read, with no points.
 inline constexpr int kTileVersion = 2;
 
 // One leaf of a chunk octree: a node of the chunk (depth ≤ chunk_depth) and its fused

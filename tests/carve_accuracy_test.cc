@@ -1,4 +1,4 @@
-// The carving acceptance test (issue 3): a simulated `office` is carved through the real
+// The carving acceptance test: a simulated `office` is carved through the real
 // pipeline (time slices ➜ partial sums ➜ combined tiles, worker/scan_carver.h) and the tiles
 // are compared with the exact truth solids of the building (MakePresetBuilding("office", 1)).
 //
@@ -371,7 +371,7 @@ SurfaceScore ScoreSurface(const CarvedMap& map, const TruthSolids& truth, const 
 
 constexpr double kDefaultWalkS = 60;
 
-// The issue's configuration (noise on: drift, jitter, range noise) and, to tell the carver's
+// The goal's configuration (noise on: drift, jitter, range noise) and, to tell the carver's
 // error from the localization's, the same walk with an exact /path (drift off; clock jitter and
 // range noise still on). The map is built in the frame of the recorded (drifted) path while
 // the truth is in the true frame, so drift alone displaces surfaces by up to ~10 cm.
@@ -480,18 +480,18 @@ void CheckOfficeAgainstTruth(bool drift, bool via_harness = false) {
 
 TEST(CarveAccuracyTest, OfficeAgainstTruthExactPath) { CheckOfficeAgainstTruth(false); }
 
-// The issue's "end to end through the local two-worker harness": the same scan and scores, the
+// End to end through the local two-worker harness: the same scan and scores, the
 // tiles made by separate coordinator and worker processes talking gRPC.
 TEST(CarveAccuracyTest, OfficeThroughLocalHarnessExactPath) {
   CheckOfficeAgainstTruth(false, /*via_harness=*/true);
 }
 
-// The issue's own configuration (~10 cm localization drift). KNOWN TO FAIL, and it cannot
+// The goal's own configuration (~10 cm localization drift). KNOWN TO FAIL, and it cannot
 // pass: disabled rather than weakened. It measures 86.4 % labels / 69.4 % surface against the
 // required 97 % / 95 %. The map lives in the drifted frame: drift alone puts 69 % of this walk's
 // returns more than a voxel (6.25 cm) from where they truly are (median 8.8 cm;
 // tests/tools/drift_displacement.py, docs/BENCHMARKS.md), and the reported drift covariance
-// (eq 4.1) widens every ray's Gaussians. Issue 3 is blocked on restating this goal.
+// (eq 4.1) widens every ray's Gaussians. The goal needs restating for a drifting path.
 // Run it with --gtest_also_run_disabled_tests.
 TEST(CarveAccuracyTest, DISABLED_OfficeAgainstTruthWithDrift) { CheckOfficeAgainstTruth(true); }
 

@@ -1,4 +1,4 @@
-// Cross-service test (STYLE habit 13): a real coordinator, a real worker and a real merge
+// Cross-service test: a real coordinator, a real worker and a real merge
 // service on 127.0.0.1:0 in this process, talked to over gRPC as a client would. The process-level behaviour (`carvemap
 // run`, a SIGKILLed worker, bad jobs) is tests/tools/distributed_test.sh.
 #include <grpcpp/grpcpp.h>

@@ -1,5 +1,5 @@
-// The coordinator's Prometheus metrics (issue 7, DESIGN §8 "expose counters") read over HTTP
-// as Prometheus would: a real coordinator on 127.0.0.1:0 with --metrics-listen, a lease left
+// The coordinator's Prometheus metrics (docs/DESIGN.md §8 "expose counters") read over
+// HTTP as Prometheus would: a real coordinator on 127.0.0.1:0 with --metrics-listen, a lease left
 // to expire by a worker that never heartbeats, then a real worker carving a whole job. The
 // counters must agree with what the job itself reports (job.json, WatchJob), and the text
 // must name no job and no tenant.

@@ -1,4 +1,4 @@
-// Security of the public job API and the internal carve-task API (DESIGN §8, issue 7): a
+// Security of the public job API and the internal carve-task API (docs/DESIGN.md §8): a
 // real coordinator on 127.0.0.1:0 with bearer tokens for two tenants and a cluster secret,
 // real workers where a job must run, talked to over gRPC as a client would. Every refusal is
 // checked with its exact status, and its message for what it must not say: another tenant's

@@ -1,5 +1,5 @@
-// A chunk's tile from its slices' partial sums (DESIGN §5): eq 4.8's sums of every slice that
-// carved into the chunk (worker/slice_carver.h) added up in slice order, the leaves no slice
+// A chunk's tile from its slices' partial sums (docs/DESIGN.md §5): eq 4.8's sums of every slice
+// that carved into the chunk (worker/slice_carver.h) added up in slice order, the leaves no slice
 // observed dropped (they held only scan points), §4.3.2's simplification, one tile. The sums
 // are the whole scan's carve of the chunk up to floating-point rounding (the order of the
 // additions follows the slices), and the same bytes whatever worker combines them.

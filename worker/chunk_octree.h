@@ -1,4 +1,4 @@
-// The probabilistic octree of one 2 m chunk (seed §4.3.1–§4.3.2, DESIGN §5): wedges are carved
+// The probabilistic octree of one 2 m chunk (§4.3.1–§4.3.2, docs/DESIGN.md §5): wedges are carved
 // into its finest leaves (eq 4.8), then the tree is simplified bottom-up (§4.3.2) and its
 // leaves go to a tile (storage/tile_store.h).
 //

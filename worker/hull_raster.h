@@ -1,4 +1,4 @@
-// The finest leaves of one chunk that a wedge hull touches (seed §4.3.2: "the locations ... that
+// The finest leaves of one chunk that a wedge hull touches (§4.3.2: "the locations ... that
 // are intersected by at least one scan wedge"), listed as runs of leaves along one axis.
 //
 // A leaf is touched iff HullIntersectsBox(hull, its box) (services/geometry/wedge_geometry.h),

@@ -1,6 +1,6 @@
-// A whole scan carved into tiles in this process (DESIGN §5), as the coordinator and its workers
-// do it across processes: the scan cut into time slices (coordinator/scan_slices.h), each slice
-// carved into partial sums (worker/slice_carver.h) by a pool of threads, then every chunk's
+// A whole scan carved into tiles in this process (docs/DESIGN.md §5), as the coordinator and its
+// workers do it across processes: the scan cut into time slices (coordinator/scan_slices.h), each
+// slice carved into partial sums (worker/slice_carver.h) by a pool of threads, then every chunk's
 // sums added up in slice order and simplified into its tile (worker/chunk_combiner.h) by the
 // same pool. What `carvemap carve`, the tests and the benchmarks run; the distributed run's
 // baseline. Tiles are the same bytes whatever the thread count.

@@ -1,8 +1,8 @@
 // Carving one time slice of a scan (coordinator/scan_slices.h) into partial sums per chunk
-// (DESIGN §5): the scan's frames ➜ rays and wedges (§4.1.1, §4.3.1; coordinator/wedge_builder.h)
-// ➜ the 2 m chunks each wedge's hull touches ➜ eq 4.8 in each chunk (worker/chunk_octree.h),
-// the slice's own rays voting, its context rays only shaping their wedges. No spill: a wedge
-// is binned in memory and carved within the batch of frames it belongs to.
+// (docs/DESIGN.md §5): the scan's frames ➜ rays and wedges (§4.1.1, §4.3.1;
+// coordinator/wedge_builder.h) ➜ the 2 m chunks each wedge's hull touches ➜ eq 4.8 in each chunk
+// (worker/chunk_octree.h), the slice's own rays voting, its context rays only shaping their wedges.
+// No spill: a wedge is binned in memory and carved within the batch of frames it belongs to.
 //
 // Memory is bounded whatever the slice's length: frames are carved in batches of about
 // batch_rays own rays (a ray votes in the batch of its frame; the wedges joining two batches

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The two-worker harness (DESIGN §9) by hand: a merge service, a coordinator and two workers
+# The two-worker harness (docs/DESIGN.md §9) by hand: a merge service, a coordinator and two workers
 # on loopback, the job submitted with `carvemap submit --watch`, everything stopped at the
 # end. What `carvemap run` does in one command, spelled out as separate servers (as in a
 # cluster), including their secrets: a fresh bearer token for the job API and a cluster secret

@@ -1,4 +1,4 @@
-// A building with known truth (DESIGN §4): solids for the ray caster, the ground-truth
+// A building with known truth (docs/DESIGN.md §4): solids for the ray caster, the ground-truth
 // levels/rooms/doors/objects, and what the walk needs to plan a route. Made by the presets
 // (building_presets.h) or by extruding a 2D floor map (floormap_building.h).
 #pragma once

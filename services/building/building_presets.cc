@@ -15,7 +15,7 @@ namespace {
 using Eigen::AlignedBox2d;
 using Eigen::Vector2d;
 
-// Dimensions of an ordinary office building (DESIGN §4).
+// Dimensions of an ordinary office building (docs/DESIGN.md §4).
 constexpr double kWallT = 0.15;  // wall thickness, m
 constexpr double kHalfT = kWallT / 2;
 constexpr double kSlabT = 0.3;                   // floor slab thickness, m
@@ -513,7 +513,7 @@ class PresetBuilder {
       r.polygon = RoomOutline(s);
       for (const ColumnSpec& c : s.columns) {
         std::vector<Vector2d> hole = ColumnFootprint(c);
-        std::reverse(hole.begin(), hole.end());  // holes are clockwise (DESIGN §4)
+        std::reverse(hole.begin(), hole.end());  // holes are clockwise (docs/DESIGN.md §4)
         r.holes.push_back(hole);
       }
       r.floor_z = L_.levels[s.level].floor_z;

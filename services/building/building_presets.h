@@ -1,4 +1,4 @@
-// Procedural preset buildings with exact truth (DESIGN §4): "room" (one furnished room),
+// Procedural preset buildings with exact truth (docs/DESIGN.md §4): "room" (one furnished room),
 // "office" (one level, 16 rooms on a hallway, one room never entered, a window, columns, a
 // curved wall), "office2" (two levels joined by stairs, 30 rooms) and "office4" (four levels of
 // three wings, stairs between each level and the next, 180 rooms, 5,440 m² of floor: a

@@ -121,7 +121,7 @@ absl::StatusOr<Grid> ReadOccupancy(const std::string& path, const Grid* same_siz
 }
 
 // Pixel-edge corners as integers: X = column edge 0..W, Y = H − row edge (y up), so world
-// x = X·res, y = Y·res (DESIGN §4: pixel (row, col) covers x ∈ [col, col+1]·res,
+// x = X·res, y = Y·res (docs/DESIGN.md §4: pixel (row, col) covers x ∈ [col, col+1]·res,
 // y ∈ [H−1−row, H−row]·res).
 struct Corner {
   int x, y;

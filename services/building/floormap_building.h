@@ -1,5 +1,5 @@
-// A building extruded from a 2D floor map (DESIGN §4; the maps and their ground truth are
-// described in ../shared/data/SOURCES.md): occupied pixels become walls from floor to ceiling,
+// A building extruded from a 2D floor map (docs/DESIGN.md §4; the maps and their ground truth are
+// described in tests/data/SOURCES.md): occupied pixels become walls from floor to ceiling,
 // furniture drawn into the furnished map becomes 0.75 m blocks, and the ground-truth rooms are
 // traced exactly from the *_gt_segmentation.png regions.
 #pragma once

@@ -12,7 +12,7 @@
 namespace carvemap {
 namespace {
 
-const std::string kMaps = std::string(CARVEMAP_SHARED_DIR) + "/data/floormaps";
+const std::string kMaps = std::string(CARVEMAP_TEST_DATA_DIR) + "/floormaps";
 
 struct MapCase {
   std::string name;
@@ -78,7 +78,7 @@ TEST_P(FloormapTest, RoomsExactAllEnteredAndConnected) {
 
   ASSERT_EQ(b->rooms.size(), size_t(mc.rooms));
   // Areas: each room's polygon (minus holes) is exactly its pixels, and sample pixel centres
-  // (mapped per DESIGN §4) lie inside the room they belong to.
+  // (mapped per docs/DESIGN.md §4) lie inside the room they belong to.
   absl::StatusOr<Image<uint8_t>> gt = ReadPngGray8(opt.rooms_map_path);
   ASSERT_TRUE(gt.ok());
   std::vector<GtRegion> regions = GtRegions(*gt);

@@ -1,4 +1,4 @@
-// Writes a building's ground truth as gt/ files (DESIGN §4): building.json, surfaces.ply
+// Writes a building's ground truth as gt/ files (docs/DESIGN.md §4): building.json, surfaces.ply
 // (StructureMesh) and objects.ply (ObjectsMesh, with face property `int object` = object id).
 #pragma once
 

@@ -1,6 +1,6 @@
-// `carvemap carve`: the whole carving pipeline in this process (DESIGN §5): the scan cut into
-// time slices, each carved into partial sums per chunk by a pool of threads, then every chunk's
-// sums combined into its tile (worker/scan_carver.h). The baseline the distributed
+// `carvemap carve`: the whole carving pipeline in this process (docs/DESIGN.md §5): the scan cut
+// into time slices, each carved into partial sums per chunk by a pool of threads, then every
+// chunk's sums combined into its tile (worker/scan_carver.h). The baseline the distributed
 // coordinator/worker run is compared against.
 //
 // Output: OUT/tiles/c_<x>_<y>_<z>.h5. Tiles are carved into OUT/tiles.incomplete/ and that
@@ -141,10 +141,10 @@ absl::Status RunCarve(const CarveFlags& flags) {
 void RegisterCarve(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "carve",
-      "Carve a scan into a probabilistic octree in this process (DESIGN §5), by time slices "
-      "on --threads threads: OUT/tiles/ gets one HDF5 tile per 2 m chunk");
+      "Carve a scan into a probabilistic octree in this process (docs/DESIGN.md §5), by time "
+      "slices on --threads threads: OUT/tiles/ gets one HDF5 tile per 2 m chunk");
   auto flags = std::make_shared<CarveFlags>();
-  cmd->add_option("scan", flags->scan_path, "scan.h5 (DESIGN §3)")->required();
+  cmd->add_option("scan", flags->scan_path, "scan.h5 (docs/DESIGN.md §3)")->required();
   cmd->add_option("-o,--output", flags->output_dir, "Output directory (created if missing)")
       ->required();
   cmd->add_option("--resolution", flags->resolution_m,

@@ -114,7 +114,7 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
   submit->add_option("--resolution", flags->submit.resolution_m,
                      "Leaf size in metres: 0.0625, 0.03125, 0.015625 or 0.0078125 (0: default)");
   submit->add_option("--object-resolution", flags->submit.object_resolution_m,
-                     "Leaf size the object chunks are carved again at (seed §5.6.1); 0: half "
+                     "Leaf size the object chunks are carved again at (§5.6.1); 0: half "
                      "of --resolution, equal to it: no re-carving");
   submit->add_option("--floorplan", flags->submit.floorplan_method,
                      "Floor-plan method of the merge: rooms (§3.3 room partitioning, the "
@@ -122,7 +122,7 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
       ->check(CLI::IsMember({"rooms", "eigencrust"}));
   submit->add_flag("--points", flags->submit.trimmed_points,
                    "The merge also writes points.ply: the scan's points without those farther "
-                   "than 1 m from the floor plans (seed §5.5)");
+                   "than 1 m from the floor plans (§5.5)");
   submit->add_option("--min-object-volume", flags->submit.min_object_volume_m3,
                      "Objects with less volume than this, m³, are dropped (§5.6); 0: the "
                      "default, 0.005")

@@ -28,7 +28,7 @@
 namespace carvemap {
 namespace {
 
-// The short summary of a finished job (issue 6): levels, rooms with areas, objects, triangle
+// The short summary of a finished job: levels, rooms with areas, objects, triangle
 // counts and time per stage, from its levels.json and job.json. A file that cannot be read is
 // skipped: the outputs list below still says where everything is.
 void PrintJobSummary(const std::string& out_dir) {
@@ -140,8 +140,9 @@ absl::Status RunDemo(const DemoFlags& flags) {
   PrintJobSummary(out_dir);
   std::printf(
       "\noutputs in %s:\n"
-      "  input/scan.h5           the scans and the localizer's (drifted) path, DESIGN §3\n"
-      "  input/gt/               the truth: building.json, surfaces.ply, objects.ply (DESIGN §4)\n"
+      "  input/scan.h5           the scans and the localizer's (drifted) path, docs/DESIGN.md §3\n"
+      "  input/gt/               the truth: building.json, surfaces.ply, objects.ply\n"
+      "                          (docs/DESIGN.md §4)\n"
       "  octree.bt               the carved occupancy octree (OctoMap binary; opens in octovis)\n"
       "  levels.json             floor and ceiling heights of each level (§5.2)\n"
       "  level_<k>/              topdown.png open-height map (§5.4); floorplan.geojson and .svg,\n"

@@ -1,11 +1,11 @@
-// `carvemap floorplan --gridmap MAP.png --resolution 0.05 --path PATH.csv -o OUT`: the 2D route
-// of issue 5: a SLAM grid map used directly as wall samples (seed §3.1.2), the walk for the lines
+// `carvemap floorplan --gridmap MAP.png --resolution 0.05 --path PATH.csv -o OUT`: the 2D route:
+// a SLAM grid map used directly as wall samples (§3.1.2), the walk for the lines
 // of sight, then the floor plan with rooms (§3.3) and its 2.5D extrusion.
 // `carvemap floorplan --cloud SCAN.h5 -o OUT`: the point-cloud route (§3.1.1): every return of
 // the scan as a cloud, its levels from the points' height histograms (§2.5), wall samples per
 // level, the scan's path for the lines of sight, a floor plan per level.
 // `--floorplan eigencrust` makes the interior by §3.2 instead (floorplan_pipeline.h).
-// Writes the same files as the merge (DESIGN §7): OUT/level_<k>/floorplan.geojson,
+// Writes the same files as the merge (docs/DESIGN.md §7): OUT/level_<k>/floorplan.geojson,
 // floorplan.svg, extruded.ply, and OUT/job.json last.
 #include <chrono>
 #include <cstdio>
@@ -232,7 +232,7 @@ void RegisterFloorplan(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "floorplan",
       "Floor plan with rooms and a 2.5D model from a 2D occupancy grid map and the walk "
-      "(seed §3.1.2, §3.3), or from a scan.h5's points (--cloud, §3.1.1): writes "
+      "(§3.1.2, §3.3), or from a scan.h5's points (--cloud, §3.1.1): writes "
       "OUT/level_<k>/floorplan.geojson, floorplan.svg, extruded.ply and OUT/job.json");
   auto f = std::make_shared<FloorplanFlags>();
   CLI::Option* gridmap =
@@ -244,8 +244,9 @@ void RegisterFloorplan(CLI::App& app, int& exit_code) {
                       "The walk: one scanner position \"x,y\" in metres per line, in time order")
           ->check(CLI::ExistingFile);
   cmd->add_option("--cloud", f->cloud,
-                  "A scan.h5 (DESIGN §3): wall samples from its points (§3.1.1), levels from "
-                  "their heights (§2.5), lines of sight from its path; instead of --gridmap/--path")
+                  "A scan.h5 (docs/DESIGN.md §3): wall samples from its points (§3.1.1), levels "
+                  "from their heights (§2.5), lines of sight from its path; instead of "
+                  "--gridmap/--path")
       ->check(CLI::ExistingFile)
       ->excludes(gridmap)
       ->excludes(path);

@@ -1,5 +1,5 @@
-// `carvemap import graph|tum|ply INPUT -o scan.h5`: turns other inputs into scan.h5 (DESIGN §3)
-// through the importers in storage/import/, then re-opens and validates what it wrote.
+// `carvemap import graph|tum|ply INPUT -o scan.h5`: turns other inputs into scan.h5 (docs/DESIGN.md
+// §3) through the importers in storage/import/, then re-opens and validates what it wrote.
 #include <iomanip>
 #include <iostream>
 #include <memory>

@@ -1,5 +1,5 @@
-// `carvemap merge TILES_DIR -o OUT [--scan SCAN.h5] [--resolution R]`: the merge (DESIGN §6, §7)
-// of a tiles directory: OUT/octree.bt, OUT/levels.json, OUT/level_<k>/topdown.png (+
+// `carvemap merge TILES_DIR -o OUT [--scan SCAN.h5] [--resolution R]`: the merge (docs/DESIGN.md
+// §6, §7) of a tiles directory: OUT/octree.bt, OUT/levels.json, OUT/level_<k>/topdown.png (+
 // topdown.json), with --scan OUT/level_<k>/floorplan.geojson, floorplan.svg and extruded.ply,
 // OUT/mesh/dense.ply, OUT/mesh/building.ply and OUT/job.json.
 #include <iomanip>

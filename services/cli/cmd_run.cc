@@ -1,6 +1,6 @@
-// `carvemap run SCAN.h5 -o OUT`: the whole distributed job on one machine (DESIGN §9). Starts
-// the merge service, the coordinator and N workers as separate processes on loopback, submits
-// the job over RPC, shows its progress, and stops them.
+// `carvemap run SCAN.h5 -o OUT`: the whole distributed job on one machine (docs/DESIGN.md §9).
+// Starts the merge service, the coordinator and N workers as separate processes on loopback,
+// submits the job over RPC, shows its progress, and stops them.
 //
 // OUT/ gets the outputs (tiles/, octree.bt, level_0/, job.json); OUT/.carvemap/ holds the job
 // store, the partial sums while the job runs, the servers' logs and their pid/port files.
@@ -297,7 +297,7 @@ void RegisterRun(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--object-resolution", flags->object_resolution_m,
                   "Leaf size the chunks holding furniture are carved again at before the "
-                  "objects are meshed (seed §5.6.1); 0 = half of --resolution (at least "
+                  "objects are meshed (§5.6.1); 0 = half of --resolution (at least "
                   "0.0078125), equal to --resolution = no re-carving")
       ->capture_default_str();
   cmd->add_option("--floorplan", flags->floorplan_method,

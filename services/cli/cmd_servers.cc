@@ -1,5 +1,5 @@
-// `carvemap coordinator`, `carvemap worker` and `carvemap merger`: the servers of DESIGN §8 on
-// their own. Thin shells: flags ➜ Spec ➜ Start ➜ Wait (services/rpc/).
+// `carvemap coordinator`, `carvemap worker` and `carvemap merger`: the servers of docs/DESIGN.md §8
+// on their own. Thin shells: flags ➜ Spec ➜ Start ➜ Wait (services/rpc/).
 #include <sys/resource.h>
 
 #include <atomic>
@@ -191,8 +191,9 @@ absl::Status RunCoordinator(CoordinatorFlags flags, LogFormat log_format) {
         } else {
           if (flags.merge.addresses.empty()) {
             return absl::InvalidArgumentError(
-                "no merge service: give --merge-server HOST:PORT (a `carvemap merger`; DESIGN §8 "
-                "runs the merge as its own service), or --no-merge for tiles only");
+                "no merge service: give --merge-server HOST:PORT (a `carvemap merger`; "
+                "docs/DESIGN.md §8 runs the merge as its own service), or --no-merge for tiles "
+                "only");
           }
           flags.merge.security.bearer = flags.spec.cluster_secret;
           absl::StatusOr<MergeFunction> merge = RemoteMerge(flags.merge);
@@ -241,7 +242,7 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_flag("--keep-partials", s.keep_partials,
                 "Keep the slices' partial sums after a job ends (<work dir>/<job>/partials)");
-  // The merge service (DESIGN §8; docs/RPC.md "MergeService").
+  // The merge service (docs/DESIGN.md §8; docs/RPC.md "MergeService").
   MergeClientSpec& m = flags->merge;
   cmd->add_option("--merge-server", m.addresses,
                   "host:port of a merge service (`carvemap merger`); repeat or separate with "

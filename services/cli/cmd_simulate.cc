@@ -1,5 +1,5 @@
 // `carvemap simulate`: a backpack walks through a known building (a preset or a 2D floor map)
-// and records line scans with realistic noise (DESIGN §4): writes OUT/scan.h5 and OUT/gt/.
+// and records line scans with realistic noise (docs/DESIGN.md §4): writes OUT/scan.h5 and OUT/gt/.
 #include <chrono>
 #include <cstdio>
 #include <iostream>
@@ -72,7 +72,7 @@ absl::Status RunSimulate(SimulateFlags& flags) {
 void RegisterSimulate(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "simulate",
-      "Simulate a backpack scanning a known building: writes OUT/scan.h5 (DESIGN §3) and "
+      "Simulate a backpack scanning a known building: writes OUT/scan.h5 (docs/DESIGN.md §3) and "
       "OUT/gt/ (building.json, surfaces.ply, objects.ply)");
   auto flags = std::make_shared<SimulateFlags>();
   SimulateOptions& o = flags->options;

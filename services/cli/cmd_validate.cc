@@ -1,4 +1,4 @@
-// `carvemap validate SCAN.h5`: checks a scan.h5 against DESIGN §3 (structure and every row)
+// `carvemap validate SCAN.h5`: checks a scan.h5 against docs/DESIGN.md §3 (structure and every row)
 // and prints a short summary.
 #include <CLI/CLI.hpp>
 #include <iomanip>
@@ -68,7 +68,7 @@ absl::Status RunValidate(const std::string& scan_path) {
 
 void RegisterValidate(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
-      "validate", "Check a scan.h5 (DESIGN §3: structure and every row) and summarize it");
+      "validate", "Check a scan.h5 (docs/DESIGN.md §3: structure and every row) and summarize it");
   auto scan_path = std::make_shared<std::string>();
   cmd->add_option("scan", *scan_path, "The scan.h5 file")->required();
   cmd->callback(

@@ -172,9 +172,9 @@ bool Splits(const Eigen::VectorXd& x) {
 }
 
 // L x = λ D x for one connected graph of m nodes (edges with local indices): the eigenvector of
-// the smallest eigenvalue that splits the nodes (the seed's "smallest non-zero eigenvalue": for
-// a graph of positive edges only, λ = 0 belongs to the constant vector). Dense for small graphs,
-// Spectra's shift-invert generalized solver otherwise.
+// the smallest eigenvalue that splits the nodes (the dissertation's "smallest non-zero eigenvalue":
+// for a graph of positive edges only, λ = 0 belongs to the constant vector). Dense for small
+// graphs, Spectra's shift-invert generalized solver otherwise.
 absl::StatusOr<std::pair<Eigen::VectorXd, double>> SmallestSplittingEigenvector(
     int m, const std::vector<Edge>& edges) {
   std::vector<double> diag(m, 0.0);

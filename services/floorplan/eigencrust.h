@@ -1,4 +1,4 @@
-// The Eigencrust floor plan's labelling (seed §3.2.1–§3.2.3; DESIGN §6 stage 5, the second
+// The Eigencrust floor plan's labelling (§3.2.1–§3.2.3; docs/DESIGN.md §6 stage 5, the second
 // floor-plan method): which triangles of the wall samples' Delaunay triangulation are inside the
 // building.
 //
@@ -34,9 +34,9 @@
 // circumcentre to the other's: the Voronoi edge a wall sample's long cell stretches along). A
 // zero normal (a grid-map sample on a one-cell wall) gives sin θ = 0.
 //
-// Where the seed is silent: pole-graph components that touch neither super-node are not solved
-// (their sign would be arbitrary); their poles are labelled with the non-pole graph. Parallel
-// edges made by contracting nodes add up. A triangle that is known both inside and outside
+// Where the dissertation is silent: pole-graph components that touch neither super-node are not
+// solved (their sign would be arbitrary); their poles are labelled with the non-pole graph.
+// Parallel edges made by contracting nodes add up. A triangle that is known both inside and outside
 // (a pose in a corner triangle) is outside.
 //
 // Plain functions over plain data: no files, no logging. Thread-compatible.

@@ -1,4 +1,4 @@
-// The Eigencrust floor plan (seed §3.2; DESIGN §6 stage 5's second method), as a FloorPlan with
+// The Eigencrust floor plan (§3.2; docs/DESIGN.md §6 stage 5's second method), as a FloorPlan with
 // rooms so that it gives the same outputs as the room-partitioning method (§3.3):
 //   1. §3.2.1 smoothing (SmoothWallSamples, when on);
 //   2. §3.2.2–§3.2.3 the Eigencrust labelling (LabelEigencrust);

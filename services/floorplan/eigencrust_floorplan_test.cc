@@ -1,5 +1,5 @@
 // The Eigencrust floor plan through the whole pipeline (BuildLevelFloorPlan with
-// FloorPlanMethod::kEigencrust: seed §3.2 + §3.3.2's rooms + §3.3.4's extrusion) on synthetic
+// FloorPlanMethod::kEigencrust: §3.2 + §3.3.2's rooms + §3.3.4's extrusion) on synthetic
 // wall samples (synthetic_walls_test_util.h).
 #include "services/floorplan/eigencrust_floorplan.h"
 

@@ -1,4 +1,4 @@
-// Tests of the Eigencrust labelling (seed §3.2.1–§3.2.3) on synthetic wall samples
+// Tests of the Eigencrust labelling (§3.2.1–§3.2.3) on synthetic wall samples
 // (synthetic_walls_test_util.h).
 #include "services/floorplan/eigencrust.h"
 

@@ -1,4 +1,4 @@
-// 2.5D extrusion of a floor plan (seed §3.3.4, §5.3.3; DESIGN §7 level_<k>/extruded.ply): each
+// 2.5D extrusion of a floor plan (§3.3.4, §5.3.3; docs/DESIGN.md §7 level_<k>/extruded.ply): each
 // room gets one floor and one ceiling height, and the plan becomes the closed solid of the
 // interior.
 //

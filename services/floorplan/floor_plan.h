@@ -1,4 +1,4 @@
-// A floor plan of one level (seed §3.3; DESIGN §6 stage 5): the interior triangles of the 2D
+// A floor plan of one level (§3.3; docs/DESIGN.md §6 stage 5): the interior triangles of the 2D
 // Delaunay triangulation of the wall samples, each labelled with its room. Made by
 // room_labeling.h (§3.3.1–§3.3.2), simplified by floorplan_simplify.h (§3.3.3), turned into room
 // polygons and walls by room_polygons.h, extruded by extrusion.h (§3.3.4).

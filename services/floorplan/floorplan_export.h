@@ -1,6 +1,6 @@
-// Floor-plan outputs of DESIGN §7: level_<k>/floorplan.geojson, floorplan.svg and extruded.ply.
-// The builders are pure; the Write* functions are the file writers (each file is written through
-// storage/atomic_file.h, so a crash leaves no half file).
+// Floor-plan outputs of docs/DESIGN.md §7: level_<k>/floorplan.geojson, floorplan.svg and
+// extruded.ply. The builders are pure; the Write* functions are the file writers (each file is
+// written through storage/atomic_file.h, so a crash leaves no half file).
 #pragma once
 
 #include <nlohmann/json.hpp>
@@ -32,7 +32,7 @@ namespace carvemap {
 [[nodiscard]] absl::Status WriteFloorPlanFiles(const std::string& dir, const FloorPlan& plan,
                                                const FloorPlanOutline& outline);
 
-// Writes the extruded model (ExtrudeFloorPlan) as DESIGN §7 PLY.
+// Writes the extruded model (ExtrudeFloorPlan) as docs/DESIGN.md §7 PLY.
 [[nodiscard]] absl::Status WriteExtrudedPly(const std::string& path, const TriangleMesh& mesh);
 
 }  // namespace carvemap

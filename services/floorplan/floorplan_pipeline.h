@@ -1,6 +1,6 @@
-// One level's floor plan from its wall samples (DESIGN §6 stage 5), the stages in the seed's
-// order: interior and rooms (§3.3.1–§3.3.2, room_labeling.h), one floor and ceiling height per
-// room (§3.3.4, extrusion.h), wall simplification that keeps doorways (§3.3.3,
+// One level's floor plan from its wall samples (docs/DESIGN.md §6 stage 5), the stages in the
+// dissertation's order: interior and rooms (§3.3.1–§3.3.2, room_labeling.h), one floor and ceiling
+// height per room (§3.3.4, extrusion.h), wall simplification that keeps doorways (§3.3.3,
 // floorplan_simplify.h), room polygons and walls (room_polygons.h), and the 2.5D extrusion
 // (§3.3.4). Shared by the merge (octree wall samples, §5.3) and `carvemap floorplan` (grid map
 // wall samples, §3.1.2; point clouds, §3.1.1), so every route gives the same outputs.
@@ -66,7 +66,7 @@ struct LevelFloorPlan {
                                                                  int level,
                                                                  const FloorPlanOptions& options);
 
-// job.json's "rooms" entries (issue 5): one object per room {level, room, area_m2, floor_z,
+// job.json's "rooms" entries: one object per room {level, room, area_m2, floor_z,
 // ceiling_z, centroid [x, y]} in room order.
 [[nodiscard]] nlohmann::json RoomsToJson(const LevelFloorPlan& result);
 

@@ -1,4 +1,4 @@
-// Simplification of floor-plan walls (seed §3.3.3, eqs 3.3–3.4): a 2D quadric-error variant that
+// Simplification of floor-plan walls (§3.3.3, eqs 3.3–3.4): a 2D quadric-error variant that
 // removes boundary vertices (on an interior/exterior edge) by collapsing the interior triangle on
 // a boundary edge, so the room labelling of the area is kept.
 //

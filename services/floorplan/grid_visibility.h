@@ -1,4 +1,4 @@
-// Which scanner positions see which wall samples, on a 2D occupancy grid (seed §3.1, §3.3.1:
+// Which scanner positions see which wall samples, on a 2D occupancy grid (§3.1, §3.3.1:
 // "each sample is associated with the scanner pose that observed it"). Used by every wall-sample
 // source: a grid map gives the grid directly (§3.1.2); the octree gives a horizontal slice of
 // its exterior leaves (§5.3.1).
@@ -41,8 +41,8 @@ struct OccupancyGrid2D {
 };
 
 struct VisibilityOptions {
-  double max_range_m = 30.0;         // DESIGN §4: the scanners' range
-  double angle_step_deg = 0.25;      // DESIGN §4: the scanners' angular step; 360° fans
+  double max_range_m = 30.0;         // docs/DESIGN.md §4: the scanners' range
+  double angle_step_deg = 0.25;      // docs/DESIGN.md §4: the scanners' angular step; 360° fans
   // Poses closer than this (along the path) to the previous kept pose are skipped; 0 keeps all.
   double min_pose_spacing_m = 0.25;
   // A hit point further than this from every sample sees none, m. 0 = 1.5 grid cells.

@@ -1,5 +1,5 @@
-// Issue 5 evaluation, 2D route (seed §3.1.2 + §3.3): every real floor map of
-// ../shared/data/floormaps (plain and furnished) used directly as wall samples, with the walk
+// Floor-plan evaluation, 2D route (§3.1.2 + §3.3): every real floor map of
+// tests/data/floormaps (plain and furnished) used directly as wall samples, with the walk
 // the simulator plans through it, through the whole floor-plan pipeline; the rooms are scored
 // against the maps' ground-truth segmentation (SOURCES.md: room F1 at IoU > 0.5, Bormann et
 // al.'s recall and precision). The floors asserted sit a little below what the pipeline reaches
@@ -7,7 +7,7 @@
 // The same route on the simulator's preset buildings (room, office, office2), whose rooms are
 // known exactly: a grid map rasterised from the building at a height band (walls only, or walls
 // and furniture as a low 2D scanner sees them), the simulator's walk; every entered room must come
-// out as one room, and the unentered one not at all (issue 5: room count exact).
+// out as one room, and the unentered one not at all (the room count exact).
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -30,7 +30,7 @@
 namespace carvemap {
 namespace {
 
-const std::string kMaps = std::string(CARVEMAP_SHARED_DIR) + "/data/floormaps";
+const std::string kMaps = std::string(CARVEMAP_TEST_DATA_DIR) + "/floormaps";
 
 struct EvalCase {
   std::string name;
@@ -181,14 +181,14 @@ TEST(GridmapFloorplanEval, RoomsAgainstGroundTruthOnEveryRealMap) {
                    std::to_string(sum_f1[0] / n));
     RecordProperty(furnished ? "mean_f1_furnished_eigencrust" : "mean_f1_plain_eigencrust",
                    std::to_string(sum_f1[1] / n));
-    // Floors a little below the measured means (2026-11-26: F1 plain 0.935, furnished 0.927;
-    // Bormann recall 0.986 / 0.944, precision 0.977 / 0.985; issue 5's goal: F1 ≥ 0.9
+    // Floors a little below the measured means (F1 plain 0.935, furnished 0.927; Bormann
+    // recall 0.986 / 0.944, precision 0.977 / 0.985; docs/BENCHMARKS.md; the goal: F1 ≥ 0.9
     // furnished).
     EXPECT_GE(sum_f1[0] / n, furnished ? 0.91 : 0.92) << kind;
     EXPECT_GE(sum_br[0] / n, furnished ? 0.92 : 0.96) << kind;
     EXPECT_GE(sum_bp[0] / n, furnished ? 0.96 : 0.95) << kind;
     // Eigencrust (§3.2, rooms by §3.3.2 on its interior): floors a little below its means
-    // (2026-11-26: the same as §3.3's to three decimals, F1 0.935 / 0.927, Bormann recall
+    // (measured: the same as §3.3's to three decimals, F1 0.935 / 0.927, Bormann recall
     // 0.986 / 0.944, precision 0.977 / 0.985: the rooms come from the same partition, and
     // the interiors differ only along the walls; docs/BENCHMARKS.md "Eigencrust floor plans").
     EXPECT_GE(sum_f1[1] / n, furnished ? 0.91 : 0.92) << kind << " eigencrust";

@@ -39,7 +39,7 @@ OccupancyGrid2D GridFromImage(const Image<uint8_t>& gray, const GridMapOptions& 
   grid.width = gray.width;
   grid.height = gray.height;
   grid.cells.assign(static_cast<size_t>(gray.width) * gray.height, 0);
-  // DESIGN §4: image row 0 is the top, the grid's row 0 the bottom.
+  // docs/DESIGN.md §4: image row 0 is the top, the grid's row 0 the bottom.
   for (int iy = 0; iy < gray.height; ++iy) {
     for (int ix = 0; ix < gray.width; ++ix) {
       grid.cells[static_cast<size_t>(iy) * gray.width + ix] =

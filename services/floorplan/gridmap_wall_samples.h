@@ -1,4 +1,4 @@
-// Wall samples straight from a 2D occupancy grid map (seed §3.1.2; DESIGN §6 stage 4): a SLAM
+// Wall samples straight from a 2D occupancy grid map (§3.1.2; docs/DESIGN.md §6 stage 4): a SLAM
 // grid map already is "a set of 2D positions of walls", so every occupied cell that borders free
 // space becomes one sample at its centre, and the recorded path gives the scanner poses. A 2D map
 // has no heights, so every sample gets the same floor and ceiling (§3.1.2 takes them from the
@@ -29,8 +29,8 @@
 namespace carvemap {
 
 struct GridMapOptions {
-  double resolution_m = 0.05;  // per pixel (the floor maps' own, ../shared/data/SOURCES.md)
-  // World x, y of the image's lower-left corner (DESIGN §4: lower-left origin).
+  double resolution_m = 0.05;  // per pixel (the floor maps' own, tests/data/SOURCES.md)
+  // World x, y of the image's lower-left corner (docs/DESIGN.md §4: lower-left origin).
   double origin_x_m = 0;
   double origin_y_m = 0;
   int occupied_below = 250;  // gray < this is occupied (SOURCES.md: upstream's threshold)
@@ -39,7 +39,7 @@ struct GridMapOptions {
   double ceiling_z = 2.6;
   // Free-standing occupied components whose bounding-box diagonal is below this are clutter: no
   // samples (see the file comment). 0 keeps every occupied cell. On the real floor maps
-  // (../shared/data/floormaps) every free-standing piece of furniture is ≤ 1.17 m across and
+  // (tests/data/floormaps) every free-standing piece of furniture is ≤ 1.17 m across and
   // every free-standing piece of wall (stubs between doors, in the plain maps too) ≥ 1.45 m.
   double clutter_max_extent_m = 1.3;
   VisibilityOptions visibility;

@@ -23,7 +23,7 @@ void FillPx(Image<uint8_t>& im, int col0, int row0, int col1, int row1, uint8_t 
   for (int r = row0; r < row1; ++r)
     for (int c = col0; c < col1; ++c) im.at(r, c) = v;
 }
-// World point → (row, col) of an H-row image with lower-left origin (DESIGN §4).
+// World point → (row, col) of an H-row image with lower-left origin (docs/DESIGN.md §4).
 Eigen::Vector2i PixelOf(const Image<uint8_t>& im, const Eigen::Vector2d& p) {
   const int col = static_cast<int>(std::floor(p.x() / kRes));
   const int iy = static_cast<int>(std::floor(p.y() / kRes));
@@ -267,7 +267,7 @@ TEST(GridMapWallSamplesTest, FreeStandingClutterGivesNoSamplesButStillBlocks) {
 
 // The real map Freiburg52_scan (SOURCES.md) with the walk the simulator would take.
 TEST(GridMapWallSamplesTest, Freiburg52RealMap) {
-  const std::string dir = std::string(CARVEMAP_SHARED_DIR) + "/data/floormaps";
+  const std::string dir = std::string(CARVEMAP_TEST_DATA_DIR) + "/floormaps";
   auto im = ReadPngGray8(dir + "/Freiburg52_scan.png");
   ASSERT_TRUE(im.ok()) << im.status();
   auto building = MakeFloormapBuilding(FloormapOptionsFor(dir, "Freiburg52_scan"));

@@ -1,4 +1,4 @@
-// Wall samples from the carved octree (seed §5.3.1, §5.3.3; DESIGN §6 stage 4): the vertical
+// Wall samples from the carved octree (§5.3.1, §5.3.3; docs/DESIGN.md §6 stage 4): the vertical
 // planar regions of the boundary faces are the walls; each is sampled on a d_s grid over the 2D
 // convex hull of its faces (in wall coordinates u, z), where furniture hid it too; every column
 // of kept points becomes one 2D WallSample, with the floor and ceiling heights of the nearest
@@ -50,8 +50,8 @@ struct OctreeWallSampleOptions {
   // §5.3.1: smaller regions (area of their faces on this level) are not walls.
   double min_area_m2 = 0.05;
   // §5.3.1: regions whose faces on this level span less height than this are not walls. The
-  // seed says 1 m; filing cabinets and sideboards are 1.0–1.1 m (the simulator's 1.05 m), and
-  // once a cabinet's front is carved whole (rays carrying their share of the gaps between them)
+  // dissertation says 1 m; filing cabinets and sideboards are 1.0–1.1 m (the simulator's 1.05 m),
+  // and once a cabinet's front is carved whole (rays carrying their share of the gaps between them)
   // it passes 1 m and the plan cuts the cabinet out of its room: on the whole office walk,
   // 1.2 m finds 28 % of the objects against 19 % at 1 m, with the same 15 rooms.
   double min_height_m = 1.2;

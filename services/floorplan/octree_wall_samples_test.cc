@@ -1,4 +1,4 @@
-// Wall samples from the octree (seed §5.3.1, §5.3.3): a hand-made wall with a shelf in front
+// Wall samples from the octree (§5.3.1, §5.3.3): a hand-made wall with a shelf in front
 // and two doorways (no carving), then a real carved preset against gt/building.json.
 #include "services/floorplan/octree_wall_samples.h"
 
@@ -300,7 +300,7 @@ TEST(OctreeWallSamples, RejectsBadInput) {
 
 // ---------------------------------------------------------------- carved presets
 
-// Issue 5's targets are a median ≤ 2 cm from the true walls, ≥ 90 % of samples within 5 cm,
+// The targets are a median ≤ 2 cm from the true walls, ≥ 90 % of samples within 5 cm,
 // ≥ 90 % of heights within 3 cm. The room meets them all (measured: median 0.7 cm, 97.5 %
 // within 5 cm, heights 100 %, 95 % with a pose). The office on a 20 s walk does not, for
 // reasons upstream of this stage, so its bounds are the measured values less a margin, to

@@ -1,4 +1,4 @@
-// Wall samples from a 3D point cloud (seed §3.1.1; DESIGN §6 stage 4): the points of each level
+// Wall samples from a 3D point cloud (§3.1.1; docs/DESIGN.md §6 stage 4): the points of each level
 // are binned on a d_s grid in the horizontal plane; the neighbourhood N_g of cell g is every
 // point within horizontal distance d_s of its centre (a point is in several neighbourhoods).
 // N_g is a wall when
@@ -18,7 +18,7 @@
 // location"; a ray that ends there had a line of sight to it).
 //
 // Streaming, never the whole cloud in memory: the cloud is read three times through a
-// CloudStreamFn (the seed's "cannot be done in a streaming fashion" is about one pass).
+// CloudStreamFn (the dissertation's "cannot be done in a streaming fashion" is about one pass).
 // PointCloudHeightHistogram is the first pass (levels, §2.5). Pass 2 keeps per cell only counts,
 // extremes, a 16-bit mask of the height bins and the sums of the PCA; pass 3 revisits only the
 // cells that passed: per-axis histograms of x and y (median_bins bins over the neighbourhood's

@@ -1,4 +1,4 @@
-// Tests of the wall samples from a point cloud (seed §3.1.1): each rule on small clouds made here
+// Tests of the wall samples from a point cloud (§3.1.1): each rule on small clouds made here
 // whose neighbourhoods are known exactly (d_s grid, |N_g| ≥ 50, vertical support ≥ H = 2 m, the
 // 16-bin height histogram, the PCA normal's confidence ≥ 0.15 and its orientation, the median
 // inside the cell), then the whole route on the simulator's `room` and `office` presets: the
@@ -389,7 +389,7 @@ TEST(PointCloudWallSamples, HeightHistogramSplitsFloorAndCeiling) {
 struct PresetCase {
   const char* preset;
   double walk_s;  // 0 = the whole walk
-  // Measured on 2026-11-26 (printed below), bounds a margin under them.
+  // Measured (printed below), bounds a margin under them.
   double min_samples;
   double min_within_5cm;    // fraction of samples
   double min_normal_ok;     // fraction: into a true room and within 10° of the nearest wall's
@@ -402,7 +402,7 @@ void PrintTo(const PresetCase& c, std::ostream* os) { *os << c.preset << " " << 
 
 class SimulatedPointCloudWallSamples : public ::testing::TestWithParam<PresetCase> {};
 
-// Issue 5's targets for wall samples: the median ≤ 2 cm from the true walls; here also the
+// The targets for wall samples: the median ≤ 2 cm from the true walls; here also the
 // normals (into the room the sample faces, perpendicular to the wall), the heights (the room's
 // floor and ceiling: the cloud's wall extremes) and the poses (a kept pose on the sample's
 // side of the wall, the side its normal faces).
@@ -516,7 +516,7 @@ TEST_P(SimulatedPointCloudWallSamples, SamplesLieOnTheTrueWalls) {
   EXPECT_GE(pose_on_side, c.min_with_poses * n);
 }
 
-// Measured 2026-11-26 (20 Hz, 0.5° beams, no drift): room (whole 24 s walk) 413 samples,
+// Measured (20 Hz, 0.5° beams, no drift): room (whole 24 s walk) 413 samples,
 // median 0.2 mm from the walls, 100 % within 5 cm, normals 96.9 %, floor 88.3 % (the misses
 // are up to 0.7 m high: furniture against the wall hides its foot), ceiling 100 %, poses 100 %;
 // office (first 20 s) 782 samples, median 0.4 mm, 99.7 % within 5 cm, normals 94.9 %, floor

@@ -451,7 +451,7 @@ double FaceArea(const Mesh& m, int f) {
 
 // Thin walls (extension of §3.3.1–§3.3.2): a wall one sample thick (a one-pixel wall of a grid
 // map, a partition whose two faces lie within d_s) is scanned from both sides, so the triangles
-// on both sides are interior and meet along the chain of its samples, d_s apart. The seed's
+// on both sides are interior and meet along the chain of its samples, d_s apart. The dissertation's
 // rooms assume walls with an exterior inside them; here an edge between two interior triangles
 // that is no longer than wall_edge_m (a couple of sample spacings: far narrower than any door,
 // and no line of sight passes it, §3.3.1's occlusion check) is a wall: the partition does not
@@ -516,8 +516,8 @@ std::vector<int> Partition(const Mesh& m, const std::vector<Circle>& circles,
 
 // What the §3.3.2 merge test looks at for a pair of adjacent rooms. Their shared edges (thin
 // walls left out) form pieces: chains of edges joined at vertices; each piece is one opening.
-//  - length: the longest piece. The seed speaks of "a border" between two rooms; summing all
-//    shared edges instead would merge two rooms joined by two ordinary doors.
+//  - length: the longest piece. The dissertation speaks of "a border" between two rooms; summing
+//    all shared edges instead would merge two rooms joined by two ordinary doors.
 //  - narrowing: the largest, over pieces no longer than max_door_width_m, of the piece's length
 //    over the local free-space diameter: twice the largest circumradius (§3.3.2: the local
 //    feature size) among the faces on either side reached from the piece through edges whose

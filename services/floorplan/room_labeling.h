@@ -1,4 +1,4 @@
-// Floor plan with rooms from wall samples (seed §3.3.1–§3.3.2; DESIGN §6 stage 5):
+// Floor plan with rooms from wall samples (§3.3.1–§3.3.2; docs/DESIGN.md §6 stage 5):
 //  1. 2D Delaunay triangulation of the wall samples (CGAL, inside the .cc).
 //  2. Interior = triangles crossed by a scanner-to-sample segment (s, p), p seen from s, or by a
 //     scanner-to-scanner segment between consecutive poses; crossings exclusive of triangle
@@ -18,11 +18,11 @@
 //     width, under a double door's 2.44 m, and would stay split).
 //  6. Rooms under min_room_area_m2 join a neighbour (extension).
 //
-// The extensions, where the seed is silent or its rule fails on real maps (measured on the 9
-// real floor maps, docs/BENCHMARKS.md "Floor plans with rooms"), each with its own option so it
+// The extensions, where the dissertation is silent or its rule fails on real maps (measured on the
+// 9 real floor maps, docs/BENCHMARKS.md "Floor plans with rooms"), each with its own option so it
 // can be switched off (0): door narrowing, thin walls, seed overlap, small rooms. Borders are
-// counted as contiguous pieces, the seed's "a border": the sum of all shared edges would merge
-// two rooms joined by two ordinary doors.
+// counted as contiguous pieces, the dissertation's "a border": the sum of all shared edges would
+// merge two rooms joined by two ordinary doors.
 //
 // Plain function over plain data: no files, no logging. Thread-compatible.
 #pragma once
@@ -50,7 +50,7 @@ struct RoomLabelingOptions {
   // door_context × its length of it. A door narrows the space it joins: 0.9 m into a 2 m
   // corridor is 0.45, a 1.2 m wide room's 1 m door off a hall is small against the hall, while
   // the border between two pieces of one corridor is as wide as the corridor (ratio ≈ 1).
-  // 0 disables the extension (the seed's rule alone).
+  // 0 disables the extension (the dissertation's rule alone).
   double door_narrowing = 0.7;
   double door_context = 2.0;
   // Extension of §3.3.1–§3.3.2: an edge between two interior triangles no longer than
@@ -61,12 +61,12 @@ struct RoomLabelingOptions {
   // Extension of §3.3.2's seed test: two circumcircles intersect only when they overlap by more
   // than seed_min_overlap × the smaller radius, so a large room's circle bulging a few cm
   // through a doorway does not suppress the seed of the room behind it. 0 = any overlap (the
-  // seed's literal test).
+  // dissertation's literal test).
   double seed_min_overlap = 0.25;
   // Extension: once the rooms have converged, a room smaller than this (a sliver between a wall
   // and furniture that the path crosses, a pocket cut off by thin walls) joins the room it
   // shares the most edge length with. 1 m²: the floor maps' own rule for what is a room
-  // (../shared/data/SOURCES.md); no usable room is smaller. 0 disables it.
+  // (tests/data/SOURCES.md); no usable room is smaller. 0 disables it.
   double min_room_area_m2 = 1.0;
   // §3.3.2: remove rooms the scanner's path never entered.
   bool remove_unentered_rooms = true;

@@ -1,4 +1,4 @@
-// Tests of LabelRooms (seed §3.3.1–§3.3.2) on synthetic wall samples made here: walls are 2D
+// Tests of LabelRooms (§3.3.1–§3.3.2) on synthetic wall samples made here: walls are 2D
 // segments sampled every d_s = 5 cm with ±2 mm noise, the path is a polyline sampled every
 // 0.25 m, and a pose sees a sample when the segment between them crosses no other wall (exact
 // segment tests, 30 m range). Independent of grid_visibility.cc.
@@ -388,8 +388,8 @@ TEST(RoomLabelingTest, TwoDoorsBetweenTheSameRoomsAreTwoBorders) {
 
 // Two equal 4 m × 4 m rooms joined by a door in the middle of their shared 10 cm wall. Each
 // room's largest circle touches the wall at the door, so the two bulge into each other by a few
-// cm through it; with the seed's literal "intersects" the one that sorts first suppresses the
-// other's seed and the rooms merge.
+// cm through it; with the dissertation's literal "intersects" the one that sorts first suppresses
+// the other's seed and the rooms merge.
 TEST(RoomLabelingTest, EqualRoomsJoinedByACentredDoorKeepTheirSeeds) {
   Scene scene;
   scene.walls = {{{0, 0}, {8, 0}}, {{8, 0}, {8, 4}}, {{8, 4}, {0, 4}}, {{0, 4}, {0, 0}},
@@ -749,8 +749,8 @@ TEST(RoomLabelingTest, DISABLED_TimingOnALargeBuilding) {
   for (const FloorPlanRoom& room : plan->rooms) good += std::abs(room.area_m2 - 142.5) < 0.03 * 142.5;
   EXPECT_EQ(good, 2 * kRooms);
 
-  // Issue 5's speed item: floor plan + rooms + extrusion for ≥ 30 k wall samples ≤ 1 s (the
-  // seed: 8.5 s for 33.6 k). The whole level as the merge makes it (floorplan_pipeline.h).
+  // The speed goal: floor plan + rooms + extrusion for ≥ 30 k wall samples ≤ 1 s (the
+  // dissertation: 8.5 s for 33.6 k). The whole level as the merge makes it (floorplan_pipeline.h).
   const auto t1 = std::chrono::steady_clock::now();
   absl::StatusOr<LevelFloorPlan> level = BuildLevelFloorPlan(set, 0, FloorPlanOptions{});
   const double level_ms =

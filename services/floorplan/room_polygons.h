@@ -1,4 +1,4 @@
-// Room polygons and walls of a floor plan (seed §3.3; DESIGN §7 floorplan.geojson): the
+// Room polygons and walls of a floor plan (§3.3; docs/DESIGN.md §7 floorplan.geojson): the
 // boundary of each room's triangles traced into rings, and the interior/exterior boundary traced
 // into wall polylines.
 //

@@ -1,5 +1,5 @@
-// Room segmentation scored against real room labels (DESIGN §6 stage 5 evaluation;
-// ../shared/data/SOURCES.md): ground-truth rooms from the *_gt_segmentation.png maps, a floor
+// Room segmentation scored against real room labels (docs/DESIGN.md §6 stage 5 evaluation;
+// tests/data/SOURCES.md): ground-truth rooms from the *_gt_segmentation.png maps, a floor
 // plan rasterised onto the same pixels, and two usual metrics: room F1 at IoU > 0.5 and Bormann
 // et al.'s (ICRA 2016) overlap recall / precision.
 //
@@ -31,8 +31,8 @@ struct LabelImage {
                                                 int min_pixels = 400);
 
 // Pixel (row, col) has centre x = origin_x + (col + 0.5)·res, y = origin_y + (H − 1 − row +
-// 0.5)·res (DESIGN §4); its label is plan.triangle_room of the triangle holding the centre, −1
-// outside every triangle. Half-open per scanline (a centre on the left edge of a triangle's span
+// 0.5)·res (docs/DESIGN.md §4); its label is plan.triangle_room of the triangle holding the centre,
+// −1 outside every triangle. Half-open per scanline (a centre on the left edge of a triangle's span
 // is in, on the right edge out; rows likewise by y), so a centre on an edge shared by two
 // triangles goes to exactly one. Triangles with an out-of-range vertex index are skipped.
 // Cost: O(pixels covered + rows per triangle).

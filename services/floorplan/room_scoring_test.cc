@@ -153,7 +153,7 @@ TEST(RoomScoringTest, LabelsFromSegmentationRule) {
 
 // SOURCES.md's table of ground-truth room counts, with its own rule.
 TEST(RoomScoringTest, RealGroundTruthRoomCounts) {
-  const std::string dir = std::string(CARVEMAP_SHARED_DIR) + "/data/floormaps";
+  const std::string dir = std::string(CARVEMAP_TEST_DATA_DIR) + "/floormaps";
   const std::vector<std::pair<std::string, int>> maps = {
       {"Freiburg52_scan", 10}, {"Freiburg101_scan", 10}, {"lab_intel", 26},
       {"lab_c_scan", 17},      {"lab_d_scan", 15},       {"office_a", 27},

@@ -32,7 +32,7 @@ CloudStreamFn ScanCloudStream::Stream() {
       const Eigen::Vector3d sensor = pose * info.T_s2c;
       batch.clear();
       for (const Eigen::Vector3f& p : frame.points_sensor) {
-        if (!p.allFinite()) continue;  // DESIGN §3: a NaN row is a beam with no return
+        if (!p.allFinite()) continue;  // docs/DESIGN.md §3: a NaN row is a beam with no return
         batch.push_back({pose * (info.R_s2c * p.cast<double>() + info.T_s2c), sensor, frame.t});
       }
       points_streamed_ += batch.size();

@@ -1,4 +1,4 @@
-// A scan.h5 (DESIGN §3) as the point cloud of seed §3.1.1 (pointcloud_wall_samples.h): every
+// A scan.h5 (docs/DESIGN.md §3) as the point cloud of §3.1.1 (pointcloud_wall_samples.h): every
 // return of every sensor in the world frame, from the system pose at its frame's time (linear
 // position, SLERP orientation, §2.4: ScanReader::PoseAt, the interpolation the coordinator's
 // ingest uses) composed with the sensor's extrinsics (R_s2c, T_s2c). Frames stream from the

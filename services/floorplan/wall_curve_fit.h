@@ -1,4 +1,4 @@
-// Lines and circles fitted to a floor plan's walls with RANSAC (seed §3.2.4; the last step of
+// Lines and circles fitted to a floor plan's walls with RANSAC (§3.2.4; the last step of
 // the Eigencrust floor plan, eigencrust_floorplan.h). Input: the boundary edges B between inside
 // and outside (§3.2.3) and their vertices (wall samples, with normals).
 //
@@ -18,8 +18,8 @@
 //     sample, that sample moves to the intersection: a sharp corner (§3.2.4: "encouraging sharp
 //     corners").
 //
-// Where the seed is silent or too costly literally: the second and third samples of a try are
-// drawn within neighbourhood_m of the first (three samples drawn from a whole building almost
+// Where the dissertation is silent or too costly literally: the second and third samples of a try
+// are drawn within neighbourhood_m of the first (three samples drawn from a whole building almost
 // never lie on one wall; inliers are still searched everywhere, so the back walls of a row of
 // offices can share one line, §3.2.4's example); the inlier test orients a model's normal by
 // its three samples' normals, so the two faces of a thin wall are not one model; circles with a

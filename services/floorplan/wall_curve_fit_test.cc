@@ -1,4 +1,4 @@
-// Tests of the RANSAC line and circle fitting of walls (seed §3.2.4) on boundary polylines made
+// Tests of the RANSAC line and circle fitting of walls (§3.2.4) on boundary polylines made
 // here: samples every 5 cm along known lines and circles with ±1 cm noise, their normals, and
 // the boundary edges joining consecutive samples.
 #include "services/floorplan/wall_curve_fit.h"

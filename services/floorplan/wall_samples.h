@@ -1,5 +1,5 @@
-// Wall samples (seed §3.1; DESIGN §6 stage 4): the 2D input of floor-plan generation. Each sample
-// is a point in the horizontal plane where a wall stands, with the floor and ceiling heights
+// Wall samples (§3.1; docs/DESIGN.md §6 stage 4): the 2D input of floor-plan generation. Each
+// sample is a point in the horizontal plane where a wall stands, with the floor and ceiling heights
 // there and the scanner positions that saw it (line of sight). Every source makes the same
 // structure: the octree's vertical regions (§5.3.1, octree_wall_samples.h), 2D occupancy grid
 // maps (§3.1.2, gridmap_wall_samples.h), point clouds (§3.1.1).

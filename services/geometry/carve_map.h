@@ -1,4 +1,4 @@
-// The carve map of one scan ray (seed §4.1.2, eq 4.7) and its weight w = f_⊥ (§4.3.2, eq 4.8).
+// The carve map of one scan ray (§4.1.2, eq 4.7) and its weight w = f_⊥ (§4.3.2, eq 4.8).
 //
 // For a query x, split x − μ_s into x_∥ (signed distance along d = (μ_p − μ_s)/L, L = |μ_p − μ_s|)
 // and x_⊥ (the rest). Then
@@ -8,17 +8,17 @@
 // mean L + k·x_⊥, σ² = 1/(dᵀC_p⁻¹d)), and
 //   f_⊥(x_⊥) = exp(−½ x_⊥ᵀ C*⊥⁻¹ x_⊥),  C*⊥ the 2×2 block of C* across the ray,
 //   C* = (1 − f) C_s + f C_p,  f = clamp(x_∥ / L, 0, 1).
-// The seed takes F_p as the marginal along d (mean L, σ² = dᵀC_p d). When C_p is round, or
+// The dissertation takes F_p as the marginal along d (mean L, σ² = dᵀC_p d). When C_p is round, or
 // spread only along d, the conditional is the same. When C_p is spread along a surface the ray
 // meets obliquely (the sampling term, SamplingCovariance), the marginal would put the surface
 // at range L beside the ray too, so the ray would carve behind the surface on one side and
 // leave free space uncarved on the other; the conditional follows the surface.
-// The seed calls f_⊥ "the marginal along the direction x_⊥" of N(x_∥, C*). We take the lateral
-// Gaussian's density at x_⊥ (its slice along u = x_⊥/|x_⊥|), not the density of the projection
-// onto u (exp(−|x_⊥|²/(2 uᵀC*u))). The two agree when C* is round across the ray; when it is
-// flat (a ray spread along a surface by its sampling share, SamplingCovariance) the projection
-// form leaks along the narrow axis: k σ_n off it and as far along the wide axis, the weight is
-// e^(−2k²σ_n²/σ_w²), so for a 2.5 cm spread over the 1 mm floor a point 25 σ_n behind the
+// The dissertation calls f_⊥ "the marginal along the direction x_⊥" of N(x_∥, C*). We take the
+// lateral Gaussian's density at x_⊥ (its slice along u = x_⊥/|x_⊥|), not the density of the
+// projection onto u (exp(−|x_⊥|²/(2 uᵀC*u))). The two agree when C* is round across the ray; when
+// it is flat (a ray spread along a surface by its sampling share, SamplingCovariance) the
+// projection form leaks along the narrow axis: k σ_n off it and as far along the wide axis, the
+// weight is e^(−2k²σ_n²/σ_w²), so for a 2.5 cm spread over the 1 mm floor a point 25 σ_n behind the
 // surface still weighs e^−2 ≈ 0.14, and the ray votes "interior" there.
 // The dissertation calls f_⊥ the "PMF" of the lateral marginal. We take it unnormalised (peak 1
 // on the ray): a density normalised by 1/(σ_⊥√(2π)) would exceed 1 for σ_⊥ < 0.4 m, making
@@ -143,7 +143,7 @@ inline void FuseInto(LeafStats& leaf, const CarveSample& s) { leaf.Add(s.p, s.w)
 
 // e^−x for x ≥ 0, 0 from x = 708 on (where e^−x leaves the normal doubles). Our own rather than
 // std::exp: glibc picks an exp by CPU (an FMA variant where there is FMA), and the tiles must be
-// byte-identical whichever worker carves them (DESIGN §5). x = (32m + j)·ln2/32 + r with
+// byte-identical whichever worker carves them (docs/DESIGN.md §5). x = (32m + j)·ln2/32 + r with
 // |r| ≤ ln2/64 (Cody–Waite), e^−x = 2^−m · 2^(−j/32) · e^−r with 2^(−j/32) from a table
 // (correctly rounded) and e^−r a degree-6 Taylor polynomial (truncation < 4e−18), evaluated in
 // Estrin's order to keep the dependency chain short: within 4 ulp of e^−x.

@@ -1,4 +1,4 @@
-// Eq 4.7 (seed §4.1.2) in single precision, four leaves at a time: the fast carve's evaluator
+// Eq 4.7 (§4.1.2) in single precision, four leaves at a time: the fast carve's evaluator
 // (worker/chunk_octree.h, CarveEvaluation::kFast). carve_map.h is the reference; this gives the
 // same values within 5e−6 (w and p): far below the tolerance the fast carve is held to
 // (worker/chunk_octree.h).

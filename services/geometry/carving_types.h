@@ -1,5 +1,5 @@
 // Plain data shared by the coordinator (which builds wedges and bins them into chunks) and the
-// workers (which carve them into chunk octrees): seed §4.1–§4.3, DESIGN §5.
+// workers (which carve them into chunk octrees): §4.1–§4.3, docs/DESIGN.md §5.
 #pragma once
 
 #include <array>

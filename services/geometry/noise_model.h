@@ -1,9 +1,9 @@
-// The noise model of one scan ray (seed §4.1.1, eqs 4.1–4.6): the sensor position and the scan
+// The noise model of one scan ray (§4.1.1, eqs 4.1–4.6): the sensor position and the scan
 // point as world-frame Gaussians N(μ_s, C_s) and N(μ_p, C_p), from the localization covariance
 // of the system pose, the clock-sync error of the sensor and the sensor's range noise.
 //
-// Conventions (DESIGN §3): the rotation covariance is over a world-frame rotation vector e with
-// R_est = Exp(e)·R_true, so a world-frame lever arm v (from the system origin) moves by
+// Conventions (docs/DESIGN.md §3): the rotation covariance is over a world-frame rotation vector e
+// with R_est = Exp(e)·R_true, so a world-frame lever arm v (from the system origin) moves by
 // e × v = −[v]× e, whose covariance is [v]× C_R [v]×ᵀ. Angular velocities are world-frame
 // too: R(t + δt) = Exp(ω δt)·R(t). Plain functions over Eigen types; no I/O, no logging.
 #pragma once
@@ -21,8 +21,8 @@
 namespace carvemap {
 
 struct NoiseModelOptions {
-  // Used when the scan has no /path_cov (DESIGN §3 makes it optional): an isotropic position
-  // std-dev (m) and rotation std-dev (rad) for every pose.
+  // Used when the scan has no /path_cov (docs/DESIGN.md §3 makes it optional): an isotropic
+  // position std-dev (m) and rotation std-dev (rad) for every pose.
   double default_position_sigma_m = 0.05;
   double default_rotation_sigma_rad = 0.005;
   // An isotropic std-dev (m) added to both Gaussians. Noiseless data (simulations, imports

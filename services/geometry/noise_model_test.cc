@@ -89,7 +89,7 @@ TEST(NoiseModelTest, LeverArmIsInTheWorldFrame) {
 }
 
 TEST(NoiseModelTest, RotationCovarianceMatchesSamplingTheConvention) {
-  // DESIGN §3: R_est = Exp(e)·R_true with e ~ N(0, C_R) in the world frame. Sample it and
+  // docs/DESIGN.md §3: R_est = Exp(e)·R_true with e ~ N(0, C_R) in the world frame. Sample it and
   // compare the spread of a rigidly attached point with eq 4.2.
   Matrix3d C_R;
   C_R << 4e-4, 1e-4, 0, 1e-4, 1e-4, -5e-5, 0, -5e-5, 9e-4;

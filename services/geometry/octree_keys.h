@@ -1,5 +1,5 @@
-// Octree addressing shared by coordinator, workers, tiles and merge (DESIGN §5). Space is cut
-// into 2 m chunks (§4.3.1: chunks are non-leaf nodes of one octree); each chunk is an octree of
+// Octree addressing shared by coordinator, workers, tiles and merge (docs/DESIGN.md §5). Space is
+// cut into 2 m chunks (§4.3.1: chunks are non-leaf nodes of one octree); each chunk is an octree of
 // depth k, so the resolution is 2 m / 2^k (k = 5: 6.25 cm, 6: 3.125 cm, 7: 1.5625 cm,
 // 8: 0.78 cm).
 //

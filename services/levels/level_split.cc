@@ -139,7 +139,7 @@ absl::StatusOr<std::vector<Level>> SplitLevelsFromSamples(std::span<const Height
   // - floor peaks within min_level_height_m of the first one are one level and its floor is
   //   the heaviest of them, so a table top, a landing or a sunken area never starts a level;
   // - the level's ceiling_z is its highest ceiling peak below the next floor, not the most
-  //   populated one: rooms of a level have different ceilings (DESIGN §4: a level's
+  //   populated one: rooms of a level have different ceilings (docs/DESIGN.md §4: a level's
   //   ceiling_z is its highest room ceiling), and the split above the level must clear all of
   //   them. The most populated one is kept as dominant_ceiling_z.
   std::vector<Level> levels;

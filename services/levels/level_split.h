@@ -1,4 +1,4 @@
-// Level splitting (seed §5.2, fallback §2.5; DESIGN §6 stage 3, §7 levels.json): the floor and
+// Level splitting (§5.2, fallback §2.5; docs/DESIGN.md §6 stage 3, §7 levels.json): the floor and
 // ceiling elevations of each building level and the heights that split the model between
 // levels.
 //
@@ -120,7 +120,7 @@ struct LevelSplit {
                                                      const HeightHistogram* point_heights,
                                                      const LevelSplitOptions& options = {});
 
-// DESIGN §7 levels.json: [{index, floor_z, ceiling_z, split_z}, …] with split_z the level's
+// docs/DESIGN.md §7 levels.json: [{index, floor_z, ceiling_z, split_z}, …] with split_z the level's
 // lower split (split_z_low: the level covers [split_z, next level's split_z)), plus the
 // optional fields split_z_high, dominant_ceiling_z and ceiling_found.
 [[nodiscard]] nlohmann::json LevelsToJson(std::span<const Level> levels);

@@ -1,4 +1,4 @@
-// Levels of a real carved octree (DESIGN §6 stages 1–3): the office2 preset (two levels) is
+// Levels of a real carved octree (docs/DESIGN.md §6 stages 1–3): the office2 preset (two levels) is
 // simulated and carved in process, its boundary faces are found chunk by chunk
 // (ChunkBoundaryFaces over 27-tile neighbourhoods), fitted into planar regions (§4.2.4) and
 // split into levels (§5.2); the result is checked against gt/building.json.
@@ -62,7 +62,7 @@ absl::StatusOr<std::vector<BoundaryFace>> AllFaces(TileSet& set) {
 // DISABLED by default: it carves office2's whole walk (1144 s, back at the stairs with level 1
 // done) at 10 Hz and 1°. Until the rays carried their share of the gaps (SamplingCovariance)
 // that took 7–14 minutes here and thinner scans left the volume between floor and ceiling
-// unobserved; on 2026-11-26 (fourth session) the test took 105 s (carve 100 s) and gave floors
+// unobserved; since then the test took 105 s (carve 100 s) and gave floors
 // +0.4 mm and +0.5 mm, ceilings −1.1 cm and −1.1 cm from gt/building.json (floors +2.6 cm
 // before the isosurface took each leaf's p at the finest cell beside the face). CI checks the
 // same through `carvemap run` on the thinner e2e scan (3 Hz, 2°): e2e_office2_outputs. Run

@@ -22,7 +22,7 @@ PlanarRegion Ceiling(double z, double area) { return Region(-Vector3d::UnitZ(), 
 PlanarRegion Wall(double z, double area) { return Region(Vector3d::UnitX(), z, area); }
 
 // Two stacked levels like the office2 preset: floors at 0 and 3.5 m, rooms with different
-// ceilings (the level's ceiling_z is the highest, DESIGN §4), walls in between.
+// ceilings (the level's ceiling_z is the highest, docs/DESIGN.md §4), walls in between.
 std::vector<PlanarRegion> TwoLevels() {
   return {Floor(0.0, 55), Floor(0.0, 30), Ceiling(2.7, 40), Ceiling(3.2, 20), Ceiling(2.5, 15),
           Wall(1.3, 60),  Wall(4.9, 60),  Floor(3.5, 70),   Ceiling(6.6, 25), Ceiling(6.1, 45),

@@ -1,7 +1,8 @@
-// The dense mesh (DESIGN §7 mesh/dense.ply) and the boundary faces (DESIGN §6 stage 1) of a
-// whole tiles directory, out of core: chunk by chunk, each from the tiles of its neighbourhood
-// fetched through the TileSet's bounded cache, then a small global step (the vertex weld, or
-// concatenation of faces). No logging and no files written here; the merge shell does that.
+// The dense mesh (docs/DESIGN.md §7 mesh/dense.ply) and the boundary faces (docs/DESIGN.md §6 stage
+// 1) of a whole tiles directory, out of core: chunk by chunk, each from the tiles of its
+// neighbourhood fetched through the TileSet's bounded cache, then a small global step (the vertex
+// weld, or concatenation of faces). No logging and no files written here; the merge shell does
+// that.
 //
 // Chunks are computed on `threads` threads (the tiles are read on the caller's); the output is
 // the same whatever their number.

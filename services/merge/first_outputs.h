@@ -1,7 +1,7 @@
-// The first merge outputs of a job (DESIGN §6, §7): from the carved tiles, out of core,
+// The first merge outputs of a job (docs/DESIGN.md §6, §7): from the carved tiles, out of core,
 //   <output_dir>/octree.bt              OctoMap binary tree (occupancy from p) — opens in octovis
-//   <output_dir>/level_0/topdown.png    open-height map (seed §5.4); level_0 covers the whole
-//                                       height until levels (§5.2, DESIGN §6.3) exist
+//   <output_dir>/level_0/topdown.png    open-height map (§5.4); level_0 covers the whole
+//                                       height until levels (§5.2, docs/DESIGN.md §6.3) exist
 //   <output_dir>/level_0/topdown.json   its georeference (origin, resolution) and gray scale
 //   <output_dir>/job.json               the caller's job document plus the merge's parameters,
 //                                       versions, timings and counts
@@ -50,8 +50,8 @@ struct MergeOptions {
   // RunMerge only (services/merge/merge_job.h): false skips the meshing stages (faces, regions,
   // levels, dense and planar meshes), leaving the first outputs.
   bool meshes = true;
-  // RunMerge only: the job's scan.h5 (DESIGN §3), whose /path (poses, small) gives the floor
-  // plans their scanner positions (§3.3.1 lines of sight, §3.3.2 unentered rooms). Empty: no
+  // RunMerge only: the job's scan.h5 (docs/DESIGN.md §3), whose /path (poses, small) gives the
+  // floor plans their scanner positions (§3.3.1 lines of sight, §3.3.2 unentered rooms). Empty: no
   // floor plans (job.json says why under "warnings").
   std::string scan_path;
   // RunMerge only, §5.5 on request: OUT/points.ply, the scan's returns in the world frame
@@ -116,7 +116,7 @@ struct MergeSummary {
   double observed_volume_m3 = 0;           // both
   // Topdown map: pixel (row, col) of the H-row image is the column at
   // x = origin_x + (col + 0.5)·res, y = origin_y + (H − 1 − row + 0.5)·res (lower-left origin,
-  // as DESIGN §4 floor maps).
+  // as docs/DESIGN.md §4 floor maps).
   double topdown_origin_x_m = 0, topdown_origin_y_m = 0;
   int topdown_width = 0, topdown_height = 0;
   double max_open_height_m = 0;

@@ -59,8 +59,8 @@ ChunkProgressFn StageProgress(const MergeProgressCallback& progress, const char*
 }
 
 
-// The recorded system path of the job's scan (DESIGN §3 /path): the scanner positions of the
-// floor plans (§3.3.1), 24 bytes per pose; the poses' other fields are not read.
+// The recorded system path of the job's scan (docs/DESIGN.md §3 /path): the scanner positions of
+// the floor plans (§3.3.1), 24 bytes per pose; the poses' other fields are not read.
 absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string& scan_path) {
   ScanReader::OpenOptions open;
   open.path_rows = ScanReader::PathRows::kNone;
@@ -69,7 +69,7 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string
   return (*reader)->PathPositions();
 }
 
-// Floor plans per level (DESIGN §6 stages 4–5; seed §5.3, §3.3) ➜ level_<k>/floorplan.geojson,
+// Floor plans per level (docs/DESIGN.md §6 stages 4–5; §5.3, §3.3) ➜ level_<k>/floorplan.geojson,
 // floorplan.svg, extruded.ply. A level whose plan cannot be made is not fatal: the other outputs
 // stand and job.json says why under "warnings".
 absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
@@ -166,7 +166,7 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
 }
 
 // Regions for the planar mesh only (§4.3.3): mesh_growth gives less than half the triangles
-// of the default growth on the simulated office (issue 4's ≤ 10 % of dense), but its vertical
+// of the default growth on the simulated office (the goal: ≤ 10 % of dense), but its vertical
 // regions make worse wall samples (§5.3.1), so the levels and floor plans keep the default.
 // Its bigger planes also sit a little farther from the true walls (object_segmentation_test:
 // wall cover within 5 cm 63.1 → 59.5 %; docs/BENCHMARKS.md "Dense vs planar meshes").
@@ -297,7 +297,7 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
   return absl::OkStatus();
 }
 
-// DESIGN §6 stages 6–8 (seed §5.5, §5.6): the tiles segmented against the extruded plans into
+// docs/DESIGN.md §6 stages 6–8 (§5.5, §5.6): the tiles segmented against the extruded plans into
 // building and object tiles (in <out>/.segment, removed afterwards), the building tiles' faces,
 // regions and planar mesh, the object tiles' dense mesh split into objects, and combined.ply.
 absl::StatusOr<SegmentStageResult> SegmentStage(
@@ -590,7 +590,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
 
   // §5.5–§5.6 segmentation against the floor plans, then the building's planar mesh and the
   // objects' dense meshes ➜ mesh/building.ply, mesh/objects.ply, mesh/objects/<id>.ply,
-  // mesh/combined.ply. Without floor plans the building mesh holds everything (issue 4's).
+  // mesh/combined.ply. Without floor plans the building mesh holds everything.
   t0 = Clock::now();
   uint64_t building_triangles = 0, object_count = 0;
   {

@@ -1,5 +1,5 @@
-// The merge of a job (DESIGN §6, §7): every output the tiles give today, stage by stage, out of
-// core where the stage allows:
+// The merge of a job (docs/DESIGN.md §6, §7): every output the tiles give today, stage by stage,
+// out of core where the stage allows:
 //   boundary_faces   faces between interior and exterior leaves (§4.3.2, Fig 4.9)
 //   planar_regions   flood fill, PCA growing, 15° relaxation (§4.2.4)
 //   levels           floors and ceilings from horizontal regions (§5.2) ➜ levels.json

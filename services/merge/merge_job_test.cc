@@ -86,8 +86,8 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
   EXPECT_NE(s->warnings[1].find("segmentation: no floor plan"), std::string::npos)
       << s->warnings[1];
 
-  // levels.json (DESIGN §7): the floor and ceiling are the isosurfaces of Fig 4.9, between the
-  // shell's and the room's leaf centres: p 0.1 → 0.9 crosses 0.5 halfway, on the leaf border.
+  // levels.json (docs/DESIGN.md §7): the floor and ceiling are the isosurfaces of Fig 4.9, between
+  // the shell's and the room's leaf centres: p 0.1 → 0.9 crosses 0.5 halfway, on the leaf border.
   const nlohmann::json levels = ReadJson(options.output_dir + "/levels.json");
   ASSERT_EQ(levels.size(), 1u);
   EXPECT_EQ(levels[0]["index"], 0);
@@ -105,7 +105,7 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
   EXPECT_TRUE(CheckMesh(building->mesh).watertight()) << CheckMesh(building->mesh).ToString();
   ASSERT_EQ(building->face_values.size(), 1u);
   EXPECT_EQ(building->face_values[0].first, "region");
-  // The planar mesh is far lighter than the dense one (issue 4: ≤ 10 %).
+  // The planar mesh is far lighter than the dense one (the goal: ≤ 10 %).
   EXPECT_LE(10 * building->mesh.triangles.size(), dense->mesh.triangles.size());
   for (const Eigen::Vector3f& v : building->mesh.vertices) {
     for (int a = 0; a < 3; ++a) {

@@ -1,4 +1,4 @@
-// Synthetic tiles for the merge tests (STYLE habit 14: seeded, known ground truth).
+// Synthetic tiles for the merge tests (seeded, with known ground truth).
 #pragma once
 
 #include <filesystem>

@@ -1,4 +1,4 @@
-// Issue 6's evaluation on simulated buildings (seed §5.5, §5.6): a preset carved in this process
+// The segmentation evaluation on simulated buildings (§5.5, §5.6): a preset carved in this process
 // and merged with its scan's path, so the floor plans and the segmentation run as in a job; the
 // objects of job.json are compared with the simulator's objects (gt/building.json), the
 // building mesh with the true walls (gt/surfaces.ply), and the meshes inside the rooms the walk
@@ -177,7 +177,7 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
               big_true.size(), matched, 100 * found_frac, false_objects, 100 * false_frac);
   EXPECT_GE(found_frac, pc.min_found);
   EXPECT_LE(false_frac, pc.max_false);
-  // Issue 5 through the 3D route: one room per true room the walk entered (§3.3.2 removes the
+  // Floor plans through the 3D route: one room per true room the walk entered (§3.3.2 removes the
   // unentered storage room), whatever the walk's length when it covers the whole building.
   if (o.walk_s == 0) {
     size_t entered = 0;
@@ -199,7 +199,7 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
     object_triangles += mesh->mesh.triangles.size();
   }
   EXPECT_EQ(leaky, 0u);
-  // Issue 4: the planar building mesh uses ≤ 10 % of the dense mesh's triangles (measured
+  // The planar building mesh uses ≤ 10 % of the dense mesh's triangles (measured
   // 2.6 %; 25 % while the carve was a speckle between rays).
   EXPECT_LE(double(building->mesh.triangles.size()), 0.10 * double(merged->dense_triangles));
   absl::StatusOr<PlyMesh> combined = ReadPly(out + "/mesh/combined.ply");
@@ -218,7 +218,7 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   const testing::TruthDistance to_dense(testing::ReadPlyTriangles(out + "/mesh/dense.ply"), 0.25,
                                         0.2);
   size_t wall_points = 0, covered5 = 0, covered10 = 0, hidden = 0, hidden_covered = 0;
-  // Seen or hidden: the issue's "true wall area, including the parts hidden behind shelves".
+  // Seen or hidden: the goal's "true wall area, including the parts hidden behind shelves".
   size_t either = 0, either_covered = 0;
   for (const Eigen::Vector3d& p :
        testing::WallPoints(testing::ReadPlyTriangles(carved->gt_dir + "/surfaces.ply"), 0.1)) {
@@ -309,7 +309,7 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   }
 }
 
-// Measured (2026-11-26, docs/BENCHMARKS.md), objects re-carved at 3.125 cm (the default: half
+// Measured (docs/BENCHMARKS.md), objects re-carved at 3.125 cm (the default: half
 // of 6.25 cm):
 // - at the rig's 40 Hz (1° beams): found 95 %, false 1 %, wall cover 97.7 %, behind furniture
 //   93.5 %. The misses: two shelves and a lamp in the room the walk never entered, two lamps

@@ -1,4 +1,4 @@
-// octree.bt (DESIGN §7): the merged octree in OctoMap's binary format ("# Octomap OcTree
+// octree.bt (docs/DESIGN.md §7): the merged octree in OctoMap's binary format ("# Octomap OcTree
 // binary file", id OcTree), so octovis and OctoMap tools open it. Written out of core: chunks
 // are OctoMap nodes at depth 16 − k (services/geometry/octree_keys.h), so the tree is streamed
 // in OctoMap's depth-first child order one tile at a time; only the open path of ≤ 16 nodes and

@@ -1,7 +1,7 @@
-// The merge shell around segment_chunk.h (DESIGN §6 stages 6–7): every tile of a job segmented
-// against the extruded floor plans, chunk by chunk through the TileSet's bounded cache, into two
-// tile directories that the existing stages then mesh (building: planar mesh; objects: dense
-// mesh). Out of core: one decoded tile in, two out, at a time.
+// The merge shell around segment_chunk.h (docs/DESIGN.md §6 stages 6–7): every tile of a job
+// segmented against the extruded floor plans, chunk by chunk through the TileSet's bounded cache,
+// into two tile directories that the existing stages then mesh (building: planar mesh; objects:
+// dense mesh). Out of core: one decoded tile in, two out, at a time.
 #pragma once
 
 #include <cstdint>

@@ -1,4 +1,4 @@
-// A tiles directory seen as one octree (DESIGN §6): the index of its chunks (from the file
+// A tiles directory seen as one octree (docs/DESIGN.md §6): the index of its chunks (from the file
 // names alone) and a bounded LRU cache of decoded tiles, so merge stages run out of core.
 #pragma once
 

@@ -1,4 +1,4 @@
-// The top-down open-height map (seed §5.4, DESIGN §6.9): for each xy column of leaves, the sum
+// The top-down open-height map (§5.4, docs/DESIGN.md §6.9): for each xy column of leaves, the sum
 // over the octree nodes it crosses of p(interior) × the node's height, i.e. the expected height
 // of open (interior) space in metres. Only observed leaves contribute: unobserved space
 // (p = 0.5 by convention, §4.3.2) would otherwise add half the height of every unscanned chunk
@@ -25,7 +25,7 @@ namespace carvemap {
 
 // Where a topdown map sits: pixel (row, col) of the H-row image is the column with
 // x = origin_x_m + (col + 0.5)·resolution_m, y = origin_y_m + (H − 1 − row + 0.5)·resolution_m
-// at its centre (lower-left origin, as DESIGN §4 floor maps).
+// at its centre (lower-left origin, as docs/DESIGN.md §4 floor maps).
 struct TopdownGeometry {
   double origin_x_m = 0, origin_y_m = 0;
   double resolution_m = 0;

@@ -5,7 +5,7 @@
 // (TrimmedByPlan, the rule the octree's interior cells follow). Points above or below every
 // level are kept.
 //
-// Binary little-endian PLY as DESIGN §7 (vertex float x y z; `element face 0`), through
+// Binary little-endian PLY as docs/DESIGN.md §7 (vertex float x y z; `element face 0`), through
 // "<path>.partial" and a rename. The cloud streams once, so memory stays bounded whatever the
 // scan's size; the header, padded to a fixed size, is rewritten with the vertex count at the end.
 #pragma once

@@ -1,4 +1,4 @@
-// Boundary faces of the merged octree (seed §4.3.2, §4.3.3, Fig 4.9; DESIGN §6 stage 1): the
+// Boundary faces of the merged octree (§4.3.2, §4.3.3, Fig 4.9; docs/DESIGN.md §6 stage 1): the
 // faces between an interior leaf (p > 0.5) and an exterior leaf (p ≤ 0.5, or unobserved) that
 // abut, of any sizes, across chunk borders.
 //
@@ -77,8 +77,8 @@ struct ChunkNeighbourhood {
 // simplified leaf's p is the mean over its whole volume (§4.3.2 merges the children's sums),
 // not a value at its centre. Interpolating from the centres of the big leaves that cover a
 // floor and the solid below it moved office2's floor faces up 4.4 cm on average at 6.25 cm;
-// from the finest cells, −0.2 cm (docs/BENCHMARKS.md, "Dense vs planar meshes", fourth
-// session).
+// from the finest cells, −0.2 cm (docs/BENCHMARKS.md, "Dense vs planar
+// meshes").
 // Clamped to [−limit_m, +limit_m]. Why the clamp: an unobserved or p = 0.5 exterior puts the
 // crossing exactly on the exterior cell's centre, with no evidence there; a barely interior
 // leaf (p → 0.5⁺) puts it on the interior cell's centre, where the six faces of a lone cell

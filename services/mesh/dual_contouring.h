@@ -1,8 +1,8 @@
-// Dense meshing of the octree's boundary (seed §4.3.3 "Dense octree meshing", Fig 4.9; DESIGN
-// §6 stage 8, §7 mesh/dense.ply): a watertight, consistently oriented triangle mesh of the
-// surface between interior (p > 0.5) and exterior leaves.
+// Dense meshing of the octree's boundary (§4.3.3 "Dense octree meshing", Fig 4.9;
+// docs/DESIGN.md §6 stage 8, §7 mesh/dense.ply): a watertight, consistently oriented triangle mesh
+// of the surface between interior (p > 0.5) and exterior leaves.
 //
-// The method is the seed's variant of dual contouring: "mapping each boundary face of the
+// The method is the dissertation's variant of dual contouring: "mapping each boundary face of the
 // octree to a vertex in the mesh and each corner of the octree into a face". Labels live at
 // cell centres, so the primal surface is made of the square faces between interior and
 // exterior cells, and the mesh is its dual:

@@ -1,5 +1,5 @@
-// Structural checks of triangle meshes (issue 4, 6: "watertight: every edge shared by exactly
-// two faces, no degenerate or duplicate faces"). Used by tests and by the merge's summary.
+// Structural checks of triangle meshes (watertight: every edge shared by exactly two
+// faces, no degenerate or duplicate faces). Used by tests and by the merge's summary.
 #pragma once
 
 #include <cstdint>
@@ -18,7 +18,7 @@ struct MeshCheck {
   uint64_t degenerate_triangles = 0;  // repeated index or zero area (< area_epsilon)
   uint64_t duplicate_triangles = 0;   // same three vertices as an earlier triangle
   uint64_t bad_indices = 0;           // index outside the vertex list
-  // Watertight in the issues' sense: every edge shared by exactly two triangles, consistently
+  // Watertight: every edge shared by exactly two triangles, consistently
   // oriented, none degenerate or duplicate.
   [[nodiscard]] bool watertight() const {
     return boundary_edges == 0 && nonmanifold_edges == 0 && misoriented_edges == 0 &&

@@ -126,7 +126,7 @@ absl::StatusOr<FaceSquare> SquareOf(const BoundaryFace& face, double res, size_t
 }
 
 // Builds the polygon mesh of the faces: corners split at every lattice vertex lying on a face's
-// edges (T-junctions between big and small faces, DESIGN §6 stage 1: "of any sizes"), edges
+// edges (T-junctions between big and small faces, docs/DESIGN.md §6 stage 1: "of any sizes"), edges
 // paired with their twins, and corners grouped into topological vertices (one per fan of faces
 // around a lattice vertex, so that the octree's non-manifold edges and corners — two interior
 // cells touching along an edge — become separate sheets).
@@ -302,7 +302,7 @@ absl::StatusOr<FaceSurface> BuildSurface(std::span<const BoundaryFace> faces, do
 // eq 4.9 (§4.3.3): the vertex of an octree corner x0 touched by the regions with normals n_i
 // (rows of M) through points P_i, p = diag(P Mᵀ) = (n_i · P_i):
 //   x = Σ_i (δ_i (p · u_i) / s_i + (1 − δ_i) (x0 · v_i)) v_i,   M = U S Vᵀ,
-// δ_i = 1 when s_i ≥ α. The seed sets α = 0.2 · s_min; read literally every s_i ≥ s_min > α
+// δ_i = 1 when s_i ≥ α. The dissertation sets α = 0.2 · s_min; read literally every s_i ≥ s_min > α
 // and nothing would ever be dropped (Fig 4.10 could not happen), so we read s as the largest
 // singular value, the scale of M: α = alpha_fraction · s_max. For two planes at angle θ the
 // singular values are √(1 ± cos θ), so their line is trusted only when tan(θ/2) ≥ 0.2, θ ≳ 22.6°

@@ -1,6 +1,6 @@
-// Planar meshing of the octree's boundary faces (seed §4.2.5, §4.3.3 "Planar region meshing";
-// DESIGN §6 stage 2, §8): one watertight triangle mesh whose triangles lie on the planes of the
-// planar regions.
+// Planar meshing of the octree's boundary faces (§4.2.5, §4.3.3 "Planar region meshing";
+// docs/DESIGN.md §6 stages 2 and 8): one watertight triangle mesh whose triangles lie on the planes
+// of the planar regions.
 //
 // How: the faces become a closed polygon mesh on the finest lattice (T-junctions of big and
 // small faces split, non-manifold octree edges separated into sheets); vertices where two or
@@ -26,7 +26,7 @@ namespace carvemap {
 
 struct PlanarMeshOptions {
   // eq 4.9: a singular direction of the stacked plane normals is trusted only when its singular
-  // value is at least this fraction of the largest one (the seed's α = 0.2·s; see the .cc).
+  // value is at least this fraction of the largest one (the dissertation's α = 0.2·s; see the .cc).
   double alpha_fraction = 0.2;
   // A vertex placed by eq 4.9 moves at most this many grid cells from its octree corner (the
   // move is clamped; §4.2.5: shared vertices are "allowed to be displaced up to a distance

@@ -1,4 +1,4 @@
-// Planar meshing on a real tiles directory (seed §4.2.4, §4.3.3): boundary faces, planar
+// Planar meshing on a real tiles directory (§4.2.4, §4.3.3): boundary faces, planar
 // regions, planar mesh and dense mesh of `carvemap run`'s tiles (or the merge's segmented
 // building tiles), with the counts and CPU seconds of each stage. For docs/BENCHMARKS.md and
 // for tuning on kept carves without re-running the whole merge.

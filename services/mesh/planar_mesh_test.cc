@@ -652,7 +652,7 @@ TEST_P(FittedRegionsTest, WatertightWithFitPlanarRegions) {
 INSTANTIATE_TEST_SUITE_P(Worlds, FittedRegionsTest,
                          ::testing::Combine(::testing::Values(0, 1, 2, 3), ::testing::Values(1, 4)));
 
-// Robustness (issue 4: "always watertight, no degenerate triangles"): rooms with seeded carving
+// Robustness (always watertight, no degenerate triangles): rooms with seeded carving
 // noise of every kind the carved scans show, through the real region fitting. Bumps and dents
 // on the shell, specks of solid in the room, one-cell pockets of free space inside the walls,
 // a slanted wall, and isosurface points jittered by up to 0.45 cell (Fig 4.9's clamp).
@@ -917,8 +917,8 @@ absl::StatusOr<CarvedMeshes> CarveAndMesh(const testing::CarvedPresetOptions& op
   return out;
 }
 
-// Issue 4: both meshes watertight, and the planar one at most `max_ratio` of the dense one's
-// triangles (the issue asks 10 %: the seed's planar building meshes are thousands of triangles
+// Both meshes watertight, and the planar one at most `max_ratio` of the dense one's
+// triangles (the goal is 10 %: the dissertation's planar building meshes are thousands of triangles
 // where the dense ones are millions, §4.3.3, Fig 4.12 vs 4.13).
 void CheckWatertightAndSmall(const CarvedMeshes& m, double max_ratio) {
   const MeshCheck dense = CheckMesh(m.dense);
@@ -948,7 +948,7 @@ TEST(PlanarMeshCarvedTest, RoomIsWatertightAndSmall) {
   ASSERT_TRUE(m.ok()) << m.status();
   {
     SCOPED_TRACE("default growth (levels, floor plans)");
-    // Issue 4's 10 %: 8.7 % (7.3 k of 84 k triangles) since rays carry their share of the
+    // The 10 % goal: 8.7 % (7.3 k of 84 k triangles) since rays carry their share of the
     // gaps between them (SamplingCovariance). Before, with the rays ~1 mm wide, the carve was a
     // speckle and this was 38 % (215 k of 573 k triangles, 45 k regions): the carved volume's
     // noisy closure against the unobserved gaps between rays (§4.3.2: unobserved is exterior).
@@ -1083,7 +1083,7 @@ double Percentile(std::vector<double> v, double q) {
   return v[k];
 }
 
-// Issue 4's accuracy on `office` at 3.125 cm against gt/surfaces.ply + gt/objects.ply:
+// The accuracy goal on `office` at 3.125 cm against gt/surfaces.ply + gt/objects.ply:
 // mesh to truth median ≤ 1.5 cm and 90th percentile ≤ 4 cm, over the mesh where its exterior
 // side was observed (elsewhere the mesh closes the carved volume against unobserved space,
 // which no truth describes), as the meshes record it (dense: vertex_observed; planar: the
@@ -1091,7 +1091,7 @@ double Percentile(std::vector<double> v, double q) {
 // the observed truth (samples whose free side one cell out was observed, minus faces where
 // two solids touch) within 5 cm of the mesh. A short walk (the hallway and first rooms) keeps
 // it affordable in CI; both meshes are held to it, and to watertightness and the 10 % rule.
-// Measured 2026-11-26, the 30 s walk at 3.125 cm, both meshes watertight every time:
+// Measured, the 30 s walk at 3.125 cm, both meshes watertight every time:
 // - as here (the simulator's /path_cov rotation std-dev 1e-4 rad; regions with mesh_growth,
 //   as then in the tree for everything): 8.51 M faces over 8406 m²,
 //   7720 m² of them on no true surface with their exterior unobserved (the closure of a
@@ -1112,7 +1112,7 @@ double Percentile(std::vector<double> v, double q) {
 //   more than 10 cm from any truth cluster at 1.5–2.5 m (the scanners' height and the lights')
 //   along the corridor (x 8–16 m, y 4–8 m).
 // - the same meshes, with the mesh's exterior side told by the meshes' own record instead of
-//   the leaf one cell behind each sample (2026-11-26 (4)): dense median 0.90 cm, p90 2.2 cm over
+//   the leaf one cell behind each sample (measured later): dense median 0.90 cm, p90 2.2 cm over
 //   501 k of 1.73 M samples; planar median 0.66 cm, p90 3.65 cm over 513 k of 1.68 M;
 //   completeness unchanged (97.4 %, 94.75 %). Dense samples more than 10 cm from truth: 78.9 k
 //   (13.3 %) by the old probe, 6.0 k (1.2 %) now. The old probe's were mostly surfaces whose

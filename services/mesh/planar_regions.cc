@@ -46,7 +46,7 @@ using Eigen::Vector3i;
 // refits their plane in O(1) (§4.2.4 asks for a PCA fit of every tentative union). Each face
 // is a uniform square of side s around its isosurface point (§4.3.3: PCA on the isosurface
 // positions), so it adds s²/12 of spread along its two in-plane axes: a single face or a
-// one-face-wide strip then still has a well-defined plane (the seed's "four corners" do the
+// one-face-wide strip then still has a well-defined plane (the dissertation's "four corners" do the
 // same for voxel faces). Points are relative to a common origin to keep the sums well
 // conditioned.
 struct Moments {
@@ -429,14 +429,14 @@ class Fitter {
   // when the PCA plane of their union keeps every isosurface point of the group within the
   // tolerance ("the maximum distance of V from the plane is at most the grid size") and keeps
   // the region's own points as close as before (within max(tolerance, their current maximum):
-  // a noisy flood-fill group is accepted as the seed says, but growing may not make it worse).
-  // The union plane comes from the summed moments in O(1); the candidate's points are checked
-  // exactly (after an O(1) rejection by its centroid); the region's points by a bound over its
-  // bounding box, recomputed exactly (within a budget) only when the bound is not enough.
+  // a noisy flood-fill group is accepted as the dissertation says, but growing may not make it
+  // worse). The union plane comes from the summed moments in O(1); the candidate's points are
+  // checked exactly (after an O(1) rejection by its centroid); the region's points by a bound over
+  // its bounding box, recomputed exactly (within a budget) only when the bound is not enough.
   //
   // mesh_growth differs in three ways, all toward fewer and bigger regions for the planar mesh:
   // - the region's points keep the fixed bound max(tolerance, the seed group's spread): a
-  //   flood-fill group is one lattice plane and is accepted as the seed says even where its
+  //   flood-fill group is one lattice plane and is accepted as the dissertation says even where its
   //   isosurface points spread wider (faces of big leaves against unobserved space are offset
   //   up to 0.45 of their size, Fig 4.9's clamp). A bound that follows the region's current
   //   maximum refuses any absorption that tilts the plane by a hair once a point sits at the
@@ -541,8 +541,8 @@ class Fitter {
 
   // --- (c) Relaxation: merge adjacent regions within 15° (§4.2.4, Fig 4.6d) -----------------
   // Pairs are merged smallest angle first (a priority queue with lazy invalidation), refitting
-  // the union each time. Besides the seed's angle test the planes must stay consistent: both
-  // meet the regions' shared boundary (no step between parallel planes) and the union's plane
+  // the union each time. Besides the dissertation's angle test the planes must stay consistent:
+  // both meet the regions' shared boundary (no step between parallel planes) and the union's plane
   // is within the angle of both parts. Ties are broken by region ids, which come from the
   // canonical face order, so the result does not depend on hash order.
   bool Consistent(const Group& a, const Group& b, const Boundary& bd, Plane* merged) const {
@@ -556,7 +556,7 @@ class Fitter {
     u.Add(b.moments);
     *merged = FitPlane(u);
     // For the planar mesh (mesh_growth) the union must also stay a plane: its RMS distance
-    // from the fitted plane within the grid-size tolerance. The seed's relaxation has no
+    // from the fitted plane within the grid-size tolerance. The dissertation's relaxation has no
     // distance test ("aesthetically pleasing"), so facets of a curved wall, each within 15° of
     // the next, chain into one plane: on the simulated office's lobby (an arc of 1.5 m
     // sagitta) the planar mesh then lay up to ~10 cm off the wall the dense mesh follows.

@@ -1,11 +1,12 @@
-// Planar regions of the octree's boundary faces (seed §4.2.4, §4.3.3; DESIGN §6 stage 2):
+// Planar regions of the octree's boundary faces (§4.2.4, §4.3.3; docs/DESIGN.md §6 stage 2):
 // flood fill of connected faces with the same direction, PCA region growing with the
 // grid-size tolerance, then relaxation that merges adjacent regions whose planes are within
 // 15°. Planes are fitted by PCA on the faces' isosurface positions (Fig 4.9), weighted by area.
 //
 // The three stages:
 //  (a) flood fill: faces with the same axis and direction that share (part of) an edge;
-//  (b) PCA region growing over those groups, largest first (the seed merges "adjacent regions
+//  (b) PCA region growing over those groups, largest first (the dissertation merges "adjacent
+//  regions
 //      of voxel faces", Fig 4.6c): a group joins a region when every isosurface point of the
 //      group is within the tolerance of the union's plane and the region's own points stay
 //      within max(tolerance, their previous maximum) (with mesh_growth: within max(tolerance,
@@ -59,7 +60,8 @@ struct PlanarRegionOptions {
   // (docs/BENCHMARKS.md "Dense vs planar meshes"). The merge fits the default for the levels
   // and floor plans and this for mesh/building.ply. With it, relaxation (c) also requires
   // the union's RMS distance from its plane to stay within the tolerance (a curved wall's
-  // facets would otherwise chain into one plane; the seed's relaxation has no distance test).
+  // facets would otherwise chain into one plane; the dissertation's relaxation has no distance
+  // test).
   bool mesh_growth = false;
 
   // InvalidArgument for a negative or non-finite tolerance or factor, or a merge angle outside

@@ -364,8 +364,8 @@ TEST(PlanarRegions, MeshGrowthKeepsExactRoomsAndPlanes) {
 }
 
 // A curved floor (a cylinder of radius 12 m across 5 m: normals within ±12° of up, 26 cm
-// sagitta). The seed's relaxation has no distance test, so facets each within 15° of the next
-// chain into planes that stray from the surface; with mesh_growth (the planar mesh) every
+// sagitta). The dissertation's relaxation has no distance test, so facets each within 15° of the
+// next chain into planes that stray from the surface; with mesh_growth (the planar mesh) every
 // region must stay within the grid-size tolerance in RMS of the faces it models.
 TEST(PlanarRegions, MeshGrowthFollowsACurvedSurface) {
   constexpr double kR = 12.0;
@@ -403,7 +403,7 @@ TEST(PlanarRegions, MeshGrowthFollowsACurvedSurface) {
               "worst RMS %.1f cm, worst point %.1f cm\n",
               plain->regions.size(), 100 * seed_worst_rms, mesh->regions.size(),
               100 * mesh_worst_rms, 100 * mesh_worst);
-  // The seed's relaxation (the default) flattens it beyond the tolerance: the case exists.
+  // The dissertation's relaxation (the default) flattens it beyond the tolerance: the case exists.
   EXPECT_GT(seed_worst_rms, kRes);
   EXPECT_LE(mesh_worst_rms, kRes);
   EXPECT_LE(mesh_worst, 2 * kRes);

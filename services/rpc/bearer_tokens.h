@@ -1,6 +1,6 @@
 // Bearer tokens mapped to tenants, and the shared cluster secret of the internal RPCs
-// (DESIGN §8: "Every call carries a bearer token; a token sees only its own tenant's jobs and
-// paths"). Plain code, no gRPC: services/rpc/coordinator_service.cc reads the metadata and
+// (docs/DESIGN.md §8: "Every call carries a bearer token; a token sees only its own tenant's jobs
+// and paths"). Plain code, no gRPC: services/rpc/coordinator_service.cc reads the metadata and
 // asks here. Formats and rules: docs/RPC.md, "Authentication".
 #ifndef CARVEMAP_SERVICES_RPC_BEARER_TOKENS_H_
 #define CARVEMAP_SERVICES_RPC_BEARER_TOKENS_H_

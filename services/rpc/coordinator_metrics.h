@@ -1,7 +1,7 @@
-// The coordinator's Prometheus metrics (DESIGN §8 "expose counters"; issue 7): chunks queued,
-// leased and done, workers, rays carved and rays/s, lease expiries and lost workers, refused
-// calls, and the latency of every RPC. prometheus-cpp (Debian's prometheus-cpp-dev) keeps the
-// values; `--metrics-listen` serves them at /metrics, and `carvemap watch --metrics` shows
+// The coordinator's Prometheus metrics (docs/DESIGN.md §8 "expose counters"): chunks
+// queued, leased and done, workers, rays carved and rays/s, lease expiries and lost workers,
+// refused calls, and the latency of every RPC. prometheus-cpp (Debian's prometheus-cpp-dev) keeps
+// the values; `--metrics-listen` serves them at /metrics, and `carvemap watch --metrics` shows
 // them. Names and meanings: docs/RPC.md, "Metrics". Aggregates only: no job id or tenant
 // appears in a label, so a scrape says nothing about whose work it is.
 // Thread-safe (prometheus-cpp's metrics are).

@@ -455,7 +455,7 @@ class CoordinatorServer::Impl {
   void FailJob(const std::string& job_id, const std::string& why);
   // Job.error is the tenant's to read: the server's folders in a reason (a worker's HDF5 error,
   // the merge's) become names relative to the job's output folder, as FetchArtifact names its
-  // files, so the server's layout does not leak (DESIGN §8). The log keeps the full text.
+  // files, so the server's layout does not leak (docs/DESIGN.md §8). The log keeps the full text.
   std::string TenantView(const JobRuntime& rt, std::string text) const;
   void CleanUp(const std::string& job_id, bool succeeded);
   void EnterStage(const std::string& job_id, const std::string& stage);

@@ -1,7 +1,7 @@
-// The coordinator server (DESIGN §5, §8): JobService (public) and CarveTaskService (internal)
-// on one gRPC port, over the SQLite job store and the lease table. A job runs in a background
-// thread: INGESTING (validate the scan, plan its time slices) ➜ CARVING (slices, then the chunks
-// they touch, leased to workers) ➜ MERGING ➜ SUCCEEDED, or FAILED with the reason.
+// The coordinator server (docs/DESIGN.md §5, §8): JobService (public) and CarveTaskService
+// (internal) on one gRPC port, over the SQLite job store and the lease table. A job runs in a
+// background thread: INGESTING (validate the scan, plan its time slices) ➜ CARVING (slices, then
+// the chunks they touch, leased to workers) ➜ MERGING ➜ SUCCEEDED, or FAILED with the reason.
 //
 // Shape of a tensorstore service: Spec (config, Validate) ➜ Start ➜ port() ➜ Wait/Shutdown.
 // gRPC stays behind the pimpl so this header is cheap to include.

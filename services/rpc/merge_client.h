@@ -1,6 +1,6 @@
 // The coordinator's side of MergeService (proto/carvemap/v1/merge.proto): a MergeFunction
 // that runs a job's merge on a merge service (`carvemap merger`) instead of in the
-// coordinator's process (DESIGN §1, §8; docs/RPC.md "MergeService").
+// coordinator's process (docs/DESIGN.md §1, §8; docs/RPC.md "MergeService").
 //
 // One call = one bidirectional stream: the job goes out, progress comes back (handed to the
 // request's `progress`), and the service's re-carve requests (§5.6.1) are answered with the

@@ -1,4 +1,4 @@
-// The merge step of a job as the coordinator sees it (DESIGN §6, §8): what it hands over
+// The merge step of a job as the coordinator sees it (docs/DESIGN.md §6, §8): what it hands over
 // (MergeJobRequest) and the function that runs it (MergeFunction). Two implementations:
 // LocalMerge() runs RunMerge (services/merge/merge_job.h) in the calling process — what a
 // `carvemap merger` runs for each call, and what the in-process tests give the coordinator —

@@ -1,4 +1,4 @@
-// The merge service (DESIGN §6, §8; `carvemap merger`): serves MergeService
+// The merge service (docs/DESIGN.md §6, §8; `carvemap merger`): serves MergeService
 // (proto/carvemap/v1/merge.proto) to the coordinator. Each call runs one job's merge
 // (LocalMerge, i.e. RunMerge, by default) over the job's tiles on the shared storage, streams
 // its progress, asks the coordinator to carve the object chunks again when the merge wants

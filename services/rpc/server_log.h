@@ -1,5 +1,5 @@
-// How the servers log (DESIGN §8: "log with spdlog (text or JSON)"): `--log-format text`, the
-// human line "[time] [level] message", or `--log-format json`, one JSON object per line for a
+// How the servers log (docs/DESIGN.md §8: "log with spdlog (text or JSON)"): `--log-format text`,
+// the human line "[time] [level] message", or `--log-format json`, one JSON object per line for a
 // log collector:
 //
 //   {"time":"2026-11-26T00:35:32.310Z","level":"info","component":"coordinator",

@@ -1,4 +1,4 @@
-// A carve worker (DESIGN §5, §8): registers with the coordinator, heartbeats, and loops
+// A carve worker (docs/DESIGN.md §5, §8): registers with the coordinator, heartbeats, and loops
 // LeaseChunk ➜ read the wedges ➜ CarveChunkToTile ➜ CompleteChunk (or FailChunk with the
 // reason). Serves gRPC health + reflection on its own port so orchestration can probe it.
 // Shape as the coordinator: Spec ➜ Start ➜ port() ➜ Wait/Shutdown; gRPC behind the pimpl.

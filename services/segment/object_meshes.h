@@ -1,4 +1,4 @@
-// The objects of a building, one watertight mesh each (seed §5.6.2; DESIGN §6 stage 8, §7
+// The objects of a building, one watertight mesh each (§5.6.2; docs/DESIGN.md §6 stage 8, §7
 // mesh/objects.ply, mesh/objects/<id>.ply): the dense mesh (dual_contouring.h) of the object
 // volume (segment_chunk.h) split into its connected pieces.
 //
@@ -39,7 +39,7 @@ struct ObjectSplitOptions {
   double ceiling_film_m = 0.15;
   // Pieces touching the ceiling (as above) that are at most this deep on one horizontal side
   // and at least door_header_min_width_m long on the other are the wall over a doorway: the
-  // plan's rooms run through the door, so §5.6's rule makes door headers objects (the seed
+  // plan's rooms run through the door, so §5.6's rule makes door headers objects (the dissertation
   // counts door frames as objects); users of a furniture list do not want them. m.
   double door_header_depth_m = 0.4;
   double door_header_min_width_m = 0.6;
@@ -48,7 +48,8 @@ struct ObjectSplitOptions {
   // level. Why: furniture made of thin parts comes out of the carve in pieces along its
   // height (a shelf's boards, whose 2 cm side panels the wedges carve away; a table's top and
   // the lower parts of its legs), while neighbours standing side by side (a desk and its
-  // chair) do not overlap. < 0: no grouping (the seed's one object per connected component).
+  // chair) do not overlap. < 0: no grouping (the dissertation's one object per connected
+  // component).
   double stack_gap_m = 0.5;
   double stack_overlap = 0.5;
 };

@@ -111,7 +111,7 @@ TEST_F(ObjectMeshesTest, StackedPiecesAreOneObject) {
   EXPECT_NEAR(objects[1].box.min().x(), 2.05, 1e-6);  // the chair
   EXPECT_EQ(objects[2].mesh.triangles.size(), 12u);   // the table
   EXPECT_EQ(objects[3].mesh.triangles.size(), 12u);   // the lamp
-  // The seed's rule: one object per piece.
+  // The dissertation's rule: one object per piece.
   ObjectSplitOptions pieces;
   pieces.stack_gap_m = -1;
   EXPECT_EQ(SplitObjects(all, volume_, pieces).size(), 7u);

@@ -1,8 +1,8 @@
-// The extruded floor plans as a volume the octree can be compared with, cell by cell (seed §5.5,
-// §5.6; DESIGN §6 stages 6–7): per level, a 2D raster at the octree's finest resolution holding
-// each column's room, the room's floor and ceiling heights (§3.3.4) and the signed 2D distance
-// to the plan's walls. Segmentation (segment_chunk.h) asks it, for every finest cell, "is this
-// column inside the plan, how far from a wall, and between which floor and ceiling?".
+// The extruded floor plans as a volume the octree can be compared with, cell by cell (§5.5,
+// §5.6; docs/DESIGN.md §6 stages 6–7): per level, a 2D raster at the octree's finest resolution
+// holding each column's room, the room's floor and ceiling heights (§3.3.4) and the signed 2D
+// distance to the plan's walls. Segmentation (segment_chunk.h) asks it, for every finest cell, "is
+// this column inside the plan, how far from a wall, and between which floor and ceiling?".
 //
 // Why a raster and not point-in-polygon tests: a chunk has up to 2^21 finest cells and each
 // question must cost a lookup; the raster of a 50 m × 50 m level at 6.25 cm is 640 k columns.

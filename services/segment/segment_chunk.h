@@ -1,5 +1,5 @@
-// Segmentation of one chunk of the octree against the extruded floor plans (seed §5.5, §5.6;
-// DESIGN §6 stages 6–7). Every finest cell gets one of four classes:
+// Segmentation of one chunk of the octree against the extruded floor plans (§5.5, §5.6;
+// docs/DESIGN.md §6 stages 6–7). Every finest cell gets one of four classes:
 //   - free: interior in the octree (p > 0.5) and within d of the plan (§5.5);
 //   - trimmed: interior in the octree but farther than d = trim_distance_m from the plan's
 //     interior (2D, on its level): space seen through windows and open doors, not meshed;
@@ -14,9 +14,9 @@
 //     planar mesh keeps the wall surfaces hidden behind furniture; trimmed cells are exterior;
 //   - objects: interior = object cells only, so its dense mesh is the objects, closed at the
 //     back where they touch the plan's walls and floors.
-// Unobserved space: §4.3.2 makes it exterior, and the seed fills the hidden backs of furniture
-// "based on the wall location" (§5.6.2, Fig 5.18e). But a backpack's line scanners leave much
-// of a room unswept (measured on the simulated office: 96 % of the candidate object cells were
+// Unobserved space: §4.3.2 makes it exterior, and the dissertation fills the hidden backs of
+// furniture "based on the wall location" (§5.6.2, Fig 5.18e). But a backpack's line scanners leave
+// much of a room unswept (measured on the simulated office: 96 % of the candidate object cells were
 // unobserved, most of them empty air near walls and floors), so unobserved space is object
 // only when, looking along the plan's wall normal through the cell, the first observed cell
 // away from the nearest wall is solid and the first one towards it is solid or the wall itself,
@@ -53,8 +53,8 @@ namespace carvemap {
 
 struct SegmentOptions {
   // §5.5: interior octree space farther than this from the floor plan's interior is dropped
-  // (the seed's Fig 5.14 uses a 1 m buffer), m. The PlanVolume must be rasterized with a margin
-  // larger than this: columns beyond its raster count as farther.
+  // (the dissertation's Fig 5.14 uses a 1 m buffer), m. The PlanVolume must be rasterized with a
+  // margin larger than this: columns beyond its raster count as farther.
   double trim_distance_m = 1.0;
   // §5.6.1: the plan is aligned with the octree but simplified (§3.3.3 moves walls by up to the
   // error bound) and its floor/ceiling heights are medians; a cell is an object only when its

@@ -3,7 +3,7 @@
 // processes on the position error and on the world-frame rotation vector error, started at 0
 // at t = 0 (a localizer's output is smooth: no white jitter). The reported covariance adds a
 // small floor so it is never singular:
-//   p_est = p_true + e_p,  R_est = Exp(e_r)·R_true  (DESIGN §3).
+//   p_est = p_true + e_p,  R_est = Exp(e_r)·R_true  (docs/DESIGN.md §3).
 #pragma once
 
 #include <array>

@@ -1,4 +1,4 @@
-// Ray casting against a building's truth meshes with Embree (DESIGN §4): the simulator's
+// Ray casting against a building's truth meshes with Embree (docs/DESIGN.md §4): the simulator's
 // scanners, and closest-point distances for tests. Geometry 0 is the structure (walls,
 // floors, ceilings, stairs), geometry 1 the objects (furniture, fixtures).
 #pragma once

@@ -62,7 +62,7 @@ class FrameSimulator {
 
   void Run(const FrameJob& job, ThreadScratch& scratch, FrameOutput& out) const {
     const LineScanner& sc = rig_[job.sensor];
-    // Rays leave the TRUE sensor pose at the TRUE frame time (DESIGN §4); the file gets the
+    // Rays leave the TRUE sensor pose at the TRUE frame time (docs/DESIGN.md §4); the file gets the
     // drifted path and the jittered time.
     const Pose T_world_sensor = PoseAtTime(path_, job.t) * sc.T_system_sensor;
     const Eigen::Matrix3f R = T_world_sensor.rotation.toRotationMatrix().cast<float>();

@@ -1,6 +1,7 @@
-// The scanning simulator (DESIGN §4): a backpack walks through a building with known truth
+// The scanning simulator (docs/DESIGN.md §4): a backpack walks through a building with known truth
 // and records line scans with localization drift, clock jitter and range noise (§2.1, §2.2,
-// §4.1.1), written as scan.h5 (DESIGN §3) plus gt/ (building.json, surfaces.ply, objects.ply).
+// §4.1.1), written as scan.h5 (docs/DESIGN.md §3) plus gt/ (building.json, surfaces.ply,
+// objects.ply).
 #pragma once
 
 #include <cstdint>
@@ -38,7 +39,7 @@ struct NoiseOptions {
 struct SimulateOptions {
   // The building: a preset ("room", "office", "office2") unless floormap_png is set.
   std::string preset = "office";
-  std::string floormap_png;   // 2D floor map (DESIGN §4 pixel convention)
+  std::string floormap_png;   // 2D floor map (docs/DESIGN.md §4 pixel convention)
   std::string furniture_png;  // optional furniture map of the same size
   std::string rooms_png;      // optional ground-truth room segmentation of the same size
   double resolution_m = 0.05; // floor map metres per pixel

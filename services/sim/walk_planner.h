@@ -1,6 +1,6 @@
-// The backpack operator's walk through a building (DESIGN §4): a route through every entered
-// room and back to the start (a loop closure, as in a real survey), then a time-parametrized
-// TRUE system path with a human gait. Plain functions: no files, no logging.
+// The backpack operator's walk through a building (docs/DESIGN.md §4): a route through every
+// entered room and back to the start (a loop closure, as in a real survey), then a
+// time-parametrized TRUE system path with a human gait. Plain functions: no files, no logging.
 #pragma once
 
 #include <cstdint>

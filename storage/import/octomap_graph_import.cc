@@ -102,7 +102,7 @@ absl::StatusOr<ImportedScan> ImportOctomapGraph(const std::string& file,
 
   uint32_t n_nodes = 0;
   if (absl::Status s = p.ReadU32("header", "the node count", n_nodes); !s.ok()) return s;
-  // A scan needs poses (DESIGN §3: /path is never empty).
+  // A scan needs poses (docs/DESIGN.md §3: /path is never empty).
   if (n_nodes == 0) return p.Error("header", "the graph has no nodes", 0);
   if (n_nodes > r.remaining() / kNodeMinBytes) {
     return p.Error("header",

@@ -1,4 +1,4 @@
-// Plain data shared by the importers (other inputs ➜ carvemap-scan, DESIGN §3). An importer
+// Plain data shared by the importers (other inputs ➜ carvemap-scan, docs/DESIGN.md §3). An importer
 // parses its input into an ImportedScan; import_writer.h writes one through ScanWriter.
 #pragma once
 

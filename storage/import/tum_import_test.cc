@@ -19,7 +19,7 @@ namespace {
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
-const std::string kDir = std::string(CARVEMAP_SHARED_DIR) + "/data/tum_fr2_pioneer_slam2";
+const std::string kDir = std::string(CARVEMAP_TEST_DATA_DIR) + "/tum_fr2_pioneer_slam2";
 
 // Frames kept in memory are fine for 10 images of 640×480.
 const absl::StatusOr<ImportedScan>& Fixture() {

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The floor plan's 3D route on the real floor maps (issue 5, "Evaluation"): for each map of
-# ../shared/data/floormaps, `carvemap simulate --floormap … [--furniture …] --rooms …`, then
+# The floor plan's 3D route on the real floor maps : for each map of
+# tests/data/floormaps, `carvemap simulate --floormap … [--furniture …] --rooms …`, then
 # `carvemap run SCAN -o OUT`, then OUT/level_0/floorplan.geojson scored against the map's
 # *_gt_segmentation.png by build/tests/bench/floorplan_score (services/floorplan/room_scoring.h:
 # room F1 at IoU > 0.5 one-to-one, Bormann et al. recall / precision, room counts). Prints one
@@ -24,13 +24,13 @@
 #   --min-f1 F     as a test: exit 1 unless every map run has room F1 >= F
 #   --levels N     as a test: exit 1 unless every map run has N levels in levels.json
 # Environment: CARVEMAP, FLOORPLAN_SCORE (binaries), MAPS (floor map folder), NICE (default 15).
-# Build first: /work/tools/nb carvemap floorplan_score (or scripts/build.sh).
+# Build first: scripts/build.sh carvemap floorplan_score.
 set -euo pipefail
 
 here=$(cd "$(dirname "$0")/../.." && pwd)
 carvemap=${CARVEMAP:-$here/build/carvemap}
 score=${FLOORPLAN_SCORE:-$here/build/tests/bench/floorplan_score}
-maps_dir=${MAPS:-$here/../shared/data/floormaps}
+maps_dir=${MAPS:-$here/tests/data/floormaps}
 nice_level=${NICE:-15}
 variants=furnished rate=4 beam=2 res=0.0625 workers=2 stop_at="" work=/tmp/carvemap-floorplan-3d
 keep=0 fresh=0 min_f1="" want_levels=""

@@ -1,16 +1,16 @@
-// Scores a floor plan the 3D route wrote (OUT/level_<k>/floorplan.geojson, DESIGN §7) against a
-// real map's ground-truth rooms (../shared/data/floormaps/*_gt_segmentation.png, SOURCES.md),
-// with the same metrics as the 2D route's evaluation (services/floorplan/room_scoring.h: room F1
-// at IoU > 0.5, one-to-one; Bormann et al.'s overlap recall / precision). Used by
-// tests/bench/floorplan_3d_eval.sh.
+// Scores a floor plan the 3D route wrote (OUT/level_<k>/floorplan.geojson, docs/DESIGN.md §7)
+// against a real map's ground-truth rooms (tests/data/floormaps/*_gt_segmentation.png,
+// SOURCES.md), with the same metrics as the 2D route's evaluation
+// (services/floorplan/room_scoring.h: room F1 at IoU > 0.5, one-to-one; Bormann et al.'s overlap
+// recall / precision). Used by tests/bench/floorplan_3d_eval.sh.
 //
 //   floorplan_score --geojson OUT/level_0/floorplan.geojson --gt MAP_gt_segmentation.png
 //                   [--resolution 0.05] [--origin-x 0] [--origin-y 0]
 //
 // Frames: `carvemap simulate --floormap` extrudes pixel (row, col) of an H-row map to
-// x = col·res, y = (H−1−row)·res (DESIGN §4, lower-left origin), the frame RasterizeFloorPlan
-// uses with origin (0, 0); the plan's polygons are in the world frame of the scan, so a map
-// simulated with defaults needs no offset.
+// x = col·res, y = (H−1−row)·res (docs/DESIGN.md §4, lower-left origin), the frame
+// RasterizeFloorPlan uses with origin (0, 0); the plan's polygons are in the world frame of the
+// scan, so a map simulated with defaults needs no offset.
 //
 // Prints one line of key=value pairs (truth_rooms, predicted_rooms, matched, precision, recall,
 // f1, bormann_recall, bormann_precision, plan_rooms = room features in the file).

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The local pipeline's scaling benchmarks (issue 3), through `carvemap run` as a user runs it:
+# The local pipeline's scaling benchmarks, through `carvemap run` as a user runs it:
 #   1. wall time with 1 worker vs 2 workers on the same scan (and the carve stage alone);
 #   2. peak RSS of the coordinator, of each worker and of the merge service for the same
 #      building and walk scanned at 1×, 2× and 4× the data (scanner rate 10, 20, 40 Hz: the same

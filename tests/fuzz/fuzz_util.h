@@ -80,8 +80,8 @@ inline void Require(bool ok, std::string_view what) {
   std::abort();
 }
 
-// "Bad input gets a clear error naming the file" (DESIGN §3, COMMON): every error from a reader
-// must carry the path it was given.
+// "Bad input gets a clear error naming the file" (docs/DESIGN.md §3, COMMON): every error from a
+// reader must carry the path it was given.
 inline void RequireNamesFile(const absl::Status& status, const std::string& path) {
   Trace(status);
   if (status.ok()) return;

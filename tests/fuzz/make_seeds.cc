@@ -1,12 +1,12 @@
 // Writes the seed corpora of the fuzz targets (corpus/<target>/) from the real fixtures in
-// ../shared/data, cut small so that each execution stays fast (libFuzzer's max_len follows the
+// tests/data, cut small so that each execution stays fast (libFuzzer's max_len follows the
 // largest seed). Run by hand when a format changes; the seeds are committed:
 //   cmake --build <fuzz build> --target make_seeds
-//   <fuzz build>/make_seeds /work/shared/data tests/fuzz/corpus
+//   <fuzz build>/make_seeds tests/data tests/fuzz/corpus
 // HDF5: the structure-aware targets (scan_reader, tile_reader) get scripts (h5_script.h)
 // decompiled from files our writers wrote (ScanWriter, WriteTile) and from a "foreign" scan
-// with contiguous datasets and fixed-length strings (as h5py and others may write, DESIGN §3);
-// the *_raw targets get files: the foreign scans (10 KiB; ScanWriter's 100–200 KiB chunks
+// with contiguous datasets and fixed-length strings (as h5py and others may write, docs/DESIGN.md
+// §3); the *_raw targets get files: the foreign scans (10 KiB; ScanWriter's 100–200 KiB chunks
 // make 400 KiB files) and WriteTile's tiles.
 #include <png.h>
 
@@ -174,7 +174,8 @@ std::string BinaryPly(const std::vector<Node>& nodes, bool big) {
                       body);
 }
 
-// --- scan.h5 (DESIGN §3) with contiguous datasets -------------------------------------------
+// --- scan.h5 (docs/DESIGN.md §3) with contiguous datasets
+// -------------------------------------------
 
 Hid Contiguous(hid_t loc, const char* name, hid_t file_type, hsize_t rows, hsize_t cols) {
   const hsize_t dims[2] = {rows, cols};
@@ -581,7 +582,7 @@ void PartialSumsSeeds(const std::vector<Node>& nodes, const fs::path& out) {
 
 int main(int argc, char** argv) {
   using namespace carvemap;
-  if (argc != 3) Die("usage: make_seeds <shared data dir> <corpus dir>");
+  if (argc != 3) Die("usage: make_seeds <test data dir> <corpus dir>");
   const std::string data = argv[1];
   const fs::path out = argv[2];
   const std::vector<Node> nodes = GraphNodes(data, 3, 12);

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Checks a job's outputs (DESIGN §7) independently of carvemap's code, from the spec alone:
+"""Checks a job's outputs (docs/DESIGN.md §7) independently of carvemap's code, from the
+spec alone:
 
   - every file job.json lists exists and is not empty;
   - levels.json is a list of {index, floor_z, ceiling_z, split_z}, and when the job came from
@@ -49,7 +50,8 @@ def read_ply(path):
             elif words[0] == "property":
                 if words[1] == "list":
                     if element != "face" or words[2:4] != ["uchar", "int"]:
-                        raise ValueError(f"{path}: faces must be 'list uchar int' (DESIGN §7)")
+                        raise ValueError(f"{path}: faces must be 'list uchar int' "
+                                         "(docs/DESIGN.md §7)")
                     has_list = True
                 elif element == "vertex":
                     vprops.append((words[2], words[1]))

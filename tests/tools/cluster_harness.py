@@ -1,5 +1,5 @@
-"""A local carvemap cluster for the fault, recovery, load and client tests (issue 7):
-a coordinator, workers and merge services as separate `carvemap` processes (DESIGN §1, §9),
+"""A local carvemap cluster for the fault, recovery, load and client tests:
+a coordinator, workers and merge services as separate `carvemap` processes (docs/DESIGN.md §1, §9),
 each with its own log, and a gRPC
 client (Python stubs generated from proto/ at test time with grpc_tools.protoc) to submit and
 watch jobs. Nothing here knows carvemap's C++ code: only the documented CLI flags (docs/RPC.md,

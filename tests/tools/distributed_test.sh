@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# End-to-end test of the distributed carving (DESIGN §5, §8, §9) through real processes:
+# End-to-end test of the distributed carving (docs/DESIGN.md §5, §8, §9) through real processes:
 #   determinism   `carvemap run` with 1 and with 2 workers gives byte-identical tiles, and the
 #                 merge runs on the merge service `run` starts;
 #   lost worker   a worker SIGKILLed mid-job: the job still completes, same tiles;
@@ -40,7 +40,7 @@ if msg=$(same_tiles "$WORK/one" "$WORK/two"); then pass "1 vs 2 workers: $msg"; 
 for f in job.json octree.bt level_0/topdown.png; do
   [ -s "$WORK/two/$f" ] || fail "run did not write $f"
 done
-# The merge ran in its own process (DESIGN §9), the merge service `run` started.
+# The merge ran in its own process (docs/DESIGN.md §9), the merge service `run` started.
 if grep -q "merge started" "$WORK/two/.carvemap/merger.log" 2>/dev/null \
     && grep -q "merging on 127.0.0.1:" "$WORK/two/.carvemap/coordinator.log"; then
   pass "the merge ran on the merge service"

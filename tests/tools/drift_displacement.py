@@ -29,8 +29,9 @@ def rotations(q):
 
 
 def poses_at(path, t):
-    """DESIGN §3: position linear, orientation SLERP between the poses around each t. Poses are
-    milliseconds apart, so a normalised linear blend of the quaternions is SLERP to ~1e-9 rad."""
+    """docs/DESIGN.md §3: position linear, orientation SLERP between the poses around each t.
+    Poses are milliseconds apart, so a normalised linear blend of the quaternions is SLERP to
+    ~1e-9 rad."""
     times = path["t"]
     i = np.clip(np.searchsorted(times, t) - 1, 0, len(times) - 2)
     a = ((t - times[i]) / (times[i + 1] - times[i]))[:, None]

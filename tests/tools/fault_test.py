@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Fault injection and recovery through real processes (issue 7, DESIGN §5, §8).
+"""Fault injection and recovery through real processes (docs/DESIGN.md §5, §8).
 
 Every job here is the same small job (the `room` preset, 5 Hz, 2° beams, 8 s of walk, objects
 carved again at 3.125 cm), submitted by the same tenant with the same idempotency key, so it
@@ -10,7 +10,7 @@ timings) byte for byte.
 
   reference            simulate the scan and run the job undisturbed (the fixture of the rest)
   coordinator-restart  the coordinator SIGKILLed during ingest, during carving, and during the
-                       merge's second carving pass (seed §5.6.1), then started again on the same
+                       merge's second carving pass (§5.6.1), then started again on the same
                        job store and port: the job resumes and completes; chunks DONE at the kill
                        are not carved again (their tiles keep their inode), LEASED ones are
                        carved (again or by their old lease)
@@ -23,8 +23,9 @@ timings) byte for byte.
   storage-full         the output folder on a small tmpfs (a private mount namespace; skipped,
                        exit 77, only when the kernel refuses one): tiles that do not fit, and
                        meshes that do not fit: FAILED naming ENOSPC, nothing that looks complete
-  merge-kill           the merge service SIGKILLed mid-merge (DESIGN §8: the merge is its own
-                       service): with a second service running, the coordinator merges again
+  merge-kill           the merge service SIGKILLed mid-merge (docs/DESIGN.md §8: the merge is
+                       its own service): with a second service running, the coordinator
+                       merges again
                        there; during the merge's second carving pass (§5.6.1) with the service
                        restarted on its port, it merges again there without carving the object
                        chunks a second time; with no service left, the job FAILS with the

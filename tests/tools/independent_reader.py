@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """An independent reader of carvemap's input and ground-truth contracts.
 
-Written from ../shared/DESIGN.md §3 (scan.h5) and §4 (gt/) alone, with h5py and numpy, sharing
+Written from docs/DESIGN.md §3 (scan.h5) and §4 (gt/) alone, with h5py and numpy, sharing
 no code with the C++ reader: if both agree, the files follow the written contract and not just
 our own reading of it.
 

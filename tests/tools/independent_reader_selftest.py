@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Checks that independent_reader.py accepts a good file and rejects each kind of bad one.
 
-Files are written here with h5py, as a foreign writer would, from DESIGN §3/§4."""
+Files are written here with h5py, as a foreign writer would, from docs/DESIGN.md §3/§4."""
 import json
 import os
 import struct

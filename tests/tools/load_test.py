@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Load, bounded and on loopback only (issue 7): 4 tenants submit 8 jobs at once (2 each, from
+"""Load, bounded and on loopback only: 4 tenants submit 8 jobs at once (2 each, from
 8 threads released together) to one coordinator with 2 workers, while 50 watchers stream
 WatchJob (each with its own tenant's token, spread over the jobs). Then:
 

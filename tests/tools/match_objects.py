@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Issue 6's object score for a finished job against the simulator's truth, by hand.
+"""The object score of a finished job against the simulator's truth, by hand.
 
 The same matching as services/merge/object_segmentation_test.cc: true objects with all sides
 >= 0.3 m are found when a reported object (job.json "objects") has box IoU >= 0.5 with them,

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""An independent client of the job API (issue 7): Python, Debian's python3-grpcio, stubs
+"""An independent client of the job API: Python, Debian's python3-grpcio, stubs
 generated from proto/ at test time with python3-grpc-tools; it knows only the .proto files and
 docs/RPC.md, none of carvemap's C++.
 
@@ -266,8 +266,8 @@ def fetch(jobs, pb, auth, job_id, name, chunk=0, offset=0):
 
 
 def check_ply_size(ply):
-    """Binary little-endian PLY with float x y z vertices and uchar-int triangle lists (DESIGN
-    §7): the header's counts must account for every byte."""
+    """Binary little-endian PLY with float x y z vertices and uchar-int triangle lists
+    (docs/DESIGN.md §7): the header's counts must account for every byte."""
     end = ply.index(b"end_header\n") + len(b"end_header\n")
     header = ply[:end].decode("ascii").splitlines()
     expect(header[0] == "ply" and header[1] == "format binary_little_endian 1.0",
