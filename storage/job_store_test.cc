@@ -4,8 +4,10 @@
 #include <gtest/gtest.h>
 
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <thread>
 
 #include <sqlite3.h>
@@ -248,6 +250,46 @@ TEST(JobStoreTest, ChunkUpdatesAreCompareAndSetAndAtomic) {
   ghost.key = {99, 99, 99};
   std::vector<ChunkUpdate> ghost_update = {{ghost, 0}};
   EXPECT_EQ(s.UpdateChunks(ghost_update, 1400).code(), absl::StatusCode::kNotFound);
+}
+
+// The job's counters follow its chunks through any sequence of updates, several to one chunk
+// in one call included (they move by each update's change; AddChunks counts afresh).
+TEST(JobStoreTest, CountersFollowTheChunksThroughRandomUpdates) {
+  auto store = JobStore::Open(TempPath("jobs.db"));
+  ASSERT_TRUE(store.ok());
+  JobStore& s = **store;
+  ASSERT_TRUE(s.CreateJob(MakeJob("j-1", 1000)).ok());
+  ASSERT_TRUE(s.AddChunks("j-1", MakeChunks(12)).ok());
+  std::mt19937 rng(7);
+  for (int round = 0; round < 60; ++round) {
+    auto chunks = s.ListChunks("j-1");
+    ASSERT_TRUE(chunks.ok());
+    std::vector<ChunkUpdate> updates;
+    const int n = 1 + int(rng() % 3);
+    for (int k = 0; k < n; ++k) {
+      ChunkRecord& c = (*chunks)[rng() % chunks->size()];
+      const int64_t expected = c.generation;
+      c.state = static_cast<ChunkState>(1 + rng() % 3);  // queued, leased, done
+      c.attempts = int(rng() % 4);
+      c.generation = expected + 1;
+      updates.push_back({c, expected});  // the same chunk again: from the generation just set
+    }
+    ASSERT_TRUE(s.UpdateChunks(updates, 2000 + round).ok()) << round;
+    auto after = s.ListChunks("j-1");
+    auto job = s.GetJob("j-1");
+    ASSERT_TRUE(after.ok() && job.ok());
+    int64_t done = 0, leased = 0, retries = 0;
+    for (const ChunkRecord& c : *after) {
+      done += c.state == ChunkState::kDone;
+      leased += c.state == ChunkState::kLeased;
+      retries += std::max(c.attempts - 1, 0);
+    }
+    EXPECT_EQ(job->counters.chunks_total, 12) << round;
+    EXPECT_EQ(job->counters.chunks_done, done) << round;
+    EXPECT_EQ(job->counters.chunks_leased, leased) << round;
+    EXPECT_EQ(job->counters.chunk_retries, retries) << round;
+    EXPECT_EQ(job->updated_unix_ms, 2000 + round);
+  }
 }
 
 // Two threads on one store: every write lands, none interleaves inside a transaction.
