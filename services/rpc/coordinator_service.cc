@@ -1807,6 +1807,9 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
             absl::StrCat("worker ", req.worker_id(), " unknown or lost: register again"));
       }
       Touch(req.worker_id());
+      // A caller that has given up waiting would never learn of a lease granted now (its
+      // heartbeats would give it back, but only after a heartbeat's delay).
+      if (ctx.IsCancelled()) return absl::CancelledError("lease call cancelled by the worker");
       absl::StatusOr<std::optional<LeaseTable::Grant>> g = table_->Lease(req.worker_id());
       if (!g.ok()) return g.status();
       grant = *g;
