@@ -79,8 +79,7 @@ absl::StatusOr<std::vector<ScanSlice>> PlanSlices(std::span<const std::vector<Fr
   return slices;
 }
 
-absl::StatusOr<ScanSlicePlan> PlanScanSlices(ScanReader& reader,
-                                             const SlicePlanOptions& options) {
+absl::StatusOr<ScanSlicePlan> PlanScanSlices(ScanReader& reader, const SlicePlanOptions& options) {
   if (absl::Status s = reader.Validate(); !s.ok()) return s;
   std::vector<std::vector<FrameRecord>> frames;
   std::vector<SensorKind> kinds;

@@ -70,6 +70,6 @@ struct ScanSlicePlan {
   uint64_t rays = 0;
 };
 [[nodiscard]] absl::StatusOr<ScanSlicePlan> PlanScanSlices(ScanReader& reader,
-                                                          const SlicePlanOptions& options);
+                                                           const SlicePlanOptions& options);
 
 }  // namespace carvemap

@@ -1,10 +1,10 @@
 #include "coordinator/scan_slices.h"
 
+#include <gtest/gtest.h>
+
 #include <filesystem>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "services/sim/simulator.h"
 

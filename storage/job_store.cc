@@ -635,9 +635,8 @@ absl::Status JobStore::UpdateChunks(std::span<const ChunkUpdate> updates, int64_
     const ChunkRecord& c = u.chunk;
     const std::string what = absl::StrCat("update chunk ", KeyText(c.key), " of job ", c.job_id);
     Stmt old(path_, db_);
-    if (absl::Status st = old.Prepare(
-            "SELECT state, attempts FROM chunks "
-            "WHERE job_id=? AND x=? AND y=? AND z=? AND generation=?");
+    if (absl::Status st = old.Prepare("SELECT state, attempts FROM chunks "
+                                      "WHERE job_id=? AND x=? AND y=? AND z=? AND generation=?");
         !st.ok()) {
       return st;
     }

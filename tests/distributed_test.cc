@@ -1,6 +1,6 @@
 // Cross-service test: a real coordinator, a real worker and a real merge
-// service on 127.0.0.1:0 in this process, talked to over gRPC as a client would. The process-level behaviour (`carvemap
-// run`, a SIGKILLed worker, bad jobs) is tests/tools/distributed_test.sh.
+// service on 127.0.0.1:0 in this process, talked to over gRPC as a client would. The process-level
+// behaviour (`carvemap run`, a SIGKILLed worker, bad jobs) is tests/tools/distributed_test.sh.
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>

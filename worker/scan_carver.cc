@@ -117,9 +117,8 @@ absl::StatusOr<ScanCarveTotals> CarveScan(
   for (const ScanSlice& s : slices) rays_total += s.own_rays;
   std::vector<size_t> order(slices.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return slices[a].own_rays > slices[b].own_rays;
-  });
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return slices[a].own_rays > slices[b].own_rays; });
   std::atomic<uint64_t> slices_done{0};
   const auto tick_slices = [&] {
     if (!progress) return;

@@ -41,8 +41,8 @@ struct OccupancyGrid2D {
 };
 
 struct VisibilityOptions {
-  double max_range_m = 30.0;         // docs/DESIGN.md §4: the scanners' range
-  double angle_step_deg = 0.25;      // docs/DESIGN.md §4: the scanners' angular step; 360° fans
+  double max_range_m = 30.0;     // docs/DESIGN.md §4: the scanners' range
+  double angle_step_deg = 0.25;  // docs/DESIGN.md §4: the scanners' angular step; 360° fans
   // Poses closer than this (along the path) to the previous kept pose are skipped; 0 keeps all.
   double min_pose_spacing_m = 0.25;
   // A hit point further than this from every sample sees none, m. 0 = 1.5 grid cells.

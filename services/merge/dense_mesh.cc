@@ -10,7 +10,6 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
-
 #include "services/mesh/dual_contouring.h"
 
 namespace carvemap {

@@ -118,11 +118,14 @@ TEST(DenseMesh, ThreadsGiveTheSameMeshAndFacesAsOne) {
   ASSERT_GT(one->mesh.triangles.size(), 1000u);
   for (int threads : {2, 3}) {
     uint64_t last = 0;
-    auto many = BuildDenseMesh(**set, [&](uint64_t done, uint64_t) {
-      EXPECT_EQ(done, last + 1);  // in chunk order, one call per chunk
-      last = done;
-      return true;
-    }, threads);
+    auto many = BuildDenseMesh(
+        **set,
+        [&](uint64_t done, uint64_t) {
+          EXPECT_EQ(done, last + 1);  // in chunk order, one call per chunk
+          last = done;
+          return true;
+        },
+        threads);
     ASSERT_TRUE(many.ok()) << many.status();
     EXPECT_EQ(last, one->chunks);
     EXPECT_EQ(many->mesh.vertices, one->mesh.vertices) << threads;
@@ -138,10 +141,13 @@ TEST(DenseMesh, ThreadsGiveTheSameMeshAndFacesAsOne) {
   }
   // Cancelled in a batch: no later chunk is reported.
   uint64_t calls = 0;
-  auto cancelled = BuildDenseMesh(**set, [&](uint64_t done, uint64_t) {
-    ++calls;
-    return done < 5;
-  }, 2);
+  auto cancelled = BuildDenseMesh(
+      **set,
+      [&](uint64_t done, uint64_t) {
+        ++calls;
+        return done < 5;
+      },
+      2);
   EXPECT_EQ(cancelled.status().code(), absl::StatusCode::kCancelled);
   EXPECT_EQ(calls, 5u);
 }

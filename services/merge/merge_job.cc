@@ -58,7 +58,6 @@ ChunkProgressFn StageProgress(const MergeProgressCallback& progress, const char*
   };
 }
 
-
 // The recorded system path of the job's scan (docs/DESIGN.md §3 /path): the scanner positions of
 // the floor plans (§3.3.1), 24 bytes per pose; the poses' other fields are not read.
 absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string& scan_path) {
@@ -354,9 +353,8 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
         TileSet::Open((work / "building").string(), grid.resolution_m(),
                       options.cache_budget_bytes);
     if (!btiles.ok()) return btiles.status();
-    absl::StatusOr<std::vector<BoundaryFace>> bfaces =
-        CollectBoundaryFaces(**btiles, StageProgress(progress, "building_faces"),
-                         MergeThreads(options));
+    absl::StatusOr<std::vector<BoundaryFace>> bfaces = CollectBoundaryFaces(
+        **btiles, StageProgress(progress, "building_faces"), MergeThreads(options));
     if (!bfaces.ok()) return bfaces.status();
     (*btiles)->ReleaseCache();  // read again only by the dense fallback below
     if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
@@ -373,9 +371,8 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
     if (!building) {
       // The planar mesher failed (its reason is in the warnings): the building volume's dense
       // mesh stands in, watertight by construction, so combined.ply stays whole.
-      absl::StatusOr<DenseMeshResult> dense =
-          BuildDenseMesh(**btiles, StageProgress(progress, "building_dense_mesh"),
-                         MergeThreads(options));
+      absl::StatusOr<DenseMeshResult> dense = BuildDenseMesh(
+          **btiles, StageProgress(progress, "building_dense_mesh"), MergeThreads(options));
       if (!dense.ok()) return dense.status();
       if (absl::Status s = WritePly((out / "mesh" / "building.ply").string(), dense->mesh);
           !s.ok()) {
@@ -416,8 +413,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
         TileSet::Open(source.dir, source.resolution_m, options.cache_budget_bytes);
     if (!otiles.ok()) return otiles.status();
     absl::StatusOr<DenseMeshResult> dense =
-        BuildDenseMesh(**otiles, StageProgress(progress, "object_mesh"),
-                         MergeThreads(options));
+        BuildDenseMesh(**otiles, StageProgress(progress, "object_mesh"), MergeThreads(options));
     if (!dense.ok()) return dense.status();
     objects = SplitObjects(dense->mesh, source.finer_volume ? *source.finer_volume : *volume,
                            SplitOptionsFor(options, grid), &split_report);
@@ -511,8 +507,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   // boundary faces (stage 1)
   Clock::time_point t0 = Clock::now();
   absl::StatusOr<std::vector<BoundaryFace>> faces =
-      CollectBoundaryFaces(tiles, StageProgress(progress, "boundary_faces"),
-                         MergeThreads(options));
+      CollectBoundaryFaces(tiles, StageProgress(progress, "boundary_faces"), MergeThreads(options));
   if (!faces.ok()) return InStage("boundary_faces", faces.status());
   double face_area = 0;
   for (const BoundaryFace& f : *faces) face_area += f.area_m2();
@@ -575,8 +570,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   uint64_t dense_triangles = 0;
   {
     absl::StatusOr<DenseMeshResult> dense =
-        BuildDenseMesh(tiles, StageProgress(progress, "dense_mesh"),
-                         MergeThreads(options));
+        BuildDenseMesh(tiles, StageProgress(progress, "dense_mesh"), MergeThreads(options));
     if (!dense.ok()) return InStage("dense_mesh", dense.status());
     if (absl::Status s = WritePly((out / "mesh" / "dense.ply").string(), dense->mesh); !s.ok()) {
       return InStage("dense_mesh", s);

@@ -18,8 +18,7 @@ namespace {
 
 using ::testing::HasSubstr;
 
-const std::string kFixture =
-    std::string(CARVEMAP_TEST_DATA_DIR) + "/octomap/spherical_scan.graph";
+const std::string kFixture = std::string(CARVEMAP_TEST_DATA_DIR) + "/octomap/spherical_scan.graph";
 
 std::vector<char> ReadAll(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
