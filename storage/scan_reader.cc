@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <limits>
+#include <span>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -144,6 +146,9 @@ struct ScanReader::Impl {
   absl::Status LoadSensors();
   absl::Status LoadSensor(hid_t sensors_group, const std::string& name);
 
+  // Calls `fn(first row, rows)` on /path in blocks of kPathBlockRows, whatever Open kept.
+  absl::Status ForEachPathBlock(
+      const std::function<absl::Status(uint64_t, std::span<const PathRecord>)>& fn) const;
   absl::Status ValidatePath() const;
   absl::Status ValidatePathCov() const;
   absl::Status ValidateMagnetometer() const;
@@ -675,32 +680,12 @@ absl::StatusOr<std::vector<FrameRecord>> ScanReader::FrameRecords(int sensor) {
 // does not grow with the survey's length.
 constexpr uint64_t kPathBlockRows = 1 << 16;
 
-absl::StatusOr<std::vector<Eigen::Vector3d>> ScanReader::PathPositions() {
-  auto dataset = impl_->OpenDataset("/path");
-  if (!dataset.ok()) return dataset.status();
-  Hid mem = h5::PathMemType();
-  std::vector<Eigen::Vector3d> positions;
-  positions.reserve(impl_->path_rows);
-  std::vector<PathRecord> block;
-  for (uint64_t first = 0; first < impl_->path_rows; first += block.size()) {
-    block.resize(std::min(kPathBlockRows, impl_->path_rows - first));
-    if (absl::Status s =
-            h5::ReadRows(dataset->get(), mem.get(), 0, first, block.size(), block.data());
-        !s.ok()) {
-      return h5::Prefixed(absl::StrCat(impl_->file, ": /path"), s);
-    }
-    for (const PathRecord& p : block) positions.emplace_back(p.x, p.y, p.z);
-  }
-  return positions;
-}
-
-absl::Status ScanReader::Impl::ValidatePath() const {
-  if (path_rows == 0) return Invalid(file, "/path", "no poses");
+absl::Status ScanReader::Impl::ForEachPathBlock(
+    const std::function<absl::Status(uint64_t, std::span<const PathRecord>)>& fn) const {
   auto dataset = OpenDataset("/path");
   if (!dataset.ok()) return dataset.status();
   Hid mem = h5::PathMemType();
   std::vector<PathRecord> block;
-  double previous_t = 0;
   for (uint64_t first = 0; first < path_rows; first += block.size()) {
     block.resize(std::min(kPathBlockRows, path_rows - first));
     if (absl::Status s =
@@ -708,6 +693,26 @@ absl::Status ScanReader::Impl::ValidatePath() const {
         !s.ok()) {
       return h5::Prefixed(absl::StrCat(file, ": /path"), s);
     }
+    if (absl::Status s = fn(first, block); !s.ok()) return s;
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<Eigen::Vector3d>> ScanReader::PathPositions() {
+  std::vector<Eigen::Vector3d> positions;
+  positions.reserve(impl_->path_rows);
+  absl::Status s = impl_->ForEachPathBlock([&](uint64_t, std::span<const PathRecord> block) {
+    for (const PathRecord& p : block) positions.emplace_back(p.x, p.y, p.z);
+    return absl::OkStatus();
+  });
+  if (!s.ok()) return s;
+  return positions;
+}
+
+absl::Status ScanReader::Impl::ValidatePath() const {
+  if (path_rows == 0) return Invalid(file, "/path", "no poses");
+  double previous_t = 0;
+  return ForEachPathBlock([&](uint64_t first, std::span<const PathRecord> block) {
     for (size_t k = 0; k < block.size(); ++k) {
       const uint64_t i = first + k;
       const PathRecord& p = block[k];
@@ -723,8 +728,8 @@ absl::Status ScanReader::Impl::ValidatePath() const {
         return RowError(file, "/path", i, absl::StrCat("non-unit quaternion (norm ", norm, ")"));
       }
     }
-  }
-  return absl::OkStatus();
+    return absl::OkStatus();
+  });
 }
 
 absl::Status ScanReader::Impl::ValidatePathCov() const {
