@@ -113,8 +113,7 @@ absl::StatusOr<ScanCarveTotals> CarveScan(
   std::vector<std::string> partials(slices.size());
   std::vector<SliceCarveStats> stats(slices.size());
   std::vector<std::atomic<uint64_t>> slice_rays(slices.size());
-  uint64_t rays_total = 0;
-  for (const ScanSlice& s : slices) rays_total += s.own_rays;
+  const uint64_t rays_total = plan->rays;  // the slices' own rows partition every frame
   std::vector<size_t> order(slices.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
   std::stable_sort(order.begin(), order.end(),

@@ -951,8 +951,7 @@ absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
   JobRuntime& rt = runtime_[job.id];
   rt.slices = std::move(plan->slices);
   rt.slice_s = plan->slice_s;
-  rt.rays_to_carve = 0;
-  for (const ScanSlice& s : rt.slices) rt.rays_to_carve += int64_t(s.own_rays);
+  rt.rays_to_carve = int64_t(plan->rays);  // the slices' own rows partition every frame
   return absl::OkStatus();
 }
 
