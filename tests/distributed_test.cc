@@ -84,6 +84,14 @@ class DistributedTest : public ::testing::Test {
     return "sim/scan.h5";
   }
 
+  // The scan of SimulateScan as the job "room".
+  static absl::StatusOr<JobInfo> SubmitRoom(JobClient& client, const std::string& scan) {
+    SubmitParams params;
+    params.input_path = scan;
+    params.output_name = "room";
+    return client.Submit(params);
+  }
+
   fs::path root_;
   std::function<absl::Status(const MergeJobRequest&)> merge_hook_;
   std::unique_ptr<MergeServer> merger_;  // outlives the coordinator (declared first)
@@ -236,10 +244,7 @@ TEST_F(DistributedTest, JobRunsToSucceededWithAWorker) {
 TEST_F(DistributedTest, ALeaseTheWorkerNeverReceivedIsGivenBack) {
   const std::string scan = SimulateScan();
   JobClient client(address_);
-  SubmitParams params;
-  params.input_path = scan;
-  params.output_name = "room";
-  auto job = client.Submit(params);
+  auto job = SubmitRoom(client, scan);
   ASSERT_TRUE(job.ok()) << job.status();
   WorkerSpec ws;
   ws.coordinator_address = address_;
@@ -329,10 +334,7 @@ TEST_F(DistributedTest, MergeCarvesChunksAgainFinerThroughTheWorkers) {
     return absl::OkStatus();
   };
   JobClient client(address_);
-  SubmitParams params;
-  params.input_path = scan;
-  params.output_name = "room";
-  auto job = client.Submit(params);
+  auto job = SubmitRoom(client, scan);
   ASSERT_TRUE(job.ok()) << job.status();
   auto done = client.Watch(job->job_id, 0.2, [](const WatchUpdate&) {});
   ASSERT_TRUE(done.ok()) << done.status();
