@@ -5,9 +5,8 @@
 #include <chrono>
 #include <utility>
 
-#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_split.h"
+#include "coordinator/lease_id.h"
 
 namespace carvemap {
 namespace {
@@ -20,34 +19,6 @@ class SystemClock final : public LeaseTable::Clock {
         .count();
   }
 };
-
-
-struct ParsedLease {
-  std::string job_id;
-  ChunkCoord chunk;
-  int64_t generation = 0;
-};
-
-// Inverse of MakeLeaseId. Split from the right, so a job id may itself contain '/'.
-absl::StatusOr<ParsedLease> ParseLeaseId(absl::string_view lease_id) {
-  const auto bad = [&] {
-    return absl::InvalidArgumentError(absl::StrCat("malformed lease id \"", lease_id, "\""));
-  };
-  size_t gen_slash = lease_id.rfind('/');
-  if (gen_slash == absl::string_view::npos || gen_slash == 0) return bad();
-  size_t key_slash = lease_id.rfind('/', gen_slash - 1);
-  if (key_slash == absl::string_view::npos || key_slash == 0) return bad();
-  ParsedLease p;
-  p.job_id = std::string(lease_id.substr(0, key_slash));
-  std::vector<absl::string_view> xyz =
-      absl::StrSplit(lease_id.substr(key_slash + 1, gen_slash - key_slash - 1), ',');
-  if (xyz.size() != 3 || !absl::SimpleAtoi(xyz[0], &p.chunk.x) ||
-      !absl::SimpleAtoi(xyz[1], &p.chunk.y) || !absl::SimpleAtoi(xyz[2], &p.chunk.z) ||
-      !absl::SimpleAtoi(lease_id.substr(gen_slash + 1), &p.generation) || p.generation < 1) {
-    return bad();
-  }
-  return p;
-}
 
 }  // namespace
 
@@ -71,11 +42,6 @@ LeaseTable::Clock& LeaseTable::Clock::System() {
 LeaseTable::LeaseTable(JobStore& store, Clock& clock, LeaseTableOptions options)
     : store_(store), clock_(clock), options_(options) {
   assert(options_.Validate().ok());
-}
-
-std::string LeaseTable::MakeLeaseId(absl::string_view job_id, const ChunkCoord& chunk,
-                                    int64_t generation) {
-  return absl::StrCat(job_id, "/", chunk.x, ",", chunk.y, ",", chunk.z, "/", generation);
 }
 
 // ---- jobs
@@ -152,7 +118,7 @@ absl::StatusOr<std::optional<LeaseTable::Grant>> LeaseTable::Lease(absl::string_
     ChunkRecord next = current;
     next.state = ChunkState::kLeased;
     next.generation = current.generation + 1;
-    next.lease_id = MakeLeaseId(job_id, key, next.generation);
+    next.lease_id = LeaseId{std::string(job_id), key, next.generation}.ToString();
     next.worker_id = std::string(worker_id);
     next.deadline_unix_ms = now + options_.lease_timeout_ms;
     next.attempts = current.attempts + 1;
@@ -161,8 +127,9 @@ absl::StatusOr<std::optional<LeaseTable::Grant>> LeaseTable::Lease(absl::string_
     if (absl::Status s = store_.UpdateChunks({&update, 1}, now); !s.ok()) return s;
     job.queued.erase(key);
     leases_by_worker_[next.worker_id].insert({job_id, key});
-    Grant grant{job_id,        key,           next.lease_id, next.generation,
-                next.deadline_unix_ms, next.attempts, next.wedge_count};
+    Grant grant{
+        job_id,          key, next.lease_id, next.generation, next.deadline_unix_ms, next.attempts,
+        next.wedge_count};
     job.chunks[key] = std::move(next);
     return grant;
   }
@@ -181,7 +148,8 @@ std::optional<int64_t> LeaseTable::Heartbeat(absl::string_view worker_id) {
 
 absl::Status LeaseTable::Add(absl::string_view job_id, std::span<const ChunkRecord> chunks) {
   auto it = jobs_.find(job_id);
-  if (it == jobs_.end()) return absl::NotFoundError(absl::StrCat("add: job ", job_id, " is not loaded"));
+  if (it == jobs_.end())
+    return absl::NotFoundError(absl::StrCat("add: job ", job_id, " is not loaded"));
   JobEntry& job = it->second;
   for (const ChunkRecord& c : chunks) {
     if (job.chunks.count(c.key)) {
@@ -212,8 +180,7 @@ absl::Status LeaseTable::Requeue(absl::string_view job_id, const std::vector<Chu
   for (const ChunkCoord& key : keys) {
     auto c = job.chunks.find(key);
     if (c == job.chunks.end()) {
-      return absl::NotFoundError(
-          absl::StrCat("requeue: job ", job.id, " has no ", TaskText(key)));
+      return absl::NotFoundError(absl::StrCat("requeue: job ", job.id, " has no ", TaskText(key)));
     }
     ChunkUpdate u{c->second, c->second.generation};
     u.chunk.state = ChunkState::kQueued;
@@ -264,7 +231,7 @@ absl::Status LeaseTable::Release(absl::string_view job_id, const std::vector<Chu
 
 absl::Status LeaseTable::Complete(absl::string_view lease_id, int64_t generation,
                                   const Tile& tile) {
-  absl::StatusOr<ParsedLease> parsed = ParseLeaseId(lease_id);
+  absl::StatusOr<LeaseId> parsed = LeaseId::Parse(lease_id);
   if (!parsed.ok()) return parsed.status();
   if (parsed->generation != generation) {
     return absl::InvalidArgumentError(absl::StrCat("complete ", lease_id, ": generation ",
@@ -282,8 +249,8 @@ absl::Status LeaseTable::Complete(absl::string_view lease_id, int64_t generation
   }
   auto c = job.chunks.find(parsed->chunk);
   if (c == job.chunks.end()) {
-    return absl::NotFoundError(absl::StrCat("complete ", lease_id, ": job ", job.id,
-                                            " has no ", TaskText(parsed->chunk)));
+    return absl::NotFoundError(
+        absl::StrCat("complete ", lease_id, ": job ", job.id, " has no ", TaskText(parsed->chunk)));
   }
   const ChunkRecord& current = c->second;
   if (current.state == ChunkState::kDone) {
@@ -314,7 +281,7 @@ absl::Status LeaseTable::Complete(absl::string_view lease_id, int64_t generation
 
 absl::StatusOr<bool> LeaseTable::Fail(absl::string_view lease_id, int64_t generation,
                                       absl::string_view reason, bool retryable) {
-  absl::StatusOr<ParsedLease> parsed = ParseLeaseId(lease_id);
+  absl::StatusOr<LeaseId> parsed = LeaseId::Parse(lease_id);
   if (!parsed.ok()) return parsed.status();
   auto it = jobs_.find(parsed->job_id);
   if (it == jobs_.end()) {
@@ -346,9 +313,9 @@ absl::StatusOr<int> LeaseTable::ExpireLeases() {
       const ChunkRecord& c = jobs_.at(ref.first).chunks.at(ref.second);
       if (c.deadline_unix_ms < now) {
         by_job[ref.first].push_back(
-            {ref.second, absl::StrCat("lease ", c.lease_id, " of worker ", worker,
-                                      " expired (deadline passed ", now - c.deadline_unix_ms,
-                                      " ms ago)")});
+            {ref.second,
+             absl::StrCat("lease ", c.lease_id, " of worker ", worker, " expired (deadline passed ",
+                          now - c.deadline_unix_ms, " ms ago)")});
         ++expired;
       }
     }
@@ -373,9 +340,9 @@ absl::StatusOr<int> LeaseTable::WorkerLost(absl::string_view worker_id) {
   return static_cast<int>(refs.size());
 }
 
-absl::Status LeaseTable::RequeueOrFail(
-    JobEntry& job, const std::vector<std::pair<ChunkCoord, std::string>>& what,
-    bool force_fail) {
+absl::Status LeaseTable::RequeueOrFail(JobEntry& job,
+                                       const std::vector<std::pair<ChunkCoord, std::string>>& what,
+                                       bool force_fail) {
   const int64_t now = clock_.NowUnixMs();
   std::vector<ChunkUpdate> updates;
   std::optional<JobTransition> fail;
@@ -388,12 +355,12 @@ absl::Status LeaseTable::RequeueOrFail(
     u.chunk.last_error = why;
     updates.push_back(u);
     if (!fail && (force_fail || current.attempts >= options_.max_attempts)) {
-      fail = JobTransition{
-          JobState::kFailed,
-          force_fail ? absl::StrCat(TaskText(key), ": ", why, " (not retryable)")
-                     : absl::StrCat(TaskText(key), ": attempt ", current.attempts,
-                                    " of ", options_.max_attempts, " failed: ", why),
-          now};
+      fail =
+          JobTransition{JobState::kFailed,
+                        force_fail ? absl::StrCat(TaskText(key), ": ", why, " (not retryable)")
+                                   : absl::StrCat(TaskText(key), ": attempt ", current.attempts,
+                                                  " of ", options_.max_attempts, " failed: ", why),
+                        now};
     }
   }
   // One transaction: the requeues and the job failure land together or not at all.

@@ -153,10 +153,6 @@ class LeaseTable {
   // The lease ids a worker holds, in key order.
   [[nodiscard]] std::vector<std::string> LeasesOf(absl::string_view worker_id) const;
 
-  // "<job_id>/<x>,<y>,<z>/<generation>": unique (a generation is never reused) and
-  // self-describing, so a lease from before a restart still names its chunk.
-  static std::string MakeLeaseId(absl::string_view job_id, const ChunkCoord& chunk,
-                                 int64_t generation);
 
  private:
   struct JobEntry {

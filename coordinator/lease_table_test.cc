@@ -454,7 +454,6 @@ TEST(LeaseTableOptionsTest, Validate) {
             absl::StatusCode::kInvalidArgument);
   EXPECT_EQ((LeaseTableOptions{.max_attempts = 0}.Validate().code()),
             absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(LeaseTable::MakeLeaseId("a/b", {1, -2, 3}, 4), "a/b/1,-2,3/4");
 }
 
 }  // namespace

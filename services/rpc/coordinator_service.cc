@@ -27,6 +27,7 @@
 #include "absl/strings/str_split.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/synchronization/notification.h"
+#include "coordinator/lease_id.h"
 #include "coordinator/lease_table.h"
 #include "coordinator/rate_window.h"
 #include "coordinator/scan_slices.h"
@@ -200,13 +201,10 @@ void ToProto(const JobRecord& r, pb::Job& out) {
   pr->set_chunk_retries(r.counters.chunk_retries);
 }
 
-// Lease ids are "<job_id>/<x>,<y>,<z>/<generation>" (LeaseTable::MakeLeaseId).
 absl::StatusOr<std::string> JobOfLease(absl::string_view lease_id) {
-  std::vector<absl::string_view> parts = absl::StrSplit(lease_id, '/');
-  if (parts.size() != 3 || parts[0].empty()) {
-    return absl::InvalidArgumentError(absl::StrCat("malformed lease id '", lease_id, "'"));
-  }
-  return std::string(parts[0]);
+  absl::StatusOr<LeaseId> id = LeaseId::Parse(lease_id);
+  if (!id.ok()) return id.status();
+  return std::move(id->job_id);
 }
 
 bool ValidOutputName(const std::string& name) {

@@ -1,15 +1,15 @@
 #include "services/rpc/server_log.h"
 
 #include <grpc/support/log.h>
+#include <spdlog/spdlog.h>
 
 #include <chrono>
 #include <ctime>
-
 #include <nlohmann/json.hpp>
-#include <spdlog/spdlog.h>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
+#include "coordinator/lease_id.h"
 
 namespace carvemap {
 namespace {
@@ -26,8 +26,7 @@ std::string IsoTimeUtc(std::chrono::system_clock::time_point t) {
   gmtime_r(&secs, &tm);
   char buf[40];
   const size_t n = std::strftime(buf, sizeof(buf), "%Y-%m-%dT%H:%M:%S", &tm);
-  return absl::StrCat(absl::string_view(buf, n), ".", absl::Dec(ms % 1000, absl::kZeroPad3),
-                      "Z");
+  return absl::StrCat(absl::string_view(buf, n), ".", absl::Dec(ms % 1000, absl::kZeroPad3), "Z");
 }
 
 class JsonFormatter final : public spdlog::formatter {
@@ -76,9 +75,8 @@ void GrpcToSpdlog(gpr_log_func_args* args) {
 absl::StatusOr<LogFormat> ParseLogFormat(std::string_view name) {
   if (name == "text") return LogFormat::kText;
   if (name == "json") return LogFormat::kJson;
-  return absl::InvalidArgumentError(
-      absl::StrCat("log format '", absl::string_view(name.data(), name.size()),
-                   "': must be 'text' or 'json'"));
+  return absl::InvalidArgumentError(absl::StrCat(
+      "log format '", absl::string_view(name.data(), name.size()), "': must be 'text' or 'json'"));
 }
 
 std::unique_ptr<spdlog::formatter> MakeJsonLogFormatter(std::string component) {
@@ -106,11 +104,11 @@ LogScope::~LogScope() { t_fields.resize(restore_size_); }
 LogFields LeaseLogFields(std::string_view lease_id, std::string_view worker_id) {
   LogFields fields;
   // Debian's absl has its own string_view.
-  std::vector<absl::string_view> parts =
-      absl::StrSplit(absl::string_view(lease_id.data(), lease_id.size()), '/');
-  if (parts.size() == 3 && !parts[0].empty()) {
-    fields.emplace_back("job", std::string(parts[0]));
-    fields.emplace_back("chunk", std::string(parts[1]));
+  if (absl::StatusOr<LeaseId> id =
+          LeaseId::Parse(absl::string_view(lease_id.data(), lease_id.size()));
+      id.ok()) {
+    fields.emplace_back("job", id->job_id);
+    fields.emplace_back("chunk", absl::StrCat(id->chunk.x, ",", id->chunk.y, ",", id->chunk.z));
   }
   if (!lease_id.empty()) fields.emplace_back("lease", std::string(lease_id));
   if (!worker_id.empty()) fields.emplace_back("worker", std::string(worker_id));

@@ -129,6 +129,11 @@ TEST(ServerLogTest, LeaseFields) {
               ElementsAre(std::pair<std::string, std::string>("job", "j-1"),
                           std::pair<std::string, std::string>("chunk", "0,0,0"),
                           std::pair<std::string, std::string>("lease", "j-1/0,0,0/1")));
+  // Job ids may hold '/': the id is read from the right (coordinator/lease_id.h).
+  EXPECT_THAT(LeaseLogFields("a/b/1,-2,3/4", ""),
+              ElementsAre(std::pair<std::string, std::string>("job", "a/b"),
+                          std::pair<std::string, std::string>("chunk", "1,-2,3"),
+                          std::pair<std::string, std::string>("lease", "a/b/1,-2,3/4")));
   // Not a lease id: kept as it is, nothing made up.
   EXPECT_THAT(LeaseLogFields("garbage", "w-1"),
               ElementsAre(std::pair<std::string, std::string>("lease", "garbage"),
