@@ -72,6 +72,18 @@ struct IndexedWedges {
   std::vector<uint8_t> votes;
 };
 
+// How eq 4.7 is evaluated for each vote (the votes themselves, eq 4.8's S(L), are the same):
+//   kExact — double precision (carve_map.h): the reference, what the tests of the model run.
+//   kFast  — single precision, four leaves at a time (carve_map_float.h), summed in double
+//            into a dense array of the chunk's leaves (worker/chunk_octree.h): the default.
+//            The tolerance it is held to against kExact (worker/slice_carver_test,
+//            tests/bench/carve_bench): ≥ 99.9 % of finest leaves with the same label and
+//            |Δp| ≤ 0.01 on ≥ 99 % of stored leaves. What it gives: the same votes, every
+//            label the same and |Δp| < 1e−6 on the simulated office2 (docs/BENCHMARKS.md),
+//            ≥ 99.999 % of labels on slice_carver_test's office.
+// Both are deterministic: the same input gives the same bytes on any x86-64 worker.
+enum class CarveEvaluation { kExact, kFast };
+
 // The fused statistics of one octree leaf (eq 4.8), kept as sums so that fusion is a plain
 // accumulation and sibling leaves merge exactly when simplified (§4.3.2). Unobserved space
 // (count 0) reads as p = 0.5.

@@ -27,16 +27,18 @@
 #include "absl/strings/str_split.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/synchronization/notification.h"
+#include "coordinator/job_folders.h"
+#include "coordinator/job_params.h"
 #include "coordinator/lease_id.h"
 #include "coordinator/lease_table.h"
 #include "coordinator/rate_window.h"
 #include "coordinator/scan_slices.h"
+#include "coordinator/worker_registry.h"
 #include "storage/hdf5_lock.h"
 #include "storage/partial_sums.h"
 #include "storage/scan_reader.h"
 #include "proto/carvemap/v1/carve.grpc.pb.h"
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
-#include "services/floorplan/floorplan_pipeline.h"  // FloorPlanMethod names
 #include "services/geometry/octree_keys.h"
 #include "services/grpc_server_common.h"
 #include "services/grpc_status.h"
@@ -54,124 +56,25 @@ namespace pb = ::carvemap::v1;
 
 namespace {
 
-constexpr double kDefaultResolutionM = 0.0625;
-constexpr int kMinJobChunkDepth = 5;  // 6.25 cm
-constexpr int kMaxJobChunkDepth = 8;  // 0.78 cm
-
 int64_t NowMs() { return LeaseTable::Clock::System().NowUnixMs(); }
 
 std::string PartialPath(const std::string& dir, uint32_t index) {
   return (fs::path(dir) / absl::StrCat("slice_", index, ".part")).string();
 }
 
-struct ResolvedParams {
-  double resolution_m = kDefaultResolutionM;
-  int method = pb::CARVE_METHOD_PROBABILISTIC;
-  int workers_hint = 0;
-  double object_resolution_m = kDefaultResolutionM;  // = resolution_m: no re-carving
-  std::string floorplan_method = "rooms";               // §3.3 rooms or §3.2 eigencrust
-  bool trimmed_points = false;                          // §5.5 points.ply on request
-  double min_object_volume_m3 = 0;                      // §5.6 specks; 0 = the merge's default
-  int evaluation = pb::CARVE_EVALUATION_FAST;           // eq 4.7 in the workers
-};
-
-std::string ParamsToJson(const ResolvedParams& p) {
-  nlohmann::json j = {
-      {"resolution_m", p.resolution_m},
-      {"method", p.method},
-      {"workers_hint", p.workers_hint},
-      {"object_resolution_m", p.object_resolution_m},
-      {"floorplan_method", p.floorplan_method},
-      {"trimmed_points", p.trimmed_points},
-      {"min_object_volume_m3", p.min_object_volume_m3},
-      {"evaluation", p.evaluation == pb::CARVE_EVALUATION_EXACT ? "exact" : "fast"}};
-  return j.dump();
+JobParamsRequest FromProto(const pb::JobParams& in) {
+  return {.resolution_m = in.resolution_m(),
+          .method = static_cast<int>(in.method()),
+          .workers_hint = in.workers_hint(),
+          .object_resolution_m = in.object_resolution_m(),
+          .floorplan_method = in.floorplan_method(),
+          .trimmed_points = in.trimmed_points(),
+          .min_object_volume_m3 = in.min_object_volume_m3(),
+          .evaluation = static_cast<int>(in.evaluation())};
 }
 
-ResolvedParams ParamsFromJson(const std::string& text) {
-  ResolvedParams p;
-  nlohmann::json j = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
-  if (j.is_object()) {
-    p.resolution_m = j.value("resolution_m", kDefaultResolutionM);
-    p.method = j.value("method", static_cast<int>(pb::CARVE_METHOD_PROBABILISTIC));
-    p.workers_hint = j.value("workers_hint", 0);
-    // Jobs stored before §5.6.1's re-carving existed merge as they were submitted.
-    p.object_resolution_m = j.value("object_resolution_m", p.resolution_m);
-    p.floorplan_method = j.value("floorplan_method", std::string("rooms"));
-    p.trimmed_points = j.value("trimmed_points", false);
-    p.min_object_volume_m3 = j.value("min_object_volume_m3", 0.0);
-    // Jobs stored before the fast evaluation existed were carved exactly: a resumed one goes
-    // on so, its tiles of one kind.
-    p.evaluation = j.value("evaluation", std::string("exact")) == "fast"
-                       ? pb::CARVE_EVALUATION_FAST
-                       : pb::CARVE_EVALUATION_EXACT;
-  }
-  return p;
-}
-
-absl::StatusOr<ResolvedParams> ResolveParams(const pb::JobParams& in) {
-  ResolvedParams p;
-  p.resolution_m = in.resolution_m() == 0 ? kDefaultResolutionM : in.resolution_m();
-  absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(p.resolution_m);
-  if (!grid.ok() || grid->chunk_depth < kMinJobChunkDepth ||
-      grid->chunk_depth > kMaxJobChunkDepth) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "resolution_m ", in.resolution_m(),
-        ": must be one of 0.0625, 0.03125, 0.015625, 0.0078125 (2 m / 2^k, k = 5..8)"));
-  }
-  p.resolution_m = grid->resolution_m();
-  switch (in.method()) {
-    case pb::CARVE_METHOD_UNSPECIFIED:
-    case pb::CARVE_METHOD_PROBABILISTIC:
-      p.method = pb::CARVE_METHOD_PROBABILISTIC;
-      break;
-    case pb::CARVE_METHOD_VOXEL:
-      return absl::UnimplementedError("method VOXEL: not implemented by the workers yet");
-    default:
-      return absl::InvalidArgumentError(absl::StrCat("unknown method ", in.method()));
-  }
-  if (in.workers_hint() < 0) return absl::InvalidArgumentError("workers_hint must be >= 0");
-  p.workers_hint = in.workers_hint();
-  const int finest = kMaxJobChunkDepth;
-  if (in.object_resolution_m() == 0) {
-    // Half the job's leaf size: on the simulated office, objects re-carved at 3.125 cm under
-    // 6.25 cm tiles were found more often than at 1.5625 cm (65 % against 57 %, BENCHMARKS:
-    // the scan points that keep legs and rods are a few cm apart).
-    p.object_resolution_m = OctreeGrid{std::min(grid->chunk_depth + 1, finest)}.resolution_m();
-  } else {
-    absl::StatusOr<OctreeGrid> fine = OctreeGrid::FromResolution(in.object_resolution_m());
-    if (!fine.ok() || fine->chunk_depth < grid->chunk_depth || fine->chunk_depth > finest) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "object_resolution_m ", in.object_resolution_m(), ": must be 2 m / 2^k, not coarser "
-          "than resolution_m (", p.resolution_m, ") and not finer than 0.0078125"));
-    }
-    p.object_resolution_m = fine->resolution_m();
-  }
-  // Checked here so a bad name fails the submit, not the merge after the carving.
-  absl::StatusOr<FloorPlanMethod> plan = ParseFloorPlanMethod(
-      in.floorplan_method().empty() ? std::string_view("rooms") : in.floorplan_method());
-  if (!plan.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("floorplan_method: ", plan.status().message()));
-  }
-  p.floorplan_method = std::string(FloorPlanMethodName(*plan));
-  p.trimmed_points = in.trimmed_points();
-  if (!(in.min_object_volume_m3() >= 0) || !std::isfinite(in.min_object_volume_m3())) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "min_object_volume_m3 ", in.min_object_volume_m3(), ": must be finite and ≥ 0"));
-  }
-  p.min_object_volume_m3 = in.min_object_volume_m3();
-  switch (in.evaluation()) {
-    case pb::CARVE_EVALUATION_UNSPECIFIED:
-    case pb::CARVE_EVALUATION_FAST:
-      p.evaluation = pb::CARVE_EVALUATION_FAST;
-      break;
-    case pb::CARVE_EVALUATION_EXACT:
-      p.evaluation = pb::CARVE_EVALUATION_EXACT;
-      break;
-    default:
-      return absl::InvalidArgumentError(absl::StrCat("unknown evaluation ", in.evaluation()));
-  }
-  return p;
+pb::CarveEvaluation ToProto(CarveEvaluation e) {
+  return e == CarveEvaluation::kExact ? pb::CARVE_EVALUATION_EXACT : pb::CARVE_EVALUATION_FAST;
 }
 
 void ToProto(const JobRecord& r, pb::Job& out) {
@@ -180,15 +83,15 @@ void ToProto(const JobRecord& r, pb::Job& out) {
   out.set_state(static_cast<pb::JobState>(static_cast<int>(r.state)));
   out.set_input_path(r.input_path);
   out.set_output_name(r.output_name);
-  const ResolvedParams p = ParamsFromJson(r.params_json);
+  const JobParams p = JobParams::FromJson(r.params_json);
   out.mutable_params()->set_resolution_m(p.resolution_m);
-  out.mutable_params()->set_method(static_cast<pb::CarveMethod>(p.method));
+  out.mutable_params()->set_method(static_cast<pb::CarveMethod>(static_cast<int>(p.method)));
   out.mutable_params()->set_workers_hint(p.workers_hint);
   out.mutable_params()->set_object_resolution_m(p.object_resolution_m);
   out.mutable_params()->set_floorplan_method(p.floorplan_method);
   out.mutable_params()->set_trimmed_points(p.trimmed_points);
   out.mutable_params()->set_min_object_volume_m3(p.min_object_volume_m3);
-  out.mutable_params()->set_evaluation(static_cast<pb::CarveEvaluation>(p.evaluation));
+  out.mutable_params()->set_evaluation(ToProto(p.evaluation));
   out.set_error(r.error);
   out.set_created_unix_ms(r.created_unix_ms);
   out.set_updated_unix_ms(r.updated_unix_ms);
@@ -374,7 +277,7 @@ class CoordinatorServer::Impl {
     std::string partials_dir;  // <work>/<job>/partials: every pass's slices' partial sums
     std::string output_dir;
     std::string tenant_dir, input_path;  // the scan as the job names it (JobRecord)
-    ResolvedParams params;
+    JobParams params;
     // The plan (scan_slices.h): made in INGESTING, made again (the same) by a restarted
     // coordinator. Slice k of pass p is the task SliceTaskKey(k, p).
     std::vector<ScanSlice> slices;
@@ -401,26 +304,9 @@ class CoordinatorServer::Impl {
     std::string current_stage;
   };
 
-  // Where a tenant's inputs (and outputs) are: the roots, or their <tenant_dir> folders.
-  std::string DataDir(const std::string& tenant_dir) const {
-    return (fs::path(spec_.data_root) / tenant_dir).lexically_normal().string();
-  }
-  std::string OutputRoot(const std::string& tenant_dir) const {
-    return (fs::path(spec_.output_root) / tenant_dir).lexically_normal().string();
-  }
-  std::string OutputDir(const JobRecord& job) const {
-    return (fs::path(OutputRoot(job.tenant_dir)) / job.output_name).string();
-  }
   // The caller's job, or NOT_FOUND with the same message whether the id is unknown or
   // another tenant's: ids of others do not leak.
   absl::StatusOr<JobRecord> OwnJob(const Caller& caller, const std::string& job_id);
-  std::string TilesDir(const JobRecord& job) const {
-    if (spec_.storage_root.empty()) return (fs::path(OutputDir(job)) / "tiles").string();
-    return (fs::path(spec_.storage_root) / job.id / "tiles").string();
-  }
-  std::string PartialsDir(const JobRecord& job) const {
-    return (fs::path(work_dir_) / job.id / "partials").string();
-  }
 
   void StartJobThread(const std::string& job_id) {
     absl::MutexLock lock(&mu_);
@@ -447,27 +333,22 @@ class CoordinatorServer::Impl {
   absl::StatusOr<std::string> RecarveStage(const std::string& job_id,
                                            const std::vector<RecarveChunk>& chunks,
                                            double resolution_m);
-  std::string ObjectTilesDir(const std::string& tiles_dir) const {
-    return (fs::path(tiles_dir).parent_path() / "object_tiles").string();
-  }
   void FailJob(const std::string& job_id, const std::string& why);
-  // Job.error is the tenant's to read: the server's folders in a reason (a worker's HDF5 error,
-  // the merge's) become names relative to the job's output folder, as FetchArtifact names its
-  // files, so the server's layout does not leak (docs/DESIGN.md §8). The log keeps the full text.
-  std::string TenantView(const JobRuntime& rt, std::string text) const;
+  // Job.error as the tenant may read it (coordinator/job_folders.h TenantView).
+  std::string TenantView(const JobRuntime& rt, std::string text) const {
+    return carvemap::TenantView(std::move(text),
+                                JobFolders{rt.output_dir, rt.tiles_dir, rt.partials_dir},
+                                folders_.work_dir);
+  }
   void CleanUp(const std::string& job_id, bool succeeded);
   void EnterStage(const std::string& job_id, const std::string& stage);
   void Sweep();
   // The job must exist and not be terminal; shared by CompleteChunk and FailChunk, which check
   // the store before the lease table (the table has forgotten cancelled jobs).
   absl::Status CheckLeaseJob(absl::string_view lease_id);
-  void Touch(const std::string& worker_id) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
-    auto it = workers_.find(worker_id);
-    if (it != workers_.end()) it->second = NowMs();
-  }
 
   const CoordinatorSpec spec_;
-  std::string work_dir_;
+  CoordinatorFolders folders_;
   std::unique_ptr<JobStore> store_;
   GrpcServers servers_;  // the two APIs; the plaintext health port if asked for
   TokenTable tokens_;
@@ -479,14 +360,11 @@ class CoordinatorServer::Impl {
   std::atomic<bool> stopping_{false};
   absl::Notification shutdown_done_;
   std::thread sweeper_;
-  std::string instance_;  // distinguishes worker ids of this coordinator from a previous one's
 
   absl::Mutex mu_;
   std::unique_ptr<LeaseTable> table_ ABSL_GUARDED_BY(mu_);
-  std::map<std::string, int64_t> workers_ ABSL_GUARDED_BY(mu_);  // id → last seen (ms)
-  // The job of each worker's latest lease: whose work its heartbeats report.
-  std::map<std::string, std::string> job_of_worker_ ABSL_GUARDED_BY(mu_);
-  int64_t next_worker_ ABSL_GUARDED_BY(mu_) = 1;
+  // Its instance (random) tells this coordinator's worker ids from a previous one's.
+  WorkerRegistry workers_ ABSL_GUARDED_BY(mu_){RandomHex(4)};
   std::map<std::string, JobRuntime> runtime_ ABSL_GUARDED_BY(mu_);
   std::vector<std::thread> job_threads_ ABSL_GUARDED_BY(mu_);
   absl::Mutex shutdown_mu_;
@@ -621,17 +499,13 @@ absl::Status CoordinatorServer::Impl::Start() {
   absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =
       ServerCredentialsFor(spec_.tls_cert_file, spec_.tls_key_file, spec_.tls_client_ca_file);
   if (!credentials.ok()) return credentials.status();
-  work_dir_ = spec_.work_dir.empty()
-                  ? (fs::path(spec_.storage_root.empty() ? spec_.output_root : spec_.storage_root) /
-                     ".carvemap")
-                        .string()
-                  : spec_.work_dir;
-  if (absl::Status s = CheckWritableDir(work_dir_, "work dir"); !s.ok()) return s;
+  folders_ = CoordinatorFolders::Of(spec_.data_root, spec_.output_root, spec_.storage_root,
+                                    spec_.work_dir);
+  if (absl::Status s = CheckWritableDir(folders_.work_dir, "work dir"); !s.ok()) return s;
   absl::StatusOr<std::unique_ptr<JobStore>> store =
-      JobStore::Open((fs::path(work_dir_) / "jobs.db").string());
+      JobStore::Open((fs::path(folders_.work_dir) / "jobs.db").string());
   if (!store.ok()) return store.status();
   store_ = *std::move(store);
-  instance_ = RandomHex(4);
   {
     absl::MutexLock lock(&mu_);
     LeaseTableOptions options;
@@ -709,7 +583,7 @@ absl::Status CoordinatorServer::Impl::Start() {
   }
   spdlog::info("coordinator: listening on {}:{} (outputs {}, work dir {})",
                spec_.listen_address.substr(0, spec_.listen_address.rfind(':')), servers_.port,
-               spec_.output_root, work_dir_);
+               spec_.output_root, folders_.work_dir);
   return absl::OkStatus();
 }
 
@@ -742,9 +616,9 @@ void CoordinatorServer::Impl::Sweep() {
     // fsync behind the writeback of a freshly written scan held it for seconds): it does not
     // count against the workers or their leases.
     if (const int64_t late = NowMs() - due; late > 0) {
-      for (auto& [id, seen] : workers_) {
-        seen = std::min(NowMs(), seen + late);
-        if (late > 1000) (void)table_->Heartbeat(id);
+      workers_.CreditLateness(late, NowMs());
+      if (late > 1000) {
+        for (const std::string& id : workers_.Ids()) (void)table_->Heartbeat(id);
       }
     }
     absl::StatusOr<int> expired = table_->ExpireLeases();
@@ -756,18 +630,12 @@ void CoordinatorServer::Impl::Sweep() {
     }
     const int64_t now = NowMs();
     const int64_t timeout_ms = static_cast<int64_t>(spec_.worker_timeout_s * 1000);
-    for (auto it = workers_.begin(); it != workers_.end();) {
-      if (now - it->second <= timeout_ms) {
-        ++it;
-        continue;
-      }
-      LogScope log_scope({{"worker", it->first}});
-      absl::StatusOr<int> lost = table_->WorkerLost(it->first);
+    for (const auto& [id, silent_ms] : workers_.RemoveSilent(now, timeout_ms)) {
+      LogScope log_scope({{"worker", id}});
+      absl::StatusOr<int> lost = table_->WorkerLost(id);
       spdlog::warn("coordinator: worker {} lost (no heartbeat for {:.1f} s); {} lease(s) requeued",
-                   it->first, (now - it->second) / 1000.0, lost.ok() ? *lost : -1);
+                   id, silent_ms / 1000.0, lost.ok() ? *lost : -1);
       metrics_.WorkerLost(lost.ok() ? *lost : 0);
-      job_of_worker_.erase(it->first);
-      it = workers_.erase(it);
     }
     // Gauges: the chunks of every job in the lease table, workers, running jobs.
     int64_t queued = 0, leased = 0, done = 0, active = 0;
@@ -857,32 +725,6 @@ void CoordinatorServer::Impl::EnterStage(const std::string& job_id, const std::s
   }
 }
 
-std::string CoordinatorServer::Impl::TenantView(const JobRuntime& rt, std::string text) const {
-  // Longest first: the tiles live inside the output folder unless --storage-root moves them.
-  std::vector<std::pair<std::string, std::string>> dirs = {
-      {ObjectTilesDir(rt.tiles_dir), "object_tiles"}, {rt.tiles_dir, "tiles"},
-      {rt.partials_dir, "partials"}, {rt.output_dir, "."},
-      {fs::absolute(work_dir_).lexically_normal().string(), "work"}};
-  std::sort(dirs.begin(), dirs.end(),
-            [](const auto& a, const auto& b) { return a.first.size() > b.first.size(); });
-  for (const auto& [dir, name] : dirs) {
-    if (dir.size() < 2 || dir.front() != '/') continue;  // absolute folders only
-    for (size_t at = text.find(dir); at != std::string::npos; at = text.find(dir, at)) {
-      const size_t end = at + dir.size();
-      const bool whole = end == text.size() || text[end] == '/' || text[end] == '\'' ||
-                         text[end] == ':' || text[end] == ' ' || text[end] == ',';
-      if (!whole) {
-        at = end;
-        continue;
-      }
-      const bool slash = end < text.size() && text[end] == '/' && name == ".";
-      text.replace(at, dir.size() + (slash ? 1 : 0), slash ? "" : name);
-      at += slash ? 0 : name.size();
-    }
-  }
-  return text;
-}
-
 void CoordinatorServer::Impl::FailJob(const std::string& job_id, const std::string& raw) {
   std::string why;
   {
@@ -930,7 +772,7 @@ absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
   // symlink swapped meanwhile cannot point the plan elsewhere, and errors name the path as the
   // tenant gave it. Workers open it the same way (SliceTask.scan_root, scan_path).
   absl::StatusOr<ConfinedFile> scan =
-      ConfinedFile::Open(DataDir(job.tenant_dir), job.input_path, "input_path");
+      ConfinedFile::Open(folders_.DataDir(job.tenant_dir), job.input_path, "input_path");
   if (!scan.ok()) return scan.status();
   absl::StatusOr<ScanSlicePlan> plan;
   {
@@ -1194,13 +1036,13 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
   {
     absl::MutexLock lock(&mu_);
     JobRuntime& rt = runtime_[job_id];
-    rt.tiles_dir = fs::absolute(TilesDir(*job)).lexically_normal().string();
-    rt.partials_dir = fs::absolute(PartialsDir(*job)).lexically_normal().string();
+    rt.tiles_dir = fs::absolute(folders_.TilesDir(*job)).lexically_normal().string();
+    rt.partials_dir = fs::absolute(folders_.PartialsDir(*job)).lexically_normal().string();
     rt.pass_dir = rt.partials_dir;
     rt.tenant_dir = job->tenant_dir;
     rt.input_path = job->input_path;
-    rt.output_dir = fs::absolute(OutputDir(*job)).lexically_normal().string();
-    rt.params = ParamsFromJson(job->params_json);
+    rt.output_dir = fs::absolute(folders_.OutputDir(*job)).lexically_normal().string();
+    rt.params = JobParams::FromJson(job->params_json);
   }
   JobState state = job->state;
   auto move_to = [&](JobState to) {
@@ -1331,7 +1173,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
     if (spec_.merge) {
       // The merge opens the scan itself, confined to the tenant's folder as at submit and
       // ingest (LocalMerge here, or a merge service on the same shared storage).
-      req.scan_root = fs::absolute(DataDir(job->tenant_dir)).lexically_normal().string();
+      req.scan_root = fs::absolute(folders_.DataDir(job->tenant_dir)).lexically_normal().string();
       req.scan_input = job->input_path;
       absl::Status merged;
       if (spec_.merge_in_process) {
@@ -1372,7 +1214,7 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
     return absl::InvalidArgumentError(
         absl::StrCat(s.message(), " (input paths are relative to the data root)"));
   }
-  absl::StatusOr<ResolvedParams> params = ResolveParams(req.params());
+  absl::StatusOr<JobParams> params = ResolveJobParams(FromProto(req.params()));
   if (!params.ok()) return params.status();
   if (!req.output_name().empty() && !ValidOutputName(req.output_name())) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -1387,7 +1229,7 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
     if (!found.ok()) return found.status();
     if (found->has_value()) {
       const JobRecord& j = **found;
-      if (j.input_path != input || j.params_json != ParamsToJson(*params) ||
+      if (j.input_path != input || j.params_json != params->ToJson() ||
           (!req.output_name().empty() && j.output_name != req.output_name())) {
         return absl::AlreadyExistsError(absl::StrCat(
             "idempotency_key '", req.idempotency_key(), "' was used for job ", j.id,
@@ -1403,7 +1245,7 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
   // NOT_FOUND if missing or unreadable (storage/confined_path.h); the same answers whatever
   // lies outside.
   if (absl::StatusOr<ConfinedFile> scan =
-          ConfinedFile::Open(DataDir(caller.tenant_dir), input, "input_path");
+          ConfinedFile::Open(folders_.DataDir(caller.tenant_dir), input, "input_path");
       !scan.ok()) {
     return scan.status();
   }
@@ -1422,12 +1264,12 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
   job.tenant_dir = caller.tenant_dir;
   job.input_path = input;
   job.output_name = req.output_name().empty() ? job.id : req.output_name();
-  job.params_json = ParamsToJson(*params);
+  job.params_json = params->ToJson();
   job.idempotency_key = req.idempotency_key();
   job.created_unix_ms = job.updated_unix_ms = NowMs();
   // The output folder must not already be a link out of the tenant's output folder (one
   // planted there would have the merge write elsewhere).
-  const std::string output_root = OutputRoot(job.tenant_dir);
+  const std::string output_root = folders_.OutputRoot(job.tenant_dir);
   if (absl::Status s = CheckWritableDir(output_root, "output root"); !s.ok()) {
     spdlog::error("coordinator: {}", s.ToString());
     return absl::FailedPreconditionError("the output root is not writable");
@@ -1438,19 +1280,19 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
     return out.status();
   }
   std::error_code ec;
-  const bool output_existed = fs::exists(OutputDir(job), ec);
-  if (absl::Status s = CheckWritableDir(OutputDir(job), "output"); !s.ok()) {
+  const bool output_existed = fs::exists(folders_.OutputDir(job), ec);
+  if (absl::Status s = CheckWritableDir(folders_.OutputDir(job), "output"); !s.ok()) {
     spdlog::error("coordinator: job {}: {}", job.id, s.ToString());
     return absl::FailedPreconditionError(
         absl::StrCat("output_name '", job.output_name, "': the output folder cannot be written"));
   }
-  if (absl::Status s = CheckWritableDir(TilesDir(job), "tiles dir"); !s.ok()) return s;
+  if (absl::Status s = CheckWritableDir(folders_.TilesDir(job), "tiles dir"); !s.ok()) return s;
   if (absl::Status s = store_->CreateJob(job, spec_.max_jobs_per_tenant); !s.ok()) {
     if (!output_existed) {
       // A refused submit leaves nothing behind: the folders made above, if still empty
       // (fs::remove does not remove a folder with anything in it).
-      fs::remove(TilesDir(job), ec);
-      fs::remove(OutputDir(job), ec);
+      fs::remove(folders_.TilesDir(job), ec);
+      fs::remove(folders_.OutputDir(job), ec);
     }
     if (absl::IsAlreadyExists(s)) {
       return absl::AlreadyExistsError(
@@ -1460,8 +1302,8 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
   }
   LogScope log_scope({{"job", job.id}, {"tenant", job.tenant}});
   spdlog::info("coordinator: job {} of tenant {} submitted: {} -> {} (resolution {} m)", job.id,
-               job.tenant, (fs::path(DataDir(job.tenant_dir)) / input).string(), OutputDir(job),
-               params->resolution_m);
+               job.tenant, (fs::path(folders_.DataDir(job.tenant_dir)) / input).string(),
+               folders_.OutputDir(job), params->resolution_m);
   absl::StatusOr<JobRecord> stored = store_->GetJob(job.id);
   if (!stored.ok()) return stored.status();
   ToProto(*stored, *resp.mutable_job());
@@ -1640,9 +1482,10 @@ bool CoordinatorServer::Impl::WriteProgress(grpc::ServerWriter<pb::JobEvent>& wr
         }
       }
       std::set<std::string> active;
-      for (const auto& [worker, seen] : workers_) {
+      for (const std::string& worker : workers_.Ids()) {
         for (const std::string& lease : table_->LeasesOf(worker)) {
-          if (absl::StartsWith(lease, absl::StrCat(job->id, "/"))) active.insert(worker);
+          absl::StatusOr<LeaseId> id = LeaseId::Parse(lease);
+          if (id.ok() && id->job_id == job->id) active.insert(worker);
         }
       }
       p->set_active_workers(static_cast<int32_t>(active.size()));
@@ -1667,7 +1510,8 @@ absl::Status CoordinatorServer::Impl::FetchArtifact(const Caller& caller,
     }
   }
   // Resolved under the job's output folder like an input under the data root.
-  absl::StatusOr<ConfinedFile> file = ConfinedFile::Open(OutputDir(*job), req.name(), "artifact");
+  absl::StatusOr<ConfinedFile> file =
+      ConfinedFile::Open(folders_.OutputDir(*job), req.name(), "artifact");
   if (absl::IsNotFound(file.status())) {
     if (job->state != JobState::kSucceeded) {
       return absl::FailedPreconditionError(absl::StrCat("job ", job->id, " is ",
@@ -1723,8 +1567,7 @@ absl::Status CoordinatorServer::Impl::RegisterWorker(grpc::ServerContext& ctx,
   std::string id;
   {
     absl::MutexLock lock(&mu_);
-    id = absl::StrCat("w-", instance_, "-", next_worker_++);
-    workers_[id] = NowMs();
+    id = workers_.Register(NowMs());
   }
   LogScope log_scope({{"worker", id}});
   spdlog::info("coordinator: worker {} registered (host {}, {} thread(s), peer {})", id,
@@ -1739,18 +1582,16 @@ absl::Status CoordinatorServer::Impl::Heartbeat(const pb::HeartbeatRequest& req,
                                                 pb::HeartbeatResponse& resp) {
   if (req.worker_id().empty()) return absl::InvalidArgumentError("empty worker id");
   absl::MutexLock lock(&mu_);
-  auto it = workers_.find(req.worker_id());
-  if (it == workers_.end()) {
+  if (!workers_.Touch(req.worker_id(), NowMs())) {
     return absl::NotFoundError(
         absl::StrCat("worker ", req.worker_id(), " unknown or lost: register again"));
   }
-  it->second = NowMs();
   if (req.rays_carved() > 0) {
     // The wedges carved since the worker's last heartbeat belong to the job of its latest
     // lease (a worker carves one job's chunks at a time; a lease finished since is that job's).
     metrics_.RaysCarvedLive(req.rays_carved());
-    if (auto job = job_of_worker_.find(req.worker_id()); job != job_of_worker_.end()) {
-      if (auto rt = runtime_.find(job->second); rt != runtime_.end()) {
+    if (const std::string job = workers_.JobOf(req.worker_id()); !job.empty()) {
+      if (auto rt = runtime_.find(job); rt != runtime_.end()) {
         rt->second.carve_rate.Add(std::chrono::steady_clock::now(),
                                   double(req.rays_carved()));
       }
@@ -1764,10 +1605,9 @@ absl::Status CoordinatorServer::Impl::Heartbeat(const pb::HeartbeatRequest& req,
     // the lease deadline.
     for (const std::string& lease : held) {
       if (reported.count(lease)) continue;
-      const size_t slash = lease.rfind('/');
-      int64_t gen = 0;
-      if (slash != std::string::npos && absl::SimpleAtoi(lease.substr(slash + 1), &gen)) {
-        (void)table_->Fail(lease, gen, absl::StrCat("abandoned by worker ", req.worker_id()),
+      if (absl::StatusOr<LeaseId> id = LeaseId::Parse(lease); id.ok()) {
+        (void)table_->Fail(lease, id->generation,
+                           absl::StrCat("abandoned by worker ", req.worker_id()),
                            /*retryable=*/true);
       }
     }
@@ -1792,18 +1632,17 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
   while (true) {
     if (stopping_) return absl::UnavailableError("coordinator shutting down");
     std::optional<LeaseTable::Grant> grant;
-    ResolvedParams job_params;
+    JobParams job_params;
     std::string tiles_dir, pass_dir, regions_path, scan_root, scan_input;
     int pass = 0;
     std::optional<ScanSlice> slice;
     std::vector<uint32_t> slice_indices;  // a combine: every slice of the pass, in order
     {
       absl::MutexLock lock(&mu_);
-      if (!workers_.count(req.worker_id())) {
+      if (!workers_.Touch(req.worker_id(), NowMs())) {
         return absl::NotFoundError(
             absl::StrCat("worker ", req.worker_id(), " unknown or lost: register again"));
       }
-      Touch(req.worker_id());
       // A caller that has given up waiting would never learn of a lease granted now (its
       // heartbeats would give it back, but only after a heartbeat's delay).
       if (ctx.IsCancelled()) return absl::CancelledError("lease call cancelled by the worker");
@@ -1811,14 +1650,14 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
       if (!g.ok()) return g.status();
       grant = *g;
       if (grant) {
-        job_of_worker_[req.worker_id()] = grant->job_id;
+        workers_.SetJob(req.worker_id(), grant->job_id);
         const JobRuntime& rt = runtime_[grant->job_id];
         job_params = rt.params;
         tiles_dir = rt.tiles_dir;
         pass_dir = rt.pass_dir;
         pass = rt.pass;
         regions_path = rt.regions_path;
-        scan_root = fs::absolute(DataDir(rt.tenant_dir)).lexically_normal().string();
+        scan_root = fs::absolute(folders_.DataDir(rt.tenant_dir)).lexically_normal().string();
         scan_input = rt.input_path;
         if (IsSliceTask(grant->chunk)) {
           const uint32_t index = uint32_t(grant->chunk.y);
@@ -1841,11 +1680,11 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
       lease.set_attempt(grant->attempt);
       pb::CarveParams& params = *lease.mutable_params();
       params.set_resolution_m(job_params.resolution_m);
-      params.set_method(static_cast<pb::CarveMethod>(job_params.method));
+      params.set_method(static_cast<pb::CarveMethod>(static_cast<int>(job_params.method)));
       absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(job_params.resolution_m);
       params.set_leaf_depth(grid.ok() ? grid->chunk_depth : 0);
       params.set_tile_dir(tiles_dir);
-      params.set_evaluation(static_cast<pb::CarveEvaluation>(job_params.evaluation));
+      params.set_evaluation(ToProto(job_params.evaluation));
       if (IsSliceTask(grant->chunk)) {
         if (!slice) {
           return absl::InternalError(absl::StrCat("lease ", grant->lease_id, ": no slice ",
@@ -1907,13 +1746,13 @@ absl::Status CoordinatorServer::Impl::CompleteChunk(const pb::CompleteChunkReque
     if (job.ok() && (job->state == JobState::kFailed || job->state == JobState::kCancelled) &&
         ValidRelativePath(req.tile().path())) {
       std::error_code ec;
-      fs::remove(fs::path(TilesDir(*job)) / req.tile().path(), ec);
+      fs::remove(fs::path(folders_.TilesDir(*job)) / req.tile().path(), ec);
     }
     return s;
   }
   const std::string job_id = *JobOfLease(req.lease_id());
   absl::MutexLock lock(&mu_);
-  Touch(req.worker_id());
+  workers_.Touch(req.worker_id(), NowMs());  // an unknown worker: its result still counts
   LeaseTable::Tile tile{req.tile().path(), req.tile().size_bytes(), req.tile().sha256_hex()};
   if (absl::Status s = table_->Complete(req.lease_id(), req.generation(), tile); !s.ok()) {
     spdlog::info("coordinator: completion of {} by {} rejected: {}", req.lease_id(),
@@ -1949,7 +1788,7 @@ absl::Status CoordinatorServer::Impl::FailChunk(const pb::FailChunkRequest& req,
   LogScope log_scope(LeaseLogFields(req.lease_id(), req.worker_id()));
   if (absl::Status s = CheckLeaseJob(req.lease_id()); !s.ok()) return s;
   absl::MutexLock lock(&mu_);
-  Touch(req.worker_id());
+  workers_.Touch(req.worker_id(), NowMs());  // an unknown worker: its result still counts
   const std::string job_id = *JobOfLease(req.lease_id());  // checked by CheckLeaseJob
   absl::StatusOr<bool> requeued =
       // The table prefixes "worker <id>: " itself; the reason may become the job's error.
