@@ -403,8 +403,10 @@ absl::StatusOr<ImportedScan> ImportCarmen(const std::string& file, const CarmenO
       auto more = reader.Next(text);
       if (!more.ok()) return more.status();
       if (!*more) break;
-      const size_t end = text.find_first_of(" \t\r");
-      const absl::string_view word = absl::string_view(text).substr(0, end);
+      // The first word, found as the second pass's tokens find it.
+      const size_t begin = std::min(text.find_first_not_of(" \t\r"), text.size());
+      const size_t end = std::min(text.find_first_of(" \t\r", begin), text.size());
+      const absl::string_view word = absl::string_view(text).substr(begin, end - begin);
       const MessageType type = Classify(word);
       if (type.kind == Kind::kOther || type.kind == Kind::kOdom) continue;
       if (type.laser != options.laser) {

@@ -220,6 +220,15 @@ TEST(CarmenImportTest, OldFormatWithoutLoggerTimestampIsRead) {
   EXPECT_EQ(scan->path[0].x, 1.0);
 }
 
+TEST(CarmenImportTest, LeadingBlanksAndCommentsAreSkipped) {
+  const std::string path =
+      WriteTemp("blanks.log", "# CARMEN Logfile\n\n   " + FlaserLine(180, 2.0, 1, 2, 0.5, 10.0) +
+                                  "\t" + FlaserLine(180, 2.0, 1, 2, 0.5, 11.0));
+  auto scan = ImportCarmen(path);
+  ASSERT_TRUE(scan.ok()) << scan.status();
+  EXPECT_EQ(scan->frames.size(), 2u);
+}
+
 TEST(CarmenImportTest, RearLaserIsItsOwnSensor) {
   const std::string path =
       WriteTemp("rear.log", FlaserLine(180, 1.0, 0, 0, 0, 1.0) +
