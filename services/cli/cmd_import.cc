@@ -1,5 +1,6 @@
-// `carvemap import graph|tum|ply INPUT -o scan.h5`: turns other inputs into scan.h5 (docs/DESIGN.md
-// §3) through the importers in storage/import/, then re-opens and validates what it wrote.
+// `carvemap import graph|tum|ply|carmen INPUT -o scan.h5`: turns other inputs into scan.h5
+// (docs/DESIGN.md §3) through the importers in storage/import/, then re-opens and validates what
+// it wrote.
 #include <iomanip>
 #include <iostream>
 #include <memory>
@@ -10,6 +11,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "services/cli/commands.h"
+#include "storage/import/carmen_import.h"
 #include "storage/import/import_writer.h"
 #include "storage/import/octomap_graph_import.h"
 #include "storage/import/ply_import.h"
@@ -50,12 +52,14 @@ struct ImportFlags {
   OctomapGraphOptions graph;
   TumOptions tum;
   PlyImportOptions ply;
+  CarmenOptions carmen;
 };
 
 void RegisterImport(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
-      "import", "Turn an OctoMap scan graph, TUM depth images or a PLY with sensor origins "
-                "into scan.h5 (validated after writing)");
+      "import",
+      "Turn an OctoMap scan graph, TUM depth images, a PLY with sensor origins or a "
+      "CARMEN laser log into scan.h5 (validated after writing)");
   cmd->require_subcommand(1);
   auto flags = std::make_shared<ImportFlags>();
 
@@ -123,6 +127,62 @@ void RegisterImport(CLI::App& app, int& exit_code) {
                              Run(flags->output, PlySensor(flags->ply), [&](const FrameSink& sink) {
                                return ImportPly(flags->input, flags->ply, sink);
                              }));
+  });
+
+  CarmenOptions& carmen = flags->carmen;
+  CLI::App* carmen_cmd = cmd->add_subcommand(
+      "carmen",
+      "CARMEN robot log (plain or .gz) ➜ scan.h5: one 2D laser as a `line` sensor.\n"
+      "Reads FLASER/RLASER (old format), ROBOTLASER<k> and RAWLASER<k> (with or without "
+      "remission_mode) and ODOM.\nAssumes: the laser is horizontal, --height above the floor; "
+      "the system frame is the laser's pose on\nthe floor (path z = 0, yaw = theta). Lines "
+      "that carry a pose (FLASER/RLASER: x y theta,\nthe corrected pose in a corrected log; "
+      "ROBOTLASER: the laser pose) give one frame and one path\npose each; RAWLASER lines "
+      "(no pose) take the ODOM odometry interpolated at their time, and\nthose outside the "
+      "odometry's span are skipped. Old-format beams span 180° from theta − 90°,\nπ/n apart "
+      "for 180 or 360 readings, π/(n−1) for 181 or 361. Readings ≥ --max-range (and the\n"
+      "line's own max range) or 0 are no return. Times must increase (--skip-backward-times).");
+  carmen_cmd->add_option("input", flags->input, "The log file (.log or .log.gz)")->required();
+  carmen_cmd->add_option("-o,--output", flags->output, "The scan.h5 to write")->required();
+  carmen_cmd
+      ->add_option("--laser", carmen.laser,
+                   "Which laser: 1 front (FLASER, ROBOTLASER1, RAWLASER1), 2 rear (RLASER, "
+                   "ROBOTLASER2, RAWLASER2), 3, 4")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 4));
+  carmen_cmd->add_option("--height", carmen.height_m, "Height of the laser above the floor, m")
+      ->capture_default_str();
+  carmen_cmd
+      ->add_option("--max-range", carmen.max_range_m, "Readings at or beyond this are no return, m")
+      ->capture_default_str();
+  carmen_cmd->add_flag("--skip-backward-times", carmen.skip_backward_times,
+                       "Skip a line whose time is not after the previous one's (counted) "
+                       "instead of failing");
+  carmen_cmd->callback([flags, &exit_code] {
+    CarmenReport report;
+    absl::Status status =
+        Run(flags->output, CarmenSensor(flags->carmen), [&](const FrameSink& sink) {
+          return ImportCarmen(flags->input, flags->carmen, sink, &report);
+        });
+    if (status.ok()) {
+      std::cout << "frames from " << report.laser_message << " lines, path from "
+                << report.pose_message << "; " << report.no_return_rays << " no-return rays";
+      if (report.skipped_backward > 0) {
+        std::cout << "; skipped " << report.skipped_backward
+                  << " lines whose time went backwards (the first at line "
+                  << report.first_skipped_line << ")";
+      }
+      if (report.skipped_outside_poses > 0) {
+        std::cout << "; skipped " << report.skipped_outside_poses
+                  << " scans outside the odometry's time span";
+      }
+      if (report.ignored_laser_lines > 0) {
+        std::cout << "; ignored " << report.ignored_laser_lines
+                  << " lines of the same laser in other message types";
+      }
+      std::cout << "\n";
+    }
+    exit_code = ReportStatus("import carmen", status);
   });
 }
 

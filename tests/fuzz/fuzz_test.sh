@@ -35,6 +35,7 @@ case "${1:-}" in
       scan_reader*) set -- -dict="$here/dict/scan.dict" "$@" ;;
       tile_reader*) set -- -dict="$here/dict/tile.dict" "$@" ;;
       tum_import|png) set -- -dict="$here/dict/tum.dict" "$@" ;;
+      carmen_import) set -- -dict="$here/dict/carmen.dict" "$@" ;;
     esac
     rm -rf "$work"
     mkdir -p "$work" "$artifacts"

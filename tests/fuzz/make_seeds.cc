@@ -9,6 +9,7 @@
 // §3); the *_raw targets get files: the foreign scans (10 KiB; ScanWriter's 100–200 KiB chunks
 // make 400 KiB files) and WriteTile's tiles.
 #include <png.h>
+#include <zlib.h>
 
 #include <cmath>
 #include <cstdio>
@@ -486,6 +487,62 @@ void TumSeeds(const std::string& data_dir, const fs::path& out) {
   WriteBytes(out / "fr2_poses_only", text);
 }
 
+// --- CARMEN logs (storage/import/carmen_import.h) ------------------------------------------
+
+// The decompressed text of a real log slice in tests/data/carmen.
+std::string Gunzip(const std::string& path) {
+  gzFile f = gzopen(path.c_str(), "rb");
+  if (!f) Die("cannot open " + path);
+  std::string text;
+  char buf[1 << 14];
+  int n;
+  while ((n = gzread(f, buf, sizeof buf)) > 0) text.append(buf, static_cast<size_t>(n));
+  gzclose(f);
+  if (n < 0) Die("cannot decompress " + path);
+  return text;
+}
+
+// The log's lines up to its `scans`-th FLASER, leaving out PARAM lines (the Freiburg log has
+// 168 of them, which the importer skips unread).
+std::string FirstScans(const std::string& text, int scans) {
+  std::istringstream in(text);
+  std::string line, out;
+  int seen = 0;
+  while (seen < scans && std::getline(in, line)) {
+    if (line.rfind("PARAM", 0) == 0) continue;
+    out += line + "\n";
+    if (line.rfind("FLASER", 0) == 0) ++seen;
+  }
+  return out;
+}
+
+void CarmenSeeds(const std::string& data_dir, const fs::path& out) {
+  const std::string intel = FirstScans(Gunzip(data_dir + "/carmen/intel-first100.log.gz"), 3);
+  WriteBytes(out / "intel_3_scans.log", intel);
+  WriteBytes(out / "freiburg_2_scans.log",
+             FirstScans(Gunzip(data_dir + "/carmen/freiburg101-first20.log.gz"), 2));
+  // The same three scans gzip-compressed, deterministically (no name or time in the header).
+  std::string gz(compressBound(intel.size()) + 64, '\0');
+  z_stream z{};
+  if (deflateInit2(&z, 9, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK) Die("deflate");
+  z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(intel.data()));
+  z.avail_in = static_cast<uInt>(intel.size());
+  z.next_out = reinterpret_cast<Bytef*>(gz.data());
+  z.avail_out = static_cast<uInt>(gz.size());
+  if (deflate(&z, Z_FINISH) != Z_STREAM_END) Die("deflate");
+  gz.resize(z.total_out);
+  deflateEnd(&z);
+  WriteBytes(out / "intel_3_scans.log.gz", gz);
+  // The newer messages, in both layouts (with and without remission_mode), and odometry.
+  WriteBytes(out / "robot_raw.log",
+             "ODOM 0 0 0 0 0 0 1.0 host 1.0\n"
+             "RAWLASER1 0 -1.5708 3.14159 1.5708 50 0.01 0 3 1.0 2.0 81.0 0 1.5 host 1.5\n"
+             "ODOM 1 0 0.5 0 0 0 2.0 host 2.0\n"
+             "RAWLASER1 0 -1.5708 3.14159 1.5708 50 0.01 3 1.0 2.0 3.0 1 7 1.8 host 1.8\n"
+             "ROBOTLASER2 0 -1.0 1.0 0.25 4.0 0.01 0 5 1.0 2.0 4.0 3.5 0 2 0.5 0.5 10 20 1.2 9.8 "
+             "20 1.2 0.1 0 0.5 0.3 0 2.1 host 2.1\n");
+}
+
 // --- Meshes, walks, partial sums ----------------------------------------------------------------
 
 void MeshSeeds(const fs::path& out) {
@@ -596,6 +653,7 @@ int main(int argc, char** argv) {
   TileSeeds(out);
   PngSeeds(data, out / "png");
   TumSeeds(data, out / "tum_import");
+  CarmenSeeds(data, out / "carmen_import");
   MeshSeeds(out / "ply_mesh");
   PathSeeds(nodes, out / "path_csv");
   PartialSumsSeeds(nodes, out / "partial_sums");
