@@ -11,6 +11,7 @@ PACKAGES=(
   libhdf5-dev hdf5-tools libspdlog-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libpng-dev libembree-dev libtbb-dev libssl-dev
+  zlib1g-dev  # storage/import/carmen_import.cc: gzipped CARMEN logs
   openssl  # the CLI: tests/tools/make_test_pki.sh (TLS tests)
   prometheus-cpp-dev libcurl4-openssl-dev  # the coordinator's /metrics; `watch --metrics`
   python3 python3-h5py python3-numpy
