@@ -44,6 +44,27 @@ LeaseTable::LeaseTable(JobStore& store, Clock& clock, LeaseTableOptions options)
   assert(options_.Validate().ok());
 }
 
+namespace {
+
+// The counts of one chunk in its job's (JobEntry::done, ...), `sign` +1 to add it, −1 to take
+// it out.
+template <typename Job>
+void CountChunk(Job& job, const ChunkRecord& c, int sign) {
+  job.done += sign * (c.state == ChunkState::kDone);
+  job.leased += sign * (c.state == ChunkState::kLeased);
+  job.queued_state += sign * (c.state == ChunkState::kQueued);
+  job.retries += sign * std::max(0, c.attempts - 1);
+}
+
+}  // namespace
+
+void LeaseTable::SetChunk(JobEntry& job, ChunkRecord chunk) {
+  auto [it, inserted] = job.chunks.try_emplace(chunk.key);
+  if (!inserted) CountChunk(job, it->second, -1);
+  it->second = std::move(chunk);
+  CountChunk(job, it->second, +1);
+}
+
 // ---- jobs
 
 absl::Status LeaseTable::LoadJob(absl::string_view job_id) {
@@ -78,7 +99,7 @@ absl::Status LeaseTable::LoadJob(absl::string_view job_id) {
       c = u.chunk;
     }
     if (c.state == ChunkState::kQueued) job.queued.insert(c.key);
-    job.chunks.emplace(c.key, std::move(c));
+    SetChunk(job, std::move(c));
   }
   if (!requeue.empty()) {
     if (absl::Status s = store_.UpdateChunks(requeue, now); !s.ok()) return s;
@@ -130,7 +151,7 @@ absl::StatusOr<std::optional<LeaseTable::Grant>> LeaseTable::Lease(absl::string_
     Grant grant{
         job_id,          key, next.lease_id, next.generation, next.deadline_unix_ms, next.attempts,
         next.wedge_count};
-    job.chunks[key] = std::move(next);
+    SetChunk(job, std::move(next));
     return grant;
   }
   return std::nullopt;
@@ -163,7 +184,7 @@ absl::Status LeaseTable::Add(absl::string_view job_id, std::span<const ChunkReco
     record.job_id = job.id;
     record.state = ChunkState::kQueued;
     job.queued.insert(record.key);
-    job.chunks.emplace(record.key, std::move(record));
+    SetChunk(job, std::move(record));
   }
   return absl::OkStatus();
 }
@@ -196,16 +217,16 @@ absl::Status LeaseTable::Requeue(absl::string_view job_id, const std::vector<Chu
   }
   if (absl::Status s = store_.UpdateChunks(updates, clock_.NowUnixMs()); !s.ok()) return s;
   for (const ChunkUpdate& u : updates) {
-    ChunkRecord& current = job.chunks.at(u.chunk.key);
+    const ChunkRecord& current = job.chunks.at(u.chunk.key);
     if (current.state == ChunkState::kLeased) ForgetLease(current);
-    current = u.chunk;
     if (held) {
-      job.queued.erase(current.key);
-      job.held.insert(current.key);
+      job.queued.erase(u.chunk.key);
+      job.held.insert(u.chunk.key);
     } else {
-      job.held.erase(current.key);
-      job.queued.insert(current.key);
+      job.held.erase(u.chunk.key);
+      job.queued.insert(u.chunk.key);
     }
+    SetChunk(job, u.chunk);
   }
   return absl::OkStatus();
 }
@@ -275,7 +296,7 @@ absl::Status LeaseTable::Complete(absl::string_view lease_id, int64_t generation
   if (absl::Status s = store_.UpdateChunks({&update, 1}, clock_.NowUnixMs()); !s.ok()) return s;
   if (current.state == ChunkState::kLeased) ForgetLease(current);
   job.queued.erase(current.key);
-  c->second = std::move(next);
+  SetChunk(job, std::move(next));
   return absl::OkStatus();
 }
 
@@ -368,7 +389,7 @@ absl::Status LeaseTable::RequeueOrFail(JobEntry& job,
   for (ChunkUpdate& u : updates) {
     ForgetLease(job.chunks.at(u.chunk.key));
     job.queued.insert(u.chunk.key);
-    job.chunks[u.chunk.key] = std::move(u.chunk);
+    SetChunk(job, std::move(u.chunk));
   }
   if (fail) {
     job.failed = true;
@@ -389,28 +410,25 @@ absl::StatusOr<LeaseTable::Progress> LeaseTable::GetProgress(absl::string_view j
   if (it == jobs_.end()) {
     return absl::NotFoundError(absl::StrCat("lease table: job ", job_id, " not loaded"));
   }
+  const JobEntry& job = it->second;
   Progress p;
-  p.failed = it->second.failed;
-  p.error = it->second.error;
-  for (const auto& [key, c] : it->second.chunks) {
-    ++p.chunks_total;
-    p.chunks_done += c.state == ChunkState::kDone;
-    p.chunks_leased += c.state == ChunkState::kLeased;
-    p.chunks_queued += c.state == ChunkState::kQueued;
-    p.chunk_retries += std::max(0, c.attempts - 1);
-  }
+  p.failed = job.failed;
+  p.error = job.error;
+  p.chunks_total = int64_t(job.chunks.size());
+  p.chunks_done = job.done;
+  p.chunks_leased = job.leased;
+  p.chunks_queued = job.queued_state;
+  p.chunk_retries = job.retries;
   return p;
 }
 
 bool LeaseTable::AllDone(absl::string_view job_id, bool except_held) const {
   auto it = jobs_.find(job_id);
   if (it == jobs_.end() || it->second.failed) return false;
-  for (const auto& [key, c] : it->second.chunks) {
-    if (c.state != ChunkState::kDone && !(except_held && it->second.held.count(key))) {
-      return false;
-    }
-  }
-  return true;
+  // Held chunks are QUEUED (Requeue raised their generation: no earlier lease completes them).
+  const JobEntry& job = it->second;
+  const int64_t need = int64_t(job.chunks.size()) - (except_held ? int64_t(job.held.size()) : 0);
+  return job.done == need;
 }
 
 std::vector<std::string> LeaseTable::LeasesOf(absl::string_view worker_id) const {

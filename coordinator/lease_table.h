@@ -162,6 +162,9 @@ class LeaseTable {
     std::set<ChunkCoord> held;    // QUEUED but not leased until Release
     bool failed = false;
     std::string error;
+    // The chunks by state and their retries, kept as chunks change (SetChunk), so that
+    // GetProgress and AllDone, asked at every completion, cost nothing per chunk.
+    int64_t done = 0, leased = 0, queued_state = 0, retries = 0;
   };
   using LeaseRef = std::pair<std::string, ChunkCoord>;  // job id, chunk
 
@@ -173,6 +176,8 @@ class LeaseTable {
                              bool force_fail);
   // Removes the chunk's lease from leases_by_worker_ (memory only).
   void ForgetLease(const ChunkRecord& chunk);
+  // Every change of a chunk goes through here: it keeps the job's counts.
+  static void SetChunk(JobEntry& job, ChunkRecord chunk);
 
   JobStore& store_;
   Clock& clock_;

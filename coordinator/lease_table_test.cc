@@ -3,9 +3,11 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-
+#include <algorithm>
 #include <filesystem>
 #include <memory>
+#include <random>
+#include <set>
 
 #include "absl/strings/str_cat.h"
 
@@ -140,8 +142,7 @@ TEST_F(LeaseTableTest, SecondCompletionIsRejected) {
   EXPECT_THAT(again.message(), HasSubstr("already committed"));
   EXPECT_EQ(table_->Complete(g.lease_id, 7, TileFor(g)).code(),
             absl::StatusCode::kInvalidArgument);  // generation does not match the id
-  EXPECT_EQ(table_->Complete("garbage", 1, TileFor(g)).code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(table_->Complete("garbage", 1, TileFor(g)).code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(table_->Complete("j-9/0,0,0/1", 1, TileFor(g)).code(), absl::StatusCode::kNotFound);
 }
 
@@ -406,7 +407,7 @@ TEST_F(LeaseTableTest, RestartRebuildsTheTable) {
   auto progress = table_->GetProgress("j-1");
   ASSERT_TRUE(progress.ok());
   EXPECT_EQ(progress->chunks_total, 4);
-  EXPECT_EQ(progress->chunks_done, 1);  // DONE stays done
+  EXPECT_EQ(progress->chunks_done, 1);    // DONE stays done
   EXPECT_EQ(progress->chunks_leased, 0);  // LEASED went back to the queue
   EXPECT_EQ(progress->chunks_queued, 3);
   EXPECT_EQ(StoredChunk("j-1", b.chunk).state, ChunkState::kQueued);
@@ -446,6 +447,115 @@ TEST_F(LeaseTableTest, JobsAreServedInLoadOrderAndDropJobVoidsLeases) {
   EXPECT_EQ(table_->Complete(first.lease_id, first.generation, TileFor(first)).code(),
             absl::StatusCode::kNotFound);
   EXPECT_THAT(table_->LeasesOf("w-1"), ElementsAre(second.lease_id));
+}
+
+// The progress the table keeps as chunks change equals a recount of the store's rows (every
+// change is persisted), through a long random mix of every operation, a restart included.
+TEST_F(LeaseTableTest, KeptProgressEqualsARecountOfTheStore) {
+  options_.max_attempts = 1000;  // retries, not failures: the job stays alive
+  Restart();
+  AddJob("j", 40);
+  std::mt19937 rng(11);
+  std::vector<LeaseTable::Grant> held;  // leases workers hold
+  std::set<ChunkCoord> held_back;       // chunks Requeue(held = true) holds
+  int next_key = 40;
+  const auto check = [&] {
+    absl::StatusOr<std::vector<ChunkRecord>> rows = store_->ListChunks("j");
+    ASSERT_TRUE(rows.ok()) << rows.status();
+    LeaseTable::Progress want;
+    int64_t done_outside_held = 0, outside_held = 0;
+    for (const ChunkRecord& c : *rows) {
+      ++want.chunks_total;
+      want.chunks_done += c.state == ChunkState::kDone;
+      want.chunks_leased += c.state == ChunkState::kLeased;
+      want.chunks_queued += c.state == ChunkState::kQueued;
+      want.chunk_retries += std::max(0, c.attempts - 1);
+      if (!held_back.count(c.key)) {
+        ++outside_held;
+        done_outside_held += c.state == ChunkState::kDone;
+      }
+    }
+    absl::StatusOr<LeaseTable::Progress> got = table_->GetProgress("j");
+    ASSERT_TRUE(got.ok()) << got.status();
+    EXPECT_EQ(got->chunks_total, want.chunks_total);
+    EXPECT_EQ(got->chunks_done, want.chunks_done);
+    EXPECT_EQ(got->chunks_leased, want.chunks_leased);
+    EXPECT_EQ(got->chunks_queued, want.chunks_queued);
+    EXPECT_EQ(got->chunk_retries, want.chunk_retries);
+    EXPECT_EQ(table_->AllDone("j"), want.chunks_done == want.chunks_total);
+    EXPECT_EQ(table_->AllDone("j", /*except_held=*/true), done_outside_held == outside_held);
+  };
+  for (int step = 0; step < 600; ++step) {
+    switch (rng() % 8) {
+      case 0:
+      case 1: {  // lease
+        absl::StatusOr<std::optional<LeaseTable::Grant>> g =
+            table_->Lease(absl::StrCat("w-", rng() % 3));
+        ASSERT_TRUE(g.ok()) << g.status();
+        if (*g) held.push_back(**g);
+        break;
+      }
+      case 2:
+      case 3:  // complete
+        if (!held.empty()) {
+          const size_t i = rng() % held.size();
+          (void)table_->Complete(held[i].lease_id, held[i].generation, TileFor(held[i]));
+          held.erase(held.begin() + long(i));
+        }
+        break;
+      case 4:  // a worker gives up
+        if (!held.empty()) {
+          const size_t i = rng() % held.size();
+          (void)table_->Fail(held[i].lease_id, held[i].generation, "test", /*retryable=*/true);
+          held.erase(held.begin() + long(i));
+        }
+        break;
+      case 5:  // a worker is lost, or leases expire
+        if (rng() % 2) {
+          ASSERT_TRUE(table_->WorkerLost(absl::StrCat("w-", rng() % 3)).ok());
+        } else {
+          clock_.AdvanceMs(kTimeoutMs + 1);
+          ASSERT_TRUE(table_->ExpireLeases().ok());
+        }
+        break;
+      case 6: {  // another pass over some chunks, held or not; or new chunks
+        if (rng() % 3 == 0) {
+          ChunkRecord r;
+          r.job_id = "j";
+          r.key = {1, 0, next_key++};
+          ASSERT_TRUE(table_->Add("j", {&r, 1}).ok());
+          break;
+        }
+        std::vector<ChunkCoord> keys;
+        for (int k = 0; k < 3; ++k) keys.push_back({0, 0, int(rng() % 40)});
+        std::sort(keys.begin(), keys.end());
+        keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+        const bool hold = rng() % 2;
+        ASSERT_TRUE(table_->Requeue("j", keys, "again", hold).ok());
+        for (const ChunkCoord& k : keys) {
+          if (hold) {
+            held_back.insert(k);
+          } else {
+            held_back.erase(k);
+          }
+        }
+        break;
+      }
+      case 7:  // release what is held back; now and then a restart
+        if (!held_back.empty()) {
+          ASSERT_TRUE(
+              table_->Release("j", std::vector<ChunkCoord>(held_back.begin(), held_back.end()))
+                  .ok());
+          held_back.clear();
+        } else if (rng() % 4 == 0) {
+          Restart();  // leases are requeued on load; held is memory only
+          ASSERT_TRUE(table_->LoadJob("j").ok());
+        }
+        break;
+    }
+    check();
+    if (HasFailure()) FAIL() << "at step " << step;
+  }
 }
 
 TEST(LeaseTableOptionsTest, Validate) {
