@@ -346,6 +346,9 @@ class CoordinatorServer::Impl {
   // The job must exist and not be terminal; shared by CompleteChunk and FailChunk, which check
   // the store before the lease table (the table has forgotten cancelled jobs).
   absl::Status CheckLeaseJob(absl::string_view lease_id);
+  // Wakes the parked LeaseChunk calls: tasks may have been queued (added, requeued, released,
+  // given back by a worker, expired or lost with their worker), or the coordinator stops.
+  void WorkMayBeQueued() { work_cv_.SignalAll(); }
 
   const CoordinatorSpec spec_;
   CoordinatorFolders folders_;
@@ -362,6 +365,8 @@ class CoordinatorServer::Impl {
   std::thread sweeper_;
 
   absl::Mutex mu_;
+  // Parked LeaseChunk calls wait on it; signalled wherever tasks may have been queued.
+  absl::CondVar work_cv_;
   std::unique_ptr<LeaseTable> table_ ABSL_GUARDED_BY(mu_);
   // Its instance (random) tells this coordinator's worker ids from a previous one's.
   WorkerRegistry workers_ ABSL_GUARDED_BY(mu_){RandomHex(4)};
@@ -591,6 +596,7 @@ void CoordinatorServer::Impl::Shutdown() {
   absl::MutexLock shutdown_lock(&shutdown_mu_);
   if (shutdown_done_.HasBeenNotified()) return;
   stopping_ = true;
+  WorkMayBeQueued();
   // Streams and long polls see stopping_ within a poll interval; the deadline bounds the wait.
   servers_.Shutdown(std::chrono::milliseconds(500));
   if (sweeper_.joinable()) sweeper_.join();
@@ -627,6 +633,7 @@ void CoordinatorServer::Impl::Sweep() {
     } else if (*expired > 0) {
       spdlog::warn("coordinator: {} lease(s) expired and were requeued", *expired);
       metrics_.LeasesExpired(*expired);
+      WorkMayBeQueued();
     }
     const int64_t now = NowMs();
     const int64_t timeout_ms = static_cast<int64_t>(spec_.worker_timeout_s * 1000);
@@ -636,6 +643,7 @@ void CoordinatorServer::Impl::Sweep() {
       spdlog::warn("coordinator: worker {} lost (no heartbeat for {:.1f} s); {} lease(s) requeued",
                    id, silent_ms / 1000.0, lost.ok() ? *lost : -1);
       metrics_.WorkerLost(lost.ok() ? *lost : 0);
+      WorkMayBeQueued();
     }
     // Gauges: the chunks of every job in the lease table, workers, running jobs.
     int64_t queued = 0, leased = 0, done = 0, active = 0;
@@ -865,6 +873,7 @@ absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
     rt.pass_dir = rt.partials_dir;
     rt.regions_path.clear();
     if (absl::Status s = table_->LoadJob(job_id); !s.ok() && !absl::IsAlreadyExists(s)) return s;
+    WorkMayBeQueued();
     // A restarted coordinator may find the chunks to combine stored already.
     if (absl::StatusOr<std::vector<ChunkRecord>> chunks = store_->ListChunks(job_id); chunks.ok()) {
       for (const ChunkRecord& c : *chunks) combines |= !IsSliceTask(c.key);
@@ -885,6 +894,7 @@ absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
     {
       absl::MutexLock lock(&mu_);
       if (absl::Status s = table_->Add(job_id, records); !s.ok()) return s;
+      WorkMayBeQueued();
     }
     spdlog::info("coordinator: job {}: slices carved; combining {} chunks", job_id,
                  records.size());
@@ -1008,6 +1018,7 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
       rt.pass = 0;
       return s;
     }
+    WorkMayBeQueued();
   }
   spdlog::info("coordinator: job {}: carving {} object chunks again at {} m (pass {})", job_id,
                chunks.size(), resolution_m, pass);
@@ -1015,6 +1026,7 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
   if (s.ok()) {
     absl::MutexLock lock(&mu_);
     s = table_->Release(job_id, keys);
+    WorkMayBeQueued();
   }
   if (s.ok()) s = WaitForChunks(job_id);
   {
@@ -1609,6 +1621,7 @@ absl::Status CoordinatorServer::Impl::Heartbeat(const pb::HeartbeatRequest& req,
         (void)table_->Fail(lease, id->generation,
                            absl::StrCat("abandoned by worker ", req.worker_id()),
                            /*retryable=*/true);
+        WorkMayBeQueued();
       }
     }
     held = table_->LeasesOf(req.worker_id());
@@ -1665,6 +1678,12 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
         } else {
           for (const ScanSlice& s : rt.slices) slice_indices.push_back(s.index);
         }
+      } else if (!stopping_) {
+        // Parked until work may have been queued (WorkMayBeQueued) or the call's time is up.
+        // At most a second at a time: a worker that gives up is noticed within it.
+        const double left_s =
+            std::chrono::duration<double>(deadline - std::chrono::steady_clock::now()).count();
+        if (left_s > 0) work_cv_.WaitWithTimeout(&mu_, absl::Seconds(std::min(left_s, 1.0)));
       }
     }
     if (grant) {
@@ -1717,7 +1736,6 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
       return absl::OkStatus();
     }
     if (std::chrono::steady_clock::now() >= deadline || ctx.IsCancelled()) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   resp.set_retry_after_s(0.25);
   return absl::OkStatus();
@@ -1795,6 +1813,7 @@ absl::Status CoordinatorServer::Impl::FailChunk(const pb::FailChunkRequest& req,
       table_->Fail(req.lease_id(), req.generation(), TenantView(runtime_[job_id], req.reason()),
                    req.retryable());
   if (!requeued.ok()) return requeued.status();
+  if (*requeued) WorkMayBeQueued();
   metrics_.ChunkFailed();
   spdlog::warn("coordinator: worker {} failed {}: {} ({})", req.worker_id(), req.lease_id(),
                req.reason(), *requeued ? "requeued" : "job failed");
