@@ -152,14 +152,16 @@ absl::StatusOr<std::string> ResolveConfinedPath(const std::string& root,
 
 // ---- ConfinedFile
 
-ConfinedFile::ConfinedFile(int fd, std::string relative, int64_t size_bytes)
+ConfinedFile::ConfinedFile(int fd, std::string what, std::string relative, int64_t size_bytes)
     : fd_(fd),
+      what_(std::move(what)),
       relative_(std::move(relative)),
       proc_path_(absl::StrCat("/proc/self/fd/", fd)),
       size_bytes_(size_bytes) {}
 
 ConfinedFile::ConfinedFile(ConfinedFile&& other) noexcept
     : fd_(std::exchange(other.fd_, -1)),
+      what_(std::move(other.what_)),
       relative_(std::move(other.relative_)),
       proc_path_(std::move(other.proc_path_)),
       size_bytes_(other.size_bytes_) {}
@@ -168,6 +170,7 @@ ConfinedFile& ConfinedFile::operator=(ConfinedFile&& other) noexcept {
   if (this != &other) {
     if (fd_ >= 0) ::close(fd_);
     fd_ = std::exchange(other.fd_, -1);
+    what_ = std::move(other.what_);
     relative_ = std::move(other.relative_);
     proc_path_ = std::move(other.proc_path_);
     size_bytes_ = other.size_bytes_;
@@ -181,8 +184,17 @@ ConfinedFile::~ConfinedFile() {
 
 absl::Status ConfinedFile::Rename(const absl::Status& status) const {
   if (status.ok() || proc_path_.empty()) return status;
-  return absl::Status(status.code(),
-                      absl::StrReplaceAll(status.message(), {{proc_path_, relative_}}));
+  std::string message = absl::StrReplaceAll(status.message(), {{proc_path_, relative_}});
+  // Removed since it was opened: code that reopens path() by name (HDF5 resolves the link to
+  // the file's real name, which is gone) reports errors about the contents; the cause is that
+  // the file no longer exists.
+  struct stat st;
+  if (fd_ >= 0 && ::fstat(fd_, &st) == 0 && st.st_nlink == 0) {
+    return absl::NotFoundError(absl::StrCat(Quoted(what_, relative_),
+                                            ": no such file (removed while it was read: ",
+                                            message, ")"));
+  }
+  return absl::Status(status.code(), std::move(message));
 }
 
 absl::StatusOr<ConfinedFile> ConfinedFile::Open(const std::string& root,
@@ -197,7 +209,7 @@ absl::StatusOr<ConfinedFile> ConfinedFile::Open(const std::string& root,
     if (errno == ELOOP) return Escapes(what, relative);  // swapped for a link meanwhile
     return NotFound(what, relative);
   }
-  ConfinedFile file(fd, std::string(relative), 0);
+  ConfinedFile file(fd, std::string(what), std::string(relative), 0);
   // What the kernel says the open file is: it must still be under the root.
   char real[PATH_MAX];
   const ssize_t n = ::readlink(file.proc_path_.c_str(), real, sizeof(real) - 1);

@@ -59,12 +59,15 @@ class ConfinedFile {
   [[nodiscard]] const std::string& path() const { return proc_path_; }
   [[nodiscard]] int64_t size_bytes() const { return size_bytes_; }
   // Replaces path() in `status`'s message by the name the client gave, so errors of code
-  // that opened path() read as the client's own path.
+  // that opened path() read as the client's own path. When the file has been removed since it
+  // was opened, NOT_FOUND "... no such file (removed while it was read: <message>)", whatever
+  // `status` was.
   [[nodiscard]] absl::Status Rename(const absl::Status& status) const;
 
  private:
-  ConfinedFile(int fd, std::string relative, int64_t size_bytes);
+  ConfinedFile(int fd, std::string what, std::string relative, int64_t size_bytes);
   int fd_ = -1;
+  std::string what_;
   std::string relative_;
   std::string proc_path_;
   int64_t size_bytes_ = 0;

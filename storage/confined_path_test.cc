@@ -134,6 +134,10 @@ TEST_F(ConfinedPathTest, ConfinedFileReadsTheCheckedFileEvenAfterASwap) {
   ASSERT_TRUE(f.ok()) << f.status();
   EXPECT_EQ(f->size_bytes(), 9);
   EXPECT_THAT(f->path(), ::testing::StartsWith("/proc/self/fd/"));
+  // Errors of code that opened path() read as the client's name.
+  absl::Status renamed = f->Rename(absl::DataLossError("ingest: " + f->path() + ": bad"));
+  EXPECT_EQ(renamed.message(), "ingest: scans/a.h5: bad");
+  EXPECT_EQ(renamed.code(), absl::StatusCode::kDataLoss);
   // Swap the checked file for a link to a file outside: path() still reads the checked one.
   fs::remove(root_ / "scans" / "a.h5");
   fs::create_symlink(base_ / "outside" / "secret.h5", root_ / "scans" / "a.h5");
@@ -141,13 +145,22 @@ TEST_F(ConfinedPathTest, ConfinedFileReadsTheCheckedFileEvenAfterASwap) {
   std::string text;
   std::getline(in, text);
   EXPECT_EQ(text, "acme scan");
-  // Errors of code that opened path() read as the client's name.
-  absl::Status renamed = f->Rename(absl::DataLossError("ingest: " + f->path() + ": bad"));
-  EXPECT_EQ(renamed.message(), "ingest: scans/a.h5: bad");
-  EXPECT_EQ(renamed.code(), absl::StatusCode::kDataLoss);
   // And now the name itself is refused.
   EXPECT_EQ(ConfinedFile::Open(root_.string(), "scans/a.h5", "input_path").status().code(),
             absl::StatusCode::kPermissionDenied);
+}
+
+TEST_F(ConfinedPathTest, AFileRemovedWhileReadIsNotFoundWhateverTheReaderSaid) {
+  absl::StatusOr<ConfinedFile> f = ConfinedFile::Open(root_.string(), "scans/a.h5", "input_path");
+  ASSERT_TRUE(f.ok()) << f.status();
+  fs::remove(root_ / "scans" / "a.h5");
+  // HDF5 reopening path() of a removed file reports a corrupt file; the cause is the removal.
+  absl::Status renamed =
+      f->Rename(absl::DataLossError(f->path() + ": truncated or corrupt HDF5 file"));
+  EXPECT_EQ(renamed.code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(renamed.message(),
+            "input_path 'scans/a.h5': no such file (removed while it was read: scans/a.h5: "
+            "truncated or corrupt HDF5 file)");
 }
 
 TEST_F(ConfinedPathTest, DirectoriesAndFifosAreNotFiles) {
