@@ -32,6 +32,8 @@ struct FrameKey {
 };
 
 constexpr uint32_t kNoRay = std::numeric_limits<uint32_t>::max();
+// A batch's ray vectors are reserved for at most this many rays (72 MiB of RayModel).
+constexpr uint64_t kMaxReservedRays = uint64_t{1} << 20;
 
 // One batch's wedges, each ray stored once for the whole batch (a ray's wedges reach ~2 chunks
 // on average): chunks list their wedges by batch ray ids, and each chunk's IndexedWedges (its
@@ -128,6 +130,12 @@ struct SliceCarver::Impl {
     auto at = std::find_if(open.begin(), open.end(), [b](const Batch& x) { return x.index > b; });
     at = open.insert(at, Batch{});
     at->index = b;
+    // About what the batch will hold (its own rays, few of its neighbours'): growing the
+    // vector by copies cost more than the wedges' binning. Pages are only taken when written;
+    // a batch_rays meaning "one batch" is not reserved whole.
+    const size_t expected = std::min<uint64_t>(options.batch_rays, kMaxReservedRays);
+    at->rays.reserve(expected);
+    at->votes.reserve(expected);
     return &*at;
   }
 
