@@ -1,6 +1,7 @@
 #include "worker/slice_carver.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <deque>
@@ -43,6 +44,7 @@ struct Batch {
   int64_t index = 0;
   std::vector<RayModel> rays;  // by batch ray id, in order of first use
   std::vector<uint8_t> votes;  // by batch ray id: whether the ray votes in this batch
+  std::vector<Eigen::Vector3d> far_ends;  // by batch ray id: ExtendedPointMean, for the hulls
   absl::flat_hash_map<FrameKey, uint32_t> frame_slot;   // frame → its entry in frame_ids
   std::vector<std::vector<uint32_t>> frame_ids;         // a frame's batch ray id by ray index
   FrameKey last_frame[2] = {{kNoRay, 0}, {kNoRay, 0}};  // the frames looked up last, and
@@ -136,6 +138,7 @@ struct SliceCarver::Impl {
     const size_t expected = std::min<uint64_t>(options.batch_rays, kMaxReservedRays);
     at->rays.reserve(expected);
     at->votes.reserve(expected);
+    at->far_ends.reserve(expected);
     return &*at;
   }
 
@@ -170,8 +173,42 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
     }
   }
   ++stats.wedges;
+  // The wedge's rays in each batch it serves, with their far ends computed once per batch ray
+  // (a 3×3 inverse each, and a ray belongs to up to four wedges): this hull and the chunks'
+  // (CarveIndexed) are built from the same points.
+  std::array<std::array<uint32_t, 4>, 4> batch_ids;
+  std::array<Eigen::Vector3d, 4> sensor_means, far_ends;
+  for (int i = 0; i < nb; ++i) {
+    absl::StatusOr<Batch*> opened = OpenBatch(batches[i]);
+    if (!opened.ok()) return opened.status();
+    Batch& batch = **opened;
+    for (int r = 0; r < wedge.num_rays; ++r) {
+      uint32_t& id = batch.RayOf({ids[r].sensor, ids[r].frame}, ids[r].index);
+      if (id == kNoRay) {
+        id = uint32_t(batch.rays.size());
+        batch.rays.push_back(wedge.rays[r]);
+        const bool votes = Owned(ids[r].sensor, ids[r].frame) &&
+                           BatchOf(ids[r].sensor, ids[r].frame) == batches[i];
+        batch.votes.push_back(votes ? 1 : 0);
+        batch.far_ends.push_back(i == 0 ? ExtendedPointMean(wedge.rays[r], kWedgeHullSigmas)
+                                        : far_ends[r]);
+      }
+      batch_ids[i][r] = id;
+      if (i == 0) far_ends[r] = batch.far_ends[id];
+    }
+  }
   uint64_t facets = 0;  // the hull's facets: the carve rebuilds it from them, without a search
-  const WedgeHull hull = MakeWedgeHull(wedge, kWedgeHullSigmas, &facets);
+  WedgeHull hull;
+  if (wedge.num_rays == 1) {
+    hull = MakeWedgeHull(wedge, kWedgeHullSigmas, &facets);
+  } else {
+    for (int r = 0; r < wedge.num_rays; ++r) {
+      sensor_means[r] = wedge.rays[r].sensor_mean.cast<double>();
+    }
+    // As MakeWedgeHull, from the same points.
+    hull = HullOfWedgePoints({sensor_means.data(), size_t(wedge.num_rays)},
+                             {far_ends.data(), size_t(wedge.num_rays)}, &facets);
+  }
   std::vector<ChunkKey> chunks = ChunksOfWedge(hull);
   if (options.regions != nullptr) {
     // §5.6.1: only chunks of the pass, and only where the hull's box meets their region.
@@ -187,25 +224,15 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
     stats.bounds.extend(wedge.rays[r].sensor_mean.cast<double>());
     stats.bounds.extend(wedge.rays[r].point_mean.cast<double>());
   }
+  if (chunks.empty()) return absl::OkStatus();
   for (int i = 0; i < nb; ++i) {
     absl::StatusOr<Batch*> opened = OpenBatch(batches[i]);
     if (!opened.ok()) return opened.status();
     Batch& batch = **opened;
-    if (chunks.empty()) continue;
     WedgeRef ref;
     ref.num_rays = wedge.num_rays;
     ref.facets = facets;
-    for (int r = 0; r < wedge.num_rays; ++r) {
-      uint32_t& id = batch.RayOf({ids[r].sensor, ids[r].frame}, ids[r].index);
-      if (id == kNoRay) {
-        id = uint32_t(batch.rays.size());
-        batch.rays.push_back(wedge.rays[r]);
-        const bool votes = Owned(ids[r].sensor, ids[r].frame) &&
-                           BatchOf(ids[r].sensor, ids[r].frame) == batches[i];
-        batch.votes.push_back(votes ? 1 : 0);
-      }
-      ref.ray[r] = id;
-    }
+    for (int r = 0; r < wedge.num_rays; ++r) ref.ray[r] = batch_ids[i][r];
     for (const ChunkKey& c : chunks) {
       batch.chunks[c].push_back(ref);
       ++stats.wedge_chunk_pairs;
@@ -231,6 +258,7 @@ absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
     in.rays.clear();
     in.votes.clear();
     in.wedges.clear();
+    in.far_ends.clear();
     chunk_rays.clear();
     for (WedgeRef ref : refs) {
       for (int r = 0; r < ref.num_rays; ++r) {
@@ -239,6 +267,7 @@ absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
           local = uint32_t(in.rays.size());
           in.rays.push_back(batch.rays[ref.ray[r]]);
           in.votes.push_back(batch.votes[ref.ray[r]]);
+          in.far_ends.push_back(batch.far_ends[ref.ray[r]]);
           chunk_rays.push_back(ref.ray[r]);
         }
         ref.ray[r] = local;

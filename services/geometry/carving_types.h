@@ -70,6 +70,10 @@ struct IndexedWedges {
   // wedges), and votes where it belongs: a time slice carries the wedges that join its first
   // and last frames to its neighbours' (coordinator/scan_slices.h).
   std::vector<uint8_t> votes;
+  // Optional, one per ray: the far end of its wedges' hulls (ExtendedPointMean with
+  // worker/chunk_octree.h's kWedgeHullSigmas), for a caller that has computed them already;
+  // empty, the carve computes them.
+  std::vector<Eigen::Vector3d> far_ends;
 };
 
 // The fused statistics of one octree leaf (eq 4.8), kept as sums so that fusion is a plain
