@@ -33,7 +33,7 @@ struct FrameKey {
 };
 
 constexpr uint32_t kNoRay = std::numeric_limits<uint32_t>::max();
-// A batch's ray vectors are reserved for at most this many rays (72 MiB of RayModel).
+// A batch's vectors are reserved for at most this many rays (72 MiB of RayModel).
 constexpr uint64_t kMaxReservedRays = uint64_t{1} << 20;
 
 // One batch's wedges, each ray stored once for the whole batch (a ray's wedges reach ~2 chunks
@@ -49,7 +49,9 @@ struct Batch {
   std::vector<std::vector<uint32_t>> frame_ids;         // a frame's batch ray id by ray index
   FrameKey last_frame[2] = {{kNoRay, 0}, {kNoRay, 0}};  // the frames looked up last, and
   uint32_t last_slot[2] = {0, 0};                       // their entries
-  std::map<ChunkKey, std::vector<WedgeRef>, ChunkKeyLess> chunks;  // WedgeRef::ray: batch ids
+  std::vector<WedgeRef> wedges;  // WedgeRef::ray: batch ray ids
+  // Each chunk's wedges (indices into `wedges`: a wedge reaches ~2 chunks).
+  std::map<ChunkKey, std::vector<uint32_t>, ChunkKeyLess> chunks;
 
   // The batch ray id of frame `key`'s ray `index` (kNoRay the first time).
   uint32_t& RayOf(const FrameKey& key, uint32_t index) {
@@ -139,6 +141,7 @@ struct SliceCarver::Impl {
     at->rays.reserve(expected);
     at->votes.reserve(expected);
     at->far_ends.reserve(expected);
+    at->wedges.reserve(expected);
     return &*at;
   }
 
@@ -233,8 +236,10 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
     ref.num_rays = wedge.num_rays;
     ref.facets = facets;
     for (int r = 0; r < wedge.num_rays; ++r) ref.ray[r] = batch_ids[i][r];
+    const uint32_t w = uint32_t(batch.wedges.size());
+    batch.wedges.push_back(ref);
     for (const ChunkKey& c : chunks) {
-      batch.chunks[c].push_back(ref);
+      batch.chunks[c].push_back(w);
       ++stats.wedge_chunk_pairs;
     }
   }
@@ -246,7 +251,7 @@ absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
   carved_up_to = batch.index;
   // A chunk's rays are numbered in the order its wedges first name them, each once.
   local_of.assign(batch.rays.size(), kNoRay);
-  for (auto& [chunk, refs] : batch.chunks) {
+  for (auto& [chunk, wedges] : batch.chunks) {
     auto [it, inserted] = trees.try_emplace(chunk, options.grid, chunk);
     ChunkOctree& tree = it->second;
     if (inserted) {
@@ -260,7 +265,8 @@ absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
     in.wedges.clear();
     in.far_ends.clear();
     chunk_rays.clear();
-    for (WedgeRef ref : refs) {
+    for (uint32_t w : wedges) {
+      WedgeRef ref = batch.wedges[w];
       for (int r = 0; r < ref.num_rays; ++r) {
         uint32_t& local = local_of[ref.ray[r]];
         if (local == kNoRay) {
@@ -279,7 +285,7 @@ absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
     if (absl::Status s = tree.CarveIndexed(in); !s.ok()) return s;
     tree_leaves += tree.num_leaves() - before;
     // The chunk's wedges are done with: give the memory back now, not at the batch's end.
-    refs = std::vector<WedgeRef>();
+    wedges = std::vector<uint32_t>();
   }
   if (tree_leaves * kBytesPerLeaf > options.memory_budget_bytes) return Flush();
   return absl::OkStatus();
