@@ -346,6 +346,10 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
           absl::StrCat("chunk_octree: ray ", r, " has a non-finite mean or covariance"));
     }
   }
+  if (!in.far_ends.empty() && in.far_ends.size() != num_rays) {
+    return absl::InvalidArgumentError(absl::StrCat("chunk_octree: ", in.far_ends.size(),
+                                                   " far ends for ", num_rays, " rays"));
+  }
   if (!in.votes.empty() && in.votes.size() != num_rays) {
     return absl::InvalidArgumentError(absl::StrCat("chunk_octree: ", in.votes.size(),
                                                    " vote flags for ", num_rays, " rays"));
@@ -369,7 +373,8 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   far_ends.resize(num_rays);
   for (size_t r = 0; r < num_rays; ++r) {
     sensor_means[r] = in.rays[r].sensor_mean.cast<double>();
-    far_ends[r] = ExtendedPointMean(in.rays[r], kWedgeHullSigmas);
+    far_ends[r] =
+        in.far_ends.empty() ? ExtendedPointMean(in.rays[r], kWedgeHullSigmas) : in.far_ends[r];
     const std::optional<Eigen::Vector3d> direction = PreparedRay::Direction(in.rays[r]);
     if (direction && votes(r)) axis[r] = int8_t(RunAxis(*direction));
   }

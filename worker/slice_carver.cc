@@ -1,6 +1,7 @@
 #include "worker/slice_carver.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <deque>
@@ -20,26 +21,54 @@ namespace {
 // About what the finest sums of one leaf cost in a ChunkOctree (hash entry and slack).
 constexpr size_t kBytesPerLeaf = 64;
 
-struct RayKey {
+// A frame of one sensor: its rays are RayId::index within it.
+struct FrameKey {
   uint32_t sensor;
   uint64_t frame;
-  uint32_t index;
-  bool operator==(const RayKey&) const = default;
+  bool operator==(const FrameKey&) const = default;
   template <typename H>
-  friend H AbslHashValue(H h, const RayKey& k) {
-    return H::combine(std::move(h), k.sensor, k.frame, k.index);
+  friend H AbslHashValue(H h, const FrameKey& k) {
+    return H::combine(std::move(h), k.sensor, k.frame);
   }
 };
 
-// One chunk's wedges of one batch, each ray once (eq 4.8's S(L) is a set of rays).
-struct ChunkBatch {
-  IndexedWedges wedges;
-  absl::flat_hash_map<RayKey, uint32_t> ray_index;
-};
+constexpr uint32_t kNoRay = std::numeric_limits<uint32_t>::max();
+// A batch's vectors are reserved for at most this many rays (72 MiB of RayModel).
+constexpr uint64_t kMaxReservedRays = uint64_t{1} << 20;
 
+// One batch's wedges, each ray stored once for the whole batch (a ray's wedges reach ~2 chunks
+// on average): chunks list their wedges by batch ray ids, and each chunk's IndexedWedges (its
+// rays once, eq 4.8's S(L) a set) is made when the chunk is carved. Rays are found by frame and
+// index, not hashed one by one: a wedge's rays lie in one or two frames.
 struct Batch {
   int64_t index = 0;
-  std::map<ChunkKey, ChunkBatch, ChunkKeyLess> chunks;
+  std::vector<RayModel> rays;  // by batch ray id, in order of first use
+  std::vector<uint8_t> votes;  // by batch ray id: whether the ray votes in this batch
+  std::vector<Eigen::Vector3d> far_ends;  // by batch ray id: ExtendedPointMean, for the hulls
+  absl::flat_hash_map<FrameKey, uint32_t> frame_slot;   // frame → its entry in frame_ids
+  std::vector<std::vector<uint32_t>> frame_ids;         // a frame's batch ray id by ray index
+  FrameKey last_frame[2] = {{kNoRay, 0}, {kNoRay, 0}};  // the frames looked up last, and
+  uint32_t last_slot[2] = {0, 0};                       // their entries
+  std::vector<WedgeRef> wedges;  // WedgeRef::ray: batch ray ids
+  // Each chunk's wedges (indices into `wedges`: a wedge reaches ~2 chunks).
+  std::map<ChunkKey, std::vector<uint32_t>, ChunkKeyLess> chunks;
+
+  // The batch ray id of frame `key`'s ray `index` (kNoRay the first time).
+  uint32_t& RayOf(const FrameKey& key, uint32_t index) {
+    int hit = key == last_frame[0] ? 0 : (key == last_frame[1] ? 1 : -1);
+    if (hit < 0) {
+      auto [it, inserted] = frame_slot.try_emplace(key, uint32_t(frame_ids.size()));
+      if (inserted) frame_ids.emplace_back();
+      last_frame[1] = last_frame[0];
+      last_slot[1] = last_slot[0];
+      last_frame[0] = key;
+      last_slot[0] = it->second;
+      hit = 0;
+    }
+    std::vector<uint32_t>& ids = frame_ids[last_slot[hit]];
+    if (index >= ids.size()) ids.resize(size_t(index) + 1, kNoRay);
+    return ids[index];
+  }
 };
 
 }  // namespace
@@ -80,6 +109,10 @@ struct SliceCarver::Impl {
   int64_t carved_up_to = -1;  // batches up to this one are carved
   std::map<ChunkKey, ChunkOctree, ChunkKeyLess> trees;
   size_t tree_leaves = 0;
+  // CarveBatch's working memory, kept from one chunk and batch to the next.
+  IndexedWedges chunk_wedges;
+  std::vector<uint32_t> local_of;    // batch ray id → the chunk's ray index (kNoRay: none yet)
+  std::vector<uint32_t> chunk_rays;  // the chunk's rays' batch ids
   uint64_t flushed_updates = 0;
 
   [[nodiscard]] bool Owned(uint32_t sensor, uint64_t row) const {
@@ -101,6 +134,14 @@ struct SliceCarver::Impl {
     auto at = std::find_if(open.begin(), open.end(), [b](const Batch& x) { return x.index > b; });
     at = open.insert(at, Batch{});
     at->index = b;
+    // About what the batch will hold (its own rays, few of its neighbours'): growing the
+    // vector by copies cost more than the wedges' binning. Pages are only taken when written;
+    // a batch_rays meaning "one batch" is not reserved whole.
+    const size_t expected = std::min<uint64_t>(options.batch_rays, kMaxReservedRays);
+    at->rays.reserve(expected);
+    at->votes.reserve(expected);
+    at->far_ends.reserve(expected);
+    at->wedges.reserve(expected);
     return &*at;
   }
 
@@ -135,8 +176,42 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
     }
   }
   ++stats.wedges;
+  // The wedge's rays in each batch it serves, with their far ends computed once per batch ray
+  // (a 3×3 inverse each, and a ray belongs to up to four wedges): this hull and the chunks'
+  // (CarveIndexed) are built from the same points.
+  std::array<std::array<uint32_t, 4>, 4> batch_ids;
+  std::array<Eigen::Vector3d, 4> sensor_means, far_ends;
+  for (int i = 0; i < nb; ++i) {
+    absl::StatusOr<Batch*> opened = OpenBatch(batches[i]);
+    if (!opened.ok()) return opened.status();
+    Batch& batch = **opened;
+    for (int r = 0; r < wedge.num_rays; ++r) {
+      uint32_t& id = batch.RayOf({ids[r].sensor, ids[r].frame}, ids[r].index);
+      if (id == kNoRay) {
+        id = uint32_t(batch.rays.size());
+        batch.rays.push_back(wedge.rays[r]);
+        const bool votes = Owned(ids[r].sensor, ids[r].frame) &&
+                           BatchOf(ids[r].sensor, ids[r].frame) == batches[i];
+        batch.votes.push_back(votes ? 1 : 0);
+        batch.far_ends.push_back(i == 0 ? ExtendedPointMean(wedge.rays[r], kWedgeHullSigmas)
+                                        : far_ends[r]);
+      }
+      batch_ids[i][r] = id;
+      if (i == 0) far_ends[r] = batch.far_ends[id];
+    }
+  }
   uint64_t facets = 0;  // the hull's facets: the carve rebuilds it from them, without a search
-  const WedgeHull hull = MakeWedgeHull(wedge, kWedgeHullSigmas, &facets);
+  WedgeHull hull;
+  if (wedge.num_rays == 1) {
+    hull = MakeWedgeHull(wedge, kWedgeHullSigmas, &facets);
+  } else {
+    for (int r = 0; r < wedge.num_rays; ++r) {
+      sensor_means[r] = wedge.rays[r].sensor_mean.cast<double>();
+    }
+    // As MakeWedgeHull, from the same points.
+    hull = HullOfWedgePoints({sensor_means.data(), size_t(wedge.num_rays)},
+                             {far_ends.data(), size_t(wedge.num_rays)}, &facets);
+  }
   std::vector<ChunkKey> chunks = ChunksOfWedge(hull);
   if (options.regions != nullptr) {
     // §5.6.1: only chunks of the pass, and only where the hull's box meets their region.
@@ -152,27 +227,19 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
     stats.bounds.extend(wedge.rays[r].sensor_mean.cast<double>());
     stats.bounds.extend(wedge.rays[r].point_mean.cast<double>());
   }
+  if (chunks.empty()) return absl::OkStatus();
   for (int i = 0; i < nb; ++i) {
     absl::StatusOr<Batch*> opened = OpenBatch(batches[i]);
     if (!opened.ok()) return opened.status();
     Batch& batch = **opened;
+    WedgeRef ref;
+    ref.num_rays = wedge.num_rays;
+    ref.facets = facets;
+    for (int r = 0; r < wedge.num_rays; ++r) ref.ray[r] = batch_ids[i][r];
+    const uint32_t w = uint32_t(batch.wedges.size());
+    batch.wedges.push_back(ref);
     for (const ChunkKey& c : chunks) {
-      ChunkBatch& cb = batch.chunks[c];
-      WedgeRef ref;
-      ref.num_rays = wedge.num_rays;
-      ref.facets = facets;
-      for (int r = 0; r < wedge.num_rays; ++r) {
-        const RayKey key{ids[r].sensor, ids[r].frame, ids[r].index};
-        auto [it, inserted] = cb.ray_index.try_emplace(key, uint32_t(cb.wedges.rays.size()));
-        if (inserted) {
-          cb.wedges.rays.push_back(wedge.rays[r]);
-          const bool votes = Owned(ids[r].sensor, ids[r].frame) &&
-                             BatchOf(ids[r].sensor, ids[r].frame) == batches[i];
-          cb.wedges.votes.push_back(votes ? 1 : 0);
-        }
-        ref.ray[r] = it->second;
-      }
-      cb.wedges.wedges.push_back(ref);
+      batch.chunks[c].push_back(w);
       ++stats.wedge_chunk_pairs;
     }
   }
@@ -182,7 +249,9 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
 absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
   ++stats.batches;
   carved_up_to = batch.index;
-  for (auto& [chunk, cb] : batch.chunks) {
+  // A chunk's rays are numbered in the order its wedges first name them, each once.
+  local_of.assign(batch.rays.size(), kNoRay);
+  for (auto& [chunk, wedges] : batch.chunks) {
     auto [it, inserted] = trees.try_emplace(chunk, options.grid, chunk);
     ChunkOctree& tree = it->second;
     if (inserted) {
@@ -190,11 +259,33 @@ absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
       tree.SetEvaluation(options.evaluation);
       if (options.regions != nullptr) tree.RestrictTo(options.regions->at(chunk));
     }
+    IndexedWedges& in = chunk_wedges;
+    in.rays.clear();
+    in.votes.clear();
+    in.wedges.clear();
+    in.far_ends.clear();
+    chunk_rays.clear();
+    for (uint32_t w : wedges) {
+      WedgeRef ref = batch.wedges[w];
+      for (int r = 0; r < ref.num_rays; ++r) {
+        uint32_t& local = local_of[ref.ray[r]];
+        if (local == kNoRay) {
+          local = uint32_t(in.rays.size());
+          in.rays.push_back(batch.rays[ref.ray[r]]);
+          in.votes.push_back(batch.votes[ref.ray[r]]);
+          in.far_ends.push_back(batch.far_ends[ref.ray[r]]);
+          chunk_rays.push_back(ref.ray[r]);
+        }
+        ref.ray[r] = local;
+      }
+      in.wedges.push_back(ref);
+    }
+    for (uint32_t id : chunk_rays) local_of[id] = kNoRay;
     const size_t before = tree.num_leaves();
-    if (absl::Status s = tree.CarveIndexed(cb.wedges); !s.ok()) return s;
+    if (absl::Status s = tree.CarveIndexed(in); !s.ok()) return s;
     tree_leaves += tree.num_leaves() - before;
-    // The rays' geometry is done with: give the memory back now, not at the batch's end.
-    cb = ChunkBatch{};
+    // The chunk's wedges are done with: give the memory back now, not at the batch's end.
+    wedges = std::vector<uint32_t>();
   }
   if (tree_leaves * kBytesPerLeaf > options.memory_budget_bytes) return Flush();
   return absl::OkStatus();

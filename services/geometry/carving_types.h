@@ -70,6 +70,10 @@ struct IndexedWedges {
   // wedges), and votes where it belongs: a time slice carries the wedges that join its first
   // and last frames to its neighbours' (coordinator/scan_slices.h).
   std::vector<uint8_t> votes;
+  // Optional, one per ray: the far end of its wedges' hulls (ExtendedPointMean with
+  // worker/chunk_octree.h's kWedgeHullSigmas), for a caller that has computed them already;
+  // empty, the carve computes them.
+  std::vector<Eigen::Vector3d> far_ends;
 };
 
 // How eq 4.7 is evaluated for each vote (the votes themselves, eq 4.8's S(L), are the same):

@@ -12,6 +12,8 @@
 // and prints rays/s of each, their ratios, and tile and partial-sums bytes per ray. Rays are the
 // scan's returns (what both carve). Then the cost per unit of work: carvemap's leaf votes (eq 4.8)
 // against OctoMap's key updates (computeUpdate's sets, counted outside its timing).
+// The work goes under $TMPDIR/carve_bench; with CARVE_BENCH_KEEP=1 it is kept (the fast carve's
+// partial sums and tiles in fast/), to compare two builds' carves byte for byte.
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -224,7 +226,8 @@ int Main(int argc, char** argv) {
               octomap_updates / double(octomap_rays), 1e9 * octomap_cpu_s / double(octomap_updates));
   std::printf("tile bytes/ray: %.1f, partial sums bytes/ray: %.1f\n", carves[1].tile_bytes / rays,
               carves[1].partial_bytes / rays);
-  fs::remove_all(root);
+  const char* keep = std::getenv("CARVE_BENCH_KEEP");
+  if (keep == nullptr || std::string(keep) != "1") fs::remove_all(root);
   return 0;
 }
 
