@@ -114,10 +114,10 @@ absl::Status CheckHorizontalLineSensors(const std::string& file,
   }
   for (const SensorInfo& s : sensors) {
     if (s.kind != SensorKind::kLine) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          file, ": sensor \"", s.name, "\" is a ", std::string(SensorKindName(s.kind)),
-          " sensor; --scan maps horizontal 2D line scanners only: use --cloud ", file,
-          " (wall samples from the points, §3.1.1) or `carvemap run` for 3D scans"));
+      return absl::InvalidArgumentError(
+          absl::StrCat(file, ": sensor \"", s.name, "\" is a ", std::string(SensorKindName(s.kind)),
+                       " sensor; --scan maps horizontal 2D line scanners only: use --cloud ", file,
+                       " (wall samples from the points, §3.1.1) or `carvemap run` for 3D scans"));
     }
     const double tilt_deg =
         std::acos(std::min(1.0, std::abs((s.R_s2c * Eigen::Vector3d::UnitZ()).z()))) * 180 / M_PI;
@@ -140,8 +140,7 @@ struct ScanGridCounts {
 // The occupancy grid of a scan's rays (two passes: its extent, then the rays) and the path's
 // x-y positions. The scan's frames in world x-y: the path at the frame's time composed with
 // the sensor's mounting (DESIGN §3).
-absl::StatusOr<ScanOccupancyGrid> ScanGrid(ScanReader& reader,
-                                           const ScanOccupancyOptions& options,
+absl::StatusOr<ScanOccupancyGrid> ScanGrid(ScanReader& reader, const ScanOccupancyOptions& options,
                                            std::vector<Eigen::Vector2d>& path,
                                            ScanGridCounts& counts) {
   path.clear();
@@ -180,9 +179,9 @@ absl::StatusOr<ScanOccupancyGrid> ScanGrid(ScanReader& reader,
     if (!*more) break;
     to_scan(frame, scan);
     if (absl::Status s = IntegrateLineScan(scan, options, *grid); !s.ok()) {
-      return absl::Status(s.code(), absl::StrCat(reader.file(), ": sensor ",
-                                                 sensors[frame.sensor].name, " frame ", frame.row,
-                                                 ": ", s.message()));
+      return absl::Status(
+          s.code(), absl::StrCat(reader.file(), ": sensor ", sensors[frame.sensor].name, " frame ",
+                                 frame.row, ": ", s.message()));
     }
     ++counts.frames;
     counts.rays += frame.points_sensor.size();

@@ -126,8 +126,7 @@ TEST(RoomScoringTest, KeepEnteredRooms) {
   EXPECT_EQ(c.count(3), 0u);
   EXPECT_EQ(c[-1], 600 - 200 - 8 * 19);
   // The same walk with row 15 (room 3) as well keeps all three.
-  EXPECT_EQ(Counts(KeepEnteredRooms(t, {at(5, 2), at(3, 20), at(15, 20)}, res, ox, oy)).size(),
-            4u);
+  EXPECT_EQ(Counts(KeepEnteredRooms(t, {at(5, 2), at(3, 20), at(15, 20)}, res, ox, oy)).size(), 4u);
   // Predicting the truth itself, against the entered rooms: 2 of 2, and room 3's prediction
   // lies outside the scoring domain.
   auto s = ScoreRooms(kept, t);

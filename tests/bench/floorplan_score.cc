@@ -207,8 +207,7 @@ int Main(int argc, char** argv) {
     open.path_rows = ScanReader::PathRows::kNone;  // PathPositions reads the poses in blocks
     absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(entered_scan, open);
     if (!reader.ok()) {
-      std::fprintf(stderr, "floorplan_score: %s\n",
-                   std::string(reader.status().message()).c_str());
+      std::fprintf(stderr, "floorplan_score: %s\n", std::string(reader.status().message()).c_str());
       return 1;
     }
     absl::StatusOr<std::vector<Eigen::Vector3d>> path = (*reader)->PathPositions();
