@@ -4,10 +4,15 @@
 // `carvemap floorplan --cloud SCAN.h5 -o OUT`: the point-cloud route (§3.1.1): every return of
 // the scan as a cloud, its levels from the points' height histograms (§2.5), wall samples per
 // level, the scan's path for the lines of sight, a floor plan per level.
+// `carvemap floorplan --scan SCAN.h5 -o OUT`: the 2D route from a 2D laser log: an occupancy
+// grid from the rays of its horizontal line scanners (scan_occupancy_grid.h), then the grid map
+// route on it (§3.1.2 wall samples, the scan's path for the lines of sight, §3.3's rooms);
+// the grid is also written as OUT/occupancy.png.
 // `--floorplan eigencrust` makes the interior by §3.2 instead (floorplan_pipeline.h).
 // Writes the same files as the merge (docs/DESIGN.md §7): OUT/level_<k>/floorplan.geojson,
 // floorplan.svg, extruded.ply, and OUT/job.json last.
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -24,10 +29,12 @@
 #include "services/floorplan/gridmap_wall_samples.h"
 #include "services/floorplan/pointcloud_wall_samples.h"
 #include "services/floorplan/scan_cloud_stream.h"
+#include "services/floorplan/scan_occupancy_grid.h"
 #include "services/levels/level_split.h"
 #include "storage/atomic_file.h"
 #include "storage/path_csv.h"
 #include "storage/png_io.h"
+#include "storage/scan_reader.h"
 
 namespace carvemap {
 namespace {
@@ -38,6 +45,8 @@ struct FloorplanFlags {
   std::string gridmap;
   std::string path_csv;
   std::string cloud;  // scan.h5: the point-cloud route instead of --gridmap/--path
+  std::string scan;   // scan.h5 of horizontal line scanners: the grid built from its rays
+  ScanOccupancyOptions occupancy;
   std::string output_dir;
   std::string method = "rooms";
   GridMapOptions grid;
@@ -91,6 +100,100 @@ void AddTimings(nlohmann::json& timings, const LevelFloorPlan& r) {
   }
 }
 
+// A line scanner's scan plane is its x-y plane (DESIGN §3, backpack_rig.h); it is horizontal
+// when the sensor's z axis is vertical (either way up). The mounting is checked, not the path's
+// roll and pitch: a 2D log's path has none.
+constexpr double kMaxTiltDeg = 2.0;
+
+// Every sensor must be a horizontal line scanner; the error names the first that is not and
+// the route that takes it.
+absl::Status CheckHorizontalLineSensors(const std::string& file,
+                                        const std::vector<SensorInfo>& sensors) {
+  if (sensors.empty()) {
+    return absl::FailedPreconditionError(absl::StrCat(file, ": no sensors, so no rays to map"));
+  }
+  for (const SensorInfo& s : sensors) {
+    if (s.kind != SensorKind::kLine) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(file, ": sensor \"", s.name, "\" is a ", std::string(SensorKindName(s.kind)),
+                       " sensor; --scan maps horizontal 2D line scanners only: use --cloud ", file,
+                       " (wall samples from the points, §3.1.1) or `carvemap run` for 3D scans"));
+    }
+    const double tilt_deg =
+        std::acos(std::min(1.0, std::abs((s.R_s2c * Eigen::Vector3d::UnitZ()).z()))) * 180 / M_PI;
+    if (tilt_deg > kMaxTiltDeg) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          file, ": sensor \"", s.name, "\" is a line scanner whose scan plane is tilted ",
+          absl::SixDigits(tilt_deg), "° from horizontal (at most ", kMaxTiltDeg,
+          "° here); --scan maps horizontal 2D line scanners only: use --cloud ", file,
+          " (wall samples from the points, §3.1.1) or `carvemap run`"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+// What the --scan route read, for job.json.
+struct ScanGridCounts {
+  uint64_t frames = 0, rays = 0, returns = 0;
+};
+
+// The occupancy grid of a scan's rays (two passes: its extent, then the rays) and the path's
+// x-y positions. The scan's frames in world x-y: the path at the frame's time composed with
+// the sensor's mounting (DESIGN §3).
+absl::StatusOr<ScanOccupancyGrid> ScanGrid(ScanReader& reader, const ScanOccupancyOptions& options,
+                                           std::vector<Eigen::Vector2d>& path,
+                                           ScanGridCounts& counts) {
+  path.clear();
+  for (const PathRecord& p : reader.path()) path.emplace_back(p.x, p.y);
+  const std::vector<SensorInfo>& sensors = reader.sensors();
+  auto to_scan = [&](const ScanFrame& frame, LineScan2D& scan) {
+    const SensorInfo& info = sensors[frame.sensor];
+    const Pose pose = reader.PoseAt(frame.t) * Pose{Eigen::Quaterniond(info.R_s2c), info.T_s2c};
+    scan.origin = pose.translation.head<2>();
+    scan.hits.clear();
+    for (const Eigen::Vector3f& p : frame.points_sensor) {
+      if (!p.allFinite()) continue;  // no return: carves nothing (scan_occupancy_grid.h)
+      scan.hits.push_back((pose * p.cast<double>()).head<2>());
+    }
+  };
+  Eigen::AlignedBox2d box;
+  for (const Eigen::Vector2d& p : path) box.extend(p);
+  ScanFrame frame;
+  LineScan2D scan;
+  {
+    std::unique_ptr<ScanReader::FrameStream> stream = reader.StreamFrames();
+    for (;;) {
+      absl::StatusOr<bool> more = stream->Next(frame);
+      if (!more.ok()) return more.status();
+      if (!*more) break;
+      to_scan(frame, scan);
+      ExtendScanBounds(scan, options, box);
+    }
+  }
+  absl::StatusOr<ScanOccupancyGrid> grid = EmptyScanOccupancyGrid(box, options);
+  if (!grid.ok()) return grid.status();
+  std::unique_ptr<ScanReader::FrameStream> stream = reader.StreamFrames();
+  for (;;) {
+    absl::StatusOr<bool> more = stream->Next(frame);
+    if (!more.ok()) return more.status();
+    if (!*more) break;
+    to_scan(frame, scan);
+    if (absl::Status s = IntegrateLineScan(scan, options, *grid); !s.ok()) {
+      return absl::Status(
+          s.code(), absl::StrCat(reader.file(), ": sensor ", sensors[frame.sensor].name, " frame ",
+                                 frame.row, ": ", s.message()));
+    }
+    ++counts.frames;
+    counts.rays += frame.points_sensor.size();
+    counts.returns += scan.hits.size();
+  }
+  if (counts.returns == 0) {
+    return absl::FailedPreconditionError(
+        absl::StrCat(reader.file(), ": no ray has a return, so nothing is occupied"));
+  }
+  return grid;
+}
+
 absl::Status RunFloorplan(FloorplanFlags& f) {
   const auto t_start = std::chrono::steady_clock::now();
   f.plan.rooms.remove_unentered_rooms = !f.keep_unentered;
@@ -98,14 +201,20 @@ absl::Status RunFloorplan(FloorplanFlags& f) {
   if (!method.ok()) return method.status();
   f.plan.method = *method;
   const bool from_cloud = !f.cloud.empty();
-  if (from_cloud && (!f.gridmap.empty() || !f.path_csv.empty())) {
-    return absl::InvalidArgumentError("--cloud replaces --gridmap and --path: give one route");
+  const bool from_scan = !f.scan.empty();
+  if (from_cloud && from_scan) {
+    return absl::InvalidArgumentError("--cloud and --scan are two routes: give one");
   }
-  if (!from_cloud && f.gridmap.empty() && f.path_csv.empty()) {
+  if ((from_cloud || from_scan) && (!f.gridmap.empty() || !f.path_csv.empty())) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        from_cloud ? "--cloud" : "--scan", " replaces --gridmap and --path: give one route"));
+  }
+  if (!from_cloud && !from_scan && f.gridmap.empty() && f.path_csv.empty()) {
     return absl::InvalidArgumentError(
-        "no input: give --gridmap MAP.png and --path PATH.csv (the 2D route) or --cloud SCAN.h5");
+        "no input: give --gridmap MAP.png and --path PATH.csv (the 2D route), --scan SCAN.h5 "
+        "(a 2D laser scan) or --cloud SCAN.h5");
   }
-  if (!from_cloud && (f.gridmap.empty() || f.path_csv.empty())) {
+  if (!from_cloud && !from_scan && (f.gridmap.empty() || f.path_csv.empty())) {
     return absl::InvalidArgumentError("--gridmap needs --path, and --path needs --gridmap");
   }
 
@@ -117,25 +226,69 @@ absl::Status RunFloorplan(FloorplanFlags& f) {
   nlohmann::json input, params;
   size_t total_samples = 0, total_rooms = 0, total_removed = 0;
   if (!from_cloud) {
-    absl::StatusOr<Image<uint8_t>> map = ReadPngGray8(f.gridmap);
-    if (!map.ok()) return map.status();
-    absl::StatusOr<std::vector<Eigen::Vector2d>> path = ReadPathCsv(f.path_csv);
-    if (!path.ok()) return path.status();
+    absl::StatusOr<Image<uint8_t>> map;
+    absl::StatusOr<std::vector<Eigen::Vector2d>> path;
+    ScanGridCounts scan_counts;
+    auto t0 = std::chrono::steady_clock::now();
+    if (from_scan) {
+      // The grid from the scan's rays, then the grid-map route on it (§3.1.2).
+      absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(f.scan);
+      if (!reader.ok()) return reader.status();
+      if (absl::Status s = CheckHorizontalLineSensors(f.scan, (*reader)->sensors()); !s.ok()) {
+        return s;
+      }
+      f.occupancy.resolution_m = f.grid.resolution_m;
+      path = std::vector<Eigen::Vector2d>();
+      absl::StatusOr<ScanOccupancyGrid> grid = ScanGrid(**reader, f.occupancy, *path, scan_counts);
+      if (!grid.ok()) return grid.status();
+      map = OccupancyGridImage(*grid, f.occupancy);
+      f.grid.origin_x_m = grid->origin_x_m;
+      f.grid.origin_y_m = grid->origin_y_m;
+      std::error_code ec;
+      fs::create_directories(out, ec);
+      if (ec) return absl::InternalError(absl::StrCat(out.string(), ": ", ec.message()));
+      if (absl::Status s = WritePngGray8((out / "occupancy.png").string(), *map); !s.ok()) {
+        return s;
+      }
+      outputs.push_back("occupancy.png");
+      timings["floorplan.occupancy_grid"] =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    } else {
+      map = ReadPngGray8(f.gridmap);
+      if (!map.ok()) return map.status();
+      path = ReadPathCsv(f.path_csv);
+      if (!path.ok()) return path.status();
+    }
+    const std::string& source = from_scan ? f.scan : f.gridmap;
     absl::StatusOr<WallSampleSet> samples = GridMapWallSamples(*map, *path, f.grid);
     if (!samples.ok()) {
       return absl::Status(samples.status().code(),
-                          absl::StrCat(f.gridmap, ": ", samples.status().message()));
+                          absl::StrCat(source, ": ", samples.status().message()));
     }
     absl::StatusOr<LevelFloorPlan> result = BuildLevelFloorPlan(*samples, 0, f.plan);
     if (!result.ok()) return result.status();
     if (absl::Status s = WriteLevel(out, 0, *result, outputs); !s.ok()) return s;
-    input = {{"gridmap", f.gridmap}, {"path", f.path_csv}};
     params = {{"resolution_m", f.grid.resolution_m},
               {"origin", {f.grid.origin_x_m, f.grid.origin_y_m}},
               {"occupied_below", f.grid.occupied_below},
               {"floor_z", f.grid.floor_z},
               {"ceiling_z", f.grid.ceiling_z}};
     counts = PlanCounts(*result);
+    if (from_scan) {
+      input = {{"scan", f.scan}};
+      params["occupancy"] = {{"hit_log_odds", f.occupancy.hit_log_odds},
+                             {"miss_log_odds", f.occupancy.miss_log_odds},
+                             {"min_log_odds", f.occupancy.min_log_odds},
+                             {"max_log_odds", f.occupancy.max_log_odds},
+                             {"occupied_log_odds", f.occupancy.occupied_log_odds},
+                             {"max_range_m", f.occupancy.max_range_m},
+                             {"grid_size", {map->width, map->height}}};
+      counts["frames"] = scan_counts.frames;
+      counts["rays"] = scan_counts.rays;
+      counts["returns"] = scan_counts.returns;
+    } else {
+      input = {{"gridmap", f.gridmap}, {"path", f.path_csv}};
+    }
     counts["path_positions"] = path->size();
     AddTimings(timings, *result);
     rooms = RoomsToJson(*result);
@@ -232,7 +385,8 @@ void RegisterFloorplan(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "floorplan",
       "Floor plan with rooms and a 2.5D model from a 2D occupancy grid map and the walk "
-      "(§3.1.2, §3.3), or from a scan.h5's points (--cloud, §3.1.1): writes "
+      "(§3.1.2, §3.3), from a 2D laser scan's rays (--scan), or from a scan.h5's points "
+      "(--cloud, §3.1.1): writes "
       "OUT/level_<k>/floorplan.geojson, floorplan.svg, extruded.ply and OUT/job.json");
   auto f = std::make_shared<FloorplanFlags>();
   CLI::Option* gridmap =
@@ -250,6 +404,17 @@ void RegisterFloorplan(CLI::App& app, int& exit_code) {
       ->check(CLI::ExistingFile)
       ->excludes(gridmap)
       ->excludes(path);
+  cmd->add_option("--scan", f->scan,
+                  "A scan.h5 of horizontal 2D line scanners (e.g. `import carmen`): an occupancy "
+                  "grid from its rays at --resolution (written as OUT/occupancy.png), then the "
+                  "grid-map route on it with the scan's path; instead of --gridmap/--path")
+      ->check(CLI::ExistingFile)
+      ->excludes(gridmap)
+      ->excludes(path);
+  cmd->add_option("--ray-max-range", f->occupancy.max_range_m,
+                  "With --scan: returns further than this carve free space up to it and mark "
+                  "no wall, m (0 = no limit)")
+      ->capture_default_str();
   cmd->add_option("--floorplan", f->method,
                   "Floor-plan method: rooms (§3.3 room partitioning) or eigencrust (§3.2, with "
                   "§3.3's rooms on its interior)")

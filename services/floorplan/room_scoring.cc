@@ -66,6 +66,25 @@ LabelImage LabelsFromSegmentation(const Image<uint8_t>& gt, int free_at_least, i
   return out;
 }
 
+LabelImage KeepEnteredRooms(const LabelImage& truth, const std::vector<Eigen::Vector2d>& points,
+                            double resolution_m, double origin_x_m, double origin_y_m) {
+  LabelImage out = truth;
+  std::vector<int32_t> entered;
+  for (const Eigen::Vector2d& p : points) {
+    const double col = std::floor((p.x() - origin_x_m) / resolution_m);
+    const double iy = std::floor((p.y() - origin_y_m) / resolution_m);
+    if (!(col >= 0 && iy >= 0 && col < truth.width && iy < truth.height)) continue;
+    const size_t k = static_cast<size_t>(truth.height - 1 - static_cast<int>(iy)) * truth.width +
+                     static_cast<size_t>(col);
+    if (k < truth.labels.size() && truth.labels[k] >= 0) entered.push_back(truth.labels[k]);
+  }
+  std::sort(entered.begin(), entered.end());
+  for (int32_t& v : out.labels) {
+    if (v >= 0 && !std::binary_search(entered.begin(), entered.end(), v)) v = -1;
+  }
+  return out;
+}
+
 LabelImage RasterizeFloorPlan(const FloorPlan& plan, int width, int height, double resolution_m,
                               double origin_x_m, double origin_y_m) {
   LabelImage out;

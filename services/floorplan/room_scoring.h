@@ -9,6 +9,8 @@
 #include <cstdint>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "services/floorplan/floor_plan.h"
@@ -29,6 +31,16 @@ struct LabelImage {
 // pixels.size() ≠ width·height gives all −1.
 [[nodiscard]] LabelImage LabelsFromSegmentation(const Image<uint8_t>& gt, int free_at_least = 250,
                                                 int min_pixels = 400);
+
+// The truth rooms that hold at least one of `points` (world x-y; pixel (row, col) covers
+// [origin_x + col·res, …) × [origin_y + (H − 1 − row)·res, …), docs/DESIGN.md §4) keep their
+// label; every other pixel becomes −1. For a survey that did not visit the whole building: §3.3.2
+// removes the rooms the walk never entered from the plan, so those are scored against the
+// entered rooms alone. Points off the image are ignored. Labels are not renumbered.
+[[nodiscard]] LabelImage KeepEnteredRooms(const LabelImage& truth,
+                                          const std::vector<Eigen::Vector2d>& points,
+                                          double resolution_m, double origin_x_m,
+                                          double origin_y_m);
 
 // Pixel (row, col) has centre x = origin_x + (col + 0.5)·res, y = origin_y + (H − 1 − row +
 // 0.5)·res (docs/DESIGN.md §4); its label is plan.triangle_room of the triangle holding the centre,

@@ -106,6 +106,36 @@ TEST(RoomScoringTest, MergedRoomsAndTheScoringDomain) {
   EXPECT_EQ(s->bormann_recall, 0);
 }
 
+// A walk through rooms 0 and 7 (lower-left origin at (1, 2), 0.5 m pixels) keeps those two and
+// drops room 3; a point on a wall pixel or off the image enters nothing. Scoring then counts
+// the entered rooms only.
+TEST(RoomScoringTest, KeepEnteredRooms) {
+  LabelImage t = Labels(30, 20);
+  Paint(t, 0, 0, 10, 20, 0);
+  Paint(t, 11, 0, 30, 8, 7);
+  Paint(t, 11, 9, 30, 20, 3);
+  const double res = 0.5, ox = 1, oy = 2;
+  auto at = [&](int row, int col) {  // a point inside pixel (row, col)
+    return Eigen::Vector2d(ox + (col + 0.3) * res, oy + (t.height - 1 - row + 0.6) * res);
+  };
+  const LabelImage kept =
+      KeepEnteredRooms(t, {at(5, 2), at(3, 20), at(8, 20), at(5, 10), {-50, 0}}, res, ox, oy);
+  std::map<int32_t, int> c = Counts(kept);
+  EXPECT_EQ(c[0], 200);
+  EXPECT_EQ(c[7], 8 * 19);
+  EXPECT_EQ(c.count(3), 0u);
+  EXPECT_EQ(c[-1], 600 - 200 - 8 * 19);
+  // The same walk with row 15 (room 3) as well keeps all three.
+  EXPECT_EQ(Counts(KeepEnteredRooms(t, {at(5, 2), at(3, 20), at(15, 20)}, res, ox, oy)).size(), 4u);
+  // Predicting the truth itself, against the entered rooms: 2 of 2, and room 3's prediction
+  // lies outside the scoring domain.
+  auto s = ScoreRooms(kept, t);
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_EQ(s->truth_rooms, 2);
+  EXPECT_EQ(s->predicted_rooms, 2);
+  EXPECT_EQ(s->f1, 1.0);
+}
+
 TEST(RoomScoringTest, SizeMismatchIsAnError) {
   auto s = ScoreRooms(Labels(10, 10), Labels(10, 9));
   EXPECT_EQ(s.status().code(), absl::StatusCode::kInvalidArgument);

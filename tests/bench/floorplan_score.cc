@@ -6,18 +6,27 @@
 //
 //   floorplan_score --geojson OUT/level_0/floorplan.geojson --gt MAP_gt_segmentation.png
 //                   [--resolution 0.05] [--origin-x 0] [--origin-y 0]
+//                   [--affine a11,a12,b1,a21,a22,b2] [--entered-scan SCAN.h5]
 //
 // Frames: `carvemap simulate --floormap` extrudes pixel (row, col) of an H-row map to
 // x = col·res, y = (H−1−row)·res (docs/DESIGN.md §4, lower-left origin), the frame
 // RasterizeFloorPlan uses with origin (0, 0); the plan's polygons are in the world frame of the
 // scan, so a map simulated with defaults needs no offset.
 //
+// --affine maps the plan (and the scan's path) into the map's frame first: [x_map, y_map] =
+// A·[x, y] + b, the 2×3 matrix [A | b] row by row (a real log's frame is not the map's;
+// /work/shared/data/carmen/registration.json). --entered-scan scores against the truth rooms
+// its /path enters only (room_scoring.h KeepEnteredRooms): a survey that skipped rooms is judged
+// on the rooms it could know.
+//
 // Prints one line of key=value pairs (truth_rooms, predicted_rooms, matched, precision, recall,
-// f1, bormann_recall, bormann_precision, plan_rooms = room features in the file).
+// f1, bormann_recall, bormann_precision, plan_rooms = room features in the file,
+// all_truth_rooms = the map's rooms before --entered-scan).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -30,6 +39,7 @@
 #include "nlohmann/json.hpp"
 #include "services/floorplan/room_scoring.h"
 #include "storage/png_io.h"
+#include "storage/scan_reader.h"
 
 namespace carvemap {
 namespace {
@@ -154,11 +164,20 @@ int Main(int argc, char** argv) {
   CLI::App app{"Score a floorplan.geojson against a ground-truth room segmentation PNG"};
   std::string geojson, gt_path;
   double res = 0.05, ox = 0, oy = 0;
+  std::vector<double> affine;
+  std::string entered_scan;
   app.add_option("--geojson", geojson, "level_<k>/floorplan.geojson")->required();
   app.add_option("--gt", gt_path, "*_gt_segmentation.png")->required();
   app.add_option("--resolution", res, "Metres per pixel of the map")->check(CLI::PositiveNumber);
   app.add_option("--origin-x", ox, "x of the map's lower-left corner, m");
   app.add_option("--origin-y", oy, "y of the map's lower-left corner, m");
+  app.add_option("--affine", affine,
+                 "Plan frame ➜ map frame, [A | b] row by row: a11,a12,b1,a21,a22,b2")
+      ->delimiter(',')
+      ->expected(6);
+  app.add_option("--entered-scan", entered_scan,
+                 "Score only the truth rooms this scan.h5's /path enters")
+      ->check(CLI::ExistingFile);
   CLI11_PARSE(app, argc, argv);
 
   absl::StatusOr<Image<uint8_t>> gt = ReadPngGray8(gt_path);
@@ -171,7 +190,35 @@ int Main(int argc, char** argv) {
     std::fprintf(stderr, "floorplan_score: %s\n", std::string(rooms.status().message()).c_str());
     return 1;
   }
-  const LabelImage truth = LabelsFromSegmentation(*gt);
+  Eigen::Matrix2d A = Eigen::Matrix2d::Identity();
+  Eigen::Vector2d b = Eigen::Vector2d::Zero();
+  if (!affine.empty()) {
+    A << affine[0], affine[1], affine[3], affine[4];
+    b << affine[2], affine[5];
+  }
+  for (PlanRoom& room : *rooms)
+    for (Polygon& polygon : room.polygons)
+      for (Ring& ring : polygon)
+        for (Eigen::Vector2d& p : ring) p = A * p + b;
+  LabelImage truth = LabelsFromSegmentation(*gt);
+  const int all_truth_rooms = ScoreRooms(truth, truth)->truth_rooms;
+  if (!entered_scan.empty()) {
+    ScanReader::OpenOptions open;
+    open.path_rows = ScanReader::PathRows::kNone;  // PathPositions reads the poses in blocks
+    absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(entered_scan, open);
+    if (!reader.ok()) {
+      std::fprintf(stderr, "floorplan_score: %s\n", std::string(reader.status().message()).c_str());
+      return 1;
+    }
+    absl::StatusOr<std::vector<Eigen::Vector3d>> path = (*reader)->PathPositions();
+    if (!path.ok()) {
+      std::fprintf(stderr, "floorplan_score: %s\n", std::string(path.status().message()).c_str());
+      return 1;
+    }
+    std::vector<Eigen::Vector2d> walk;
+    for (const Eigen::Vector3d& p : *path) walk.push_back(A * p.head<2>() + b);
+    truth = KeepEnteredRooms(truth, walk, res, ox, oy);
+  }
   LabelImage predicted{gt->width, gt->height,
                        std::vector<int32_t>(size_t(gt->width) * gt->height, -1)};
   for (const PlanRoom& room : *rooms)
@@ -184,9 +231,9 @@ int Main(int argc, char** argv) {
   }
   std::printf(
       "truth_rooms=%d predicted_rooms=%d matched=%d precision=%.3f recall=%.3f f1=%.3f "
-      "bormann_recall=%.3f bormann_precision=%.3f plan_rooms=%zu\n",
+      "bormann_recall=%.3f bormann_precision=%.3f plan_rooms=%zu all_truth_rooms=%d\n",
       s->truth_rooms, s->predicted_rooms, s->matched, s->precision, s->recall, s->f1,
-      s->bormann_recall, s->bormann_precision, rooms->size());
+      s->bormann_recall, s->bormann_precision, rooms->size(), all_truth_rooms);
   return 0;
 }
 
