@@ -100,9 +100,9 @@ void AddTimings(nlohmann::json& timings, const LevelFloorPlan& r) {
   }
 }
 
-// A line scanner's scan plane is its x-y plane (DESIGN §3, backpack_rig.h); it is horizontal
-// when the sensor's z axis is vertical (either way up). The mounting is checked, not the path's
-// roll and pitch: a 2D log's path has none.
+// A line scanner's scan plane is its x-y plane (docs/DESIGN.md §3, backpack_rig.h); it is
+// horizontal when the sensor's z axis is vertical (either way up). The mounting is checked, not
+// the path's roll and pitch: a 2D log's path has none.
 constexpr double kMaxTiltDeg = 2.0;
 
 // Every sensor must be a horizontal line scanner; the error names the first that is not and
@@ -139,7 +139,7 @@ struct ScanGridCounts {
 
 // The occupancy grid of a scan's rays (two passes: its extent, then the rays) and the path's
 // x-y positions. The scan's frames in world x-y: the path at the frame's time composed with
-// the sensor's mounting (DESIGN §3).
+// the sensor's mounting (docs/DESIGN.md §3).
 absl::StatusOr<ScanOccupancyGrid> ScanGrid(ScanReader& reader, const ScanOccupancyOptions& options,
                                            std::vector<Eigen::Vector2d>& path,
                                            ScanGridCounts& counts) {
@@ -156,36 +156,44 @@ absl::StatusOr<ScanOccupancyGrid> ScanGrid(ScanReader& reader, const ScanOccupan
       scan.hits.push_back((pose * p.cast<double>()).head<2>());
     }
   };
-  Eigen::AlignedBox2d box;
-  for (const Eigen::Vector2d& p : path) box.extend(p);
-  ScanFrame frame;
-  LineScan2D scan;
-  {
+  // Every frame as a 2D scan, through `each` (a first pass for the extent, a second for the
+  // rays: the grid's size must be known before the first ray is drawn).
+  auto each_scan = [&](auto&& each) -> absl::Status {
+    ScanFrame frame;
+    LineScan2D scan;
     std::unique_ptr<ScanReader::FrameStream> stream = reader.StreamFrames();
     for (;;) {
       absl::StatusOr<bool> more = stream->Next(frame);
       if (!more.ok()) return more.status();
-      if (!*more) break;
+      if (!*more) return absl::OkStatus();
       to_scan(frame, scan);
-      ExtendScanBounds(scan, options, box);
+      if (absl::Status s = each(frame, scan); !s.ok()) return s;
     }
+  };
+  Eigen::AlignedBox2d box;
+  for (const Eigen::Vector2d& p : path) box.extend(p);
+  if (absl::Status s = each_scan([&](const ScanFrame&, const LineScan2D& scan) {
+        ExtendScanBounds(scan, options, box);
+        return absl::OkStatus();
+      });
+      !s.ok()) {
+    return s;
   }
   absl::StatusOr<ScanOccupancyGrid> grid = EmptyScanOccupancyGrid(box, options);
   if (!grid.ok()) return grid.status();
-  std::unique_ptr<ScanReader::FrameStream> stream = reader.StreamFrames();
-  for (;;) {
-    absl::StatusOr<bool> more = stream->Next(frame);
-    if (!more.ok()) return more.status();
-    if (!*more) break;
-    to_scan(frame, scan);
-    if (absl::Status s = IntegrateLineScan(scan, options, *grid); !s.ok()) {
-      return absl::Status(
-          s.code(), absl::StrCat(reader.file(), ": sensor ", sensors[frame.sensor].name, " frame ",
-                                 frame.row, ": ", s.message()));
-    }
-    ++counts.frames;
-    counts.rays += frame.points_sensor.size();
-    counts.returns += scan.hits.size();
+  if (absl::Status s = each_scan([&](const ScanFrame& frame, const LineScan2D& scan) {
+        if (absl::Status s = IntegrateLineScan(scan, options, *grid); !s.ok()) {
+          return absl::Status(s.code(),
+                              absl::StrCat(reader.file(), ": sensor ", sensors[frame.sensor].name,
+                                           " frame ", frame.row, ": ", s.message()));
+        }
+        ++counts.frames;
+        counts.rays += frame.points_sensor.size();
+        counts.returns += scan.hits.size();
+        return absl::OkStatus();
+      });
+      !s.ok()) {
+    return s;
   }
   if (counts.returns == 0) {
     return absl::FailedPreconditionError(

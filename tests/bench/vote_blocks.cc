@@ -142,9 +142,8 @@ int Main(int argc, char** argv) {
   };
   std::vector<StoredWedge> wedges;
   absl::flat_hash_map<RayKey, std::vector<uint32_t>> wedges_of_ray;
-  WedgeBuilderOptions wo;
-  absl::StatusOr<WedgeBuilder> builder =
-      WedgeBuilder::Create(reader.sensors(), wo, [&](const Wedge& w, std::span<const RayId> ids) {
+  absl::StatusOr<WedgeBuilderStats> built =
+      BuildWedges(reader, WedgeBuilderOptions{}, [&](const Wedge& w, std::span<const RayId> ids) {
         StoredWedge s;
         s.wedge = w;
         for (int r = 0; r < w.num_rays; ++r) {
@@ -155,20 +154,7 @@ int Main(int argc, char** argv) {
         wedges.push_back(std::move(s));
         return absl::OkStatus();
       });
-  if (!builder.ok()) return Fail(builder.status());
-  std::span<const PathCovariance> cov;
-  if (reader.path_covariance().has_value()) cov = *reader.path_covariance();
-  std::unique_ptr<ScanReader::FrameStream> stream = reader.StreamFrames();
-  ScanFrame frame;
-  while (true) {
-    absl::StatusOr<bool> more = stream->Next(frame);
-    if (!more.ok()) return Fail(more.status());
-    if (!*more) break;
-    absl::StatusOr<FrameContext> ctx = FrameContextAt(reader.timed_path(), cov, frame.t, wo.noise);
-    if (!ctx.ok()) return Fail(ctx.status());
-    if (absl::Status s = builder->AddFrame(frame, *ctx); !s.ok()) return Fail(s);
-  }
-  if (absl::Status s = builder->Finish(); !s.ok()) return Fail(s);
+  if (!built.ok()) return Fail(built.status());
 
   // The sample: rays in a fixed order (the map's order is not), drawn with a fixed seed.
   std::vector<RayKey> rays;
