@@ -10,7 +10,8 @@ namespace carvemap {
 namespace {
 
 // Visits the cells a segment crosses, from the cell of `a` to the cell of `b` inclusive, in
-// order (Amanatides & Woo's traversal, in cell units). Exactly |Δix| + |Δiy| steps, so the
+// order (Amanatides & Woo's traversal, in cell units). Written here: OctoMap's ray keys are
+// 3D octree keys, and none of our libraries walks a 2D grid. Exactly |Δix| + |Δiy| steps, so the
 // last cell visited is b's even when floating point rounds a crossing the other way.
 template <typename Visit>
 void TraverseCells(const Eigen::Vector2d& a, const Eigen::Vector2d& b, Visit&& visit) {

@@ -112,7 +112,7 @@ absl::Status TopdownMap::Write(const std::string& png_path, const std::string& j
                                                           OrNull(z_range_.z_hi_m)})},
       {"quantity",
        "expected open height (m): sum over observed octree leaves in the column of "
-       "p(interior) x leaf height (seed §5.4)"},
+       "p(interior) x leaf height (Turner 2015, §5.4)"},
       {"image", geometry_.width > 0 && geometry_.height > 0
                     ? std::filesystem::path(png_path).filename().string()
                     : std::string()},
