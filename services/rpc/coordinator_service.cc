@@ -322,9 +322,8 @@ class CoordinatorServer::Impl {
   // merge; CANCELLED: the job is already terminal (cancelled or failed by the lease table) or
   // the coordinator stops.
   absl::Status CarveStage(const std::string& job_id);
-  // Polls until every task of a job loaded in the lease table is committed. Cancelled as
-  // CarveStage.
-  // Until every task of the job is done (or, with except_held, every task not held).
+  // Waits until every task of a job loaded in the lease table is committed (or, with
+  // except_held, every task not held). Cancelled as CarveStage.
   absl::Status WaitForChunks(const std::string& job_id, bool except_held = false);
   // The chunks the pass's slices carved into, from their partial sums' indexes.
   absl::StatusOr<std::vector<ChunkCoord>> ChunksOfPass(const std::string& job_id);
@@ -349,6 +348,9 @@ class CoordinatorServer::Impl {
   // Wakes the parked LeaseChunk calls: tasks may have been queued (added, requeued, released,
   // given back by a worker, expired or lost with their worker), or the coordinator stops.
   void WorkMayBeQueued() { work_cv_.SignalAll(); }
+  // Wakes the job threads waiting for their tasks (WaitForChunks): tasks were done, failed or
+  // dropped, or the coordinator stops.
+  void TasksChanged() { done_cv_.SignalAll(); }
 
   const CoordinatorSpec spec_;
   CoordinatorFolders folders_;
@@ -367,6 +369,7 @@ class CoordinatorServer::Impl {
   absl::Mutex mu_;
   // Parked LeaseChunk calls wait on it; signalled wherever tasks may have been queued.
   absl::CondVar work_cv_;
+  absl::CondVar done_cv_;  // TasksChanged
   std::unique_ptr<LeaseTable> table_ ABSL_GUARDED_BY(mu_);
   // Its instance (random) tells this coordinator's worker ids from a previous one's.
   WorkerRegistry workers_ ABSL_GUARDED_BY(mu_){RandomHex(4)};
@@ -597,6 +600,7 @@ void CoordinatorServer::Impl::Shutdown() {
   if (shutdown_done_.HasBeenNotified()) return;
   stopping_ = true;
   WorkMayBeQueued();
+  TasksChanged();
   // Streams and long polls see stopping_ within a poll interval; the deadline bounds the wait.
   servers_.Shutdown(std::chrono::milliseconds(500));
   if (sweeper_.joinable()) sweeper_.join();
@@ -634,6 +638,7 @@ void CoordinatorServer::Impl::Sweep() {
       spdlog::warn("coordinator: {} lease(s) expired and were requeued", *expired);
       metrics_.LeasesExpired(*expired);
       WorkMayBeQueued();
+      TasksChanged();  // a task out of attempts fails its job
     }
     const int64_t now = NowMs();
     const int64_t timeout_ms = static_cast<int64_t>(spec_.worker_timeout_s * 1000);
@@ -644,6 +649,7 @@ void CoordinatorServer::Impl::Sweep() {
                    id, silent_ms / 1000.0, lost.ok() ? *lost : -1);
       metrics_.WorkerLost(lost.ok() ? *lost : 0);
       WorkMayBeQueued();
+      TasksChanged();
     }
     // Gauges: the chunks of every job in the lease table, workers, running jobs.
     int64_t queued = 0, leased = 0, done = 0, active = 0;
@@ -907,14 +913,13 @@ absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
 
 absl::Status CoordinatorServer::Impl::WaitForChunks(const std::string& job_id,
                                                     bool except_held) {
+  absl::MutexLock lock(&mu_);
   while (!stopping_) {
-    {
-      absl::MutexLock lock(&mu_);
-      absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
-      if (!p.ok() || p->failed) return absl::CancelledError("job ended while carving");
-      if (table_->AllDone(job_id, except_held)) return absl::OkStatus();
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
+    if (!p.ok() || p->failed) return absl::CancelledError("job ended while carving");
+    if (table_->AllDone(job_id, except_held)) return absl::OkStatus();
+    // Woken when tasks change (TasksChanged); at least once a second in any case.
+    done_cv_.WaitWithTimeout(&mu_, absl::Seconds(1));
   }
   return absl::CancelledError("coordinator stopping");
 }
@@ -1353,6 +1358,7 @@ absl::Status CoordinatorServer::Impl::CancelJob(const Caller& caller,
     if (s.ok()) spdlog::info("coordinator: job {} cancelled", job->id);
     absl::MutexLock lock(&mu_);
     table_->DropJob(job->id);
+    TasksChanged();
   }
   absl::StatusOr<JobRecord> now = store_->GetJob(req.job_id());
   if (!now.ok()) return now.status();
@@ -1622,6 +1628,7 @@ absl::Status CoordinatorServer::Impl::Heartbeat(const pb::HeartbeatRequest& req,
                            absl::StrCat("abandoned by worker ", req.worker_id()),
                            /*retryable=*/true);
         WorkMayBeQueued();
+        TasksChanged();
       }
     }
     held = table_->LeasesOf(req.worker_id());
@@ -1777,6 +1784,7 @@ absl::Status CoordinatorServer::Impl::CompleteChunk(const pb::CompleteChunkReque
                  req.worker_id(), s.ToString());
     return s;
   }
+  TasksChanged();
   JobRuntime& rt = runtime_[job_id];
   rt.rays_carved += req.stats().rays();
   metrics_.ChunkCompleted(req.stats().rays());
@@ -1814,6 +1822,7 @@ absl::Status CoordinatorServer::Impl::FailChunk(const pb::FailChunkRequest& req,
                    req.retryable());
   if (!requeued.ok()) return requeued.status();
   if (*requeued) WorkMayBeQueued();
+  TasksChanged();  // or the job failed
   metrics_.ChunkFailed();
   spdlog::warn("coordinator: worker {} failed {}: {} ({})", req.worker_id(), req.lease_id(),
                req.reason(), *requeued ? "requeued" : "job failed");
