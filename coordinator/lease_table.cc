@@ -67,7 +67,27 @@ void LeaseTable::SetChunk(JobEntry& job, ChunkRecord chunk) {
 
 // ---- jobs
 
-absl::Status LeaseTable::LoadJob(absl::string_view job_id) {
+namespace {
+
+// `chunk` queued for another lease: a new generation (no earlier lease can complete it), a
+// fresh attempt budget, no tile.
+ChunkUpdate QueuedAgain(const ChunkRecord& chunk, std::string reason) {
+  ChunkUpdate u{chunk, chunk.generation};
+  u.chunk.state = ChunkState::kQueued;
+  u.chunk.generation += 1;
+  u.chunk.attempts = 0;
+  u.chunk.deadline_unix_ms = 0;
+  u.chunk.worker_id.clear();
+  u.chunk.last_error = std::move(reason);
+  u.chunk.tile_path.clear();
+  u.chunk.tile_size_bytes = 0;
+  u.chunk.tile_sha256_hex.clear();
+  return u;
+}
+
+}  // namespace
+
+absl::Status LeaseTable::LoadJob(absl::string_view job_id, const DoneCheck& check) {
   if (jobs_.find(job_id) != jobs_.end()) {
     return absl::AlreadyExistsError(absl::StrCat("lease table: job ", job_id, " already loaded"));
   }
@@ -97,6 +117,12 @@ absl::Status LeaseTable::LoadJob(absl::string_view job_id) {
       u.chunk.last_error = "requeued: coordinator restarted while leased";
       requeue.push_back(u);
       c = u.chunk;
+    } else if (c.state == ChunkState::kDone && check) {
+      if (std::string why = check(c); !why.empty()) {
+        // A new generation: nothing of the lease that made the bad file counts any more.
+        requeue.push_back(QueuedAgain(c, absl::StrCat("queued again at restart: ", why)));
+        c = requeue.back().chunk;
+      }
     }
     if (c.state == ChunkState::kQueued) job.queued.insert(c.key);
     SetChunk(job, std::move(c));
@@ -203,17 +229,7 @@ absl::Status LeaseTable::Requeue(absl::string_view job_id, const std::vector<Chu
     if (c == job.chunks.end()) {
       return absl::NotFoundError(absl::StrCat("requeue: job ", job.id, " has no ", TaskText(key)));
     }
-    ChunkUpdate u{c->second, c->second.generation};
-    u.chunk.state = ChunkState::kQueued;
-    u.chunk.generation += 1;
-    u.chunk.attempts = 0;
-    u.chunk.deadline_unix_ms = 0;
-    u.chunk.worker_id.clear();
-    u.chunk.last_error = std::string(reason);
-    u.chunk.tile_path.clear();
-    u.chunk.tile_size_bytes = 0;
-    u.chunk.tile_sha256_hex.clear();
-    updates.push_back(std::move(u));
+    updates.push_back(QueuedAgain(c->second, std::string(reason)));
   }
   if (absl::Status s = store_.UpdateChunks(updates, clock_.NowUnixMs()); !s.ok()) return s;
   for (const ChunkUpdate& u : updates) {

@@ -12,6 +12,7 @@
 #define CARVEMAP_COORDINATOR_LEASE_TABLE_H_
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <utility>
 #include <optional>
@@ -84,11 +85,16 @@ class LeaseTable {
   LeaseTable(const LeaseTable&) = delete;
   LeaseTable& operator=(const LeaseTable&) = delete;
 
+  // Why a DONE chunk's output cannot be trusted after a restart ("" = it can): its file
+  // missing or not the size the store recorded, as a crash can leave it.
+  using DoneCheck = std::function<std::string(const ChunkRecord&)>;
+
   // Loads a job's chunks from the store and starts leasing them. Chunks the store has as
   // LEASED (a previous coordinator's leases) are requeued and persisted as QUEUED, keeping
-  // their generation so a late completion of such a lease can still be matched.
+  // their generation so a late completion of such a lease can still be matched. DONE chunks
+  // that `check` (if set) finds wanting are queued again as by Requeue, its reason stored.
   // FAILED_PRECONDITION if the job is terminal; ALREADY_EXISTS if already loaded.
-  absl::Status LoadJob(absl::string_view job_id);
+  absl::Status LoadJob(absl::string_view job_id, const DoneCheck& check = nullptr);
   // Forgets a job (cancelled, failed, or finished carving). Its outstanding leases become
   // unknown: completing them is NOT_FOUND. No store write: the job's state is the caller's.
   void DropJob(absl::string_view job_id);

@@ -19,6 +19,7 @@ PACKAGES=(
   python3-grpcio python3-grpc-tools  # tests/tools: an independent client of the job API
   iproute2  # tests/tools/fault_test.py, deploy/local/netns.sh: ip netns, veth links
   time  # /usr/bin/time: CPU seconds in tests/bench/*.sh (e2e_floorplan_3d_freiburg101 runs one)
+  strace  # tests/tools/durability_trace.py: the order of fsyncs and renames in a real job
   clang-14 libclang-rt-14-dev  # tests/fuzz: libFuzzer and the ASan/UBSan runtimes
 )
 

@@ -38,5 +38,24 @@ TEST(AtomicFileTest, UnwritableDirectoryNamesThePath) {
   EXPECT_NE(std::string(s.message()).find("/nonexistent-dir/x"), std::string::npos);
 }
 
+TEST(AtomicFileTest, RenameDurablyMovesTheFileAndNamesPathsOnFailure) {
+  const std::string dir = testing::TempDir() + "/durable";
+  std::filesystem::create_directories(dir);
+  const std::string from = dir + "/a.tmp", to = dir + "/a.txt";
+  std::ofstream(from) << "data";
+  ASSERT_TRUE(RenameDurably(from, to).ok());
+  EXPECT_FALSE(std::filesystem::exists(from));
+  EXPECT_EQ(std::filesystem::file_size(to), 4u);
+  // A source that is not there: nothing renamed, the error names it.
+  absl::Status s = RenameDurably(dir + "/missing.tmp", dir + "/b.txt");
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(std::string(s.message()).find(dir + "/missing.tmp"), std::string::npos) << s;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/b.txt"));
+  s = SyncPath(dir + "/nothing-here");
+  EXPECT_NE(std::string(s.message()).find(dir + "/nothing-here"), std::string::npos) << s;
+  EXPECT_TRUE(SyncPath(dir).ok());  // a folder syncs too
+  EXPECT_TRUE(SyncFolderOf(to).ok());
+}
+
 }  // namespace
 }  // namespace carvemap

@@ -13,6 +13,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "storage/atomic_file.h"
 #include "storage/crc32c.h"
 
 namespace carvemap {
@@ -232,6 +233,10 @@ absl::StatusOr<uint64_t> PartialSumsWriter::Finish() {
   const int fd = std::exchange(m.fd, -1);
   if (::close(fd) != 0) return IoError("close", m.tmp);
   if (::rename(m.tmp.c_str(), m.path.c_str()) != 0) return IoError("rename", m.tmp);
+  // The rename too must reach the disk before the slice is reported done (atomic_file.h).
+  if (absl::Status s = SyncFolderOf(m.path); !s.ok()) {
+    return s;
+  }
   m.finished = true;
   return m.written + index.size() + kTrailerBytes;
 }
@@ -371,7 +376,7 @@ absl::Status WriteRegionsFile(const std::string& path, const ChunkRegions& regio
   if (::fsync(fd.get()) != 0) return IoError("fsync", tmp);
   if (::close(fd.release()) != 0) return IoError("close", tmp);
   if (::rename(tmp.c_str(), path.c_str()) != 0) return IoError("rename", tmp);
-  return absl::OkStatus();
+  return SyncFolderOf(path);
 }
 
 absl::StatusOr<ChunkRegions> ReadRegionsFile(const std::string& path) {

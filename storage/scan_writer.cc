@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "storage/atomic_file.h"
 #include "storage/h5_util.h"
 
 namespace carvemap {
@@ -331,12 +332,8 @@ absl::Status ScanWriter::Close() {
     s = h5::CheckRc(H5Fclose(w.file.Release()), "cannot close the file");
   }
   if (!s.ok()) return w.Err(s);  // the destructor removes the partial file
-  std::error_code error;
-  std::filesystem::rename(w.partial, w.path, error);
-  if (error) {
-    return absl::InternalError(
-        absl::StrCat(w.partial, ": cannot rename to ", w.path, ": ", error.message()));
-  }
+  // Durable: a job may be submitted on this scan as soon as it returns (atomic_file.h).
+  if (absl::Status renamed = RenameDurably(w.partial, w.path); !renamed.ok()) return renamed;
   w.closed = true;
   return absl::OkStatus();
 }

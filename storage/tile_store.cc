@@ -10,6 +10,7 @@
 #include <system_error>
 
 #include "absl/strings/str_cat.h"
+#include "storage/atomic_file.h"
 #include "storage/h5_util.h"
 #include "storage/hdf5_lock.h"
 
@@ -456,12 +457,10 @@ absl::StatusOr<std::string> WriteTile(const std::string& dir, const TileData& ti
     // Write failures (disk full, permissions) are I/O, not corrupt data.
     return absl::Status(absl::StatusCode::kInternal, absl::StrCat(partial, ": ", s.message()));
   }
-  std::filesystem::rename(partial, path, error);
-  if (error) {
-    std::error_code ignored;
-    std::filesystem::remove(partial, ignored);
-    return absl::InternalError(
-        absl::StrCat(partial, ": cannot rename to ", path, ": ", error.message()));
+  // Durable before the caller reports the chunk done (atomic_file.h).
+  if (absl::Status renamed = RenameDurably(partial, path); !renamed.ok()) {
+    std::filesystem::remove(partial, error);
+    return renamed;
   }
   return path;
 }

@@ -25,6 +25,7 @@
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
 #include "services/geometry/octree_keys.h"
+#include "storage/atomic_file.h"
 #include "worker/scan_carver.h"
 
 namespace carvemap {
@@ -114,6 +115,8 @@ absl::Status RunCarve(const CarveFlags& flags) {
     return absl::UnavailableError(absl::StrCat("cannot rename ", partial_dir.string(), " to ",
                                                tiles_dir.string(), ": ", ec.message()));
   }
+  // Each tile was synced when written; the swap itself must reach the disk too (atomic_file.h).
+  if (absl::Status s = SyncFolderOf(tiles_dir.string()); !s.ok()) return s;
   const double total_s = SecondsSince(t0);
 
   const ScanCarveTotals& t = *carved;

@@ -878,12 +878,38 @@ absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
     rt.pass = 0;
     rt.pass_dir = rt.partials_dir;
     rt.regions_path.clear();
-    if (absl::Status s = table_->LoadJob(job_id); !s.ok() && !absl::IsAlreadyExists(s)) return s;
-    WorkMayBeQueued();
     // A restarted coordinator may find the chunks to combine stored already.
     if (absl::StatusOr<std::vector<ChunkRecord>> chunks = store_->ListChunks(job_id); chunks.ok()) {
       for (const ChunkRecord& c : *chunks) combines |= !IsSliceTask(c.key);
     }
+    // What a restart finds done is trusted only if its file is there whole (docs/JOB_STORE.md,
+    // "Durability"): a missing or short tile is combined again. A slice's partial sums are
+    // checked only while no chunk is combined from them yet (a slice carved again then would
+    // race the combines queued beside it); later a bad one fails its combine by its CRCs.
+    const std::string tiles_dir = rt.tiles_dir, partials_dir = rt.partials_dir;
+    const auto check = [&](const ChunkRecord& c) -> std::string {
+      const bool slice = IsSliceTask(c.key);
+      if (slice && combines) return "";
+      const fs::path path = fs::path(slice ? partials_dir : tiles_dir) / c.tile_path;
+      std::error_code ec;
+      const auto size = fs::file_size(path, ec);
+      std::string why;
+      if (ec) {
+        why = absl::StrCat(path.string(), ": ", ec.message());
+      } else if (int64_t(size) != c.tile_size_bytes) {
+        why = absl::StrCat(path.string(), ": ", size, " bytes, ", c.tile_size_bytes,
+                           " when it was done");
+      }
+      if (!why.empty()) {
+        spdlog::warn("coordinator: job {}: {}; its {} is carved again", job_id, why,
+                     slice ? "slice" : "chunk");
+      }
+      return why;
+    };
+    if (absl::Status s = table_->LoadJob(job_id, check); !s.ok() && !absl::IsAlreadyExists(s)) {
+      return s;
+    }
+    WorkMayBeQueued();
   }
   // The slices (and any chunks stored already).
   if (absl::Status s = WaitForChunks(job_id); !s.ok()) return s;

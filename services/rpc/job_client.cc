@@ -13,6 +13,7 @@
 #include "services/grpc_status.h"
 #include "services/rpc/file_hash.h"
 #include "services/rpc/grpc_security.h"
+#include "storage/atomic_file.h"
 
 namespace carvemap {
 namespace pb = ::carvemap::v1;
@@ -273,8 +274,10 @@ absl::Status JobClient::Fetch(const std::string& job_id, const std::string& name
     std::filesystem::remove(partial, ec);
     return s;
   }
-  std::filesystem::rename(partial, dest_path, ec);
-  if (ec) return absl::InternalError(absl::StrCat("rename to ", dest_path, ": ", ec.message()));
+  if (absl::Status renamed = RenameDurably(partial, dest_path); !renamed.ok()) {
+    std::filesystem::remove(partial, ec);
+    return renamed;
+  }
   return absl::OkStatus();
 }
 

@@ -355,6 +355,16 @@ class Cluster:
             self.merger_logs
         return {os.path.basename(p): read_text(p) for p in paths if os.path.exists(p)}
 
+    def store_job_state(self, job_id):
+        """The job's state number in the job store (docs/JOB_STORE.md), read-only."""
+        db = sqlite3.connect(f"file:{os.path.join(self.work, 'jobs.db')}?mode=ro", uri=True,
+                             timeout=10)
+        try:
+            row = db.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        finally:
+            db.close()
+        return row[0] if row else None
+
     def store_chunks(self, job_id):
         """{(x, y, z): row} from the job store, read-only (docs/JOB_STORE.md); row is a dict of
         the chunks table's columns, state 1 QUEUED, 2 LEASED, 3 DONE."""

@@ -13,7 +13,9 @@ timings) byte for byte.
                        merge's second carving pass (§5.6.1), then started again on the same
                        job store and port: the job resumes and completes; chunks DONE at the kill
                        are not carved again (their tiles keep their inode), LEASED ones are
-                       carved (again or by their old lease)
+                       carved (again or by their old lease); and once more during the combines
+                       with a DONE chunk's tile cut to half its size, as a power loss can
+                       leave it: that tile is combined again, not served
   worker-kill          N trials (seeded): at a random point of the job's carving work (a
                        fraction of the chunk commits of both passes, so load does not move it)
                        a worker holding a lease is SIGKILLed and a replacement started; every
@@ -44,6 +46,7 @@ import json
 import os
 import random
 import shutil
+import signal
 import subprocess
 import sys
 import threading
@@ -247,6 +250,61 @@ def cmd_coordinator_restart(args):
             f"leased, {len(chunks) - done - leased} queued of {len(chunks)}), restarted: "
             f"SUCCEEDED, {summarize(ref['files'])} identical, {len(seen['keep'])} committed "
             f"tiles kept ({time.monotonic() - start:.1f} s)")
+
+
+    coordinator_restart_truncated_tile(args, ref)
+
+
+SLICE_X = -2147483648  # a slice task's key: (SLICE_X, slice, pass) (docs/JOB_STORE.md)
+
+
+def coordinator_restart_truncated_tile(args, ref):
+    """The coordinator killed while chunks are combined, and one DONE chunk's tile cut short
+    before it starts again: the restart must combine that chunk again (docs/JOB_STORE.md,
+    "Durability"), not hand the short tile to the merge."""
+    start = time.monotonic()
+    trial = Trial(args, "coordinator_restart_truncated_tile")
+    seen = {}
+
+    def inject(trial, api, job_id, t0):
+        c = trial.cluster
+        deadline = time.monotonic() + 300
+        while True:
+            if time.monotonic() > deadline:
+                trial.fail("no chunk was combined within 300 s")
+            chunks = c.store_chunks(job_id)
+            done = [k for k, r in chunks.items() if k[0] != SLICE_X and r["state"] == 3]
+            if done:
+                break
+            time.sleep(0.005)
+        # Frozen first, so the job cannot move on while the store is read; then the crash.
+        c.coordinator.send_signal(signal.SIGSTOP)
+        job_state = c.store_job_state(job_id)
+        c.kill_coordinator()
+        if job_state != 3:  # CARVING
+            trial.fail(f"the combines ended before the kill (job state {job_state}): the "
+                       "trial needs a job still carving; make the scan longer")
+        chunks = c.store_chunks(job_id)
+        key = sorted(k for k, r in chunks.items() if k[0] != SLICE_X and r["state"] == 3)[0]
+        path = os.path.join(trial.out, "tiles", chunks[key]["tile_path"])
+        size = os.path.getsize(path)
+        with open(path, "r+b") as f:
+            f.truncate(size // 2)
+        seen.update(path=path, size=size, key=key)
+        c.start_coordinator(port=c.port)
+        api.reconnect()
+
+    job = trial.run(inject)
+    expect_succeeded(trial, job)
+    check_same_as_reference(trial, ref)
+    if os.path.getsize(seen["path"]) != seen["size"]:
+        trial.fail(f"{seen['path']} is {os.path.getsize(seen['path'])} bytes after the job, "
+                   f"{seen['size']} before it was cut")
+    if "is carved again" not in trial.coordinator_log():
+        trial.fail("the restarted coordinator did not say it combines the cut tile again")
+    log(f"coordinator killed while combining, tile of chunk {seen['key']} cut to "
+        f"{seen['size'] // 2} of {seen['size']} bytes, restarted: combined again, SUCCEEDED, "
+        f"{summarize(ref['files'])} identical ({time.monotonic() - start:.1f} s)")
 
 
 # ---- worker kills ----------------------------------------------------------------------------
