@@ -16,6 +16,7 @@
 #ifndef CARVEMAP_STORAGE_CONFINED_PATH_H_
 #define CARVEMAP_STORAGE_CONFINED_PATH_H_
 
+#include <functional>
 #include <string>
 
 #include "absl/status/status.h"
@@ -41,8 +42,11 @@ absl::StatusOr<std::string> ResolveConfinedPath(const std::string& root,
 // A regular file under a root, opened and held open. `path()` is "/proc/self/fd/<n>": it
 // names exactly the opened file for as long as this object lives, so code that opens files
 // by name (HDF5) reads the file that was checked, even if a symlink on the way is swapped
-// afterwards. After the open the kernel's own name of the file is checked to lie under the
-// root again (a directory swapped between resolution and open is caught there).
+// afterwards. A link swapped in between the resolution and the open is caught twice: the
+// open itself is openat2(2) beneath the root with RESOLVE_BENEATH | RESOLVE_NO_MAGICLINKS
+// where the kernel has it (Linux 5.6), so the kernel refuses any step out of the root while it
+// opens; and after the open the kernel's own name of the file is checked to lie under the
+// root again (the only check on older kernels).
 // Move-only; closes the file on destruction. Linux only (/proc).
 class ConfinedFile {
  public:
@@ -72,6 +76,16 @@ class ConfinedFile {
   std::string proc_path_;
   int64_t size_bytes_ = 0;
 };
+
+// For tests of the race between resolution and open: `between` runs after ResolveConfinedPath
+// and before the open; with `no_openat2` the open is a plain open(2), as on a kernel without
+// openat2; `beneath_refusals` counts the opens openat2 refused for leaving the root.
+struct ConfinedOpenTestHooks {
+  std::function<void()> between;
+  bool no_openat2 = false;
+  int beneath_refusals = 0;
+};
+ConfinedOpenTestHooks& ConfinedOpenHooksForTest();
 
 }  // namespace carvemap
 

@@ -1,6 +1,9 @@
 #include "storage/confined_path.h"
 
+#include <fcntl.h>
+#include <linux/openat2.h>
 #include <sys/stat.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 
 #include <filesystem>
@@ -148,6 +151,48 @@ TEST_F(ConfinedPathTest, ConfinedFileReadsTheCheckedFileEvenAfterASwap) {
   // And now the name itself is refused.
   EXPECT_EQ(ConfinedFile::Open(root_.string(), "scans/a.h5", "input_path").status().code(),
             absl::StatusCode::kPermissionDenied);
+}
+
+bool KernelHasOpenat2() {
+  open_how how{};
+  how.flags = O_RDONLY | O_DIRECTORY | O_CLOEXEC;
+  const int fd = int(::syscall(SYS_openat2, AT_FDCWD, ".", &how, sizeof(how)));
+  if (fd >= 0) ::close(fd);
+  return fd >= 0;
+}
+
+// A folder on the resolved path swapped for a link leading outside after the path was
+// resolved and before it is opened: refused by the kernel during the open (openat2 beneath
+// the root), and, on a kernel without openat2, by the check of the opened file's name after.
+TEST_F(ConfinedPathTest, ALinkSwappedBetweenResolutionAndOpenIsRefused) {
+  fs::create_directories(base_ / "outside" / "scans_copy");
+  Write(base_ / "outside" / "scans_copy" / "a.h5", "outside copy");
+  ConfinedOpenTestHooks& hooks = ConfinedOpenHooksForTest();
+  const auto swap = [&] {
+    fs::rename(root_ / "scans", root_ / "scans_moved");
+    fs::create_symlink(base_ / "outside" / "scans_copy", root_ / "scans");
+  };
+  const auto restore = [&] {
+    fs::remove(root_ / "scans");
+    fs::rename(root_ / "scans_moved", root_ / "scans");
+  };
+  for (const bool openat2 : {true, false}) {
+    SCOPED_TRACE(openat2 ? "openat2" : "open and the name check");
+    ASSERT_TRUE(ConfinedFile::Open(root_.string(), "scans/a.h5", "input_path").ok());
+    hooks = {};
+    hooks.no_openat2 = !openat2;
+    hooks.between = swap;
+    absl::StatusOr<ConfinedFile> f =
+        ConfinedFile::Open(root_.string(), "scans/a.h5", "input_path");
+    const int refusals = hooks.beneath_refusals;
+    hooks = {};
+    restore();
+    ASSERT_FALSE(f.ok()) << "opened " << f->path();
+    EXPECT_EQ(f.status().code(), absl::StatusCode::kPermissionDenied) << f.status();
+    EXPECT_THAT(f.status().message(), Not(HasSubstr("scans_copy")));  // no target named
+    // Which check refused it: the kernel's, where it has openat2 (Linux ≥ 5.6).
+    EXPECT_EQ(refusals, openat2 && KernelHasOpenat2() ? 1 : 0);
+  }
 }
 
 TEST_F(ConfinedPathTest, AFileRemovedWhileReadIsNotFoundWhateverTheReaderSaid) {
