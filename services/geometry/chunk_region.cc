@@ -32,6 +32,33 @@ void ChunkRegion::Build(std::vector<bool> cells) {
   any_.assign(depth_ + 1, {});
   any_[depth_] = std::move(cells);
   const int n = 1 << depth_;
+  lo_ = Eigen::Vector3i::Constant(n);
+  hi_ = Eigen::Vector3i::Constant(-1);
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        if (!any_[depth_][CellIndex({x, y, z}, depth_)]) continue;
+        lo_ = lo_.cwiseMin(Eigen::Vector3i(x, y, z));
+        hi_ = hi_.cwiseMax(Eigen::Vector3i(x, y, z));
+      }
+  sums_.clear();
+  if (count_ > 0) {
+    const Eigen::Vector3i size = hi_ - lo_ + Eigen::Vector3i::Ones();
+    const size_t sx = size_t(size.x()) + 1, sy = size_t(size.y()) + 1;
+    sums_.assign(sx * sy * (size_t(size.z()) + 1), 0);
+    for (int k = 1; k <= size.z(); ++k)
+      for (int j = 1; j <= size.y(); ++j)
+        for (int i = 1; i <= size.x(); ++i) {
+          const auto at = [&](int a, int b, int c) -> uint32_t& {
+            return sums_[size_t(a) + sx * (size_t(b) + sy * size_t(c))];
+          };
+          const uint32_t cell =
+              any_[depth_][CellIndex(lo_ + Eigen::Vector3i(i - 1, j - 1, k - 1), depth_)];
+          at(i, j, k) = cell + at(i - 1, j, k) + at(i, j - 1, k) + at(i, j, k - 1) -
+                        at(i - 1, j - 1, k) - at(i - 1, j, k - 1) - at(i, j - 1, k - 1) +
+                        at(i - 1, j - 1, k - 1);
+        }
+  }
   for (int axis = 0; axis < 3; ++axis) {
     std::vector<uint32_t>& start = row_start_[axis];
     std::vector<CellRun>& runs = row_runs_[axis];
@@ -92,37 +119,24 @@ bool ChunkRegion::IntersectsBox(const Eigen::Vector3d& lo, const Eigen::Vector3d
   // The cells at depth() the box meets, as index ranges; cells are closed boxes, so a box
   // whose face lies on a cell border meets the cells on both sides.
   const double cell = kChunkSizeM / double(1 << depth_);
-  const int n = 1 << depth_;
+  // The cells the box meets, clipped to the region's bounding box, as ranges [c0, c1] of
+  // indices relative to lo_.
   Eigen::Vector3i c0, c1;
   for (int a = 0; a < 3; ++a) {
     const double l = std::ceil(lo[a] / cell) - 1, h = std::floor(hi[a] / cell);
-    if (h < 0 || l > n - 1) return false;
-    c0[a] = int(std::max(l, 0.0));
-    c1[a] = int(std::min(h, double(n - 1)));
+    if (h < lo_[a] || l > hi_[a]) return false;
+    c0[a] = int(std::max(l, double(lo_[a]))) - lo_[a];
+    c1[a] = int(std::min(h, double(hi_[a]))) - lo_[a];
   }
-  // Depth-first over the nodes covering the ranges, only into nodes holding a cell.
-  struct Frame {
-    Eigen::Vector3i node;
-    int depth;
+  const size_t sx = size_t(hi_.x() - lo_.x()) + 2, sy = size_t(hi_.y() - lo_.y()) + 2;
+  const auto at = [&](int a, int b, int c) {
+    return int64_t(sums_[size_t(a) + sx * (size_t(b) + sy * size_t(c))]);
   };
-  Frame stack[8 * (kMaxDepth + 1)];
-  int top = 0;
-  stack[top++] = {Eigen::Vector3i::Zero(), 0};
-  while (top > 0) {
-    const Frame f = stack[--top];
-    if (!any_[f.depth][CellIndex(f.node, f.depth)]) continue;
-    if (f.depth == depth_) return true;
-    const int sh = depth_ - f.depth - 1;
-    for (int i = 0; i < 8; ++i) {
-      const Eigen::Vector3i child = f.node * 2 + Eigen::Vector3i(i & 1, (i >> 1) & 1, i >> 2);
-      bool meets = true;
-      for (int a = 0; a < 3 && meets; ++a) {
-        meets = (child[a] << sh) <= c1[a] && ((child[a] + 1) << sh) - 1 >= c0[a];
-      }
-      if (meets) stack[top++] = {child, f.depth + 1};
-    }
-  }
-  return false;
+  const int x0 = c0.x(), y0 = c0.y(), z0 = c0.z();
+  const int x1 = c1.x() + 1, y1 = c1.y() + 1, z1 = c1.z() + 1;
+  const int64_t in = at(x1, y1, z1) - at(x0, y1, z1) - at(x1, y0, z1) - at(x1, y1, z0) +
+                     at(x0, y0, z1) + at(x0, y1, z0) + at(x1, y0, z0) - at(x0, y0, z0);
+  return in > 0;
 }
 
 std::string ChunkRegion::Encode() const {

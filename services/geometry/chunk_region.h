@@ -39,8 +39,8 @@ class ChunkRegion {
   // True when some cell of the region lies in `node` (a node of this chunk at any depth).
   [[nodiscard]] bool Intersects(const ChunkNode& node) const;
   // True when some cell of the region meets the closed box [lo, hi] (m, relative to the
-  // chunk's lowest corner; cells are 2 m / 2^depth() wide). Descends from the chunk, so a box
-  // over empty octants costs a few lookups.
+  // chunk's lowest corner; cells are 2 m / 2^depth() wide). O(1): the box's cells are clipped
+  // to the region's bounding box and counted with a summed-volume table over it.
   [[nodiscard]] bool IntersectsBox(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const;
   // The region's cells along `axis` (0 x, 1 y, 2 z) in the row of cells at depth() whose other
   // coordinates are u (axis + 1 mod 3) and v (axis + 2 mod 3), as maximal runs of cell indices,
@@ -63,6 +63,12 @@ class ChunkRegion {
   uint64_t count_ = 0;
   // any_[d]: the nodes of depth d holding a cell, indexed like Encode; any_[depth_] = cells.
   std::vector<std::vector<bool>> any_;
+  // The set cells' bounding box (inclusive cell indices; empty region: lo_ > hi_) and, over
+  // it, the summed-volume table: sums_ at (i, j, k) counts the set cells of the box's first
+  // i × j × k cells, (size + 1)³ entries. IntersectsBox is called for every wedge and chunk of
+  // a second pass, where a descent through any_ cost as much as the carve's own votes.
+  Eigen::Vector3i lo_ = Eigen::Vector3i::Ones(), hi_ = Eigen::Vector3i::Zero();
+  std::vector<uint32_t> sums_;
   // Per axis: the runs of each row (v · 2^depth + u), row r's at [row_start_[r], row_start_[r+1]).
   std::array<std::vector<uint32_t>, 3> row_start_;
   std::array<std::vector<CellRun>, 3> row_runs_;
