@@ -436,6 +436,48 @@ TEST_F(LeaseTableTest, RestartRebuildsTheTable) {
   EXPECT_TRUE(table_->AllDone("j-1"));
 }
 
+// A crash can leave a DONE chunk's file missing or short: the restarted table queues such a
+// chunk again (a new generation, its reason stored) and keeps the others done.
+TEST_F(LeaseTableTest, RestartQueuesAgainDoneChunksWhoseFileFailsTheCheck) {
+  AddJob("j-1", 3);
+  LeaseTable::Grant a = MustLease("w-1");
+  LeaseTable::Grant b = MustLease("w-1");
+  LeaseTable::Grant c = MustLease("w-1");
+  ASSERT_TRUE(table_->Complete(a.lease_id, a.generation, TileFor(a)).ok());
+  ASSERT_TRUE(table_->Complete(b.lease_id, b.generation, TileFor(b)).ok());
+
+  Restart();
+  std::vector<ChunkCoord> checked;
+  ASSERT_TRUE(table_
+                  ->LoadJob("j-1",
+                            [&](const ChunkRecord& r) -> std::string {
+                              checked.push_back(r.key);
+                              return r.key == b.chunk ? "tile truncated (5 of 9 bytes)" : "";
+                            })
+                  .ok());
+  std::sort(checked.begin(), checked.end());
+  std::vector<ChunkCoord> done = {a.chunk, b.chunk};
+  std::sort(done.begin(), done.end());
+  EXPECT_EQ(checked, done);  // only DONE chunks are checked
+  absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress("j-1");
+  ASSERT_TRUE(p.ok());
+  EXPECT_EQ(p->chunks_done, 1);
+  EXPECT_EQ(p->chunks_queued, 2);
+  const ChunkRecord stored = StoredChunk("j-1", b.chunk);
+  EXPECT_EQ(stored.state, ChunkState::kQueued);
+  EXPECT_EQ(stored.generation, b.generation + 1);
+  EXPECT_TRUE(stored.tile_path.empty());
+  EXPECT_NE(stored.last_error.find("tile truncated (5 of 9 bytes)"), std::string::npos);
+  EXPECT_EQ(StoredChunk("j-1", a.chunk).state, ChunkState::kDone);
+  // The lease that wrote the bad file can no longer complete it.
+  EXPECT_EQ(table_->Complete(b.lease_id, b.generation, TileFor(b)).code(),
+            absl::StatusCode::kFailedPrecondition);
+  while (!table_->AllDone("j-1")) {
+    const LeaseTable::Grant g = MustLease("w-2");
+    ASSERT_TRUE(table_->Complete(g.lease_id, g.generation, TileFor(g)).ok());
+  }
+}
+
 TEST_F(LeaseTableTest, JobsAreServedInLoadOrderAndDropJobVoidsLeases) {
   AddJob("j-old", 1);
   AddJob("j-new", 1);

@@ -46,6 +46,33 @@ TEST(ChunkRegionTest, BoxesMeetTheCellsTheyOverlap) {
   }
 }
 
+// Scattered cells over a part of the chunk, as an object's region is: small boxes that fall
+// between cells, inside the cells' bounding box, must say false; the answer is the
+// cell-by-cell one on every box.
+TEST(ChunkRegionTest, BoxesAmongScatteredCellsMatchCellByCell) {
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> coord(3, 12);
+  std::vector<Eigen::Vector3i> cells;
+  for (int i = 0; i < 60; ++i) cells.emplace_back(coord(rng), coord(rng), coord(rng));
+  const ChunkRegion r(4, cells);  // 12.5 cm cells
+  const double cell = 0.125;
+  std::uniform_real_distribution<double> start(-0.2, 2.2), size(0, 0.4);
+  int hits = 0;
+  for (int i = 0; i < 5000; ++i) {
+    const Eigen::Vector3d lo(start(rng), start(rng), start(rng));
+    const Eigen::Vector3d hi = lo + Eigen::Vector3d(size(rng), size(rng), size(rng));
+    bool want = false;
+    for (const Eigen::Vector3i& c : cells) {
+      const Eigen::Vector3d l = c.cast<double>() * cell, h = l + Eigen::Vector3d::Constant(cell);
+      want |= (lo.array() <= h.array()).all() && (hi.array() >= l.array()).all();
+    }
+    hits += want;
+    ASSERT_EQ(r.IntersectsBox(lo, hi), want) << lo.transpose() << " / " << hi.transpose();
+  }
+  EXPECT_GT(hits, 500);  // both answers were tested
+  EXPECT_LT(hits, 4500);
+}
+
 TEST(ChunkRegionTest, NodesOfEveryDepth) {
   // One cell (5, 2, 7) at depth 3 (25 cm cells).
   const ChunkRegion r(3, {{5, 2, 7}});
