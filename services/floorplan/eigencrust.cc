@@ -19,7 +19,7 @@
 #include "absl/strings/str_cat.h"
 #include "services/floorplan/delaunay_mesh.h"
 #include "services/floorplan/orient_2d.h"
-#include "services/floorplan/union_find.h"
+#include "services/geometry/union_find.h"
 
 namespace carvemap {
 namespace {
@@ -125,7 +125,6 @@ struct Mesh {
   }
 };
 
-using floorplan_internal::UnionFind;
 
 // Spectra operator y = (L − σD)⁻¹ x by Eigen's sparse LDLᵀ: L − σD is positive definite for
 // σ < 0 (L = D − W is a signed graph Laplacian, positive semi-definite), so Cholesky-type
@@ -252,8 +251,8 @@ absl::StatusOr<std::vector<int8_t>> LabelBySpectrum(int n, const std::vector<Edg
   std::vector<int8_t> label(n, -1);
   label[0] = 0;
   label[1] = 1;
-  UnionFind uf(n);
-  for (const Edge& e : edges) uf.Join(e.a, e.b);
+  UnionFind<int> uf(n);
+  for (const Edge& e : edges) uf.Union(e.a, e.b);
   // Components of the super-nodes (one or two).
   std::vector<int> roots = {uf.Find(0)};
   if (uf.Find(1) != roots[0]) roots.push_back(uf.Find(1));
@@ -680,10 +679,10 @@ absl::StatusOr<EigencrustLabeling> LabelEigencrust(const WallSampleSet& samples,
   auto label_of = [&](int g) { return g < 0 ? 0 : label[g]; };  // beyond the box: outside
   if (options.min_union_triangles > 0) {
     for (int pass_label : {1, 0}) {  // inside unions first, then outside ones
-      UnionFind uf(nf);
+      UnionFind<int> uf(nf);
       for (int f = 0; f < nf; ++f) {
         for (int g : out.neighbours[f]) {
-          if (g > f && label[g] == label[f]) uf.Join(f, g);
+          if (g > f && label[g] == label[f]) uf.Union(f, g);
         }
       }
       std::vector<int> size(nf, 0);

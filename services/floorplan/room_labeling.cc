@@ -15,6 +15,7 @@
 #include "absl/strings/str_cat.h"
 #include "services/floorplan/delaunay_mesh.h"
 #include "services/floorplan/orient_2d.h"
+#include "services/geometry/union_find.h"
 
 namespace carvemap {
 namespace {
@@ -556,18 +557,13 @@ absl::flat_hash_map<uint64_t, RoomBorder> RoomBorders(const Mesh& m,
     }
   }
   // Pieces: union-find over the shared edges of a pair that meet at a vertex.
-  std::vector<int> parent(shared.size());
-  std::iota(parent.begin(), parent.end(), 0);
-  auto root = [&](int e) {
-    while (parent[e] != e) e = parent[e] = parent[parent[e]];
-    return e;
-  };
+  UnionFind<int> joined(shared.size());
   {
     absl::flat_hash_map<std::pair<uint64_t, int>, int> at;
     for (size_t e = 0; e < shared.size(); ++e) {
       for (int w : {shared[e].u, shared[e].v}) {
         const auto [it, inserted] = at.try_emplace({shared[e].pair, w}, static_cast<int>(e));
-        if (!inserted) parent[root(static_cast<int>(e))] = root(it->second);
+        if (!inserted) joined.Union(static_cast<int>(e), it->second);
       }
     }
   }
@@ -576,7 +572,7 @@ absl::flat_hash_map<uint64_t, RoomBorder> RoomBorders(const Mesh& m,
   {
     std::vector<int> piece_of(shared.size(), -1);
     for (size_t e = 0; e < shared.size(); ++e) {
-      int& p = piece_of[root(static_cast<int>(e))];
+      int& p = piece_of[joined.Find(static_cast<int>(e))];
       if (p < 0) {
         p = static_cast<int>(pieces.size());
         pieces.emplace_back();

@@ -11,7 +11,7 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
-#include "services/floorplan/union_find.h"
+#include "services/geometry/union_find.h"
 
 namespace carvemap {
 namespace {
@@ -160,7 +160,6 @@ class Grid {
   std::vector<Vector2d> centres_;
 };
 
-using floorplan_internal::UnionFind;
 
 }  // namespace
 
@@ -349,9 +348,9 @@ absl::StatusOr<WallCurveFit> FitWallCurves(const std::vector<Vector2d>& vertices
 
   // ---- Step 2: components along B shorter than min_component_m are dropped.
   {
-    UnionFind uf(nv);
+    UnionFind<int> uf(nv);
     for (const auto& e : boundary) {
-      if (model_of[e[0]] >= 0 && model_of[e[0]] == model_of[e[1]]) uf.Join(e[0], e[1]);
+      if (model_of[e[0]] >= 0 && model_of[e[0]] == model_of[e[1]]) uf.Union(e[0], e[1]);
     }
     absl::flat_hash_map<int, Eigen::AlignedBox2d> extent;
     for (int v : ids) {

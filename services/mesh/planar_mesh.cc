@@ -8,7 +8,6 @@
 #include <exception>
 #include <functional>
 #include <limits>
-#include <numeric>
 #include <utility>
 
 #include <Eigen/SVD>
@@ -21,6 +20,7 @@
 #include "absl/container/flat_hash_map.h"
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "services/geometry/union_find.h"
 #include "services/mesh/mesh_checks.h"
 
 namespace carvemap {
@@ -94,14 +94,6 @@ struct FaceSquare {
   Eigen::Vector3i min_corner;     // lattice
   int size = 1;                   // lattice cells
 };
-
-int Find(std::vector<int>& parent, int x) {
-  while (parent[x] != x) {
-    parent[x] = parent[parent[x]];
-    x = parent[x];
-  }
-  return x;
-}
 
 absl::StatusOr<FaceSquare> SquareOf(const BoundaryFace& face, double res, size_t index) {
   FaceSquare sq;
@@ -272,23 +264,17 @@ absl::StatusOr<FaceSurface> BuildSurface(std::span<const BoundaryFace> faces, do
     i = j;
   }
   // Topological vertices: corners joined across twin edges.
-  std::vector<int> parent(num_corners);
-  std::iota(parent.begin(), parent.end(), 0);
-  auto unite = [&](int a, int b) {
-    a = Find(parent, a);
-    b = Find(parent, b);
-    if (a != b) parent[std::max(a, b)] = std::min(a, b);
-  };
+  UnionFind<int> corners(num_corners);
   for (int c = 0; c < num_corners; ++c) {
     const int t = s.twin[c];
     if (t < c) continue;
-    unite(c, s.Next(t));
-    unite(s.Next(c), t);
+    corners.Union(c, s.Next(t));
+    corners.Union(s.Next(c), t);
   }
   s.corner_tv.assign(num_corners, -1);
   std::vector<int> root_tv(num_corners, -1);
   for (int c = 0; c < num_corners; ++c) {
-    const int r = Find(parent, c);
+    const int r = corners.Find(c);
     if (root_tv[r] < 0) {
       root_tv[r] = s.num_tv++;
       s.tv_lattice.push_back(s.corner_vertex[c]);
@@ -608,8 +594,7 @@ std::vector<int> TinyPieces(int num_tris, const std::function<std::array<int, 3>
                             const std::function<bool(int)>& alive,
                             const std::function<Eigen::Vector3d(int)>& pos,
                             const std::function<bool(int)>& bad, double res) {
-  std::vector<int> parent(num_tris);
-  std::iota(parent.begin(), parent.end(), 0);
+  UnionFind<int> pieces(num_tris);
   absl::flat_hash_map<uint64_t, int> first_user;  // undirected edge ➜ a triangle on it
   for (int t = 0; t < num_tris; ++t) {
     if (!alive(t)) continue;
@@ -619,14 +604,13 @@ std::vector<int> TinyPieces(int num_tris, const std::function<std::array<int, 3>
       const uint64_t key = (uint64_t{std::min(a, b)} << 32) | std::max(a, b);
       auto [it, inserted] = first_user.try_emplace(key, t);
       if (inserted) continue;
-      const int p = Find(parent, it->second), q = Find(parent, t);
-      if (p != q) parent[std::max(p, q)] = std::min(p, q);
+      pieces.Union(it->second, t);
     }
   }
   absl::flat_hash_map<int, std::vector<int>> piece_vertices;
   for (int t = 0; t < num_tris; ++t) {
     if (!alive(t)) continue;
-    std::vector<int>& list = piece_vertices[Find(parent, t)];
+    std::vector<int>& list = piece_vertices[pieces.Find(t)];
     if (list.size() > kTinyPieceVertices) continue;  // big: not counted further
     for (int v : tri(t)) {
       if (std::find(list.begin(), list.end(), v) == list.end()) list.push_back(v);
@@ -636,7 +620,7 @@ std::vector<int> TinyPieces(int num_tris, const std::function<std::array<int, 3>
   absl::flat_hash_map<int, char> flat;
   for (int t = 0; t < num_tris; ++t) {
     if (!alive(t)) continue;
-    const int piece = Find(parent, t);
+    const int piece = pieces.Find(t);
     const std::vector<int>& list = piece_vertices[piece];
     if (list.size() > kTinyPieceVertices) continue;
     const std::array<int, 3> x = tri(t);
@@ -647,7 +631,7 @@ std::vector<int> TinyPieces(int num_tris, const std::function<std::array<int, 3>
   std::vector<int> drop(num_tris, -1);
   for (int t = 0; t < num_tris; ++t) {
     if (!alive(t)) continue;
-    auto it = volume6.find(Find(parent, t));
+    auto it = volume6.find(pieces.Find(t));
     if (it == volume6.end()) continue;
     if (flat.contains(it->first) || std::abs(it->second) / 6 < res * res * res) drop[t] = it->first;
   }

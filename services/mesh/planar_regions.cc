@@ -16,6 +16,7 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "services/geometry/union_find.h"
 
 namespace carvemap {
 
@@ -136,26 +137,6 @@ std::vector<Link> Aggregate(std::vector<Link> links) {
   }
   return out;
 }
-
-struct UnionFind {
-  std::vector<uint32_t> parent;
-  explicit UnionFind(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
-  uint32_t Find(uint32_t x) {
-    while (parent[x] != x) {
-      parent[x] = parent[parent[x]];
-      x = parent[x];
-    }
-    return x;
-  }
-  // The smaller root survives, so roots are the smallest canonical member.
-  void Union(uint32_t a, uint32_t b) {
-    a = Find(a);
-    b = Find(b);
-    if (a == b) return;
-    if (b < a) std::swap(a, b);
-    parent[b] = a;
-  }
-};
 
 // A connected set of same-direction faces (flood fill) or a grown region: members are
 // canonical face ids.
@@ -387,7 +368,7 @@ class Fitter {
   // Two faces with the same axis and direction that share an edge are coplanar, so every
   // group lies exactly on one lattice plane.
   void FloodFill() {
-    UnionFind uf(faces_.size());
+    UnionFind<uint32_t> uf(faces_.size());  // roots: each set's smallest member
     for (const Link& l : face_links_) {
       const LatticeFace& a = faces_[l.a];
       const LatticeFace& b = faces_[l.b];

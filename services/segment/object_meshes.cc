@@ -1,19 +1,12 @@
 #include "services/segment/object_meshes.h"
 
 #include <algorithm>
-#include <numeric>
 #include <tuple>
+
+#include "services/geometry/union_find.h"
 
 namespace carvemap {
 namespace {
-
-int Find(std::vector<int>& parent, int x) {
-  while (parent[x] != x) {
-    parent[x] = parent[parent[x]];
-    x = parent[x];
-  }
-  return x;
-}
 
 // A piece that only joins others while grouping (a speck), never links two.
 bool Speck(const SegmentedObject& o, const ObjectSplitOptions& options) {
@@ -44,8 +37,7 @@ std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
                                           ObjectSplitReport& rep) {
   if (options.stack_gap_m < 0) return pieces;
   const int n = static_cast<int>(pieces.size());
-  std::vector<int> parent(n);
-  std::iota(parent.begin(), parent.end(), 0);
+  UnionFind<int> groups(n);
   // How much j's footprint shares with i's when they are stacked; 0 when not.
   auto stacked = [&](int i, int j) {
     const Eigen::AlignedBox3d &a = pieces[i].box, &b = pieces[j].box;
@@ -54,15 +46,11 @@ std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
     const double overlap = FootprintOverlap(a, b);
     return gap <= options.stack_gap_m && overlap >= options.stack_overlap ? overlap : 0.0;
   };
-  auto join = [&](int i, int j) {
-    const int ra = Find(parent, i), rb = Find(parent, j);
-    if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
-  };
   std::vector<bool> small(n);
   for (int i = 0; i < n; ++i) small[i] = Speck(pieces[i], options);
   for (int i = 0; i < n; ++i) {
     for (int j = i + 1; j < n; ++j) {
-      if (!small[i] && !small[j] && stacked(i, j) > 0) join(i, j);
+      if (!small[i] && !small[j] && stacked(i, j) > 0) groups.Union(i, j);
     }
   }
   // A speck joins the one object it overlaps most, so specks never link two objects (a desk
@@ -75,13 +63,13 @@ std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
       if (small[j]) continue;
       if (const double o = stacked(i, j); o > best_overlap) best = j, best_overlap = o;
     }
-    if (best >= 0) join(i, best);
+    if (best >= 0) groups.Union(i, best);
   }
   std::vector<SegmentedObject> grouped;
   std::vector<int> group_of(n, -1);
   std::vector<bool> grew;  // per group: its box changed, so its level and room may have
   for (int i = 0; i < n; ++i) {
-    const int root = Find(parent, i);
+    const int root = groups.Find(i);
     if (group_of[root] < 0) {
       group_of[root] = static_cast<int>(grouped.size());
       grouped.push_back(std::move(pieces[i]));
@@ -120,19 +108,15 @@ std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
   ObjectSplitReport& rep = report ? *report : local_report;
   rep = ObjectSplitReport{};
   const int nv = static_cast<int>(object_mesh.vertices.size());
-  std::vector<int> parent(nv);
-  std::iota(parent.begin(), parent.end(), 0);
+  UnionFind<int> joined(nv);
   for (const Eigen::Vector3i& t : object_mesh.triangles) {
-    for (int e = 1; e < 3; ++e) {
-      const int a = Find(parent, t[0]), b = Find(parent, t[e]);
-      if (a != b) parent[std::max(a, b)] = std::min(a, b);
-    }
+    for (int e = 1; e < 3; ++e) joined.Union(t[0], t[e]);
   }
   // Component of each triangle, numbered by first appearance.
   std::vector<int> comp_of_root(nv, -1);
   std::vector<std::vector<int>> comp_triangles;
   for (int i = 0; i < static_cast<int>(object_mesh.triangles.size()); ++i) {
-    const int root = Find(parent, object_mesh.triangles[i][0]);
+    const int root = joined.Find(object_mesh.triangles[i][0]);
     if (comp_of_root[root] < 0) {
       comp_of_root[root] = static_cast<int>(comp_triangles.size());
       comp_triangles.emplace_back();
