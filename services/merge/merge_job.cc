@@ -24,6 +24,7 @@
 #include "services/mesh/mesh_checks.h"
 #include "services/mesh/planar_mesh.h"
 #include "services/mesh/planar_regions.h"
+#include "services/mesh/self_intersections.h"
 #include "services/segment/object_meshes.h"
 #include "services/segment/plan_volume.h"
 #include "storage/atomic_file.h"
@@ -38,6 +39,29 @@ using Clock = std::chrono::steady_clock;
 
 double SecondsSince(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// `mesh`'s self-intersections into counts["<name>_self_intersections"] (the sum over calls of
+// one name; "<name>_triangles_not_tested" when some could not be), timed under
+// merge.self_intersections, with a warning when any: a watertight mesh that crosses itself is
+// not a valid solid.
+void CountSelfIntersectionsInto(const TriangleMesh& mesh, const std::string& name,
+                                nlohmann::json& counts, nlohmann::json& timings,
+                                std::vector<std::string>& warnings) {
+  const Clock::time_point t0 = Clock::now();
+  const SelfIntersections s = CountSelfIntersections(mesh);
+  const std::string key = name + "_self_intersections";
+  counts[key] = counts.value(key, uint64_t{0}) + s.pairs;
+  if (s.unchecked > 0) {
+    const std::string untested = name + "_triangles_not_tested";
+    counts[untested] = counts.value(untested, uint64_t{0}) + s.unchecked;
+  }
+  if (s.pairs > 0) {
+    warnings.push_back(absl::StrCat(name, ": ", s.pairs,
+                                    " pairs of triangles cross each other (self-intersections)"));
+  }
+  timings["merge.self_intersections"] =
+      timings.value("merge.self_intersections", 0.0) + SecondsSince(t0);
 }
 
 absl::Status InStage(const char* stage, const absl::Status& s) {
@@ -138,6 +162,7 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
         !s.ok()) {
       return s;
     }
+    CountSelfIntersectionsInto(plan->extruded, "extruded", counts, timings, warnings);
     for (const char* name : {"floorplan.geojson", "floorplan.svg", "extruded.ply"}) {
       outputs.push_back(absl::StrCat(level_name, "/", name));
     }
@@ -179,7 +204,7 @@ PlanarRegionOptions MeshRegionOptions() {
 // `region`. A mesh that cannot be built is not fatal: nullopt, and job.json says why.
 absl::StatusOr<std::optional<TriangleMesh>> PlanarBuildingMesh(
     const std::vector<BoundaryFace>& faces, const PlanarRegionSet& regions,
-    const OctreeGrid& grid, const fs::path& out, nlohmann::json& counts,
+    const OctreeGrid& grid, const fs::path& out, nlohmann::json& counts, nlohmann::json& timings,
     std::vector<std::string>& outputs, std::vector<std::string>& warnings) {
   absl::StatusOr<PlanarMesh> planar = BuildPlanarMesh(faces, regions, grid);
   if (!planar.ok()) {
@@ -200,6 +225,7 @@ absl::StatusOr<std::optional<TriangleMesh>> PlanarBuildingMesh(
   counts["building_vertices"] = planar->mesh.vertices.size();
   counts["building_triangles"] = planar->mesh.triangles.size();
   counts["building_watertight"] = check.watertight();
+  CountSelfIntersectionsInto(planar->mesh, "building", counts, timings, warnings);
   return std::optional<TriangleMesh>(std::move(planar->mesh));
 }
 
@@ -365,7 +391,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
     if (!bregions.ok()) return bregions.status();
     counts["building_planar_regions"] = bregions->regions.size();
     absl::StatusOr<std::optional<TriangleMesh>> planar =
-        PlanarBuildingMesh(*bfaces, *bregions, grid, out, counts, outputs, warnings);
+        PlanarBuildingMesh(*bfaces, *bregions, grid, out, counts, timings, outputs, warnings);
     if (!planar.ok()) return planar.status();
     building = std::move(*planar);
     if (!building) {
@@ -384,6 +410,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
       counts["building_vertices"] = dense->mesh.vertices.size();
       counts["building_triangles"] = dense->mesh.triangles.size();
       counts["building_watertight"] = CheckMesh(dense->mesh).watertight();
+      CountSelfIntersectionsInto(dense->mesh, "building", counts, timings, warnings);
       counts["building_planar"] = false;
       building = std::move(dense->mesh);
     } else {
@@ -432,6 +459,8 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   for (SegmentedObject& o : objects) {
     const std::string name = absl::StrCat("mesh/objects/", o.id, ".ply");
     if (absl::Status s = WritePly((out / name).string(), o.mesh); !s.ok()) return s;
+    // Each object on its own: objects that touch one another are separate models.
+    CountSelfIntersectionsInto(o.mesh, "object", counts, timings, warnings);
     outputs.push_back(name);
     all_objects.Append(o.mesh);
     object_of_face.insert(object_of_face.end(), o.mesh.triangles.size(), o.id);
@@ -578,6 +607,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
     dense_triangles = dense->mesh.triangles.size();
     counts["dense_vertices"] = dense->mesh.vertices.size();
     counts["dense_triangles"] = dense_triangles;
+    CountSelfIntersectionsInto(dense->mesh, "dense", counts, timings, warnings);
   }
   outputs.push_back("mesh/dense.ply");
   timings["merge.dense_mesh"] = SecondsSince(t0);
@@ -612,7 +642,8 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
     if (!mesh_regions.ok()) return InStage("planar_mesh", mesh_regions.status());
     counts["building_planar_regions"] = mesh_regions->regions.size();
     absl::StatusOr<std::optional<TriangleMesh>> building =
-        PlanarBuildingMesh(*faces, *mesh_regions, grid, out, counts, outputs, warnings);
+        PlanarBuildingMesh(*faces, *mesh_regions, grid, out, counts, timings, outputs,
+                           warnings);
     if (!building.ok()) return InStage("planar_mesh", building.status());
     if (*building) building_triangles = (*building)->triangles.size();
     timings["merge.planar_mesh"] = SecondsSince(t0);

@@ -1,0 +1,71 @@
+#include "services/mesh/self_intersections.h"
+
+#include <gtest/gtest.h>
+
+namespace carvemap {
+namespace {
+
+// A cube of side `s` at `origin` as 12 outward-facing triangles, appended to `m`.
+void AddCube(TriangleMesh& m, const Eigen::Vector3f& origin, float s) {
+  TriangleMesh c;
+  for (int i = 0; i < 8; ++i) {
+    c.vertices.push_back(origin + s * Eigen::Vector3f(i & 1, (i >> 1) & 1, (i >> 2) & 1));
+  }
+  const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
+                           {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  for (const auto& q : quads) {
+    c.triangles.emplace_back(q[0], q[1], q[2]);
+    c.triangles.emplace_back(q[0], q[2], q[3]);
+  }
+  m.Append(c);
+}
+
+TEST(SelfIntersections, AClosedCubeHasNone) {
+  TriangleMesh m;
+  AddCube(m, Eigen::Vector3f::Zero(), 1);
+  const SelfIntersections s = CountSelfIntersections(m);
+  EXPECT_EQ(s.pairs, 0u);
+  EXPECT_EQ(s.unchecked, 0u);
+}
+
+TEST(SelfIntersections, TwoApartCubesHaveNoneAndTwoOverlappingOnesDo) {
+  TriangleMesh apart;
+  AddCube(apart, Eigen::Vector3f::Zero(), 1);
+  AddCube(apart, Eigen::Vector3f(2, 0, 0), 1);
+  EXPECT_EQ(CountSelfIntersections(apart).pairs, 0u);
+  // The second cube's corner pushed into the first: each watertight, together crossing. The
+  // faces x = 1, y = 1, z = 1 of the first cross the faces x = .5, y = .5, z = .5 of the
+  // second: every such pair of triangles whose squares' parts overlap.
+  TriangleMesh crossing;
+  AddCube(crossing, Eigen::Vector3f::Zero(), 1);
+  AddCube(crossing, Eigen::Vector3f::Constant(0.5f), 1);
+  const SelfIntersections s = CountSelfIntersections(crossing);
+  EXPECT_GT(s.pairs, 0u);
+  EXPECT_EQ(s.unchecked, 0u);
+}
+
+TEST(SelfIntersections, AFoldedNeighbourIsFound) {
+  // Two triangles on the edge (0, 1), the second folded back onto the first (coplanar, on the
+  // same side): they share an edge and overlap beyond it.
+  TriangleMesh m;
+  m.vertices = {{0, 0, 0}, {1, 0, 0}, {0.5f, 1, 0}, {0.5f, 0.5f, 0}};
+  m.triangles = {{0, 1, 2}, {1, 0, 3}};
+  EXPECT_EQ(CountSelfIntersections(m).pairs, 1u);
+  // Unfolded (the fourth vertex across the edge) they only share it.
+  m.vertices[3] = {0.5f, -1, 0};
+  EXPECT_EQ(CountSelfIntersections(m).pairs, 0u);
+}
+
+TEST(SelfIntersections, TrianglesAManifoldCannotHoldAreCountedNotTested) {
+  TriangleMesh m;
+  AddCube(m, Eigen::Vector3f::Zero(), 1);
+  m.triangles.push_back(m.triangles[0]);  // the same triangle again: an edge used thrice
+  m.triangles.emplace_back(0, 0, 1);      // a repeated index
+  m.triangles.emplace_back(0, 1, 99);     // an index past the vertices
+  const SelfIntersections s = CountSelfIntersections(m);
+  EXPECT_EQ(s.unchecked, 3u);
+  EXPECT_EQ(s.pairs, 0u);
+}
+
+}  // namespace
+}  // namespace carvemap
