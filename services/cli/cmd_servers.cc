@@ -241,7 +241,8 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
   cmd->add_option("--max-attempts", s.max_attempts, "Leases per chunk before the job fails")
       ->capture_default_str();
   cmd->add_flag("--keep-partials", s.keep_partials,
-                "Keep the slices' partial sums after a job ends (<work dir>/<job>/partials)");
+                "Keep the slices' partial sums (<work dir>/<job>/partials); by default each "
+                "pass's are removed once all its chunks are combined");
   // The merge service (docs/DESIGN.md §8; docs/RPC.md "MergeService").
   MergeClientSpec& m = flags->merge;
   cmd->add_option("--merge-server", m.addresses,

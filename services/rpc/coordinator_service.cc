@@ -322,6 +322,9 @@ class CoordinatorServer::Impl {
   // merge; CANCELLED: the job is already terminal (cancelled or failed by the lease table) or
   // the coordinator stops.
   absl::Status CarveStage(const std::string& job_id);
+  // Removes the partial sums in `dir` once nothing will read them (the files; with
+  // files_only false the folder and its subfolders too), unless the coordinator keeps them.
+  void RemovePartials(const std::string& job_id, const std::string& dir, bool files_only);
   // Waits until every task of a job loaded in the lease table is committed (or, with
   // except_held, every task not held). Cancelled as CarveStage.
   absl::Status WaitForChunks(const std::string& job_id, bool except_held = false);
@@ -932,9 +935,34 @@ absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
                  records.size());
     if (absl::Status s = WaitForChunks(job_id); !s.ok()) return s;
   }
-  absl::MutexLock lock(&mu_);
-  table_->DropJob(job_id);
+  std::string partials;
+  {
+    absl::MutexLock lock(&mu_);
+    table_->DropJob(job_id);
+    partials = runtime_[job_id].partials_dir;
+  }
+  // Every chunk is combined: nothing reads these sums again (a re-carve pass writes its own,
+  // a restart in MERGING does not carve), so the scratch space goes now, not at the job's end.
+  RemovePartials(job_id, partials, /*files_only=*/true);
   return absl::OkStatus();
+}
+
+void CoordinatorServer::Impl::RemovePartials(const std::string& job_id, const std::string& dir,
+                                             bool files_only) {
+  if (spec_.keep_partials || dir.empty()) return;
+  uint64_t bytes = 0, files = 0;
+  std::error_code ec;
+  for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
+    if (!e.is_regular_file(ec)) {
+      if (!files_only) fs::remove_all(e.path(), ec);
+      continue;
+    }
+    bytes += e.file_size(ec);
+    if (fs::remove(e.path(), ec)) ++files;
+  }
+  if (!files_only) fs::remove(dir, ec);
+  spdlog::info("coordinator: job {}: {} partial-sums files removed ({:.1f} MB)", job_id, files,
+               double(bytes) * 1e-6);
 }
 
 absl::Status CoordinatorServer::Impl::WaitForChunks(const std::string& job_id,
@@ -1066,6 +1094,7 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
   }
   restore();
   if (!s.ok()) return s;
+  RemovePartials(job_id, pass_dir, /*files_only=*/false);  // the pass's chunks are combined
   return dir;
 }
 

@@ -48,6 +48,15 @@ else
   fail "no merge on the merge service (merger.log, coordinator.log)"
 fi
 
+# Scratch space: each pass's partial sums went as soon as its chunks were combined (the carve's
+# before the merge, the re-carve's before the objects were meshed), not at the job's end.
+removed=$(grep -c "partial-sums files removed" "$WORK/two/.carvemap/coordinator.log")
+if [ "$removed" -ge 2 ] && ! ls "$WORK"/two/.carvemap/*/partials/*.part > /dev/null 2>&1; then
+  pass "partial sums removed pass by pass ($removed passes)"
+else
+  fail "partial sums not removed pass by pass ($removed removal lines in coordinator.log)"
+fi
+
 # ---- a worker SIGKILLed mid-job
 "$CARVEMAP" run "$SCAN" -o "$WORK/kill" --workers 2 -q --heartbeat-interval-s 0.5 \
     --worker-timeout-s 2 > "$WORK/kill.log" 2>&1 &
