@@ -354,6 +354,14 @@ class CoordinatorServer::Impl {
   // Wakes the job threads waiting for their tasks (WaitForChunks): tasks were done, failed or
   // dropped, or the coordinator stops.
   void TasksChanged() { done_cv_.SignalAll(); }
+  // Wakes the WatchJob streams: a job's state may have changed (a transition, a job failed by
+  // the lease table), or the coordinator stops. Not on every task: watchers report progress at
+  // their own interval. Takes watch_mu_ only, so it may be called under mu_.
+  void JobsChanged() {
+    absl::MutexLock lock(&watch_mu_);
+    ++job_events_;
+    watch_cv_.SignalAll();
+  }
 
   const CoordinatorSpec spec_;
   CoordinatorFolders folders_;
@@ -373,6 +381,10 @@ class CoordinatorServer::Impl {
   // Parked LeaseChunk calls wait on it; signalled wherever tasks may have been queued.
   absl::CondVar work_cv_;
   absl::CondVar done_cv_;  // TasksChanged
+  // JobsChanged; never held while taking mu_.
+  absl::Mutex watch_mu_ ABSL_ACQUIRED_AFTER(mu_);
+  absl::CondVar watch_cv_;
+  uint64_t job_events_ ABSL_GUARDED_BY(watch_mu_) = 0;
   std::unique_ptr<LeaseTable> table_ ABSL_GUARDED_BY(mu_);
   // Its instance (random) tells this coordinator's worker ids from a previous one's.
   WorkerRegistry workers_ ABSL_GUARDED_BY(mu_){RandomHex(4)};
@@ -604,6 +616,7 @@ void CoordinatorServer::Impl::Shutdown() {
   stopping_ = true;
   WorkMayBeQueued();
   TasksChanged();
+  JobsChanged();
   // Streams and long polls see stopping_ within a poll interval; the deadline bounds the wait.
   servers_.Shutdown(std::chrono::milliseconds(500));
   if (sweeper_.joinable()) sweeper_.join();
@@ -642,6 +655,7 @@ void CoordinatorServer::Impl::Sweep() {
       metrics_.LeasesExpired(*expired);
       WorkMayBeQueued();
       TasksChanged();  // a task out of attempts fails its job
+      JobsChanged();
     }
     const int64_t now = NowMs();
     const int64_t timeout_ms = static_cast<int64_t>(spec_.worker_timeout_s * 1000);
@@ -749,6 +763,7 @@ void CoordinatorServer::Impl::FailJob(const std::string& job_id, const std::stri
     why = TenantView(runtime_[job_id], raw);
   }
   absl::Status s = store_->TransitionJob(job_id, {JobState::kFailed, why, NowMs()});
+  JobsChanged();
   if (s.ok()) {
     spdlog::error("coordinator: job {} FAILED: {}", job_id, raw);
   } else {
@@ -1119,6 +1134,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
   JobState state = job->state;
   auto move_to = [&](JobState to) {
     absl::Status s = store_->TransitionJob(job_id, {to, "", NowMs()});
+    JobsChanged();
     if (s.ok()) {
       spdlog::info("coordinator: job {} {} -> {}", job_id, std::string(JobStateName(state)), std::string(JobStateName(to)));
       state = to;
@@ -1414,6 +1430,7 @@ absl::Status CoordinatorServer::Impl::CancelJob(const Caller& caller,
     absl::MutexLock lock(&mu_);
     table_->DropJob(job->id);
     TasksChanged();
+    JobsChanged();
   }
   absl::StatusOr<JobRecord> now = store_->GetJob(req.job_id());
   if (!now.ok()) return now.status();
@@ -1473,8 +1490,25 @@ absl::Status CoordinatorServer::Impl::WatchJob(const Caller& caller, grpc::Serve
   const double min_interval_s = req.min_interval_s() > 0 ? req.min_interval_s() : 1.0;
   JobState state = job->state;
   auto last_progress = std::chrono::steady_clock::now();
+  uint64_t seen;
+  {
+    absl::MutexLock lock(&watch_mu_);
+    seen = job_events_;
+  }
   while (!IsTerminal(state)) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    {
+      // Until a job changes state (JobsChanged) or the next progress event is due; at most a
+      // second, so that a client that went away is noticed.
+      const double due_s =
+          min_interval_s -
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - last_progress).count();
+      const absl::Time deadline = absl::Now() + absl::Seconds(std::clamp(due_s, 0.0, 1.0));
+      absl::MutexLock lock(&watch_mu_);
+      while (job_events_ == seen && !stopping_) {
+        if (watch_cv_.WaitWithDeadline(&watch_mu_, deadline)) break;
+      }
+      seen = job_events_;
+    }
     if (ctx.IsCancelled()) return absl::CancelledError("watch cancelled by the client");
     if (stopping_) return absl::UnavailableError("coordinator shutting down");
     job = store_->GetJob(req.job_id());
@@ -1878,6 +1912,7 @@ absl::Status CoordinatorServer::Impl::FailChunk(const pb::FailChunkRequest& req,
   if (!requeued.ok()) return requeued.status();
   if (*requeued) WorkMayBeQueued();
   TasksChanged();  // or the job failed
+  if (!*requeued) JobsChanged();
   metrics_.ChunkFailed();
   spdlog::warn("coordinator: worker {} failed {}: {} ({})", req.worker_id(), req.lease_id(),
                req.reason(), *requeued ? "requeued" : "job failed");
