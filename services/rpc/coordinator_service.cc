@@ -967,13 +967,21 @@ void CoordinatorServer::Impl::RemovePartials(const std::string& job_id, const st
   if (spec_.keep_partials || dir.empty()) return;
   uint64_t bytes = 0, files = 0;
   std::error_code ec;
-  for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
-    if (!e.is_regular_file(ec)) {
-      if (!files_only) fs::remove_all(e.path(), ec);
+  // Listed first, removed after: the error_code forms never throw, an iterator's ++ may.
+  std::vector<fs::path> entries;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    entries.push_back(it->path());
+  }
+  for (const fs::path& e : entries) {
+    if (!fs::is_regular_file(e, ec)) {
+      if (!files_only) fs::remove_all(e, ec);
       continue;
     }
-    bytes += e.file_size(ec);
-    if (fs::remove(e.path(), ec)) ++files;
+    const uintmax_t size = fs::file_size(e, ec);
+    if (fs::remove(e, ec)) {
+      ++files;
+      bytes += ec ? 0 : size;
+    }
   }
   if (!files_only) fs::remove(dir, ec);
   spdlog::info("coordinator: job {}: {} partial-sums files removed ({:.1f} MB)", job_id, files,
@@ -1497,12 +1505,13 @@ absl::Status CoordinatorServer::Impl::WatchJob(const Caller& caller, grpc::Serve
   }
   while (!IsTerminal(state)) {
     {
-      // Until a job changes state (JobsChanged) or the next progress event is due; at most a
-      // second, so that a client that went away is noticed.
+      // Until a job changes state (JobsChanged) or the next progress event is due: at least
+      // 0.2 s (a client asking for a tiny interval must not turn the stream into a busy poll
+      // of the store), at most a second (a client that went away is noticed).
       const double due_s =
           min_interval_s -
           std::chrono::duration<double>(std::chrono::steady_clock::now() - last_progress).count();
-      const absl::Time deadline = absl::Now() + absl::Seconds(std::clamp(due_s, 0.0, 1.0));
+      const absl::Time deadline = absl::Now() + absl::Seconds(std::clamp(due_s, 0.2, 1.0));
       absl::MutexLock lock(&watch_mu_);
       while (job_events_ == seen && !stopping_) {
         if (watch_cv_.WaitWithDeadline(&watch_mu_, deadline)) break;
