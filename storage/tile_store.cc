@@ -448,9 +448,13 @@ absl::StatusOr<std::string> WriteTile(const std::string& dir, const TileData& ti
   absl::Status valid = ValidateForWrite(sorted_view);
   if (!valid.ok()) return h5::Prefixed(path, valid);
 
-  std::lock_guard<std::mutex> lock(TileMutex());
-  h5::Init();
-  absl::Status s = WriteFile(partial, sorted_view, sorted_view.leaves);
+  absl::Status s;
+  {
+    std::lock_guard<std::mutex> lock(TileMutex());
+    h5::Init();
+    s = WriteFile(partial, sorted_view, sorted_view.leaves);
+  }
+  // The fsyncs below run outside the HDF5 lock: other threads' reads need not wait for the disk.
   std::error_code error;
   if (!s.ok()) {
     std::filesystem::remove(partial, error);
