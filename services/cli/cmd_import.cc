@@ -1,6 +1,7 @@
 // `carvemap import graph|tum|ply|carmen INPUT -o scan.h5`: turns other inputs into scan.h5
 // (docs/DESIGN.md §3) through the importers in storage/import/, then re-opens and validates what
 // it wrote.
+#include <filesystem>
 #include <iomanip>
 #include <iostream>
 #include <memory>
@@ -10,6 +11,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/str_cat.h"
 #include "services/cli/commands.h"
 #include "storage/import/carmen_import.h"
 #include "storage/import/import_writer.h"
@@ -41,6 +43,17 @@ absl::Status ValidateAndSummarize(const std::string& out_path) {
 
 absl::Status Run(const std::string& out_path, const SensorInfo& sensor,
                  absl::FunctionRef<absl::StatusOr<ImportedScan>(const FrameSink&)> import) {
+  // As `simulate -o DIR`: the folder the scan goes into is made if missing.
+  const std::filesystem::path folder = std::filesystem::path(out_path).parent_path();
+  std::error_code ec;
+  if (!folder.empty() && !std::filesystem::is_directory(folder, ec)) {
+    std::filesystem::create_directories(folder, ec);
+    if (ec) {
+      return absl::UnavailableError(
+          absl::StrCat(out_path, ": cannot create its folder ", folder.string(), ": ",
+                       ec.message()));
+    }
+  }
   if (auto summary = WriteImport(out_path, sensor, import); !summary.ok()) {
     return summary.status();
   }
