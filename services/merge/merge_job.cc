@@ -43,11 +43,12 @@ double SecondsSince(Clock::time_point t0) {
 
 // `mesh`'s self-intersections into counts["<name>_self_intersections"] (the sum over calls of
 // one name; "<name>_triangles_not_tested" when some could not be), timed under
-// merge.self_intersections, with a warning when any: a watertight mesh that crosses itself is
-// not a valid solid.
-void CountSelfIntersectionsInto(const TriangleMesh& mesh, const std::string& name,
-                                nlohmann::json& counts, nlohmann::json& timings,
-                                std::vector<std::string>& warnings) {
+// merge.self_intersections, with a warning when any (`warnings` null: the caller warns once
+// for many meshes): a watertight mesh that crosses itself is not a valid solid. Returns the
+// pairs found.
+uint64_t CountSelfIntersectionsInto(const TriangleMesh& mesh, const std::string& name,
+                                    nlohmann::json& counts, nlohmann::json& timings,
+                                    std::vector<std::string>* warnings) {
   const Clock::time_point t0 = Clock::now();
   const SelfIntersections s = CountSelfIntersections(mesh);
   const std::string key = name + "_self_intersections";
@@ -56,12 +57,13 @@ void CountSelfIntersectionsInto(const TriangleMesh& mesh, const std::string& nam
     const std::string untested = name + "_triangles_not_tested";
     counts[untested] = counts.value(untested, uint64_t{0}) + s.unchecked;
   }
-  if (s.pairs > 0) {
-    warnings.push_back(absl::StrCat(name, ": ", s.pairs,
-                                    " pairs of triangles cross each other (self-intersections)"));
+  if (s.pairs > 0 && warnings != nullptr) {
+    warnings->push_back(absl::StrCat(
+        name, ": ", s.pairs, " pairs of triangles cross each other (self-intersections)"));
   }
   timings["merge.self_intersections"] =
       timings.value("merge.self_intersections", 0.0) + SecondsSince(t0);
+  return s.pairs;
 }
 
 absl::Status InStage(const char* stage, const absl::Status& s) {
@@ -162,7 +164,7 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
         !s.ok()) {
       return s;
     }
-    CountSelfIntersectionsInto(plan->extruded, "extruded", counts, timings, warnings);
+    CountSelfIntersectionsInto(plan->extruded, "extruded", counts, timings, &warnings);
     for (const char* name : {"floorplan.geojson", "floorplan.svg", "extruded.ply"}) {
       outputs.push_back(absl::StrCat(level_name, "/", name));
     }
@@ -225,7 +227,7 @@ absl::StatusOr<std::optional<TriangleMesh>> PlanarBuildingMesh(
   counts["building_vertices"] = planar->mesh.vertices.size();
   counts["building_triangles"] = planar->mesh.triangles.size();
   counts["building_watertight"] = check.watertight();
-  CountSelfIntersectionsInto(planar->mesh, "building", counts, timings, warnings);
+  CountSelfIntersectionsInto(planar->mesh, "building", counts, timings, &warnings);
   return std::optional<TriangleMesh>(std::move(planar->mesh));
 }
 
@@ -410,7 +412,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
       counts["building_vertices"] = dense->mesh.vertices.size();
       counts["building_triangles"] = dense->mesh.triangles.size();
       counts["building_watertight"] = CheckMesh(dense->mesh).watertight();
-      CountSelfIntersectionsInto(dense->mesh, "building", counts, timings, warnings);
+      CountSelfIntersectionsInto(dense->mesh, "building", counts, timings, &warnings);
       counts["building_planar"] = false;
       building = std::move(dense->mesh);
     } else {
@@ -455,12 +457,15 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   }
   TriangleMesh all_objects;
   std::vector<int> object_of_face;
+  uint64_t objects_crossing = 0;  // objects whose mesh crosses itself: one warning for all
   nlohmann::json listed = nlohmann::json::array();
   for (SegmentedObject& o : objects) {
     const std::string name = absl::StrCat("mesh/objects/", o.id, ".ply");
     if (absl::Status s = WritePly((out / name).string(), o.mesh); !s.ok()) return s;
     // Each object on its own: objects that touch one another are separate models.
-    CountSelfIntersectionsInto(o.mesh, "object", counts, timings, warnings);
+    if (CountSelfIntersectionsInto(o.mesh, "object", counts, timings, nullptr) > 0) {
+      ++objects_crossing;
+    }
     outputs.push_back(name);
     all_objects.Append(o.mesh);
     object_of_face.insert(object_of_face.end(), o.mesh.triangles.size(), o.id);
@@ -473,6 +478,12 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
                       {"triangles", o.mesh.triangles.size()},
                       {"mesh", name}});
     o.mesh = TriangleMesh{};  // in all_objects now
+  }
+  if (objects_crossing > 0) {
+    warnings.push_back(absl::StrCat("objects: the meshes of ", objects_crossing, " objects cross "
+                                    "themselves (", counts.value("object_self_intersections",
+                                                                 uint64_t{0}),
+                                    " pairs of triangles)"));
   }
   if (absl::Status s = WritePly((out / "mesh" / "objects.ply").string(), all_objects,
                                 &object_of_face, "object");
@@ -607,7 +618,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
     dense_triangles = dense->mesh.triangles.size();
     counts["dense_vertices"] = dense->mesh.vertices.size();
     counts["dense_triangles"] = dense_triangles;
-    CountSelfIntersectionsInto(dense->mesh, "dense", counts, timings, warnings);
+    CountSelfIntersectionsInto(dense->mesh, "dense", counts, timings, &warnings);
   }
   outputs.push_back("mesh/dense.ply");
   timings["merge.dense_mesh"] = SecondsSince(t0);
