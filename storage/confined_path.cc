@@ -86,13 +86,11 @@ absl::Status CheckConfinedPathText(absl::string_view relative, absl::string_view
   return absl::OkStatus();
 }
 
-absl::StatusOr<std::string> ResolveConfinedPath(const std::string& root,
-                                                absl::string_view relative,
-                                                absl::string_view what) {
-  if (absl::Status s = CheckConfinedPathText(relative, what); !s.ok()) return s;
-  absl::StatusOr<std::string> canonical = CanonicalRoot(root, what, relative);
-  if (!canonical.ok()) return canonical.status();
-  const std::string& base = *canonical;
+namespace {
+
+// The walk of ResolveConfinedPath, under `base`, the root already made canonical.
+absl::StatusOr<std::string> ResolveUnder(const std::string& base, absl::string_view relative,
+                                         absl::string_view what) {
   const std::vector<std::string> base_parts = Components(base);
 
   // `resolved`: components under the root reached so far (never a symlink); `pending`: what
@@ -150,6 +148,17 @@ absl::StatusOr<std::string> ResolveConfinedPath(const std::string& root,
     out += c;
   }
   return out;
+}
+
+}  // namespace
+
+absl::StatusOr<std::string> ResolveConfinedPath(const std::string& root,
+                                                absl::string_view relative,
+                                                absl::string_view what) {
+  if (absl::Status s = CheckConfinedPathText(relative, what); !s.ok()) return s;
+  absl::StatusOr<std::string> base = CanonicalRoot(root, what, relative);
+  if (!base.ok()) return base.status();
+  return ResolveUnder(*base, relative, what);
 }
 
 // ---- ConfinedFile
@@ -233,17 +242,18 @@ int OpenBeneath(const std::string& base, const std::string& path, int flags) {
 absl::StatusOr<ConfinedFile> ConfinedFile::Open(const std::string& root,
                                                 absl::string_view relative,
                                                 absl::string_view what) {
-  absl::StatusOr<std::string> path = ResolveConfinedPath(root, relative, what);
-  if (!path.ok()) return path.status();
+  if (absl::Status s = CheckConfinedPathText(relative, what); !s.ok()) return s;
   absl::StatusOr<std::string> base = CanonicalRoot(root, what, relative);
   if (!base.ok()) return base.status();
+  absl::StatusOr<std::string> path = ResolveUnder(*base, relative, what);
+  if (!path.ok()) return path.status();
   if (ConfinedOpenHooksForTest().between) ConfinedOpenHooksForTest().between();
   // O_NOFOLLOW: the last component was not a link when resolved and must not be one now;
   // O_NONBLOCK: a FIFO planted under the root does not hang the open.
   const int flags = O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK;
   int fd = OpenBeneath(*base, *path, flags);
   if (fd < 0 && errno == EXDEV) {
-    ++ConfinedOpenHooksForTest().beneath_refusals;
+    ConfinedOpenHooksForTest().beneath_refusals.fetch_add(1, std::memory_order_relaxed);
     return Escapes(what, relative);  // a link swapped in meanwhile leads out
   }
   if (fd < 0 && (errno == ENOSYS || errno == EPERM)) fd = ::open(path->c_str(), flags);

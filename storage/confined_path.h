@@ -16,6 +16,7 @@
 #ifndef CARVEMAP_STORAGE_CONFINED_PATH_H_
 #define CARVEMAP_STORAGE_CONFINED_PATH_H_
 
+#include <atomic>
 #include <functional>
 #include <string>
 
@@ -79,11 +80,13 @@ class ConfinedFile {
 
 // For tests of the race between resolution and open: `between` runs after ResolveConfinedPath
 // and before the open; with `no_openat2` the open is a plain open(2), as on a kernel without
-// openat2; `beneath_refusals` counts the opens openat2 refused for leaving the root.
+// openat2; `beneath_refusals` counts the opens openat2 refused for leaving the root (atomic:
+// every open in the process counts, from any thread). Set `between` and `no_openat2` only
+// while no other thread opens.
 struct ConfinedOpenTestHooks {
   std::function<void()> between;
   bool no_openat2 = false;
-  int beneath_refusals = 0;
+  std::atomic<int> beneath_refusals{0};
 };
 ConfinedOpenTestHooks& ConfinedOpenHooksForTest();
 

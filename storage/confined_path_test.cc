@@ -179,13 +179,14 @@ TEST_F(ConfinedPathTest, ALinkSwappedBetweenResolutionAndOpenIsRefused) {
   for (const bool openat2 : {true, false}) {
     SCOPED_TRACE(openat2 ? "openat2" : "open and the name check");
     ASSERT_TRUE(ConfinedFile::Open(root_.string(), "scans/a.h5", "input_path").ok());
-    hooks = {};
     hooks.no_openat2 = !openat2;
     hooks.between = swap;
+    hooks.beneath_refusals = 0;
     absl::StatusOr<ConfinedFile> f =
         ConfinedFile::Open(root_.string(), "scans/a.h5", "input_path");
     const int refusals = hooks.beneath_refusals;
-    hooks = {};
+    hooks.no_openat2 = false;
+    hooks.between = nullptr;
     restore();
     ASSERT_FALSE(f.ok()) << "opened " << f->path();
     EXPECT_EQ(f.status().code(), absl::StatusCode::kPermissionDenied) << f.status();

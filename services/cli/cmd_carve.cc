@@ -15,7 +15,6 @@
 #include <memory>
 #include <string>
 #include <system_error>
-#include <thread>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -25,6 +24,7 @@
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
 #include "services/geometry/octree_keys.h"
+#include "services/system/usable_cpus.h"
 #include "storage/atomic_file.h"
 #include "worker/scan_carver.h"
 
@@ -153,7 +153,7 @@ void RegisterCarve(CLI::App& app, int& exit_code) {
   cmd->add_option("--resolution", flags->resolution_m,
                   "Leaf size, metres: 2 m / 2^k (0.125, 0.0625, 0.03125, 0.015625, ...)")
       ->capture_default_str();
-  flags->threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  flags->threads = UsableCpus();
   cmd->add_option("--threads", flags->threads,
                   "Carving threads (tiles are byte-identical for any count)")
       ->capture_default_str();

@@ -9,7 +9,6 @@
 #include <fstream>
 #include <memory>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include <sys/wait.h>
@@ -23,6 +22,7 @@
 #include "services/cli/progress.h"
 #include "services/rpc/process_util.h"
 #include "services/sim/simulator.h"
+#include "services/system/usable_cpus.h"
 #include "storage/scan_reader.h"
 
 namespace carvemap {
@@ -104,7 +104,7 @@ absl::Status RunDemo(const DemoFlags& flags) {
   options.output_dir = (std::filesystem::path(flags.output_dir) / "input").string();
   options.rig.rate_hz = flags.rate_hz;
   options.rig.beam_step_deg = flags.beam_step_deg;
-  options.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  options.threads = UsableCpus();
 
   std::printf("carvemap demo: simulating the '%s' building (seed %llu)\n", flags.preset.c_str(),
               static_cast<unsigned long long>(flags.seed));

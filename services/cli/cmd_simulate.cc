@@ -5,7 +5,6 @@
 #include <iostream>
 #include <memory>
 #include <string>
-#include <thread>
 
 #include <CLI/CLI.hpp>
 
@@ -13,6 +12,7 @@
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
 #include "services/sim/simulator.h"
+#include "services/system/usable_cpus.h"
 
 namespace carvemap {
 
@@ -122,7 +122,7 @@ void RegisterSimulate(CLI::App& app, int& exit_code) {
   cmd->add_option("--max-duration", o.max_duration_s,
                   "Stop the walk after this many seconds (0 = the whole walk)")
       ->capture_default_str();
-  o.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  o.threads = UsableCpus();
   cmd->add_option("--threads", o.threads, "Ray-casting threads (output is the same for any)")
       ->capture_default_str();
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress on stderr");

@@ -40,7 +40,8 @@ struct MergeOptions {
   // chunk is always held, whatever the budget.
   uint64_t cache_budget_bytes = uint64_t{256} << 20;
   // RunMerge only: threads for the per-chunk stages (boundary faces, dense meshes); ≤ 0: the
-  // machine's. The outputs do not depend on it.
+  // CPUs the process may use (UsableCpus: affinity and cgroup quota). The outputs do not
+  // depend on it.
   int threads = 0;
   // Gray scale of topdown.png: 0 = no open height, 255 = ≥ this many metres (linear).
   double topdown_max_height_m = 3.0;

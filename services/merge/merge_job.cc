@@ -7,7 +7,6 @@
 #include <limits>
 #include <optional>
 #include <string>
-#include <thread>
 #include <utility>
 #include <vector>
 
@@ -27,6 +26,7 @@
 #include "services/mesh/self_intersections.h"
 #include "services/segment/object_meshes.h"
 #include "services/segment/plan_volume.h"
+#include "services/system/usable_cpus.h"
 #include "storage/atomic_file.h"
 #include "storage/ply_io.h"
 #include "storage/scan_reader.h"
@@ -73,7 +73,7 @@ absl::Status InStage(const char* stage, const absl::Status& s) {
 
 int MergeThreads(const MergeOptions& options) {
   return options.threads > 0 ? options.threads
-                             : std::max(1, int(std::thread::hardware_concurrency()));
+                             : UsableCpus();
 }
 
 // Adapts a stage's (done, total) progress to the merge's callback.
