@@ -20,6 +20,7 @@ PACKAGES=(
   iproute2  # tests/tools/fault_test.py, deploy/local/netns.sh: ip netns, veth links
   time  # /usr/bin/time: CPU seconds in tests/bench/*.sh (e2e_floorplan_3d_freiburg101 runs one)
   strace  # tests/tools/durability_trace.py: the order of fsyncs and renames in a real job
+  prometheus  # tests/tools/prometheus_test.py: a real server scrapes every carvemap service
   clang-14 libclang-rt-14-dev  # tests/fuzz: libFuzzer and the ASan/UBSan runtimes
 )
 

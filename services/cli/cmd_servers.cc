@@ -348,6 +348,9 @@ void RegisterWorker(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--threads", s.threads, "Tasks (slices, chunks) run in parallel")
       ->capture_default_str();
+  cmd->add_option("--metrics-listen", s.metrics_listen_address,
+                  "Serve Prometheus metrics over HTTP at http://HOST:PORT/metrics (rays "
+                  "carved, tasks and their seconds, memory, bytes read and written)");
   cmd->add_option("--slice-memory-mb", flags->slice_memory_mb,
                   "Memory for a slice's chunk sums before they are written out, MB per thread")
       ->check(CLI::Range(16, 1 << 16))
@@ -419,6 +422,9 @@ void RegisterMerger(CLI::App& app, int& exit_code) {
   cmd->add_option("--health-listen", s.health_listen_address,
                   "Also serve grpc.health.v1 alone, in plaintext, on this host:port (for "
                   "Kubernetes probes, which cannot speak TLS)");
+  cmd->add_option("--metrics-listen", s.metrics_listen_address,
+                  "Serve Prometheus metrics over HTTP at http://HOST:PORT/metrics (merges "
+                  "running and queued, seconds per stage, peak memory; no job ids or tenants)");
   AddLogFlags(cmd, flags->log_format, flags->verbose);
   cmd->callback([flags, &exit_code] {
     const LogFormat format = SetUpLogging(flags->log_format, "merger", flags->verbose);

@@ -89,7 +89,14 @@ CoordinatorMetrics::CoordinatorMetrics()
                        .Name("carvemap_rpc_duration_seconds")
                        .Help("Time from an RPC's start to its status (whole stream for "
                              "WatchJob and FetchArtifact), by method and status code")
-                       .Register(*registry_)) {}
+                       .Register(*registry_)) {
+  // Every label value a counter can take exists from the start at 0, so that increase() and
+  // rate() see the first job finish (a series born at 1 has no earlier sample to compare).
+  for (const char* state : {"SUCCEEDED", "FAILED", "CANCELLED"}) {
+    jobs_finished_.Add({{"state", state}});
+  }
+  for (const char* api : {"job", "carve"}) calls_refused_.Add({{"api", api}});
+}
 
 void CoordinatorMetrics::SetChunks(int64_t queued, int64_t leased, int64_t done) {
   chunks_queued_.Set(static_cast<double>(queued));

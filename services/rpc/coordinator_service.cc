@@ -17,7 +17,6 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
-#include <prometheus/exposer.h>
 #include <spdlog/spdlog.h>
 
 #include "absl/base/thread_annotations.h"
@@ -44,6 +43,7 @@
 #include "services/grpc_status.h"
 #include "services/rpc/bearer_tokens.h"
 #include "services/rpc/coordinator_metrics.h"
+#include "services/rpc/process_metrics.h"
 #include "services/rpc/file_hash.h"
 #include "services/rpc/grpc_security.h"
 #include "services/rpc/server_log.h"
@@ -226,7 +226,7 @@ class CoordinatorServer::Impl {
   void Wait() { shutdown_done_.WaitForNotification(); }
   int port() const { return servers_.port; }
   int health_port() const { return servers_.health_port; }
-  int metrics_port() const { return metrics_port_; }
+  int metrics_port() const { return metrics_endpoint_.port; }
   CoordinatorMetrics& metrics() { return metrics_; }
 
   // Who is calling the job API: the tenant of the bearer token, and the folder under the
@@ -370,9 +370,8 @@ class CoordinatorServer::Impl {
   TokenTable tokens_;
   std::unique_ptr<grpc::Service> job_service_;
   std::unique_ptr<grpc::Service> carve_service_;
-  int metrics_port_ = 0;
   CoordinatorMetrics metrics_;
-  std::unique_ptr<prometheus::Exposer> exposer_;  // spec_.metrics_listen_address
+  MetricsEndpoint metrics_endpoint_;  // spec_.metrics_listen_address
   std::atomic<bool> stopping_{false};
   absl::Notification shutdown_done_;
   std::thread sweeper_;
@@ -551,18 +550,13 @@ absl::Status CoordinatorServer::Impl::Start() {
   if (!servers.ok()) return servers.status();
   servers_ = *std::move(servers);
   if (!spec_.metrics_listen_address.empty()) {
-    try {
-      exposer_ = std::make_unique<prometheus::Exposer>(spec_.metrics_listen_address, 1);
-      exposer_->RegisterCollectable(metrics_.registry());
-      const std::vector<int> ports = exposer_->GetListeningPorts();
-      metrics_port_ = ports.empty() ? 0 : ports.front();
-    } catch (const std::exception& e) {
-      return absl::UnavailableError(absl::StrCat("coordinator: cannot serve metrics on ",
-                                                 spec_.metrics_listen_address, ": ", e.what()));
-    }
+    absl::StatusOr<MetricsEndpoint> endpoint =
+        ServeMetrics(spec_.metrics_listen_address, {metrics_.registry()}, "coordinator");
+    if (!endpoint.ok()) return endpoint.status();
+    metrics_endpoint_ = *std::move(endpoint);
     spdlog::info("coordinator: metrics on http://{}:{}/metrics",
                  spec_.metrics_listen_address.substr(0, spec_.metrics_listen_address.rfind(':')),
-                 metrics_port_);
+                 metrics_endpoint_.port);
   }
   servers_.MarkServing({"carvemap.v1.JobService", "carvemap.v1.CarveTaskService"});
   const bool loopback = IsLoopbackAddress(spec_.listen_address);
@@ -626,7 +620,7 @@ void CoordinatorServer::Impl::Shutdown() {
     threads.swap(job_threads_);
   }
   for (std::thread& t : threads) t.join();
-  exposer_.reset();
+  metrics_endpoint_ = {};
   spdlog::info("coordinator: stopped");
   shutdown_done_.Notify();
 }

@@ -4,9 +4,7 @@
 
 #include <atomic>
 #include <chrono>
-#include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <string>
 #include <thread>
 #include <utility>
@@ -22,6 +20,8 @@
 #include "services/grpc_status.h"
 #include "services/rpc/bearer_tokens.h"
 #include "services/rpc/grpc_security.h"
+#include "services/rpc/merge_metrics.h"
+#include "services/rpc/process_metrics.h"
 #include "services/rpc/server_log.h"
 
 namespace carvemap {
@@ -39,19 +39,12 @@ constexpr auto kProgressInterval = std::chrono::milliseconds(200);
 // the coordinator accepts is 4 MiB; RemoteMerge raises it, and parts stay well below).
 constexpr size_t kRecarvePartBytes = size_t{1} << 20;
 
-// The process's resident and peak resident memory, MiB (/proc/self/status; 0 where there is
-// none). Logged as each merge stage starts: the stage during which the peak rose is the one
-// that sizes the merge service (deploy/k8s/base/merger.yaml).
+// The process's resident and peak resident memory, MiB. Logged as each merge stage starts:
+// the stage during which the peak rose is the one that sizes the merge service
+// (deploy/k8s/base/merger.yaml).
 std::pair<double, double> ResidentMiB() {
-  std::ifstream status("/proc/self/status");
-  std::string line;
-  double rss = 0, peak = 0;
-  while (std::getline(status, line)) {
-    double kib = 0;
-    if (std::sscanf(line.c_str(), "VmRSS: %lf kB", &kib) == 1) rss = kib / 1024;
-    if (std::sscanf(line.c_str(), "VmHWM: %lf kB", &kib) == 1) peak = kib / 1024;
-  }
-  return {rss, peak};
+  const ProcessStats s = ReadProcessStats();
+  return {double(s.resident_bytes) / (1 << 20), double(s.peak_resident_bytes) / (1 << 20)};
 }
 
 absl::Status ValidateJob(const pb::MergeJob& job) {
@@ -118,6 +111,7 @@ class MergeServer::Impl {
   void Wait() { shutdown_done_.WaitForNotification(); }
   int port() const { return servers_.port; }
   int health_port() const { return servers_.health_port; }
+  int metrics_port() const { return metrics_endpoint_.port; }
 
   absl::Status Authenticate(const grpc::ServerContext& ctx);
   // One call: the job, the merge, the verdict. Errors are the call's own (the merge's
@@ -139,6 +133,8 @@ class MergeServer::Impl {
   MergeServerSpec spec_;
   std::unique_ptr<grpc::Service> service_;
   GrpcServers servers_;  // the merge API; the plaintext health port if asked for
+  MergeMetrics metrics_;
+  MetricsEndpoint metrics_endpoint_;  // spec_.metrics_listen_address
   std::atomic<bool> stopping_{false};
   absl::Mutex shutdown_mu_;
   absl::Notification shutdown_done_;
@@ -198,6 +194,15 @@ absl::Status MergeServer::Impl::Start() {
   }
   spdlog::info("merger: listening on {}:{}",
                spec_.listen_address.substr(0, spec_.listen_address.rfind(':')), servers_.port);
+  if (!spec_.metrics_listen_address.empty()) {
+    absl::StatusOr<MetricsEndpoint> endpoint =
+        ServeMetrics(spec_.metrics_listen_address, {metrics_.registry()}, "merger");
+    if (!endpoint.ok()) return endpoint.status();
+    metrics_endpoint_ = *std::move(endpoint);
+    spdlog::info("merger: metrics on http://{}:{}/metrics",
+                 spec_.metrics_listen_address.substr(0, spec_.metrics_listen_address.rfind(':')),
+                 metrics_endpoint_.port);
+  }
   return absl::OkStatus();
 }
 
@@ -225,24 +230,29 @@ absl::Status MergeServer::Impl::Authenticate(const grpc::ServerContext& ctx) {
 }
 
 absl::Status MergeServer::Impl::TakeSlot(grpc::ServerContext& ctx, Stream& stream) {
-  bool reported = false;
+  bool queued = false;
+  auto leave = [&](absl::Status s) {
+    if (queued) metrics_.Dequeued();
+    return s;
+  };
   while (true) {
     {
       absl::MutexLock lock(&mu_);
       if (!busy_) {
         busy_ = true;
-        return absl::OkStatus();
+        return leave(absl::OkStatus());
       }
     }
-    if (stopping_) return absl::UnavailableError("merge service shutting down");
-    if (ctx.IsCancelled()) return absl::CancelledError("merge cancelled by the caller");
-    if (!reported) {
+    if (stopping_) return leave(absl::UnavailableError("merge service shutting down"));
+    if (ctx.IsCancelled()) return leave(absl::CancelledError("merge cancelled by the caller"));
+    if (!queued) {
       spdlog::info("merger: another job's merge runs; this one waits");
+      metrics_.Queued();
+      queued = true;
       pb::MergeServerMessage msg;
       msg.mutable_progress()->set_stage("queued");
       msg.mutable_progress()->set_total(1);
-      if (!stream.Write(msg)) return absl::CancelledError("the caller went away");
-      reported = true;
+      if (!stream.Write(msg)) return leave(absl::CancelledError("the caller went away"));
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
@@ -310,6 +320,7 @@ absl::Status MergeServer::Impl::Serve(grpc::ServerContext& ctx, Stream& stream) 
   LogScope log_scope({{"job", job.job_id()}});
   if (absl::Status s = TakeSlot(ctx, stream); !s.ok()) return s;
   const Clock::time_point t0 = Clock::now();
+  metrics_.MergeStarted(t0);
   spdlog::info("merger: job {}: merge started (attempt {}) -> {}", job.job_id(),
                std::max(1, job.attempt()), job.output_dir());
 
@@ -343,6 +354,7 @@ absl::Status MergeServer::Impl::Serve(grpc::ServerContext& ctx, Stream& stream) 
         return false;
       }
       if (stage != last_stage) {
+        metrics_.Stage(stage, Clock::now());
         const auto [rss, peak] = ResidentMiB();
         spdlog::info("merger: job {}: {} (resident {:.0f} MiB, peak so far {:.0f} MiB)",
                      job.job_id(), stage, rss, peak);
@@ -360,6 +372,10 @@ absl::Status MergeServer::Impl::Serve(grpc::ServerContext& ctx, Stream& stream) 
   }
   const absl::Status merged = spec_.merge(req);
   ReleaseSlot();
+  metrics_.MergeFinished(merged.ok()                                       ? "succeeded"
+                         : absl::IsCancelled(merged) || ctx.IsCancelled() ? "cancelled"
+                                                                          : "failed",
+                         Clock::now());
   const double seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   if (ctx.IsCancelled() || caller_gone) {
     spdlog::warn("merger: job {}: the caller cancelled or went away after {:.1f} s; merge stopped",
@@ -402,5 +418,6 @@ int MergeServer::port() const { return impl_->port(); }
 int MergeServer::health_port() const { return impl_->health_port(); }
 void MergeServer::Shutdown() { impl_->Shutdown(); }
 void MergeServer::Wait() { impl_->Wait(); }
+int MergeServer::metrics_port() const { return impl_->metrics_port(); }
 
 }  // namespace carvemap

@@ -34,6 +34,8 @@ struct MergeServerSpec {
   // A second, plaintext listener serving only grpc.health.v1 (Kubernetes' gRPC probes
   // cannot speak TLS). "" = none.
   std::string health_listen_address;
+  // Prometheus metrics over HTTP at /metrics (merge_metrics.h); "" = none, port 0: any.
+  std::string metrics_listen_address;
   // Largest message accepted from the coordinator (the MergeJob and re-carve answers are
   // small).
   int max_request_bytes = 1 << 20;
@@ -53,6 +55,7 @@ class MergeServer {
 
   [[nodiscard]] int port() const;
   [[nodiscard]] int health_port() const;  // 0 without a health listener
+  [[nodiscard]] int metrics_port() const;  // 0 without a metrics endpoint
   // Stops accepting calls; a running merge is stopped at its next progress step and its call
   // ends UNAVAILABLE without a result, so the coordinator runs it again elsewhere (or here,
   // after a restart). Idempotent.

@@ -27,7 +27,9 @@
 #include "services/grpc_status.h"
 #include "services/rpc/file_hash.h"
 #include "services/rpc/grpc_security.h"
+#include "services/rpc/process_metrics.h"
 #include "services/rpc/server_log.h"
+#include "services/rpc/worker_metrics.h"
 #include "storage/confined_path.h"
 #include "storage/hdf5_lock.h"
 #include "storage/partial_sums.h"
@@ -120,6 +122,7 @@ class WorkerServer::Impl {
     return end_status_;
   }
   int port() const { return port_; }
+  int metrics_port() const { return metrics_endpoint_.port; }
   std::string worker_id() {
     absl::MutexLock lock(&mu_);
     return worker_id_;
@@ -163,6 +166,8 @@ class WorkerServer::Impl {
   std::atomic<int64_t> unreachable_since_ms_{-1};
   std::atomic<int64_t> rays_since_heartbeat_{0};
   PartialIndexCache partial_indexes_;
+  WorkerMetrics metrics_;
+  MetricsEndpoint metrics_endpoint_;  // spec_.metrics_listen_address
   absl::Mutex shutdown_mu_;
 
   absl::Mutex mu_;
@@ -202,6 +207,15 @@ absl::Status WorkerServer::Impl::Start() {
           absl::StrCat("worker: cannot listen on ", spec_.listen_address));
     }
     SetServing(*health_, "", true);
+  }
+  if (!spec_.metrics_listen_address.empty()) {
+    absl::StatusOr<MetricsEndpoint> endpoint =
+        ServeMetrics(spec_.metrics_listen_address, {metrics_.registry()}, "worker");
+    if (!endpoint.ok()) return endpoint.status();
+    metrics_endpoint_ = *std::move(endpoint);
+    spdlog::info("worker: metrics on http://{}:{}/metrics",
+                 spec_.metrics_listen_address.substr(0, spec_.metrics_listen_address.rfind(':')),
+                 metrics_endpoint_.port);
   }
   heartbeat_thread_ = std::thread([this] { HeartbeatLoop(); });
   for (int i = 0; i < spec_.threads; ++i) threads_.emplace_back([this] { CarveLoop(); });
@@ -394,6 +408,7 @@ absl::Status WorkerServer::Impl::Carve(const pb::Lease& lease, pb::TileInfo& til
     absl::StatusOr<SliceCarveStats> result = CarveSliceToFile(
         *reader, slice, options, task.partial_path(), [this, &reported](uint64_t rays) {
           rays_since_heartbeat_ += int64_t(rays - reported);
+          metrics_.RaysCarved(rays - reported);
           reported = rays;
         });
     {
@@ -538,7 +553,13 @@ void WorkerServer::Impl::CarveLoop() {
     LogScope log_scope(LeaseLogFields(lease.lease_id(), *id));  // JSON logs: job, chunk
     pb::TileInfo tile;
     pb::CarveStats stats;
+    metrics_.TaskStarted();
+    const auto t0 = std::chrono::steady_clock::now();
     absl::Status carved = Carve(lease, tile, stats);
+    metrics_.TaskFinished(
+        lease.has_slice() ? "slice" : "combine", carved.ok(),
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+        uint64_t(tile.size_bytes()));
     if (!carved.ok()) {
       spdlog::error("worker {}: {} (lease {}): {}", *id, TaskName(lease), lease.lease_id(),
                     carved.ToString());
@@ -574,6 +595,7 @@ absl::StatusOr<std::unique_ptr<WorkerServer>> WorkerServer::Start(WorkerSpec spe
 }
 
 int WorkerServer::port() const { return impl_->port(); }
+int WorkerServer::metrics_port() const { return impl_->metrics_port(); }
 std::string WorkerServer::worker_id() const { return impl_->worker_id(); }
 void WorkerServer::Shutdown() { impl_->Shutdown(); }
 absl::Status WorkerServer::Wait() { return impl_->Wait(); }

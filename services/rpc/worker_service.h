@@ -17,6 +17,8 @@ namespace carvemap {
 struct WorkerSpec {
   std::string coordinator_address;          // "host:port" of the CarveTaskService
   std::string listen_address = "127.0.0.1:0";  // health endpoint; "" = none
+  // Prometheus metrics over HTTP at /metrics (worker_metrics.h); "" = none, port 0: any.
+  std::string metrics_listen_address;
   int threads = 1;                          // tasks (slices, chunks) run in parallel
   // A slice's chunk sums held before they are written out (worker/slice_carver.h), per thread.
   size_t slice_memory_bytes = 256u << 20;
@@ -38,6 +40,7 @@ class WorkerServer {
   WorkerServer& operator=(const WorkerServer&) = delete;
 
   [[nodiscard]] int port() const;  // 0 without a health endpoint
+  [[nodiscard]] int metrics_port() const;  // 0 without a metrics endpoint
   // The id the coordinator gave it; empty until registered (and again while registering anew).
   [[nodiscard]] std::string worker_id() const;
   // Stops leasing; a carve in progress finishes (its lease is then completed). Idempotent.

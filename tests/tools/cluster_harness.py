@@ -162,7 +162,8 @@ class Cluster:
 
     def __init__(self, carvemap, work, data_root, output_root, tenants=None, shared_dirs=None,
                  listen_host="127.0.0.1", heartbeat_s=0.5, worker_timeout_s=3.0,
-                 max_attempts=5, log_format=None, extra_coordinator_args=(), mergers=1):
+                 max_attempts=5, log_format=None, extra_coordinator_args=(), mergers=1,
+                 extra_merger_args=()):
         self.carvemap = carvemap
         self.work = os.path.abspath(work)
         self.data_root = os.path.abspath(data_root)
@@ -176,6 +177,7 @@ class Cluster:
         self.max_attempts = max_attempts
         self.log_format = log_format
         self.extra_coordinator_args = list(extra_coordinator_args)
+        self.extra_merger_args = list(extra_merger_args)
         self.tokens_file = os.path.join(self.work, "tokens")
         self.secret_file = os.path.join(self.work, "cluster-secret")
         write_private(self.tokens_file,
@@ -262,6 +264,7 @@ class Cluster:
             os.remove(port_file)
         args = [self.carvemap, "merger", "--listen", f"127.0.0.1:{self.merger_ports[n - 1]}",
                 "--port-file", port_file, "--cluster-secret-file", self.secret_file]
+        args += self.extra_merger_args
         if self.log_format:
             args += ["--log-format", self.log_format]
         proc = self._spawn(args, log_path)
