@@ -122,6 +122,9 @@ absl::Status SensorData::CheckFrameRange(uint64_t row, const FrameRecord& f) con
 struct ScanReader::Impl {
   std::string file;
   Hid fid;
+  // OpenOptions::world_yaw_rad as a rotation; identity (and never applied) for 0.
+  double yaw = 0;
+  Eigen::Quaterniond turn = Eigen::Quaterniond::Identity();
   std::vector<PathRecord> path;
   std::vector<TimedPose> timed_path;
   std::optional<std::vector<PathCovariance>> path_cov;
@@ -285,6 +288,9 @@ absl::Status ScanReader::Impl::LoadPath(uint64_t first, uint64_t n) {
   if (absl::Status s = h5::ReadRows(dataset->get(), mem.get(), 0, first, n, path.data()); !s.ok()) {
     return h5::Prefixed(absl::StrCat(file, ": /path"), s);
   }
+  if (yaw != 0) {
+    for (PathRecord& p : path) TurnAboutVertical(yaw, p);
+  }
   timed_path.clear();
   timed_path.reserve(path.size());
   for (const PathRecord& p : path) {
@@ -300,9 +306,13 @@ absl::Status ScanReader::Impl::LoadPathCov(uint64_t first, uint64_t n) {
   auto dataset = OpenDataset("/path_cov");
   if (!dataset.ok()) return dataset.status();
   path_cov.emplace(n);
-  return h5::Prefixed(
+  absl::Status s = h5::Prefixed(
       absl::StrCat(file, ": /path_cov"),
       h5::ReadRows(dataset->get(), H5T_NATIVE_FLOAT, 12, first, n, path_cov->data()));
+  if (s.ok() && yaw != 0) {
+    for (PathCovariance& c : *path_cov) TurnAboutVertical(yaw, c);
+  }
+  return s;
 }
 
 absl::Status ScanReader::Impl::LoadMagnetometer() {
@@ -455,6 +465,12 @@ absl::StatusOr<std::unique_ptr<ScanReader>> ScanReader::Open(const std::string& 
   }
   auto impl = std::make_unique<Impl>();
   impl->file = path;
+  if (!std::isfinite(options.world_yaw_rad)) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": world yaw is not finite"));
+  }
+  impl->yaw = options.world_yaw_rad;
+  impl->turn =
+      Eigen::Quaterniond(Eigen::AngleAxisd(options.world_yaw_rad, Eigen::Vector3d::UnitZ()));
   const hid_t fid = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
   if (fid < 0) {
     // HDF5 1.10 compares the superblock's end-of-file address with the file's size.
@@ -706,7 +722,55 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> ScanReader::PathPositions() {
     return absl::OkStatus();
   });
   if (!s.ok()) return s;
+  if (impl_->yaw != 0) {
+    for (Eigen::Vector3d& x : positions) x = impl_->turn * x;
+  }
   return positions;
+}
+
+absl::StatusOr<std::vector<Eigen::Vector3d>> ScanReader::MagnetometerInWorld() {
+  std::vector<Eigen::Vector3d> out;
+  if (!impl_->has_magnetometer) return out;
+  std::vector<MagnetometerRecord> readings;
+  if (impl_->magnetometer) {
+    readings = *impl_->magnetometer;
+  } else {
+    if (absl::Status s = impl_->LoadMagnetometer(); !s.ok()) return s;
+    readings = *std::move(impl_->magnetometer);
+    impl_->magnetometer.reset();
+  }
+  std::stable_sort(readings.begin(), readings.end(),
+                   [](const MagnetometerRecord& a, const MagnetometerRecord& b) { return a.t < b.t; });
+  out.reserve(readings.size());
+  // One pass over the path in blocks: each reading between two consecutive poses takes their
+  // interpolation (§2.4), as PoseAt does on a path held whole.
+  size_t next = 0;
+  bool have_previous = false;
+  TimedPose previous;
+  absl::Status s = impl_->ForEachPathBlock([&](uint64_t, std::span<const PathRecord> block) {
+    for (const PathRecord& p : block) {
+      const TimedPose pose{p.t, Pose{Eigen::Quaterniond(p.qw, p.qx, p.qy, p.qz).normalized(),
+                                     Eigen::Vector3d(p.x, p.y, p.z)}};
+      while (next < readings.size() && readings[next].t < pose.t) {
+        if (have_previous && readings[next].t >= previous.t) {
+          const double u = (readings[next].t - previous.t) / (pose.t - previous.t);
+          const Pose at = InterpolatePose(previous.pose, pose.pose, u);
+          const MagnetometerRecord& m = readings[next];
+          out.push_back(impl_->turn * (at.rotation * Eigen::Vector3d(m.mx, m.my, m.mz)));
+        }
+        ++next;
+      }
+      while (next < readings.size() && readings[next].t == pose.t) {
+        const MagnetometerRecord& m = readings[next++];
+        out.push_back(impl_->turn * (pose.pose.rotation * Eigen::Vector3d(m.mx, m.my, m.mz)));
+      }
+      previous = pose;
+      have_previous = true;
+    }
+    return absl::OkStatus();
+  });
+  if (!s.ok()) return s;
+  return out;
 }
 
 absl::Status ScanReader::Impl::ValidatePath() const {

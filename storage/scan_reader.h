@@ -41,6 +41,11 @@ class ScanReader {
     // either way: PoseAt, the covariance and the angular velocity at any of those frames'
     // times (each reads the two poses around it) come out as from the whole path.
     std::vector<RowRange> frame_rows;
+    // The turn about the vertical through the scan frame's origin (x = y = 0) applied to every
+    // pose, covariance and position the reader returns, radians counter-clockwise seen from
+    // above: the §2.3 north alignment (services/geometry/north_alignment.h). 0 = the file's
+    // frame, untouched bit for bit.
+    double world_yaw_rad = 0;
   };
   // Errors name the file and the dataset, e.g.
   // "scan.h5: /sensors/h0/frames: missing field 'count'".
@@ -90,6 +95,11 @@ class ScanReader {
   // Every pose's position (/path x, y, z), read in blocks whatever Open kept of the path: 24
   // bytes per pose where the whole path is ~190.
   absl::StatusOr<std::vector<Eigen::Vector3d>> PathPositions();
+  // The magnetometer readings taken into the world frame through the pose at their times
+  // (§2.3: R(t)·m, readings in the system frame), world_yaw_rad applied; the path read in
+  // blocks whatever Open kept. Readings outside the path's time span are left out. Empty
+  // without /magnetometer.
+  absl::StatusOr<std::vector<Eigen::Vector3d>> MagnetometerInWorld();
   // A sensor's /frames rows (time, first point, count), read in blocks: 24 bytes per frame.
   absl::StatusOr<std::vector<FrameRecord>> FrameRecords(int sensor);
 

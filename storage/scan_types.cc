@@ -1,6 +1,28 @@
 #include "storage/scan_types.h"
 
+#include <Eigen/Geometry>
+
 namespace carvemap {
+
+void TurnAboutVertical(double yaw_rad, PathRecord& p) {
+  const Eigen::Quaterniond turn(Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ()));
+  const Eigen::Vector3d x = turn * Eigen::Vector3d(p.x, p.y, p.z);
+  const Eigen::Quaterniond q = turn * Eigen::Quaterniond(p.qw, p.qx, p.qy, p.qz);
+  p.x = x.x(), p.y = x.y(), p.z = x.z();
+  p.qw = q.w(), p.qx = q.x(), p.qy = q.y(), p.qz = q.z();
+}
+
+void TurnAboutVertical(double yaw_rad, PathCovariance& c) {
+  const Eigen::Matrix3d r = Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  for (int block = 0; block < 2; ++block) {
+    float* v = c.data() + 6 * block;  // xx xy xz yy yz zz
+    Eigen::Matrix3d m;
+    m << v[0], v[1], v[2], v[1], v[3], v[4], v[2], v[4], v[5];
+    const Eigen::Matrix3d t = r * m * r.transpose();
+    v[0] = float(t(0, 0)), v[1] = float(t(0, 1)), v[2] = float(t(0, 2));
+    v[3] = float(t(1, 1)), v[4] = float(t(1, 2)), v[5] = float(t(2, 2));
+  }
+}
 
 std::string_view SensorKindName(SensorKind kind) {
   switch (kind) {

@@ -24,6 +24,12 @@ struct PathRecord {
 // (same order, rad²) over a world-frame rotation vector e with R_est = Exp(e)·R_true.
 using PathCovariance = std::array<float, 12>;
 
+// The world frame turned by `yaw_rad` about the vertical through its origin (x = y = 0),
+// counter-clockwise seen from above: a pose's position and orientation, and a covariance's
+// two blocks (both over world-frame vectors: C' = R·C·Rᵀ). §2.3's north alignment.
+void TurnAboutVertical(double yaw_rad, PathRecord& pose);
+void TurnAboutVertical(double yaw_rad, PathCovariance& cov);
+
 enum class SensorKind { kLine, kGrid, kPoints };
 [[nodiscard]] std::string_view SensorKindName(SensorKind kind);  // "line", "grid", "points"
 

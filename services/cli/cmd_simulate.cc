@@ -122,6 +122,11 @@ void RegisterSimulate(CLI::App& app, int& exit_code) {
   cmd->add_option("--max-duration", o.max_duration_s,
                   "Stop the walk after this many seconds (0 = the whole walk)")
       ->capture_default_str();
+  cmd->add_option("--frame-yaw-deg", o.frame_yaw_deg,
+                  "Record the path in a frame turned this many degrees about the vertical, as a "
+                  "localizer that starts from its first heading does (§2.3); gt/ stays north-up")
+      ->check(CLI::Range(-360.0, 360.0))
+      ->capture_default_str();
   o.threads = UsableCpus();
   cmd->add_option("--threads", o.threads, "Ray-casting threads (output is the same for any)")
       ->capture_default_str();

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <numbers>
 #include <random>
 #include <thread>
 
@@ -154,6 +155,9 @@ absl::Status SimulateOptions::Validate() const {
     return absl::InvalidArgumentError("simulate: threads must be in [1, 256]");
   }
   if (max_duration_s < 0) return absl::InvalidArgumentError("simulate: max_duration_s < 0");
+  if (!std::isfinite(frame_yaw_deg)) {
+    return absl::InvalidArgumentError("simulate: frame_yaw_deg is not finite");
+  }
   if (absl::Status s = rig.Validate(); !s.ok()) return s;
   if (absl::Status s = walk.Validate(); !s.ok()) return s;
   return noise.Validate();
@@ -206,6 +210,11 @@ absl::StatusOr<SimulationSummary> SimulateBuilding(const Building& building,
         const Pose est = drift ? ApplyDrift(true_path[i].pose, err[i]) : true_path[i].pose;
         records.push_back(ToRecord(true_path[i].t, est));
         covs.push_back(DriftCovariance(none, true_path[i].t));
+        if (o.frame_yaw_deg != 0) {
+          const double yaw = o.frame_yaw_deg * std::numbers::pi / 180;
+          TurnAboutVertical(yaw, records.back());
+          TurnAboutVertical(yaw, covs.back());
+        }
       }
       if (absl::Status s = sink.AppendPath(records, covs); !s.ok()) return s;
     }

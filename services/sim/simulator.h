@@ -50,6 +50,10 @@ struct SimulateOptions {
   NoiseOptions noise;
   int threads = 1;            // ray-casting threads; output is identical for any count
   double max_duration_s = 0;  // > 0: stop the walk after this long (tests, benchmarks)
+  // The recorded path's frame turned by this about the vertical through the building's origin,
+  // degrees counter-clockwise: a localizer whose frame follows its first heading (§2.3) rather
+  // than north. gt/ stays in the building's frame (ENU, +y north, as the magnetometer's field).
+  double frame_yaw_deg = 0;
   [[nodiscard]] absl::Status Validate() const;
 };
 
