@@ -20,7 +20,8 @@ std::string JobParams::ToJson() const {
       {"floorplan_method", floorplan_method},
       {"trimmed_points", trimmed_points},
       {"min_object_volume_m3", min_object_volume_m3},
-      {"evaluation", evaluation == CarveEvaluation::kExact ? "exact" : "fast"}};
+      {"evaluation", evaluation == CarveEvaluation::kExact ? "exact" : "fast"},
+      {"north", NorthModeName(north)}};
   return j.dump();
 }
 
@@ -37,6 +38,8 @@ JobParams JobParams::FromJson(const std::string& text) {
   p.min_object_volume_m3 = j.value("min_object_volume_m3", 0.0);
   p.evaluation = j.value("evaluation", std::string("exact")) == "fast" ? CarveEvaluation::kFast
                                                                        : CarveEvaluation::kExact;
+  absl::StatusOr<NorthMode> north = ParseNorthMode(j.value("north", std::string("none")));
+  p.north = north.ok() ? *north : NorthMode::kNone;
   return p;
 }
 
@@ -104,6 +107,9 @@ absl::StatusOr<JobParams> ResolveJobParams(const JobParamsRequest& in) {
     default:
       return absl::InvalidArgumentError(absl::StrCat("unknown evaluation ", in.evaluation));
   }
+  absl::StatusOr<NorthMode> north = ParseNorthMode(in.north);
+  if (!north.ok()) return north.status();
+  p.north = *north;
   return p;
 }
 

@@ -8,6 +8,7 @@
 
 #include "absl/status/statusor.h"
 #include "services/geometry/carving_types.h"  // CarveEvaluation
+#include "services/geometry/north_alignment.h"  // NorthMode
 
 namespace carvemap {
 
@@ -29,6 +30,7 @@ struct JobParamsRequest {
   bool trimmed_points = false;
   double min_object_volume_m3 = 0;
   int evaluation = 0;  // jobs.proto CarveEvaluation: 0 unspecified, 1 fast, 2 exact
+  std::string north;   // §2.3: "auto", "magnetic", "none"; "" = auto
 };
 
 // The parameters a job runs with, every default filled in.
@@ -42,12 +44,14 @@ struct JobParams {
   bool trimmed_points = false;                          // §5.5 points.ply on request
   double min_object_volume_m3 = 0;                      // §5.6 specks; 0 = the merge's default
   CarveEvaluation evaluation = CarveEvaluation::kFast;  // eq 4.7 in the workers
+  NorthMode north = NorthMode::kAuto;                   // §2.3 (north_alignment.h)
 
   // One line of JSON, its keys in a fixed order: equal parameters give equal text (a
   // resubmission with the same idempotency key is compared by it).
   [[nodiscard]] std::string ToJson() const;
   // The stored text back. Keys a job stored before they existed take the value such a job
-  // ran with: no object_resolution_m → resolution_m (no re-carve), no evaluation → exact.
+  // ran with: no object_resolution_m → resolution_m (no re-carve), no evaluation → exact,
+  // no north → none.
   // Text that is not a JSON object gives the defaults.
   static JobParams FromJson(const std::string& text);
   bool operator==(const JobParams&) const = default;

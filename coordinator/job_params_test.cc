@@ -68,6 +68,7 @@ TEST(JobParamsTest, BadFieldsFailNamingThem) {
       {{.min_object_volume_m3 = -1}, absl::StatusCode::kInvalidArgument, "min_object_volume_m3"},
       {{.min_object_volume_m3 = nan}, absl::StatusCode::kInvalidArgument, "min_object_volume_m3"},
       {{.evaluation = 3}, absl::StatusCode::kInvalidArgument, "unknown evaluation 3"},
+      {{.north = "true"}, absl::StatusCode::kInvalidArgument, "north: 'true'"},
   };
   for (const Case& c : cases) {
     absl::StatusOr<JobParams> p = ResolveJobParams(c.request);
@@ -83,8 +84,10 @@ TEST(JobParamsTest, JsonRoundTrip) {
                                                   .floorplan_method = "eigencrust",
                                                   .trimmed_points = true,
                                                   .min_object_volume_m3 = 0.002,
-                                                  .evaluation = 2});
+                                                  .evaluation = 2,
+                                                  .north = "magnetic"});
   ASSERT_TRUE(p.ok()) << p.status();
+  EXPECT_EQ(p->north, NorthMode::kMagnetic);
   EXPECT_EQ(JobParams::FromJson(p->ToJson()), *p);
   JobParams defaults;
   EXPECT_EQ(JobParams::FromJson(defaults.ToJson()), defaults);
@@ -95,7 +98,8 @@ TEST(JobParamsTest, JsonTextIsFixed) {
   // it must not change for the same values.
   EXPECT_EQ(JobParams{}.ToJson(),
             R"({"evaluation":"fast","floorplan_method":"rooms","method":1,)"
-            R"("min_object_volume_m3":0.0,"object_resolution_m":0.0625,"resolution_m":0.0625,)"
+            R"("min_object_volume_m3":0.0,"north":"auto","object_resolution_m":0.0625,)"
+            R"("resolution_m":0.0625,)"
             R"("trimmed_points":false,"workers_hint":0})");
 }
 
@@ -105,6 +109,7 @@ TEST(JobParamsTest, JobsStoredBeforeAKeyExistedResumeAsTheyRan) {
   EXPECT_EQ(p.object_resolution_m, 0.03125);  // no re-carve
   EXPECT_EQ(p.evaluation, CarveEvaluation::kExact);
   EXPECT_EQ(p.floorplan_method, "rooms");
+  EXPECT_EQ(p.north, NorthMode::kNone);  // carved in the scan's frame
   // Not an object: the defaults.
   EXPECT_EQ(JobParams::FromJson("not json"), JobParams{});
   EXPECT_EQ(JobParams::FromJson("[1, 2]"), JobParams{});

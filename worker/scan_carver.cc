@@ -138,8 +138,9 @@ absl::StatusOr<ScanCarveTotals> CarveScan(
         std::unique_ptr<ScanReader> reader;
         {
           std::lock_guard<std::mutex> lock(Hdf5Lock());
-          absl::StatusOr<std::unique_ptr<ScanReader>> r =
-              ScanReader::Open(scan_path, SliceOpenOptions(s));
+          ScanReader::OpenOptions open = SliceOpenOptions(s);
+          open.world_yaw_rad = options.world_yaw_rad;
+          absl::StatusOr<std::unique_ptr<ScanReader>> r = ScanReader::Open(scan_path, open);
           if (!r.ok()) return r.status();
           reader = *std::move(r);
         }

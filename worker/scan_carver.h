@@ -36,6 +36,8 @@ struct ScanCarveOptions {
   const std::map<ChunkKey, ChunkRegion, ChunkKeyLess>* regions = nullptr;
   size_t memory_budget_bytes = 256u << 20;  // per slice being carved
   bool keep_partials = false;
+  // §2.3's turn to north, applied to every pose read (ScanReader::OpenOptions).
+  double world_yaw_rad = 0;
 };
 
 struct ScanCarveProgress {

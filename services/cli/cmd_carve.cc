@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <numbers>
 #include <string>
 #include <system_error>
 #include <vector>
@@ -21,6 +22,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "coordinator/scan_north.h"
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
 #include "services/geometry/octree_keys.h"
@@ -44,6 +46,7 @@ struct CarveFlags {
   std::string evaluation = "fast";  // eq 4.7: worker/chunk_octree.h
   bool keep_partials = false;
   bool quiet = false;
+  std::string north = "auto";  // §2.3: coordinator/scan_north.h
 };
 
 double SecondsSince(Clock::time_point t0) {
@@ -56,6 +59,8 @@ absl::Status RunCarve(const CarveFlags& flags) {
   if (!grid.ok()) return grid.status();
   if (flags.threads < 1) return absl::InvalidArgumentError("--threads must be >= 1");
   if (!(flags.slice_s >= 0)) return absl::InvalidArgumentError("--slice-s must be >= 0");
+  absl::StatusOr<NorthMode> north_mode = ParseNorthMode(flags.north);
+  if (!north_mode.ok()) return north_mode.status();
 
   const fs::path out(flags.output_dir);
   const fs::path partials_dir = out / "partials";
@@ -70,6 +75,16 @@ absl::Status RunCarve(const CarveFlags& flags) {
   fs::remove_all(partial_dir, ec);
   // An older run's tiles must not pass for this run's if this one fails.
   fs::remove_all(tiles_dir, ec);
+  const fs::path north_path = out / "north.json";
+  fs::remove(north_path, ec);
+  absl::StatusOr<ScanNorth> north = NorthOfScanFile(flags.scan_path, *north_mode);
+  if (!north.ok()) return north.status();
+  if (north->decision.turned) {
+    std::printf("north: turned %.2f° about the vertical to magnetic north (§2.3)\n",
+                north->decision.yaw_rad * 180 / std::numbers::pi);
+  } else if (north->decision.warn) {
+    std::fprintf(stderr, "carve: warning: north: %s\n", north->decision.note.c_str());
+  }
 
   ProgressLine line(!flags.quiet);
   ScanCarveOptions options;
@@ -83,6 +98,7 @@ absl::Status RunCarve(const CarveFlags& flags) {
   options.slices.slice_s = flags.slice_s;
   options.memory_budget_bytes = flags.slice_memory_mb << 20;
   options.keep_partials = flags.keep_partials;
+  options.world_yaw_rad = north->decision.yaw_rad;
   const Clock::time_point carve_t0 = Clock::now();
   absl::StatusOr<ScanCarveTotals> carved =
       CarveScan(flags.scan_path, options, [&](const ScanCarveProgress& p) {
@@ -106,6 +122,14 @@ absl::Status RunCarve(const CarveFlags& flags) {
     return absl::Status(carved.status().code(),
                         absl::StrCat(carved.status().message(), " (no tiles kept: ",
                                      partial_dir.string(), " removed)"));
+  }
+  // What `carvemap merge OUT/tiles --scan` reads back: the turn the tiles were carved with.
+  nlohmann::json north_doc = NorthJson(*north);
+  north_doc["yaw_rad"] = north->decision.yaw_rad;
+  if (absl::Status s = WriteFileAtomically(
+          north_path.string(), [&](std::ostream& o) { o << north_doc.dump(2) << "\n"; });
+      !s.ok()) {
+    return s;
   }
   // The swap: OUT/tiles/ only ever holds a complete run.
   fs::create_directories(partial_dir, ec);  // a scan without chunks still gives a tiles/ dir
@@ -170,6 +194,13 @@ void RegisterCarve(CLI::App& app, int& exit_code) {
                   "precision, the reference; the same votes, within the tolerance in "
                   "worker/chunk_octree.h)")
       ->check(CLI::IsMember({"fast", "exact"}))
+      ->capture_default_str();
+  cmd->add_option("--north", flags->north,
+                  "§2.3: turn the tiles about the vertical to magnetic north (+y) from the "
+                  "scan's /magnetometer: auto (when the fit is confident and the turn is at least "
+                  "1°), magnetic (always; an error without a confident fit) or none. Recorded in "
+                  "OUT/north.json, which `carvemap merge` reads")
+      ->check(CLI::IsMember({"auto", "magnetic", "none"}))
       ->capture_default_str();
   cmd->add_flag("--keep-partials", flags->keep_partials,
                 "Keep OUT/partials/ (each slice's partial sums per chunk)");

@@ -132,6 +132,12 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
                      "precision, the reference; the same votes, within the tolerance in "
                      "worker/chunk_octree.h)")
       ->check(CLI::IsMember({"fast", "exact"}));
+  submit->add_option("--north", flags->submit.north,
+                     "§2.3: turn the outputs about the vertical to magnetic north (+y) from the "
+                     "scan's /magnetometer: auto (when the fit is confident and the turn is at "
+                     "least 1°; job.json's \"north\" says why not), magnetic (always; the job fails "
+                     "without a confident fit) or none")
+      ->check(CLI::IsMember({"auto", "magnetic", "none"}));
   submit->add_option("--idempotency-key", flags->submit.idempotency_key,
                      "Submitting twice with the same key returns the first job");
   submit->add_flag("--watch", flags->watch, "Watch the job until it ends");

@@ -23,6 +23,7 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "coordinator/scan_north.h"
 #include "services/cli/commands.h"
 #include "services/floorplan/floorplan_export.h"
 #include "services/floorplan/floorplan_pipeline.h"
@@ -46,6 +47,7 @@ struct FloorplanFlags {
   std::string path_csv;
   std::string cloud;  // scan.h5: the point-cloud route instead of --gridmap/--path
   std::string scan;   // scan.h5 of horizontal line scanners: the grid built from its rays
+  std::string north = "auto";  // §2.3 for --scan and --cloud (coordinator/scan_north.h)
   ScanOccupancyOptions occupancy;
   std::string output_dir;
   std::string method = "rooms";
@@ -233,6 +235,20 @@ absl::Status RunFloorplan(FloorplanFlags& f) {
   nlohmann::json timings = nlohmann::json::object();
   nlohmann::json input, params;
   size_t total_samples = 0, total_rooms = 0, total_removed = 0;
+  // §2.3 for the routes from a scan.h5: the turn to north it is read with.
+  nlohmann::json north_doc;
+  double world_yaw_rad = 0;
+  if (from_cloud || from_scan) {
+    absl::StatusOr<NorthMode> mode = ParseNorthMode(f.north);
+    if (!mode.ok()) return mode.status();
+    absl::StatusOr<ScanNorth> north = NorthOfScanFile(from_cloud ? f.cloud : f.scan, *mode);
+    if (!north.ok()) return north.status();
+    if (north->decision.warn) {
+      std::fprintf(stderr, "floorplan: warning: north: %s\n", north->decision.note.c_str());
+    }
+    world_yaw_rad = north->decision.yaw_rad;
+    north_doc = NorthJson(*north);
+  }
   if (!from_cloud) {
     absl::StatusOr<Image<uint8_t>> map;
     absl::StatusOr<std::vector<Eigen::Vector2d>> path;
@@ -240,7 +256,9 @@ absl::Status RunFloorplan(FloorplanFlags& f) {
     auto t0 = std::chrono::steady_clock::now();
     if (from_scan) {
       // The grid from the scan's rays, then the grid-map route on it (§3.1.2).
-      absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(f.scan);
+      ScanReader::OpenOptions open;
+      open.world_yaw_rad = world_yaw_rad;
+      absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(f.scan, open);
       if (!reader.ok()) return reader.status();
       if (absl::Status s = CheckHorizontalLineSensors(f.scan, (*reader)->sensors()); !s.ok()) {
         return s;
@@ -305,7 +323,8 @@ absl::Status RunFloorplan(FloorplanFlags& f) {
     total_removed = result->labeling.removed_rooms;
   } else {
     // §3.1.1 on the scan's returns: levels (§2.5), then all levels' samples in two passes.
-    absl::StatusOr<std::unique_ptr<ScanCloudStream>> scan = ScanCloudStream::Open(f.cloud);
+    absl::StatusOr<std::unique_ptr<ScanCloudStream>> scan =
+        ScanCloudStream::Open(f.cloud, /*validate=*/true, world_yaw_rad);
     if (!scan.ok()) return scan.status();
     auto t0 = std::chrono::steady_clock::now();
     absl::StatusOr<HeightHistogram> histogram = PointCloudHeightHistogram((*scan)->Stream());
@@ -371,6 +390,7 @@ absl::Status RunFloorplan(FloorplanFlags& f) {
                         {"timings_s", timings},
                         {"rooms", rooms},
                         {"outputs", outputs}};
+  if (!north_doc.is_null()) job["north"] = north_doc;
   if (absl::Status s = WriteFileAtomically((out / "job.json").string(),
                                            [&](std::ostream& o) { o << job.dump(2) << "\n"; });
       !s.ok()) {
@@ -419,6 +439,13 @@ void RegisterFloorplan(CLI::App& app, int& exit_code) {
       ->check(CLI::ExistingFile)
       ->excludes(gridmap)
       ->excludes(path);
+  cmd->add_option("--north", f->north,
+                  "§2.3 with --scan or --cloud: turn the plan about the vertical to magnetic "
+                  "north (+y) from the scan's /magnetometer: auto (when the fit is confident and "
+                  "the turn is at least 1°), magnetic (always; an error without a confident fit) "
+                  "or none")
+      ->check(CLI::IsMember({"auto", "magnetic", "none"}))
+      ->capture_default_str();
   cmd->add_option("--ray-max-range", f->occupancy.max_range_m,
                   "With --scan: returns further than this carve free space up to it and mark "
                   "no wall, m (0 = no limit)")

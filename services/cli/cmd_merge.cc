@@ -2,15 +2,22 @@
 // §6, §7) of a tiles directory: OUT/octree.bt, OUT/levels.json, OUT/level_<k>/topdown.png (+
 // topdown.json), with --scan OUT/level_<k>/floorplan.geojson, floorplan.svg and extruded.ply,
 // OUT/mesh/dense.ply, OUT/mesh/building.ply and OUT/job.json.
+#include <filesystem>
+#include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <numbers>
+#include <optional>
 #include <string>
 
 #include <CLI/CLI.hpp>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "coordinator/scan_north.h"
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
 #include "services/merge/merge_job.h"
@@ -18,11 +25,56 @@
 namespace carvemap {
 namespace {
 
+namespace fs = std::filesystem;
+
 struct MergeFlags {
   MergeOptions options;
   double cache_mb = 256;
   bool quiet = false;
+  std::string north;  // "" = what the carve recorded (TILES/../north.json), else auto
 };
+
+// §2.3: the turn the scan is read with, which must be the one the tiles were carved with.
+// `carvemap carve` records it in OUT/north.json beside OUT/tiles/.
+absl::Status ResolveNorth(MergeFlags& flags) {
+  fs::path tiles = fs::path(flags.options.tiles_dir).lexically_normal();
+  if (!tiles.has_filename()) tiles = tiles.parent_path();  // "OUT/tiles/"
+  const fs::path recorded_path = tiles.parent_path() / "north.json";
+  std::optional<nlohmann::json> recorded;
+  if (std::ifstream in(recorded_path); in) {
+    nlohmann::json j = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+    if (!j.is_object() || !j.contains("yaw_rad") || !j["yaw_rad"].is_number()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(recorded_path.string(), ": not a north record (no number 'yaw_rad')"));
+    }
+    recorded = std::move(j);
+  }
+  if (flags.options.scan_path.empty()) {
+    if (recorded) flags.options.job["north"] = *recorded;
+    return absl::OkStatus();  // no path or points are read: the turn does not matter
+  }
+  if (recorded && flags.north.empty()) {
+    flags.options.world_yaw_rad = (*recorded)["yaw_rad"].get<double>();
+    flags.options.job["north"] = *recorded;
+    return absl::OkStatus();
+  }
+  absl::StatusOr<NorthMode> mode = ParseNorthMode(flags.north);
+  if (!mode.ok()) return mode.status();
+  absl::StatusOr<ScanNorth> north = NorthOfScanFile(flags.options.scan_path, *mode);
+  if (!north.ok()) return north.status();
+  if (recorded && (*recorded)["yaw_rad"].get<double>() != north->decision.yaw_rad) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "--north %s turns the scan by %.4f°, but the tiles were carved turned by %.4f° (%s): "
+        "leave --north out to use the carve's",
+        flags.north, north->decision.yaw_rad * 180 / std::numbers::pi,
+        (*recorded)["yaw_rad"].get<double>() * 180 / std::numbers::pi, recorded_path.string()));
+  }
+  flags.options.world_yaw_rad = north->decision.yaw_rad;
+  nlohmann::json doc = NorthJson(*north);
+  doc["yaw_rad"] = north->decision.yaw_rad;
+  flags.options.job["north"] = doc;
+  return absl::OkStatus();
+}
 
 absl::Status RunMergeCommand(MergeFlags& flags) {
   flags.options.cache_budget_bytes = static_cast<uint64_t>(flags.cache_mb * (1 << 20));
@@ -30,6 +82,7 @@ absl::Status RunMergeCommand(MergeFlags& flags) {
                        {"params",
                         {{"floorplan", flags.options.floorplan_method},
                          {"points", flags.options.trimmed_points}}}};
+  if (absl::Status s = ResolveNorth(flags); !s.ok()) return s;
   ProgressLine line(!flags.quiet);
   auto progress = [&line](const MergeProgress& p) {
     line.Update("merge: %s %llu/%llu", p.stage.c_str(),
@@ -101,6 +154,11 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
                   "With --scan: objects with less volume than this, m³, are specks and dropped "
                   "(§5.6); 0 = the default, 0.005 (5 litres)")
       ->check(CLI::Range(0.0, 1000.0));
+  cmd->add_option("--north", flags->north,
+                  "§2.3 with --scan: the turn to magnetic north the tiles were carved with "
+                  "(auto, magnetic or none, as `carvemap carve --north`); default: what the carve "
+                  "recorded in TILES/../north.json, else auto")
+      ->check(CLI::IsMember({"auto", "magnetic", "none"}));
   cmd->add_option("--resolution", flags->options.resolution_m,
                   "Octree resolution in m (2 m / 2^k); default: the tiles'");
   cmd->add_option("--cache-mb", flags->cache_mb, "Decoded-tile cache budget in MiB")

@@ -45,6 +45,7 @@ struct RunFlags {
   bool trimmed_points = false;
   double min_object_volume_m3 = 0;  // 0 = the merge's default
   std::string evaluation = "fast";  // eq 4.7 in the workers
+  std::string north = "auto";       // §2.3 (services/geometry/north_alignment.h)
   std::string storage_root;
   // Short defaults on one machine: a killed worker's chunks come back within seconds.
   double heartbeat_interval_s = 1.0;
@@ -228,17 +229,19 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   submit.trimmed_points = flags.trimmed_points;
   submit.min_object_volume_m3 = flags.min_object_volume_m3;
   submit.evaluation = flags.evaluation;
+  submit.north = flags.north;
   // The job id follows from the key (and tiles record it), so repeated runs of the same scan
   // and resolutions give byte-identical tiles whatever the number of workers. The method,
-  // --points, --min-object-volume and --evaluation are in the key only when not the default,
-  // so the default's job ids stay as they were.
+  // --points, --min-object-volume, --evaluation and --north are in the key only when not the
+  // default, so the default's job ids stay as they were.
   submit.idempotency_key = absl::StrCat(
       "carvemap run ", scan.filename().string(), " ", flags.resolution_m, " ",
       flags.object_resolution_m,
       flags.floorplan_method == "rooms" ? "" : absl::StrCat(" ", flags.floorplan_method),
       flags.trimmed_points ? " points" : "",
       flags.min_object_volume_m3 > 0 ? absl::StrCat(" ", flags.min_object_volume_m3) : "",
-      flags.evaluation == "fast" ? "" : absl::StrCat(" ", flags.evaluation));
+      flags.evaluation == "fast" ? "" : absl::StrCat(" ", flags.evaluation),
+      flags.north == "auto" ? "" : absl::StrCat(" north=", flags.north));
   absl::StatusOr<JobInfo> job = state.client->Submit(submit);
   if (!job.ok()) return job.status();
   {
@@ -317,6 +320,13 @@ void RegisterRun(CLI::App& app, int& exit_code) {
                   "precision, the reference; the same votes, within the tolerance in "
                   "worker/chunk_octree.h)")
       ->check(CLI::IsMember({"fast", "exact"}))
+      ->capture_default_str();
+  cmd->add_option("--north", flags->north,
+                  "§2.3: turn the outputs about the vertical to magnetic north (+y) from the "
+                  "scan's /magnetometer: auto (when the fit is confident and the turn is at "
+                  "least 1°; job.json's \"north\" says why not), magnetic (always; the job fails "
+                  "without a confident fit) or none")
+      ->check(CLI::IsMember({"auto", "magnetic", "none"}))
       ->capture_default_str();
   cmd->add_option("--storage-root", flags->storage_root,
                   "Keep tiles under <storage-root>/<job>/tiles instead of OUT/tiles");

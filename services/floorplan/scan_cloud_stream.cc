@@ -5,8 +5,11 @@
 namespace carvemap {
 
 absl::StatusOr<std::unique_ptr<ScanCloudStream>> ScanCloudStream::Open(const std::string& path,
-                                                                       bool validate) {
-  absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(path);
+                                                                       bool validate,
+                                                                       double world_yaw_rad) {
+  ScanReader::OpenOptions open;
+  open.world_yaw_rad = world_yaw_rad;
+  absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(path, open);
   if (!reader.ok()) return reader.status();
   if (validate) {
     if (absl::Status s = (*reader)->Validate(); !s.ok()) return s;

@@ -22,9 +22,11 @@ namespace carvemap {
 class ScanCloudStream {
  public:
   // Opens the scan; with `validate`, checks every row first (ScanReader::Validate, one extra
-  // read of the file). Errors name the file (and dataset and row).
+  // read of the file). Errors name the file (and dataset and row). `world_yaw_rad`: the §2.3
+  // turn to north (ScanReader::OpenOptions).
   static absl::StatusOr<std::unique_ptr<ScanCloudStream>> Open(const std::string& path,
-                                                               bool validate = true);
+                                                               bool validate = true,
+                                                               double world_yaw_rad = 0);
 
   // The recorded system path (/path), time order.
   [[nodiscard]] const std::vector<TimedPose>& path() const { return reader_->timed_path(); }

@@ -55,6 +55,10 @@ struct MergeOptions {
   // floor plans their scanner positions (§3.3.1 lines of sight, §3.3.2 unentered rooms). Empty: no
   // floor plans (job.json says why under "warnings").
   std::string scan_path;
+  // RunMerge only: the §2.3 turn to north the tiles were carved with
+  // (ScanReader::OpenOptions::world_yaw_rad): the scan's path and points are read turned by
+  // it, so that they lie where the tiles do.
+  double world_yaw_rad = 0;
   // RunMerge only, §5.5 on request: OUT/points.ply, the scan's returns in the world frame
   // without those the floor plans trim (services/merge/trimmed_points.h). Needs scan_path
   // and floor plans: without either, job.json warns and there is no file (the other outputs

@@ -86,9 +86,11 @@ ChunkProgressFn StageProgress(const MergeProgressCallback& progress, const char*
 
 // The recorded system path of the job's scan (docs/DESIGN.md §3 /path): the scanner positions of
 // the floor plans (§3.3.1), 24 bytes per pose; the poses' other fields are not read.
-absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string& scan_path) {
+absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string& scan_path,
+                                                               double world_yaw_rad) {
   ScanReader::OpenOptions open;
   open.path_rows = ScanReader::PathRows::kNone;
+  open.world_yaw_rad = world_yaw_rad;
   absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan_path, open);
   if (!reader.ok()) return reader.status();
   return (*reader)->PathPositions();
@@ -114,7 +116,7 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
     warnings.push_back("floorplan: no levels found; no floor plans");
     return absl::OkStatus();
   }
-  absl::StatusOr<std::vector<Eigen::Vector3d>> path = ReadPathPositions(options.scan_path);
+  absl::StatusOr<std::vector<Eigen::Vector3d>> path = ReadPathPositions(options.scan_path, options.world_yaw_rad);
   if (!path.ok()) return path.status();
   const OctreeLabelFn label_at = [&tiles](const Eigen::Vector3d& x) -> absl::StatusOr<OctreeLabel> {
     absl::StatusOr<LeafQuery> q = tiles.Query(x);
@@ -362,7 +364,8 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
     t0 = Clock::now();
     if (absl::Status s = ReportMergeProgress(progress, "trimmed_points", 0, 1); !s.ok()) return s;
     absl::StatusOr<std::unique_ptr<ScanCloudStream>> scan =
-        ScanCloudStream::Open(options.scan_path, /*validate=*/false);  // the floor plans read it
+        ScanCloudStream::Open(options.scan_path, /*validate=*/false,  // the floor plans read it
+                              options.world_yaw_rad);
     if (!scan.ok()) return scan.status();
     absl::StatusOr<TrimmedPointsCounts> points = WriteTrimmedPoints(
         (*scan)->Stream(), *volume, seg_options.trim_distance_m, (out / "points.ply").string());

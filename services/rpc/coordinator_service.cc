@@ -31,6 +31,7 @@
 #include "coordinator/lease_id.h"
 #include "coordinator/lease_table.h"
 #include "coordinator/rate_window.h"
+#include "coordinator/scan_north.h"
 #include "coordinator/scan_slices.h"
 #include "coordinator/worker_registry.h"
 #include "storage/hdf5_lock.h"
@@ -70,7 +71,8 @@ JobParamsRequest FromProto(const pb::JobParams& in) {
           .floorplan_method = in.floorplan_method(),
           .trimmed_points = in.trimmed_points(),
           .min_object_volume_m3 = in.min_object_volume_m3(),
-          .evaluation = static_cast<int>(in.evaluation())};
+          .evaluation = static_cast<int>(in.evaluation()),
+          .north = in.north()};
 }
 
 pb::CarveEvaluation ToProto(CarveEvaluation e) {
@@ -92,6 +94,7 @@ void ToProto(const JobRecord& r, pb::Job& out) {
   out.mutable_params()->set_trimmed_points(p.trimmed_points);
   out.mutable_params()->set_min_object_volume_m3(p.min_object_volume_m3);
   out.mutable_params()->set_evaluation(ToProto(p.evaluation));
+  out.mutable_params()->set_north(NorthModeName(p.north));
   out.set_error(r.error);
   out.set_created_unix_ms(r.created_unix_ms);
   out.set_updated_unix_ms(r.updated_unix_ms);
@@ -282,6 +285,10 @@ class CoordinatorServer::Impl {
     // coordinator. Slice k of pass p is the task SliceTaskKey(k, p).
     std::vector<ScanSlice> slices;
     double slice_s = 0;
+    // §2.3's turn to north (scan_north.h), decided with the plan: every lease and the merge
+    // read the scan turned by it; job.json's "north" records it.
+    double world_yaw_rad = 0;
+    nlohmann::json north = nlohmann::json::object();
     // The pass being carved: 0 the job's; ≥ 1 a re-carve of the merge (§5.6.1), whose partial
     // sums go to pass_dir and whose chunks and regions are in regions_path.
     int pass = 0;
@@ -801,6 +808,7 @@ absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
       ConfinedFile::Open(folders_.DataDir(job.tenant_dir), job.input_path, "input_path");
   if (!scan.ok()) return scan.status();
   absl::StatusOr<ScanSlicePlan> plan;
+  absl::StatusOr<ScanNorth> north;
   {
     absl::MutexLock hdf5_lock(&hdf5_mu_);
     std::lock_guard<std::mutex> lock(Hdf5Lock());
@@ -811,10 +819,20 @@ absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
     absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan->path(), open);
     if (!reader.ok()) return scan->Rename(reader.status());
     plan = PlanScanSlices(**reader, SlicePlanOptions{});
+    if (plan.ok()) north = NorthOfScan(**reader, JobParams::FromJson(job.params_json).north);
   }
   if (!plan.ok()) return scan->Rename(plan.status());
+  if (!north.ok()) return scan->Rename(north.status());
+  if (north->decision.warn) {
+    spdlog::warn("coordinator: job {}: north: {}", job.id, north->decision.note);
+  } else if (north->decision.turned) {
+    spdlog::info("coordinator: job {}: turned {:.2f}° to magnetic north (§2.3)", job.id,
+                 north->decision.yaw_rad * 180 / std::numbers::pi);
+  }
   absl::MutexLock lock(&mu_);
   JobRuntime& rt = runtime_[job.id];
+  rt.world_yaw_rad = north->decision.yaw_rad;
+  rt.north = NorthJson(*north);
   rt.slices = std::move(plan->slices);
   rt.slice_s = plan->slice_s;
   rt.rays_to_carve = int64_t(plan->rays);  // the slices' own rows partition every frame
@@ -1188,6 +1206,13 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
   }
   if (state == JobState::kMerging) {
     EnterStage(job_id, "merge");
+    // After a restart in MERGING the plan and the turn to north are made again from the scan.
+    if (absl::Status s = EnsurePlan(*job); !s.ok()) {
+      if (stopping_) return;
+      FailJob(job_id, absl::StrCat("merge: ", s.message()));
+      CleanUp(job_id, false);
+      return;
+    }
     MergeJobRequest req;
     {
       absl::MutexLock lock(&mu_);
@@ -1201,6 +1226,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       req.floorplan_method = rt.params.floorplan_method;
       req.trimmed_points = rt.params.trimmed_points;
       req.min_object_volume_m3 = rt.params.min_object_volume_m3;
+      req.world_yaw_rad = rt.world_yaw_rad;
       nlohmann::json doc = {{"job_id", job_id},
                             {"input_path", job->input_path},
                             {"output_name", job->output_name},
@@ -1213,6 +1239,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       nlohmann::json stages = nlohmann::json::object();
       for (const auto& [name, timing] : rt.stages) stages[name] = timing.second;
       doc["stage_seconds"] = stages;
+      doc["north"] = rt.north;
       nlohmann::json carve = nlohmann::json::object();
       if (rt.slices_counted == rt.slices.size()) {
         carve = rt.carve_counts;
@@ -1745,6 +1772,7 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
     if (stopping_) return absl::UnavailableError("coordinator shutting down");
     std::optional<LeaseTable::Grant> grant;
     JobParams job_params;
+    double world_yaw_rad = 0;
     std::string tiles_dir, pass_dir, regions_path, scan_root, scan_input;
     int pass = 0;
     std::optional<ScanSlice> slice;
@@ -1765,6 +1793,7 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
         workers_.SetJob(req.worker_id(), grant->job_id);
         const JobRuntime& rt = runtime_[grant->job_id];
         job_params = rt.params;
+        world_yaw_rad = rt.world_yaw_rad;
         tiles_dir = rt.tiles_dir;
         pass_dir = rt.pass_dir;
         pass = rt.pass;
@@ -1803,6 +1832,7 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
       params.set_leaf_depth(grid.ok() ? grid->chunk_depth : 0);
       params.set_tile_dir(tiles_dir);
       params.set_evaluation(ToProto(job_params.evaluation));
+      params.set_world_yaw_rad(world_yaw_rad);
       if (IsSliceTask(grant->chunk)) {
         if (!slice) {
           return absl::InternalError(absl::StrCat("lease ", grant->lease_id, ": no slice ",

@@ -110,6 +110,7 @@ absl::StatusOr<JobInfo> JobClient::Submit(const SubmitParams& params) {
     return absl::InvalidArgumentError(
         absl::StrCat("evaluation '", params.evaluation, "': must be fast or exact"));
   }
+  req.mutable_params()->set_north(params.north);  // checked by the coordinator
   req.set_idempotency_key(params.idempotency_key);
   pb::SubmitJobResponse resp;
   if (!impl_->init.ok()) return impl_->init;

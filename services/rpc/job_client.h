@@ -49,6 +49,7 @@ struct SubmitParams {
   bool trimmed_points = false;     // §5.5 on request: the merge also writes points.ply
   double min_object_volume_m3 = 0;  // §5.6: smaller objects are dropped, m³; 0 = default
   std::string evaluation;           // eq 4.7 in the workers: "fast" or "exact"; "" = fast
+  std::string north;                // §2.3: "auto", "magnetic" or "none"; "" = auto
   std::string idempotency_key;
 };
 

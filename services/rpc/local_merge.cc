@@ -21,6 +21,7 @@ MergeFunction LocalMerge() {
     options.floorplan_method = req.floorplan_method;
     options.trimmed_points = req.trimmed_points;  // without a scan RunMerge warns, no points
     options.min_object_volume_m3 = req.min_object_volume_m3;  // ≤ 0: RunMerge's default
+    options.world_yaw_rad = req.world_yaw_rad;
     options.recarve = req.recarve;
     // The scan through the descriptor checked here (ConfinedFile: "/proc/self/fd/N"), as the
     // ingest reads it; its errors then name the path as the tenant gave it.

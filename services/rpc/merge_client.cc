@@ -189,6 +189,7 @@ class MergeCall {
       job->set_floorplan_method(req_.floorplan_method);
       job->set_trimmed_points(req_.trimmed_points);
       job->set_min_object_volume_m3(req_.min_object_volume_m3);
+      job->set_world_yaw_rad(req_.world_yaw_rad);
       job->set_recarve_available(static_cast<bool>(req_.recarve));
       job->set_job_json(req_.job_json);
       job->set_attempt(attempt);

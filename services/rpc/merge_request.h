@@ -38,6 +38,7 @@ struct MergeJobRequest {
   std::string floorplan_method = "rooms";  // §3.3 "rooms" or §3.2 "eigencrust"
   bool trimmed_points = false;             // §5.5 on request: points.ply (needs the scan)
   double min_object_volume_m3 = 0;         // §5.6 specks, m³; 0 = the merge's default
+  double world_yaw_rad = 0;                // §2.3's turn to north the tiles were carved with
   std::function<absl::StatusOr<std::string>(const std::vector<RecarveChunk>& chunks,
                                             double resolution_m)>
       recarve;

@@ -336,6 +336,7 @@ absl::Status MergeServer::Impl::Serve(grpc::ServerContext& ctx, Stream& stream) 
   req.floorplan_method = job.floorplan_method().empty() ? "rooms" : job.floorplan_method();
   req.trimmed_points = job.trimmed_points();
   req.min_object_volume_m3 = job.min_object_volume_m3();
+  req.world_yaw_rad = job.world_yaw_rad();
   req.job_json = job.job_json();
   req.attempt = std::max(1, job.attempt());
   std::string last_stage;

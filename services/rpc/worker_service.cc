@@ -397,8 +397,9 @@ absl::Status WorkerServer::Impl::Carve(const pb::Lease& lease, pb::TileInfo& til
     std::unique_ptr<ScanReader> reader;
     {
       std::lock_guard<std::mutex> lock(Hdf5Lock());
-      absl::StatusOr<std::unique_ptr<ScanReader>> r =
-          ScanReader::Open(scan->path(), SliceOpenOptions(slice));
+      ScanReader::OpenOptions open = SliceOpenOptions(slice);
+      open.world_yaw_rad = lease.params().world_yaw_rad();  // §2.3, the job's turn to north
+      absl::StatusOr<std::unique_ptr<ScanReader>> r = ScanReader::Open(scan->path(), open);
       if (!r.ok()) return scan->Rename(r.status());
       reader = *std::move(r);
     }

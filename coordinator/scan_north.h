@@ -1,0 +1,40 @@
+// §2.3 on a scan file: its magnetometer readings taken into the world frame through the path
+// (read in blocks: memory does not grow with the walk), the fit of north_alignment.h, the
+// job's decision for its --north mode, and the record job.json keeps of it. The coordinator
+// runs it once per job at ingest and hands the turn to every lease and to the merge; `carvemap
+// carve` and `merge` run it on their own.
+#ifndef CARVEMAP_COORDINATOR_SCAN_NORTH_H_
+#define CARVEMAP_COORDINATOR_SCAN_NORTH_H_
+
+#include <nlohmann/json.hpp>
+
+#include "absl/status/statusor.h"
+#include "services/geometry/north_alignment.h"
+#include "storage/scan_reader.h"
+
+namespace carvemap {
+
+struct ScanNorth {
+  NorthMode mode = NorthMode::kAuto;
+  bool has_readings = false;
+  NorthEstimate estimate;   // not fitted with kNone
+  NorthDecision decision;   // decision.yaw_rad: ScanReader::OpenOptions::world_yaw_rad
+};
+
+// `reader` opened with world_yaw_rad 0 (any PathRows). Errors: the reader's (naming the
+// file), and DecideNorth's FAILED_PRECONDITION for kMagnetic without a confident fit.
+absl::StatusOr<ScanNorth> NorthOfScan(ScanReader& reader, NorthMode mode);
+
+// The same on a scan file, read for it alone (the frame tables and the path in blocks, not
+// held); the CLI's `carve`, `merge` and `floorplan --scan`. Not thread-safe with other HDF5
+// calls (storage/hdf5_lock.h).
+absl::StatusOr<ScanNorth> NorthOfScanFile(const std::string& scan_path, NorthMode mode);
+
+// job.json's "north": the mode, whether and by how much the outputs were turned (degrees,
+// counter-clockwise from above, about the vertical through the scan frame's origin), the
+// fit's readings, inliers, spread and standard error, and the note when not turned.
+nlohmann::json NorthJson(const ScanNorth& north);
+
+}  // namespace carvemap
+
+#endif  // CARVEMAP_COORDINATOR_SCAN_NORTH_H_
