@@ -12,7 +12,7 @@ namespace carvemap {
 
 std::string JobParams::ToJson() const {
   // nlohmann's object keeps its keys sorted: the text depends on the values only.
-  const nlohmann::json j = {
+  nlohmann::json j = {
       {"resolution_m", resolution_m},
       {"method", static_cast<int>(method)},
       {"workers_hint", workers_hint},
@@ -22,6 +22,11 @@ std::string JobParams::ToJson() const {
       {"min_object_volume_m3", min_object_volume_m3},
       {"evaluation", evaluation == CarveEvaluation::kExact ? "exact" : "fast"},
       {"north", NorthModeName(north)}};
+  // Only when given, so that the text of a job without them stays as it was.
+  if (!location.empty()) {
+    j["location"] = location;
+    j["survey_date"] = survey_date;
+  }
   return j.dump();
 }
 
@@ -40,6 +45,8 @@ JobParams JobParams::FromJson(const std::string& text) {
                                                                        : CarveEvaluation::kExact;
   absl::StatusOr<NorthMode> north = ParseNorthMode(j.value("north", std::string("none")));
   p.north = north.ok() ? *north : NorthMode::kNone;
+  p.location = j.value("location", std::string());
+  p.survey_date = j.value("survey_date", std::string());
   return p;
 }
 
@@ -110,6 +117,14 @@ absl::StatusOr<JobParams> ResolveJobParams(const JobParamsRequest& in) {
   absl::StatusOr<NorthMode> north = ParseNorthMode(in.north);
   if (!north.ok()) return north.status();
   p.north = *north;
+  if (!in.location.empty()) {
+    absl::StatusOr<NorthPlace> place = ParseNorthPlace(in.location, in.survey_date, "location");
+    if (!place.ok()) return place.status();
+  } else if (!in.survey_date.empty()) {
+    return absl::InvalidArgumentError("survey_date: given without a location");
+  }
+  p.location = in.location;
+  p.survey_date = in.survey_date;
   return p;
 }
 

@@ -31,6 +31,8 @@ struct JobParamsRequest {
   double min_object_volume_m3 = 0;
   int evaluation = 0;  // jobs.proto CarveEvaluation: 0 unspecified, 1 fast, 2 exact
   std::string north;   // §2.3: "auto", "magnetic", "none"; "" = auto
+  std::string location;     // §2.3 true north: "LAT,LON"; "" = magnetic north
+  std::string survey_date;  // "YYYY-MM-DD"; "" = from the scan's times
 };
 
 // The parameters a job runs with, every default filled in.
@@ -45,6 +47,7 @@ struct JobParams {
   double min_object_volume_m3 = 0;                      // §5.6 specks; 0 = the merge's default
   CarveEvaluation evaluation = CarveEvaluation::kFast;  // eq 4.7 in the workers
   NorthMode north = NorthMode::kAuto;                   // §2.3 (north_alignment.h)
+  std::string location, survey_date;                    // §2.3 true north; "" = magnetic
 
   // One line of JSON, its keys in a fixed order: equal parameters give equal text (a
   // resubmission with the same idempotency key is compared by it).

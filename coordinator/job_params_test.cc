@@ -69,6 +69,8 @@ TEST(JobParamsTest, BadFieldsFailNamingThem) {
       {{.min_object_volume_m3 = nan}, absl::StatusCode::kInvalidArgument, "min_object_volume_m3"},
       {{.evaluation = 3}, absl::StatusCode::kInvalidArgument, "unknown evaluation 3"},
       {{.north = "true"}, absl::StatusCode::kInvalidArgument, "north: 'true'"},
+      {{.location = "91,0"}, absl::StatusCode::kInvalidArgument, "location '91,0'"},
+      {{.survey_date = "2026-01-01"}, absl::StatusCode::kInvalidArgument, "survey_date"},
   };
   for (const Case& c : cases) {
     absl::StatusOr<JobParams> p = ResolveJobParams(c.request);
@@ -85,7 +87,9 @@ TEST(JobParamsTest, JsonRoundTrip) {
                                                   .trimmed_points = true,
                                                   .min_object_volume_m3 = 0.002,
                                                   .evaluation = 2,
-                                                  .north = "magnetic"});
+                                                  .north = "magnetic",
+                                                  .location = "48.1,11.6",
+                                                  .survey_date = "2026-11-28"});
   ASSERT_TRUE(p.ok()) << p.status();
   EXPECT_EQ(p->north, NorthMode::kMagnetic);
   EXPECT_EQ(JobParams::FromJson(p->ToJson()), *p);

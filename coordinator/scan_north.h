@@ -8,6 +8,10 @@
 
 #include <nlohmann/json.hpp>
 
+#include <optional>
+#include <string>
+#include <string_view>
+
 #include "absl/status/statusor.h"
 #include "services/geometry/north_alignment.h"
 #include "storage/scan_reader.h"
@@ -18,17 +22,24 @@ struct ScanNorth {
   NorthMode mode = NorthMode::kAuto;
   bool has_readings = false;
   NorthEstimate estimate;   // not fitted with kNone
+  std::optional<NorthPlace> place;
+  double survey_year = 0;      // with a place: the decimal year the declination is for
+  double declination_deg = 0;  // with a place: magnetic north's bearing east of true north
   NorthDecision decision;   // decision.yaw_rad: ScanReader::OpenOptions::world_yaw_rad
 };
 
-// `reader` opened with world_yaw_rad 0 (any PathRows). Errors: the reader's (naming the
-// file), and DecideNorth's FAILED_PRECONDITION for kMagnetic without a confident fit.
-absl::StatusOr<ScanNorth> NorthOfScan(ScanReader& reader, NorthMode mode);
+// `reader` opened with world_yaw_rad 0 (any PathRows). With `place`, the turn is to true
+// north. Errors: the reader's (naming the file); DecideNorth's FAILED_PRECONDITION for
+// kMagnetic without a confident fit; with a place, INVALID_ARGUMENT when the survey's date is
+// unknown (relative times and no date) and OUT_OF_RANGE outside the model's years.
+absl::StatusOr<ScanNorth> NorthOfScan(ScanReader& reader, NorthMode mode,
+                                      const std::optional<NorthPlace>& place = std::nullopt);
 
 // The same on a scan file, read for it alone (the frame tables and the path in blocks, not
 // held); the CLI's `carve`, `merge` and `floorplan --scan`. Not thread-safe with other HDF5
 // calls (storage/hdf5_lock.h).
-absl::StatusOr<ScanNorth> NorthOfScanFile(const std::string& scan_path, NorthMode mode);
+absl::StatusOr<ScanNorth> NorthOfScanFile(const std::string& scan_path, NorthMode mode,
+                                          const std::optional<NorthPlace>& place = std::nullopt);
 
 // job.json's "north": the mode, whether and by how much the outputs were turned (degrees,
 // counter-clockwise from above, about the vertical through the scan frame's origin), the

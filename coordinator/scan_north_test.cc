@@ -102,6 +102,35 @@ TEST_F(ScanNorthTest, AScanAlreadyFacingNorthIsKept) {
   EXPECT_NE(NorthJson(*north)["note"].get<std::string>().find("under 1.0°"), std::string::npos);
 }
 
+// True north at a known place and date: the turn is the fit's less the World Magnetic
+// Model's declination there; a scan whose times are not dates needs the date.
+TEST_F(ScanNorthTest, TrueNorthAtAPlace) {
+  const std::string turned = Write("turned.h5", 37);
+  absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(turned);
+  ASSERT_TRUE(reader.ok());
+  absl::StatusOr<ScanNorth> magnetic = NorthOfScan(**reader, NorthMode::kAuto);
+  ASSERT_TRUE(magnetic.ok());
+  // Reykjavík, where magnetic north lies ~10° west of true north.
+  absl::StatusOr<NorthPlace> place = ParseNorthPlace("64.15,-21.94", "2026-06-01", "location");
+  ASSERT_TRUE(place.ok());
+  absl::StatusOr<ScanNorth> north = NorthOfScan(**reader, NorthMode::kAuto, *place);
+  ASSERT_TRUE(north.ok()) << north.status();
+  EXPECT_LT(north->declination_deg, -5);
+  EXPECT_GT(north->declination_deg, -20);
+  EXPECT_NEAR(north->decision.yaw_rad,
+              magnetic->decision.yaw_rad - north->declination_deg * kDeg, 1e-9);
+  const nlohmann::json j = NorthJson(*north);
+  EXPECT_EQ(j["reference"], "true north");
+  EXPECT_EQ(j["place"]["model"], "WMM-2025");
+
+  place->survey_date.clear();  // the simulator's times start at 0: no date to take
+  north = NorthOfScan(**reader, NorthMode::kAuto, *place);
+  ASSERT_FALSE(north.ok());
+  EXPECT_EQ(north.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(north.status().message().find(turned), std::string::npos) << north.status();
+  EXPECT_NE(north.status().message().find("survey date"), std::string::npos);
+}
+
 TEST_F(ScanNorthTest, WithoutReadings) {
   const std::string bare = Write("bare.h5", 37, /*magnetometer=*/false);
   absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(bare);

@@ -12,6 +12,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libpng-dev libembree-dev libtbb-dev libssl-dev
   zlib1g-dev  # storage/import/carmen_import.cc: gzipped CARMEN logs
+  libgeographiclib-dev  # services/geomag/: the World Magnetic Model's declination (§2.3)
   openssl  # the CLI: tests/tools/make_test_pki.sh (TLS tests)
   prometheus-cpp-dev libcurl4-openssl-dev  # the coordinator's /metrics; `watch --metrics`
   python3 python3-h5py python3-numpy

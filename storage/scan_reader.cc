@@ -728,6 +728,20 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> ScanReader::PathPositions() {
   return positions;
 }
 
+absl::StatusOr<std::pair<double, double>> ScanReader::PathTimeSpan() {
+  if (impl_->path_rows == 0) return Invalid(impl_->file, "/path", "no poses");
+  auto dataset = impl_->OpenDataset("/path");
+  if (!dataset.ok()) return dataset.status();
+  Hid mem = h5::PathMemType();
+  PathRecord first{}, last{};
+  for (auto [row, out] : {std::pair{uint64_t{0}, &first}, std::pair{impl_->path_rows - 1, &last}}) {
+    if (absl::Status s = h5::ReadRows(dataset->get(), mem.get(), 0, row, 1, out); !s.ok()) {
+      return h5::Prefixed(absl::StrCat(impl_->file, ": /path"), s);
+    }
+  }
+  return std::pair{first.t, last.t};
+}
+
 absl::StatusOr<std::vector<Eigen::Vector3d>> ScanReader::MagnetometerInWorld() {
   std::vector<Eigen::Vector3d> out;
   if (!impl_->has_magnetometer) return out;

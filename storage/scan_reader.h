@@ -11,6 +11,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -100,6 +101,9 @@ class ScanReader {
   // blocks whatever Open kept. Readings outside the path's time span are left out. Empty
   // without /magnetometer.
   absl::StatusOr<std::vector<Eigen::Vector3d>> MagnetometerInWorld();
+  // The times of the first and last poses of /path (two rows read, whatever Open kept).
+  // INVALID_ARGUMENT for an empty path.
+  absl::StatusOr<std::pair<double, double>> PathTimeSpan();
   // A sensor's /frames rows (time, first point, count), read in blocks: 24 bytes per frame.
   absl::StatusOr<std::vector<FrameRecord>> FrameRecords(int sensor);
 

@@ -24,6 +24,7 @@
 #include "absl/strings/str_cat.h"
 #include "coordinator/scan_north.h"
 #include "services/cli/commands.h"
+#include "services/cli/north_flags.h"
 #include "services/cli/progress.h"
 #include "services/geometry/octree_keys.h"
 #include "services/system/usable_cpus.h"
@@ -46,7 +47,7 @@ struct CarveFlags {
   std::string evaluation = "fast";  // eq 4.7: worker/chunk_octree.h
   bool keep_partials = false;
   bool quiet = false;
-  std::string north = "auto";  // §2.3: coordinator/scan_north.h
+  NorthFlags north;  // §2.3
 };
 
 double SecondsSince(Clock::time_point t0) {
@@ -59,8 +60,6 @@ absl::Status RunCarve(const CarveFlags& flags) {
   if (!grid.ok()) return grid.status();
   if (flags.threads < 1) return absl::InvalidArgumentError("--threads must be >= 1");
   if (!(flags.slice_s >= 0)) return absl::InvalidArgumentError("--slice-s must be >= 0");
-  absl::StatusOr<NorthMode> north_mode = ParseNorthMode(flags.north);
-  if (!north_mode.ok()) return north_mode.status();
 
   const fs::path out(flags.output_dir);
   const fs::path partials_dir = out / "partials";
@@ -77,11 +76,12 @@ absl::Status RunCarve(const CarveFlags& flags) {
   fs::remove_all(tiles_dir, ec);
   const fs::path north_path = out / "north.json";
   fs::remove(north_path, ec);
-  absl::StatusOr<ScanNorth> north = NorthOfScanFile(flags.scan_path, *north_mode);
+  absl::StatusOr<ScanNorth> north = NorthOfScanForFlags(flags.scan_path, flags.north);
   if (!north.ok()) return north.status();
   if (north->decision.turned) {
-    std::printf("north: turned %.2f° about the vertical to magnetic north (§2.3)\n",
-                north->decision.yaw_rad * 180 / std::numbers::pi);
+    std::printf("north: turned %.2f° about the vertical to %s north (§2.3)\n",
+                north->decision.yaw_rad * 180 / std::numbers::pi,
+                north->place ? "true" : "magnetic");
   } else if (north->decision.warn) {
     std::fprintf(stderr, "carve: warning: north: %s\n", north->decision.note.c_str());
   }
@@ -195,13 +195,7 @@ void RegisterCarve(CLI::App& app, int& exit_code) {
                   "worker/chunk_octree.h)")
       ->check(CLI::IsMember({"fast", "exact"}))
       ->capture_default_str();
-  cmd->add_option("--north", flags->north,
-                  "§2.3: turn the tiles about the vertical to magnetic north (+y) from the "
-                  "scan's /magnetometer: auto (when the fit is confident and the turn is at least "
-                  "1°), magnetic (always; an error without a confident fit) or none. Recorded in "
-                  "OUT/north.json, which `carvemap merge` reads")
-      ->check(CLI::IsMember({"auto", "magnetic", "none"}))
-      ->capture_default_str();
+  AddNorthFlags(cmd, flags->north);  // the turn is recorded in OUT/north.json for `merge`
   cmd->add_flag("--keep-partials", flags->keep_partials,
                 "Keep OUT/partials/ (each slice's partial sums per chunk)");
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress on stderr");

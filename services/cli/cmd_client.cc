@@ -12,6 +12,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "services/cli/commands.h"
+#include "services/cli/north_flags.h"
 #include "services/cli/progress.h"
 #include "services/cli/security_flags.h"
 #include "services/rpc/http_get.h"
@@ -28,6 +29,7 @@ struct ClientFlags {
   std::string server = kDefaultServer;
   std::string job_id;
   SubmitParams submit;
+  NorthFlags north;  // §2.3, copied into `submit`
   bool watch = false;
   bool quiet = false;
   std::string state;
@@ -132,12 +134,7 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
                      "precision, the reference; the same votes, within the tolerance in "
                      "worker/chunk_octree.h)")
       ->check(CLI::IsMember({"fast", "exact"}));
-  submit->add_option("--north", flags->submit.north,
-                     "§2.3: turn the outputs about the vertical to magnetic north (+y) from the "
-                     "scan's /magnetometer: auto (when the fit is confident and the turn is at "
-                     "least 1°; job.json's \"north\" says why not), magnetic (always; the job fails "
-                     "without a confident fit) or none")
-      ->check(CLI::IsMember({"auto", "magnetic", "none"}));
+  AddNorthFlags(submit, flags->north, /*optional_mode=*/true);
   submit->add_option("--idempotency-key", flags->submit.idempotency_key,
                      "Submitting twice with the same key returns the first job");
   submit->add_flag("--watch", flags->watch, "Watch the job until it ends");
@@ -146,6 +143,9 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
     std::unique_ptr<JobClient> connected = Connect(*flags, "submit", exit_code);
     if (connected == nullptr) return;
     JobClient& client = *connected;
+    flags->submit.north = flags->north.mode;
+    flags->submit.location = flags->north.location;
+    flags->submit.survey_date = flags->north.survey_date;
     absl::StatusOr<JobInfo> job = client.Submit(flags->submit);
     if (!job.ok()) {
       exit_code = ReportStatus("submit", job.status());

@@ -25,6 +25,7 @@
 #include "absl/strings/str_cat.h"
 #include "coordinator/scan_north.h"
 #include "services/cli/commands.h"
+#include "services/cli/north_flags.h"
 #include "services/floorplan/floorplan_export.h"
 #include "services/floorplan/floorplan_pipeline.h"
 #include "services/floorplan/gridmap_wall_samples.h"
@@ -47,7 +48,7 @@ struct FloorplanFlags {
   std::string path_csv;
   std::string cloud;  // scan.h5: the point-cloud route instead of --gridmap/--path
   std::string scan;   // scan.h5 of horizontal line scanners: the grid built from its rays
-  std::string north = "auto";  // §2.3 for --scan and --cloud (coordinator/scan_north.h)
+  NorthFlags north;  // §2.3 for --scan and --cloud
   ScanOccupancyOptions occupancy;
   std::string output_dir;
   std::string method = "rooms";
@@ -239,9 +240,7 @@ absl::Status RunFloorplan(FloorplanFlags& f) {
   nlohmann::json north_doc;
   double world_yaw_rad = 0;
   if (from_cloud || from_scan) {
-    absl::StatusOr<NorthMode> mode = ParseNorthMode(f.north);
-    if (!mode.ok()) return mode.status();
-    absl::StatusOr<ScanNorth> north = NorthOfScanFile(from_cloud ? f.cloud : f.scan, *mode);
+    absl::StatusOr<ScanNorth> north = NorthOfScanForFlags(from_cloud ? f.cloud : f.scan, f.north);
     if (!north.ok()) return north.status();
     if (north->decision.warn) {
       std::fprintf(stderr, "floorplan: warning: north: %s\n", north->decision.note.c_str());
@@ -439,13 +438,7 @@ void RegisterFloorplan(CLI::App& app, int& exit_code) {
       ->check(CLI::ExistingFile)
       ->excludes(gridmap)
       ->excludes(path);
-  cmd->add_option("--north", f->north,
-                  "§2.3 with --scan or --cloud: turn the plan about the vertical to magnetic "
-                  "north (+y) from the scan's /magnetometer: auto (when the fit is confident and "
-                  "the turn is at least 1°), magnetic (always; an error without a confident fit) "
-                  "or none")
-      ->check(CLI::IsMember({"auto", "magnetic", "none"}))
-      ->capture_default_str();
+  AddNorthFlags(cmd, f->north);  // with --scan or --cloud
   cmd->add_option("--ray-max-range", f->occupancy.max_range_m,
                   "With --scan: returns further than this carve free space up to it and mark "
                   "no wall, m (0 = no limit)")

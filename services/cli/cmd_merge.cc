@@ -18,6 +18,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "coordinator/scan_north.h"
+#include "services/cli/north_flags.h"
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
 #include "services/merge/merge_job.h"
@@ -31,7 +32,7 @@ struct MergeFlags {
   MergeOptions options;
   double cache_mb = 256;
   bool quiet = false;
-  std::string north;  // "" = what the carve recorded (TILES/../north.json), else auto
+  NorthFlags north;  // mode "" = what the carve recorded (TILES/../north.json), else auto
 };
 
 // §2.3: the turn the scan is read with, which must be the one the tiles were carved with.
@@ -53,20 +54,20 @@ absl::Status ResolveNorth(MergeFlags& flags) {
     if (recorded) flags.options.job["north"] = *recorded;
     return absl::OkStatus();  // no path or points are read: the turn does not matter
   }
-  if (recorded && flags.north.empty()) {
+  if (recorded && flags.north.mode.empty() && flags.north.location.empty()) {
     flags.options.world_yaw_rad = (*recorded)["yaw_rad"].get<double>();
     flags.options.job["north"] = *recorded;
     return absl::OkStatus();
   }
-  absl::StatusOr<NorthMode> mode = ParseNorthMode(flags.north);
-  if (!mode.ok()) return mode.status();
-  absl::StatusOr<ScanNorth> north = NorthOfScanFile(flags.options.scan_path, *mode);
+  absl::StatusOr<ScanNorth> north = NorthOfScanForFlags(flags.options.scan_path, flags.north);
   if (!north.ok()) return north.status();
   if (recorded && (*recorded)["yaw_rad"].get<double>() != north->decision.yaw_rad) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "--north %s turns the scan by %.4f°, but the tiles were carved turned by %.4f° (%s): "
-        "leave --north out to use the carve's",
-        flags.north, north->decision.yaw_rad * 180 / std::numbers::pi,
+        "--north %s%s turns the scan by %.4f°, but the tiles were carved turned by %.4f° (%s): "
+        "leave --north and --location out to use the carve's",
+        flags.north.mode.empty() ? "auto" : flags.north.mode,
+        flags.north.location.empty() ? "" : " --location " + flags.north.location,
+        north->decision.yaw_rad * 180 / std::numbers::pi,
         (*recorded)["yaw_rad"].get<double>() * 180 / std::numbers::pi, recorded_path.string()));
   }
   flags.options.world_yaw_rad = north->decision.yaw_rad;
@@ -154,11 +155,9 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
                   "With --scan: objects with less volume than this, m³, are specks and dropped "
                   "(§5.6); 0 = the default, 0.005 (5 litres)")
       ->check(CLI::Range(0.0, 1000.0));
-  cmd->add_option("--north", flags->north,
-                  "§2.3 with --scan: the turn to magnetic north the tiles were carved with "
-                  "(auto, magnetic or none, as `carvemap carve --north`); default: what the carve "
-                  "recorded in TILES/../north.json, else auto")
-      ->check(CLI::IsMember({"auto", "magnetic", "none"}));
+  // With --scan: the turn the tiles were carved with; by default what the carve recorded in
+  // TILES/../north.json, else auto.
+  AddNorthFlags(cmd, flags->north, /*optional_mode=*/true);
   cmd->add_option("--resolution", flags->options.resolution_m,
                   "Octree resolution in m (2 m / 2^k); default: the tiles'");
   cmd->add_option("--cache-mb", flags->cache_mb, "Decoded-tile cache budget in MiB")

@@ -25,6 +25,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/synchronization/mutex.h"
 #include "services/cli/commands.h"
+#include "services/cli/north_flags.h"
 #include "services/cli/progress.h"
 #include "services/cli/security_flags.h"
 #include "services/rpc/bearer_tokens.h"
@@ -45,7 +46,7 @@ struct RunFlags {
   bool trimmed_points = false;
   double min_object_volume_m3 = 0;  // 0 = the merge's default
   std::string evaluation = "fast";  // eq 4.7 in the workers
-  std::string north = "auto";       // §2.3 (services/geometry/north_alignment.h)
+  NorthFlags north;                 // §2.3 (services/geometry/north_alignment.h)
   std::string storage_root;
   // Short defaults on one machine: a killed worker's chunks come back within seconds.
   double heartbeat_interval_s = 1.0;
@@ -229,7 +230,9 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   submit.trimmed_points = flags.trimmed_points;
   submit.min_object_volume_m3 = flags.min_object_volume_m3;
   submit.evaluation = flags.evaluation;
-  submit.north = flags.north;
+  submit.north = flags.north.mode;
+  submit.location = flags.north.location;
+  submit.survey_date = flags.north.survey_date;
   // The job id follows from the key (and tiles record it), so repeated runs of the same scan
   // and resolutions give byte-identical tiles whatever the number of workers. The method,
   // --points, --min-object-volume, --evaluation and --north are in the key only when not the
@@ -241,7 +244,10 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
       flags.trimmed_points ? " points" : "",
       flags.min_object_volume_m3 > 0 ? absl::StrCat(" ", flags.min_object_volume_m3) : "",
       flags.evaluation == "fast" ? "" : absl::StrCat(" ", flags.evaluation),
-      flags.north == "auto" ? "" : absl::StrCat(" north=", flags.north));
+      flags.north.mode == "auto" ? "" : absl::StrCat(" north=", flags.north.mode),
+      flags.north.location.empty()
+          ? ""
+          : absl::StrCat(" at ", flags.north.location, " ", flags.north.survey_date));
   absl::StatusOr<JobInfo> job = state.client->Submit(submit);
   if (!job.ok()) return job.status();
   {
@@ -321,13 +327,7 @@ void RegisterRun(CLI::App& app, int& exit_code) {
                   "worker/chunk_octree.h)")
       ->check(CLI::IsMember({"fast", "exact"}))
       ->capture_default_str();
-  cmd->add_option("--north", flags->north,
-                  "§2.3: turn the outputs about the vertical to magnetic north (+y) from the "
-                  "scan's /magnetometer: auto (when the fit is confident and the turn is at "
-                  "least 1°; job.json's \"north\" says why not), magnetic (always; the job fails "
-                  "without a confident fit) or none")
-      ->check(CLI::IsMember({"auto", "magnetic", "none"}))
-      ->capture_default_str();
+  AddNorthFlags(cmd, flags->north);
   cmd->add_option("--storage-root", flags->storage_root,
                   "Keep tiles under <storage-root>/<job>/tiles instead of OUT/tiles");
   cmd->add_option("--heartbeat-interval-s", flags->heartbeat_interval_s,

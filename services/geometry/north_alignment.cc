@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <sstream>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -116,7 +117,7 @@ NorthEstimate EstimateNorth(std::span<const Eigen::Vector3d> world_fields,
 
 absl::StatusOr<NorthDecision> DecideNorth(NorthMode mode, bool has_readings,
                                           const NorthEstimate& estimate,
-                                          double min_turn_deg) {
+                                          double declination_rad, double min_turn_deg) {
   NorthDecision d;
   if (mode == NorthMode::kNone) {
     d.note = "--north none";
@@ -140,14 +141,17 @@ absl::StatusOr<NorthDecision> DecideNorth(NorthMode mode, bool has_readings,
     d.warn = true;
     return d;
   }
-  const double deg = estimate.yaw_rad * 180 / kPi;
+  // Magnetic north lies `declination` east (clockwise) of true north: true north is that much
+  // counter-clockwise of +y once the frame is turned to magnetic north.
+  const double yaw = Wrap(estimate.yaw_rad - declination_rad);
+  const double deg = yaw * 180 / kPi;
   if (mode == NorthMode::kAuto && std::abs(deg) < min_turn_deg) {
-    d.note = absl::StrFormat("the turn to magnetic north, %.2f°, is under %.1f°: within the "
-                             "path's own heading drift; the scan's frame is kept",
-                             deg, min_turn_deg);
+    d.note = absl::StrFormat("the turn to %s north, %.2f°, is under %.1f°: within the path's "
+                             "own heading drift; the scan's frame is kept",
+                             declination_rad == 0 ? "magnetic" : "true", deg, min_turn_deg);
     return d;
   }
-  d.yaw_rad = estimate.yaw_rad;
+  d.yaw_rad = yaw;
   d.turned = true;
   return d;
 }
@@ -162,6 +166,41 @@ const char* NorthModeName(NorthMode mode) {
       break;
   }
   return "auto";
+}
+
+absl::StatusOr<double> DecimalYear(const std::string& date) {
+  int y = 0, m = 0, d = 0;
+  char a = 0, b = 0, extra = 0;
+  std::istringstream in(date);
+  if (!(in >> y >> a >> m >> b >> d) || a != '-' || b != '-' || (in >> extra) || y < 1900 ||
+      y > 2200 || m < 1 || m > 12 || d < 1 || d > 31) {
+    return absl::InvalidArgumentError(absl::StrCat("'", date, "': expected YYYY-MM-DD"));
+  }
+  static constexpr int kBefore[12] = {0, 31, 59, 90, 120, 151, 181, 212, 243, 273, 304, 334};
+  const bool leap = (y % 4 == 0 && y % 100 != 0) || y % 400 == 0;
+  const int day = kBefore[m - 1] + (leap && m > 2 ? 1 : 0) + d - 1;
+  return y + day / (leap ? 366.0 : 365.0);
+}
+
+absl::StatusOr<NorthPlace> ParseNorthPlace(std::string_view location, std::string_view date,
+                                           std::string_view what) {
+  NorthPlace place;
+  const std::string text(location);
+  char comma = 0, extra = 0;
+  std::istringstream in(text);
+  if (!(in >> place.lat_deg >> comma >> place.lon_deg) || comma != ',' || (in >> extra) ||
+      !(place.lat_deg >= -90 && place.lat_deg <= 90) ||
+      !(place.lon_deg >= -180 && place.lon_deg < 360)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        std::string(what), " '", text,
+        "': expected LAT,LON in degrees (latitude -90..90, longitude -180..360)"));
+  }
+  place.survey_date = std::string(date);
+  if (!place.survey_date.empty() && !DecimalYear(place.survey_date).ok()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        std::string(what), ": survey date '", place.survey_date, "': expected YYYY-MM-DD"));
+  }
+  return place;
 }
 
 absl::StatusOr<NorthMode> ParseNorthMode(std::string_view text) {

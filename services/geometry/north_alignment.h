@@ -67,11 +67,30 @@ struct NorthDecision {
   bool warn = false;    // the note is worth a warning (the fit failed, not just small)
 };
 
-// `has_readings`: the scan has a /magnetometer. FAILED_PRECONDITION for kMagnetic without a
-// confident fit, naming why.
+// `has_readings`: the scan has a /magnetometer. `declination_rad`: where magnetic north lies
+// east of true north at the survey's place and date (services/geomag/), to turn to true
+// north instead (the turn becomes yaw − declination); 0: magnetic north. FAILED_PRECONDITION
+// for kMagnetic without a confident fit, naming why.
 absl::StatusOr<NorthDecision> DecideNorth(NorthMode mode, bool has_readings,
                                           const NorthEstimate& estimate,
+                                          double declination_rad = 0,
                                           double min_turn_deg = 1.0);
+
+// Where and when the survey was made, for true north: the World Magnetic Model's declination
+// there (services/geomag/). `survey_date` "YYYY-MM-DD"; empty: from the scan's times, when
+// they are absolute (Unix seconds).
+struct NorthPlace {
+  double lat_deg = 0, lon_deg = 0;
+  std::string survey_date;
+};
+
+// "LAT,LON" in degrees (latitude in [-90, 90], longitude in [-180, 360)); INVALID_ARGUMENT
+// naming `what` otherwise.
+absl::StatusOr<NorthPlace> ParseNorthPlace(std::string_view location, std::string_view date,
+                                           std::string_view what);
+
+// "YYYY-MM-DD" as a decimal year (the day's start); INVALID_ARGUMENT otherwise.
+absl::StatusOr<double> DecimalYear(const std::string& date);
 
 // "auto", "magnetic", "none" (and "" = auto); INVALID_ARGUMENT otherwise.
 absl::StatusOr<NorthMode> ParseNorthMode(std::string_view text);

@@ -162,9 +162,35 @@ TEST(NorthAlignmentTest, DecisionFollowsTheMode) {
   EXPECT_NE(d.status().message().find("only 3 of 100"), std::string::npos);
   d = DecideNorth(NorthMode::kMagnetic, false, NorthEstimate{});
   EXPECT_NE(d.status().message().find("no /magnetometer"), std::string::npos) << d.status();
+  // True north: magnetic north 10° east of it, so the turn is 10° less.
+  fit.confident = true;
+  fit.yaw_rad = 37 * kDeg;
+  d = DecideNorth(NorthMode::kAuto, true, fit, 10 * kDeg);
+  ASSERT_TRUE(d.ok());
+  EXPECT_NEAR(d->yaw_rad, 27 * kDeg, 1e-12);
+  fit.yaw_rad = 10.5 * kDeg;  // 0.5° from true north: kept under auto
+  d = DecideNorth(NorthMode::kAuto, true, fit, 10 * kDeg);
+  EXPECT_FALSE(d->turned);
+  EXPECT_NE(d->note.find("true north"), std::string::npos) << d->note;
   EXPECT_EQ(ParseNorthMode("").value(), NorthMode::kAuto);
   EXPECT_EQ(ParseNorthMode("none").value(), NorthMode::kNone);
   EXPECT_FALSE(ParseNorthMode("true").ok());
+}
+
+TEST(NorthAlignmentTest, PlacesAndDates) {
+  absl::StatusOr<NorthPlace> p = ParseNorthPlace("52.52,13.405", "2026-11-28", "--location");
+  ASSERT_TRUE(p.ok()) << p.status();
+  EXPECT_EQ(p->lat_deg, 52.52);
+  EXPECT_EQ(p->lon_deg, 13.405);
+  EXPECT_NEAR(DecimalYear("2026-11-28").value(), 2026 + 331.0 / 365, 1e-12);
+  EXPECT_NEAR(DecimalYear("2028-03-01").value(), 2028 + 60.0 / 366, 1e-12);  // a leap year
+  for (const char* bad : {"52.52", "91,0", "52,13,4", "north", "52;13"}) {
+    p = ParseNorthPlace(bad, "", "--location");
+    ASSERT_FALSE(p.ok()) << bad;
+    EXPECT_NE(p.status().message().find("--location '"), std::string::npos) << p.status();
+  }
+  p = ParseNorthPlace("52,13", "28.11.2026", "--location");
+  EXPECT_NE(p.status().message().find("YYYY-MM-DD"), std::string::npos) << p.status();
 }
 
 }  // namespace

@@ -110,7 +110,9 @@ absl::StatusOr<JobInfo> JobClient::Submit(const SubmitParams& params) {
     return absl::InvalidArgumentError(
         absl::StrCat("evaluation '", params.evaluation, "': must be fast or exact"));
   }
-  req.mutable_params()->set_north(params.north);  // checked by the coordinator
+  req.mutable_params()->set_north(params.north);  // these three checked by the coordinator
+  req.mutable_params()->set_location(params.location);
+  req.mutable_params()->set_survey_date(params.survey_date);
   req.set_idempotency_key(params.idempotency_key);
   pb::SubmitJobResponse resp;
   if (!impl_->init.ok()) return impl_->init;

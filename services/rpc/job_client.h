@@ -50,6 +50,8 @@ struct SubmitParams {
   double min_object_volume_m3 = 0;  // §5.6: smaller objects are dropped, m³; 0 = default
   std::string evaluation;           // eq 4.7 in the workers: "fast" or "exact"; "" = fast
   std::string north;                // §2.3: "auto", "magnetic" or "none"; "" = auto
+  std::string location;             // §2.3 true north: "LAT,LON" in degrees; "" = magnetic
+  std::string survey_date;          // with location: "YYYY-MM-DD"; "" = from the scan's times
   std::string idempotency_key;
 };
 

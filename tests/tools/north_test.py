@@ -12,7 +12,9 @@ its first heading). Then:
 - on the north-up scan the fit is under a degree, so nothing is turned: `carvemap carve` with
   the default and with `--north none` writes the same tiles, byte for byte;
 - `carvemap merge` of the turned scan's carve reads the turn from north.json, and refuses a
-  `--north none` that contradicts it, naming both turns.
+  `--north none` that contradicts it, naming both turns;
+- true north: `carve --location` in Reykjavík turns by the magnetic fit less the declination
+  there (WMM2025, ~-10°); `run` refuses a location that is not one before any work.
 
 Usage: north_test.py --carvemap BIN --work DIR
 """
@@ -128,6 +130,22 @@ def main():
         expect(r.returncode != 0 and "north.json" in r.stderr and "--north none" in r.stderr,
                f"merge --north none against a turned carve: exit {r.returncode}: {r.stderr}")
         log(f"merge refuses a contradicting --north: {r.stderr.strip().splitlines()[-1]}")
+
+        # True north.
+        c37t = os.path.join(work, "C37true")
+        run([cm, "carve", turned, "-o", c37t, "--location", "64.15,-21.94", "--survey-date",
+             "2026-06-01", "-q"])
+        with open(os.path.join(c37t, "north.json")) as f:
+            true_north = json.load(f)
+        d = true_north["place"]["declination_deg"]
+        expect(true_north["reference"] == "true north" and -20 < d < -5 and
+               abs(true_north["yaw_deg"] - (recorded["yaw_deg"] - d)) < 1e-3,
+               f"true north: {true_north}")
+        log(f"true north at Reykjavík: declination {d:.2f}°, turn {true_north['yaw_deg']:.2f}°")
+        r = run([cm, "run", plain, "-o", os.path.join(work, "Obad"), "--location", "91,0", "-q"],
+                ok=False)
+        expect(r.returncode != 0 and "location '91,0'" in r.stderr,
+               f"run --location 91,0: exit {r.returncode}: {r.stderr}")
     except TestFailure as e:
         print(f"FAIL: {e}")
         return 1
