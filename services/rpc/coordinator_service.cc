@@ -72,7 +72,9 @@ JobParamsRequest FromProto(const pb::JobParams& in) {
           .trimmed_points = in.trimmed_points(),
           .min_object_volume_m3 = in.min_object_volume_m3(),
           .evaluation = static_cast<int>(in.evaluation()),
-          .north = in.north()};
+          .north = in.north(),
+          .location = in.location(),
+          .survey_date = in.survey_date()};
 }
 
 pb::CarveEvaluation ToProto(CarveEvaluation e) {
@@ -95,6 +97,8 @@ void ToProto(const JobRecord& r, pb::Job& out) {
   out.mutable_params()->set_min_object_volume_m3(p.min_object_volume_m3);
   out.mutable_params()->set_evaluation(ToProto(p.evaluation));
   out.mutable_params()->set_north(NorthModeName(p.north));
+  out.mutable_params()->set_location(p.location);
+  out.mutable_params()->set_survey_date(p.survey_date);
   out.set_error(r.error);
   out.set_created_unix_ms(r.created_unix_ms);
   out.set_updated_unix_ms(r.updated_unix_ms);
@@ -315,9 +319,31 @@ class CoordinatorServer::Impl {
   // another tenant's: ids of others do not leak.
   absl::StatusOr<JobRecord> OwnJob(const Caller& caller, const std::string& job_id);
 
+  // A job's thread is joined soon after it ends (by the next start or the sweeper), not kept
+  // to the coordinator's shutdown: each kept one would hold its stack's mappings for ever.
   void StartJobThread(const std::string& job_id) {
+    ReapJobThreads();
     absl::MutexLock lock(&mu_);
-    job_threads_.emplace_back([this, job_id] { RunJob(job_id); });
+    const uint64_t key = ++job_thread_seq_;
+    job_threads_.emplace(key, std::thread([this, job_id, key] {
+                           RunJob(job_id);
+                           absl::MutexLock done_lock(&mu_);
+                           ended_job_threads_.push_back(key);
+                         }));
+  }
+  void ReapJobThreads() {
+    std::vector<std::thread> ended;
+    {
+      absl::MutexLock lock(&mu_);
+      for (uint64_t key : ended_job_threads_) {
+        auto it = job_threads_.find(key);
+        if (it == job_threads_.end()) continue;
+        ended.push_back(std::move(it->second));
+        job_threads_.erase(it);
+      }
+      ended_job_threads_.clear();
+    }
+    for (std::thread& t : ended) t.join();  // each has left RunJob: the join is immediate
   }
   void RunJob(const std::string& job_id);
   // INGESTING: the scan checked (every row) and cut into time slices, one task each.
@@ -395,7 +421,9 @@ class CoordinatorServer::Impl {
   // Its instance (random) tells this coordinator's worker ids from a previous one's.
   WorkerRegistry workers_ ABSL_GUARDED_BY(mu_){RandomHex(4)};
   std::map<std::string, JobRuntime> runtime_ ABSL_GUARDED_BY(mu_);
-  std::vector<std::thread> job_threads_ ABSL_GUARDED_BY(mu_);
+  std::map<uint64_t, std::thread> job_threads_ ABSL_GUARDED_BY(mu_);
+  std::vector<uint64_t> ended_job_threads_ ABSL_GUARDED_BY(mu_);  // to join
+  uint64_t job_thread_seq_ ABSL_GUARDED_BY(mu_) = 0;
   absl::Mutex shutdown_mu_;
   // HDF5 (scan reading when planning, the in-process merge) is not thread-safe in the Debian
   // build: one job at a time uses it in this process (and each call takes Hdf5Lock()).
@@ -621,12 +649,13 @@ void CoordinatorServer::Impl::Shutdown() {
   // Streams and long polls see stopping_ within a poll interval; the deadline bounds the wait.
   servers_.Shutdown(std::chrono::milliseconds(500));
   if (sweeper_.joinable()) sweeper_.join();
-  std::vector<std::thread> threads;
+  std::map<uint64_t, std::thread> threads;
   {
     absl::MutexLock lock(&mu_);
     threads.swap(job_threads_);
+    ended_job_threads_.clear();
   }
-  for (std::thread& t : threads) t.join();
+  for (auto& [key, t] : threads) t.join();
   metrics_endpoint_ = {};
   spdlog::info("coordinator: stopped");
   shutdown_done_.Notify();
@@ -637,6 +666,7 @@ void CoordinatorServer::Impl::Sweep() {
   while (!stopping_) {
     const int64_t due = NowMs() + interval_ms;
     std::this_thread::sleep_for(std::chrono::duration<double>(spec_.sweep_interval_s));
+    ReapJobThreads();
     absl::MutexLock lock(&mu_);
     // Time this sweep ran late, waiting for the lock or for a core, is time the coordinator
     // could not hear heartbeats either (their handlers wait for the same lock; a job-store
@@ -819,15 +849,25 @@ absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
     absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan->path(), open);
     if (!reader.ok()) return scan->Rename(reader.status());
     plan = PlanScanSlices(**reader, SlicePlanOptions{});
-    if (plan.ok()) north = NorthOfScan(**reader, JobParams::FromJson(job.params_json).north);
+    if (plan.ok()) {
+      const JobParams params = JobParams::FromJson(job.params_json);
+      std::optional<NorthPlace> place;
+      if (!params.location.empty()) {
+        absl::StatusOr<NorthPlace> p = ParseNorthPlace(params.location, params.survey_date,
+                                                       "location");  // checked at submit
+        if (p.ok()) place = *p;
+      }
+      north = NorthOfScan(**reader, params.north, place);
+    }
   }
   if (!plan.ok()) return scan->Rename(plan.status());
   if (!north.ok()) return scan->Rename(north.status());
   if (north->decision.warn) {
     spdlog::warn("coordinator: job {}: north: {}", job.id, north->decision.note);
   } else if (north->decision.turned) {
-    spdlog::info("coordinator: job {}: turned {:.2f}° to magnetic north (§2.3)", job.id,
-                 north->decision.yaw_rad * 180 / std::numbers::pi);
+    spdlog::info("coordinator: job {}: turned {:.2f}° to {} north (§2.3)", job.id,
+                 north->decision.yaw_rad * 180 / std::numbers::pi,
+                 north->place ? "true" : "magnetic");
   }
   absl::MutexLock lock(&mu_);
   JobRuntime& rt = runtime_[job.id];
