@@ -589,9 +589,6 @@ absl::Status CoordinatorServer::Impl::Start() {
         ServeMetrics(spec_.metrics_listen_address, {metrics_.registry()}, "coordinator");
     if (!endpoint.ok()) return endpoint.status();
     metrics_endpoint_ = *std::move(endpoint);
-    spdlog::info("coordinator: metrics on http://{}:{}/metrics",
-                 spec_.metrics_listen_address.substr(0, spec_.metrics_listen_address.rfind(':')),
-                 metrics_endpoint_.port);
   }
   servers_.MarkServing({"carvemap.v1.JobService", "carvemap.v1.CarveTaskService"});
   const bool loopback = IsLoopbackAddress(spec_.listen_address);

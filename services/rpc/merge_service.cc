@@ -199,9 +199,6 @@ absl::Status MergeServer::Impl::Start() {
         ServeMetrics(spec_.metrics_listen_address, {metrics_.registry()}, "merger");
     if (!endpoint.ok()) return endpoint.status();
     metrics_endpoint_ = *std::move(endpoint);
-    spdlog::info("merger: metrics on http://{}:{}/metrics",
-                 spec_.metrics_listen_address.substr(0, spec_.metrics_listen_address.rfind(':')),
-                 metrics_endpoint_.port);
   }
   return absl::OkStatus();
 }

@@ -12,6 +12,8 @@
 #include <sstream>
 #include <system_error>
 
+#include <spdlog/spdlog.h>
+
 #include "absl/strings/str_cat.h"
 
 namespace carvemap {
@@ -135,6 +137,9 @@ absl::StatusOr<MetricsEndpoint> ServeMetrics(
     return absl::UnavailableError(
         absl::StrCat(service, ": cannot serve metrics on ", address, ": ", e.what()));
   }
+  // The line tests and operators read the bound port from (with port 0).
+  spdlog::info("{}: metrics on http://{}:{}/metrics", service,
+               address.substr(0, address.rfind(':')), endpoint.port);
   return endpoint;
 }
 

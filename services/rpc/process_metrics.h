@@ -51,8 +51,9 @@ class ProcessCollector : public prometheus::Collectable {
 };
 
 // Serves `collectables` (and a ProcessCollector for `service`) at http://ADDRESS/metrics,
-// ADDRESS "host:port" (port 0: any free one). `service` ("coordinator", "worker", "merger")
-// also names the server in errors.
+// ADDRESS "host:port" (port 0: any free one), and logs "SERVICE: metrics on
+// http://HOST:PORT/metrics". `service` ("coordinator", "worker", "merger") also names the
+// server in errors.
 // The exposer holds its collectables weakly: the endpoint keeps them alive.
 struct MetricsEndpoint {
   std::unique_ptr<prometheus::Exposer> exposer;

@@ -213,9 +213,6 @@ absl::Status WorkerServer::Impl::Start() {
         ServeMetrics(spec_.metrics_listen_address, {metrics_.registry()}, "worker");
     if (!endpoint.ok()) return endpoint.status();
     metrics_endpoint_ = *std::move(endpoint);
-    spdlog::info("worker: metrics on http://{}:{}/metrics",
-                 spec_.metrics_listen_address.substr(0, spec_.metrics_listen_address.rfind(':')),
-                 metrics_endpoint_.port);
   }
   heartbeat_thread_ = std::thread([this] { HeartbeatLoop(); });
   for (int i = 0; i < spec_.threads; ++i) threads_.emplace_back([this] { CarveLoop(); });
