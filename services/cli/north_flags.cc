@@ -5,11 +5,14 @@
 namespace carvemap {
 
 void AddNorthFlags(CLI::App* cmd, NorthFlags& flags, bool optional_mode) {
-  CLI::Option* north = cmd->add_option(
-      "--north", flags.mode,
+  std::string help =
       "§2.3: turn the outputs about the vertical to north (+y) from the scan's /magnetometer: "
       "auto (when the fit is confident and the turn is at least 1°; job.json's \"north\" says "
-      "why not), magnetic (always; an error without a confident fit) or none");
+      "why not), magnetic (always; an error without a confident fit) or none";
+  if (optional_mode) {
+    help += ". Default: submit auto; merge what `carve` recorded in TILES/../north.json, else auto";
+  }
+  CLI::Option* north = cmd->add_option("--north", flags.mode, help);
   north->check(CLI::IsMember({"auto", "magnetic", "none"}));
   if (!optional_mode) north->capture_default_str();
   cmd->add_option("--location", flags.location,

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Soak benchmark (issue 29, item 5): many jobs of mixed sizes from four tenants over several
+"""Soak benchmark: many jobs of mixed sizes from four tenants over several
 minutes on one cluster (a coordinator, 2 workers, 2 merge services as separate `carvemap`
 processes, tests/tools/cluster_harness.py), while a chaos thread SIGKILLs a worker or a merge
 service at random moments and starts it again. Then:
