@@ -13,7 +13,9 @@
 
 namespace carvemap {
 
-// RFC 7946 FeatureCollection in metres (plan x, y): one Feature per room that has polygons, in
+// A GeoJSON FeatureCollection in the plan's local metres (x, y; +y north when the job turned to
+// north, §2.3): GeoJSON's structure, not RFC 7946's WGS 84 longitude/latitude, and no `crs`
+// member (docs/DESIGN.md §7). One Feature per room that has polygons, in
 // room order — a Polygon, or a MultiPolygon when the room is in several pieces; rings closed by
 // repeating the first point, exterior CCW, holes CW — with properties {room (its index), level,
 // floor_z, ceiling_z, area_m2 (Σ of its pieces' areas)}; then one LineString Feature per wall
