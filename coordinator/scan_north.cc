@@ -1,8 +1,8 @@
 #include "coordinator/scan_north.h"
 
 #include <cmath>
-#include <numbers>
 #include <memory>
+#include <numbers>
 #include <sstream>
 #include <vector>
 
@@ -51,7 +51,8 @@ absl::StatusOr<ScanNorth> NorthOfScan(ScanReader& reader, NorthMode mode,
     absl::StatusOr<double> d =
         MagneticDeclinationDeg(BuiltInWmm(), place->lat_deg, place->lon_deg, 0, *year);
     if (!d.ok()) {
-      return absl::Status(d.status().code(), absl::StrCat("true north: ", d.status().message()));
+      return absl::Status(d.status().code(),
+                          absl::StrCat(reader.file(), ": true north: ", d.status().message()));
     }
     north.declination_deg = *d;
     declination_rad = *d * std::numbers::pi / 180;
@@ -90,7 +91,7 @@ nlohmann::json NorthJson(const ScanNorth& north) {
                 {"standard_error_deg", Degrees(e.standard_error_rad)},
                 {"confident", e.confident}};
   }
-  if (north.place) {
+  if (north.place && north.mode != NorthMode::kNone) {
     j["reference"] = "true north";
     j["place"] = {{"lat_deg", north.place->lat_deg},
                   {"lon_deg", north.place->lon_deg},
