@@ -122,9 +122,11 @@ absl::Status SensorData::CheckFrameRange(uint64_t row, const FrameRecord& f) con
 struct ScanReader::Impl {
   std::string file;
   Hid fid;
-  // OpenOptions::world_yaw_rad as a rotation; identity (and never applied) for 0.
+  // OpenOptions::world_yaw_rad; 0: nothing is turned.
   double yaw = 0;
-  Eigen::Quaterniond turn = Eigen::Quaterniond::Identity();
+  [[nodiscard]] Eigen::Quaterniond Turn() const {
+    return Eigen::Quaterniond(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()));
+  }
   std::vector<PathRecord> path;
   std::vector<TimedPose> timed_path;
   std::optional<std::vector<PathCovariance>> path_cov;
@@ -469,8 +471,6 @@ absl::StatusOr<std::unique_ptr<ScanReader>> ScanReader::Open(const std::string& 
     return absl::InvalidArgumentError(absl::StrCat(path, ": world yaw is not finite"));
   }
   impl->yaw = options.world_yaw_rad;
-  impl->turn =
-      Eigen::Quaterniond(Eigen::AngleAxisd(options.world_yaw_rad, Eigen::Vector3d::UnitZ()));
   const hid_t fid = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
   if (fid < 0) {
     // HDF5 1.10 compares the superblock's end-of-file address with the file's size.
@@ -723,7 +723,8 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> ScanReader::PathPositions() {
   });
   if (!s.ok()) return s;
   if (impl_->yaw != 0) {
-    for (Eigen::Vector3d& x : positions) x = impl_->turn * x;
+    const Eigen::Quaterniond turn = impl_->Turn();
+    for (Eigen::Vector3d& x : positions) x = turn * x;
   }
   return positions;
 }
@@ -753,9 +754,11 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> ScanReader::MagnetometerInWorld() {
     readings = *std::move(impl_->magnetometer);
     impl_->magnetometer.reset();
   }
-  std::stable_sort(readings.begin(), readings.end(),
-                   [](const MagnetometerRecord& a, const MagnetometerRecord& b) { return a.t < b.t; });
+  std::stable_sort(
+      readings.begin(), readings.end(),
+      [](const MagnetometerRecord& a, const MagnetometerRecord& b) { return a.t < b.t; });
   out.reserve(readings.size());
+  const Eigen::Quaterniond turn = impl_->Turn();
   // One pass over the path in blocks: each reading between two consecutive poses takes their
   // interpolation (§2.4), as PoseAt does on a path held whole.
   size_t next = 0;
@@ -770,13 +773,13 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> ScanReader::MagnetometerInWorld() {
           const double u = (readings[next].t - previous.t) / (pose.t - previous.t);
           const Pose at = InterpolatePose(previous.pose, pose.pose, u);
           const MagnetometerRecord& m = readings[next];
-          out.push_back(impl_->turn * (at.rotation * Eigen::Vector3d(m.mx, m.my, m.mz)));
+          out.push_back(turn * (at.rotation * Eigen::Vector3d(m.mx, m.my, m.mz)));
         }
         ++next;
       }
       while (next < readings.size() && readings[next].t == pose.t) {
         const MagnetometerRecord& m = readings[next++];
-        out.push_back(impl_->turn * (pose.pose.rotation * Eigen::Vector3d(m.mx, m.my, m.mz)));
+        out.push_back(turn * (pose.pose.rotation * Eigen::Vector3d(m.mx, m.my, m.mz)));
       }
       previous = pose;
       have_previous = true;

@@ -40,7 +40,8 @@ void PutDouble(std::ostream& o, double v) {
 }
 
 // One set of GeographicLib coefficients: N, M, then C and S in column (m) major order.
-void PutSet(std::ostream& o, int n_max, const std::vector<double>& c, const std::vector<double>& s) {
+void PutSet(std::ostream& o, int n_max, const std::vector<double>& c,
+            const std::vector<double>& s) {
   PutInt(o, n_max);
   PutInt(o, n_max);
   for (int m = 0; m <= n_max; ++m) {

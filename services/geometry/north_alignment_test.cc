@@ -18,7 +18,9 @@ namespace {
 
 constexpr double kDeg = std::numbers::pi / 180;
 
-double AngleError(double a, double b) { return std::abs(std::remainder(a - b, 2 * std::numbers::pi)); }
+double AngleError(double a, double b) {
+  return std::abs(std::remainder(a - b, 2 * std::numbers::pi));
+}
 
 // The simulator's walk through the office preset with its default noise (drift of the path,
 // 1.5 µT per axis on the magnetometer): the readings in the world frame of the DRIFTED path

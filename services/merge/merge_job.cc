@@ -116,7 +116,8 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
     warnings.push_back("floorplan: no levels found; no floor plans");
     return absl::OkStatus();
   }
-  absl::StatusOr<std::vector<Eigen::Vector3d>> path = ReadPathPositions(options.scan_path, options.world_yaw_rad);
+  absl::StatusOr<std::vector<Eigen::Vector3d>> path =
+      ReadPathPositions(options.scan_path, options.world_yaw_rad);
   if (!path.ok()) return path.status();
   const OctreeLabelFn label_at = [&tiles](const Eigen::Vector3d& x) -> absl::StatusOr<OctreeLabel> {
     absl::StatusOr<LeafQuery> q = tiles.Query(x);
