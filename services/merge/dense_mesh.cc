@@ -2,14 +2,11 @@
 
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <memory>
-#include <optional>
-#include <span>
-#include <thread>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "services/merge/for_each_chunk.h"
 #include "services/mesh/dual_contouring.h"
 
 namespace carvemap {
@@ -38,53 +35,6 @@ absl::StatusOr<ChunkNeighbourhood> FetchNeighbourhood(
   }
   return hood;
 }
-
-namespace {
-
-// Runs `compute` on every chunk's neighbourhood and hands the results to `take` in chunk order.
-// The tiles are read on the calling thread (HDF5 is not thread-safe, storage/tile_store.h), a
-// batch of a few chunks per thread at a time; `compute` runs on `threads` threads. The results
-// do not depend on the thread count.
-template <typename Result, typename Compute, typename Take>
-absl::Status ForEachChunk(TileSet& tiles, std::span<const ChunkKey> chunks, bool low_only,
-                          int threads, const Compute& compute, const Take& take,
-                          const ChunkProgressFn& progress, const char* stage) {
-  threads = std::max(1, threads);
-  const size_t batch = threads == 1 ? 1 : 4 * size_t(threads);
-  std::vector<std::array<std::shared_ptr<const TileData>, 27>> hold(batch);
-  std::vector<ChunkNeighbourhood> hoods(batch);
-  std::vector<std::optional<absl::StatusOr<Result>>> results(batch);
-  for (size_t first = 0; first < chunks.size(); first += batch) {
-    const size_t n = std::min(batch, chunks.size() - first);
-    for (size_t k = 0; k < n; ++k) {
-      absl::StatusOr<ChunkNeighbourhood> hood =
-          FetchNeighbourhood(tiles, chunks[first + k], low_only, hold[k]);
-      if (!hood.ok()) return hood.status();
-      hoods[k] = *hood;
-    }
-    std::atomic<size_t> next{0};
-    const auto work = [&] {
-      for (size_t k; (k = next.fetch_add(1)) < n;) results[k].emplace(compute(hoods[k]));
-    };
-    {
-      std::vector<std::jthread> pool;
-      for (size_t t = 1; t < std::min(size_t(threads), n); ++t) pool.emplace_back(work);
-      work();
-    }
-    for (size_t k = 0; k < n; ++k) {
-      absl::StatusOr<Result>& r = *results[k];
-      if (!r.ok()) return r.status();
-      take(*std::move(r));
-      results[k].reset();
-      if (progress && !progress(first + k + 1, chunks.size())) {
-        return absl::CancelledError(absl::StrCat(stage, ": cancelled"));
-      }
-    }
-  }
-  return absl::OkStatus();
-}
-
-}  // namespace
 
 absl::StatusOr<DenseMeshResult> BuildDenseMesh(TileSet& tiles, const ChunkProgressFn& progress,
                                                int threads) {

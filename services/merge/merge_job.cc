@@ -318,7 +318,8 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
   source.dir = (work / "finer_objects").string();
   absl::StatusOr<SegmentTilesResult> segmented =
       SegmentTiles(**tiles, *volume, seg, "", source.dir,
-                   StageProgress(progress, "recarve_segmentation"), &regions);
+                   StageProgress(progress, "recarve_segmentation"), MergeThreads(options),
+                   &regions);
   if (!segmented.ok()) return segmented.status();
   counts["recarved_object_cells"] = segmented->object_cells;
   source.resolution_m = res;
@@ -352,7 +353,8 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   fs::remove_all(work, ec);
   absl::StatusOr<SegmentTilesResult> segmented =
       SegmentTiles(tiles, *volume, seg_options, (work / "building").string(),
-                   (work / "objects").string(), StageProgress(progress, "segmentation"));
+                   (work / "objects").string(), StageProgress(progress, "segmentation"),
+                   MergeThreads(options));
   if (!segmented.ok()) return segmented.status();
   tiles.ReleaseCache();  // the job's tiles are read again only by the first outputs, in order
   counts["segmented_chunks"] = segmented->chunks;

@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "absl/strings/str_cat.h"
+#include "services/merge/for_each_chunk.h"
 
 namespace carvemap {
 
@@ -10,7 +11,7 @@ absl::StatusOr<SegmentTilesResult> SegmentTiles(TileSet& tiles, const PlanVolume
                                                 const SegmentOptions& options,
                                                 const std::string& building_dir,
                                                 const std::string& objects_dir,
-                                                const ChunkProgressFn& progress,
+                                                const ChunkProgressFn& progress, int threads,
                                                 const ChunkRegionMap* only_in) {
   for (const std::string& dir : {building_dir, objects_dir}) {
     if (dir.empty()) continue;
@@ -19,41 +20,41 @@ absl::StatusOr<SegmentTilesResult> SegmentTiles(TileSet& tiles, const PlanVolume
     if (ec) return absl::UnavailableError(absl::StrCat(dir, ": cannot create: ", ec.message()));
   }
   SegmentTilesResult result;
-  const uint64_t total = tiles.chunks().size();
-  std::array<std::shared_ptr<const TileData>, 27> hold;
-  for (const ChunkKey& chunk : tiles.chunks()) {
-    absl::StatusOr<ChunkNeighbourhood> hood =
-        FetchNeighbourhood(tiles, chunk, /*low_only=*/false, hold);
-    if (!hood.ok()) return hood.status();
-    const ChunkRegion none;
-    const ChunkRegion* region = nullptr;
-    if (only_in != nullptr) {
-      auto it = only_in->find(chunk);
-      region = it != only_in->end() ? &it->second : &none;
-    }
-    absl::StatusOr<SegmentedChunk> seg = SegmentChunk(*hood, plan, options, region);
-    if (!seg.ok()) return seg.status();
-    if (!building_dir.empty()) {
-      if (absl::StatusOr<std::string> w = WriteTile(building_dir, seg->building); !w.ok()) {
-        return w.status();
-      }
-      ++result.building_tiles;
-    }
-    if (seg->object_cells > 0) {
-      if (absl::StatusOr<std::string> w = WriteTile(objects_dir, seg->objects); !w.ok()) {
-        return w.status();
-      }
-      ++result.object_tiles;
-      result.object_chunks.push_back(chunk);
-    }
-    result.object_cells += seg->object_cells;
-    result.unobserved_object_cells += seg->unobserved_object_cells;
-    result.trimmed_cells += seg->trimmed_cells;
-    ++result.chunks;
-    if (progress && !progress(result.chunks, total)) {
-      return absl::CancelledError("merge cancelled");
-    }
-  }
+  const ChunkRegion none;
+  size_t index = 0;  // of the chunk being taken, in tiles.chunks()
+  absl::Status s = ForEachChunk<SegmentedChunk>(
+      tiles, tiles.chunks(), /*low_only=*/false, threads,
+      [&](const ChunkNeighbourhood& hood) {
+        const ChunkRegion* region = nullptr;
+        if (only_in != nullptr) {
+          auto it = only_in->find(hood.chunk);
+          region = it != only_in->end() ? &it->second : &none;
+        }
+        return SegmentChunk(hood, plan, options, region);
+      },
+      [&](SegmentedChunk&& seg) -> absl::Status {
+        const ChunkKey& chunk = tiles.chunks()[index++];
+        if (!building_dir.empty()) {
+          if (absl::StatusOr<std::string> w = WriteTile(building_dir, seg.building); !w.ok()) {
+            return w.status();
+          }
+          ++result.building_tiles;
+        }
+        if (seg.object_cells > 0) {
+          if (absl::StatusOr<std::string> w = WriteTile(objects_dir, seg.objects); !w.ok()) {
+            return w.status();
+          }
+          ++result.object_tiles;
+          result.object_chunks.push_back(chunk);
+        }
+        result.object_cells += seg.object_cells;
+        result.unobserved_object_cells += seg.unobserved_object_cells;
+        result.trimmed_cells += seg.trimmed_cells;
+        ++result.chunks;
+        return absl::OkStatus();
+      },
+      progress, "segmentation");
+  if (!s.ok()) return s;
   return result;
 }
 

@@ -1,7 +1,8 @@
 // The merge shell around segment_chunk.h (docs/DESIGN.md §6 stages 6–7): every tile of a job
 // segmented against the extruded floor plans, chunk by chunk through the TileSet's bounded cache,
 // into two tile directories that the existing stages then mesh (building: planar mesh; objects:
-// dense mesh). Out of core: one decoded tile in, two out, at a time.
+// dense mesh). Out of core: a few decoded neighbourhoods per thread in, two tiles out each, at a
+// time.
 #pragma once
 
 #include <cstdint>
@@ -32,15 +33,13 @@ struct SegmentTilesResult {
 // tiles replace any there). An empty `building_dir` writes no building tiles (the finer
 // re-carving of §5.6.1 wants the objects only). `only_in` (that pass): each chunk's objects
 // only inside its region (SegmentChunk); a chunk not in the map has none. Only chunks with a
-// tile are segmented: object volume in a chunk that no wedge reached is not found. Errors: TileSet::Get's, SegmentChunk's, WriteTile's
-// (naming the file), Unavailable naming a directory that cannot be created, Cancelled.
-[[nodiscard]] absl::StatusOr<SegmentTilesResult> SegmentTiles(TileSet& tiles,
-                                                              const PlanVolume& plan,
-                                                              const SegmentOptions& options,
-                                                              const std::string& building_dir,
-                                                              const std::string& objects_dir,
-                                                              const ChunkProgressFn& progress,
-                                                              const ChunkRegionMap* only_in =
-                                                                  nullptr);
+// tile are segmented: object volume in a chunk that no wedge reached is not found. Errors:
+// TileSet::Get's, SegmentChunk's, WriteTile's (naming the file), Unavailable naming a directory
+// that cannot be created, Cancelled. The chunks are segmented on `threads` threads and written in
+// order on the calling thread: the tiles do not depend on the thread count.
+[[nodiscard]] absl::StatusOr<SegmentTilesResult> SegmentTiles(
+    TileSet& tiles, const PlanVolume& plan, const SegmentOptions& options,
+    const std::string& building_dir, const std::string& objects_dir,
+    const ChunkProgressFn& progress, int threads, const ChunkRegionMap* only_in = nullptr);
 
 }  // namespace carvemap
