@@ -1,12 +1,14 @@
 #include "services/merge/merge_job.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <limits>
 #include <optional>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -64,6 +66,20 @@ uint64_t CountSelfIntersectionsInto(const TriangleMesh& mesh, const std::string&
   timings["merge.self_intersections"] =
       timings.value("merge.self_intersections", 0.0) + SecondsSince(t0);
   return s.pairs;
+}
+
+// `from`'s keys into `into`: numbers already there are summed (merge.self_intersections is
+// timed in more than one stage), others set.
+void AddInto(const nlohmann::json& from, nlohmann::json& into) {
+  for (const auto& [key, value] : from.items()) {
+    if (into.contains(key) && into[key].is_number_unsigned() && value.is_number_unsigned()) {
+      into[key] = into[key].get<uint64_t>() + value.get<uint64_t>();
+    } else if (into.contains(key) && into[key].is_number() && value.is_number()) {
+      into[key] = into[key].get<double>() + value.get<double>();
+    } else {
+      into[key] = value;
+    }
+  }
 }
 
 absl::Status InStage(const char* stage, const absl::Status& s) {
@@ -263,13 +279,18 @@ struct ObjectSource {
 // <work>/finer_objects. The plan's walls keep the job's tolerance (one coarse cell): the plan
 // came from the coarse octree, so it is no more exact than that, and a finer tolerance would
 // turn the re-carved walls' skin into objects. No region (objects too small): no re-carving.
-absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLevelInput> inputs,
-                            const std::vector<ChunkKey>& chunks, const OctreeGrid& grid,
-                            const PlanVolume& coarse_volume, const fs::path& work,
-                            ObjectSource& source, nlohmann::json& counts,
-                            nlohmann::json& timings, const MergeProgressCallback& progress) {
-  const double res = options.object_resolution_m;
-  Clock::time_point t0 = Clock::now();
+// In three parts, so that the building's planar mesh is made while the workers re-carve
+// (SegmentStage): RecarveRegions (none: nothing to re-carve), RecarveChunks and
+// SegmentRecarvedObjects.
+struct RecarvePass {
+  std::string recarved_dir;
+  ChunkRegionMap regions;  // the chunks' regions, for the second segmentation
+};
+
+absl::StatusOr<std::vector<RecarveChunk>> RecarveRegions(
+    const MergeOptions& options, const std::vector<ChunkKey>& chunks, const OctreeGrid& grid,
+    const PlanVolume& coarse_volume, const ObjectSource& source, nlohmann::json& counts,
+    const MergeProgressCallback& progress) {
   if (absl::Status s = ReportMergeProgress(progress, "recarve", 0, chunks.size()); !s.ok()) {
     return s;
   }
@@ -278,24 +299,29 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
   // Up to the ceiling over objects as close to it as SplitObjects groups stacked pieces: a
   // lamp's rod, whose points join it only when they are in the region.
   const double ceiling_reach_m = SplitOptionsFor(options, grid).stack_gap_m;
-  {
-    absl::StatusOr<std::unique_ptr<TileSet>> objects =
-        TileSet::Open(source.dir, grid.resolution_m(), options.cache_budget_bytes);
-    if (!objects.ok()) return objects.status();
-    for (const ChunkKey& chunk : chunks) {
-      absl::StatusOr<std::shared_ptr<const TileData>> tile = (*objects)->Get(chunk);
-      if (!tile.ok()) return tile.status();
-      ChunkRegion region =
-          ObjectRecarveRegion(**tile, coarse_volume, /*margin_cells=*/1, ceiling_reach_m);
-      if (region.empty()) continue;
-      region_volume += std::ldexp(double(region.count()), -3 * region.depth());
-      again.push_back(RecarveChunk{chunk, std::move(region)});
-    }
+  absl::StatusOr<std::unique_ptr<TileSet>> objects =
+      TileSet::Open(source.dir, grid.resolution_m(), options.cache_budget_bytes);
+  if (!objects.ok()) return objects.status();
+  for (const ChunkKey& chunk : chunks) {
+    absl::StatusOr<std::shared_ptr<const TileData>> tile = (*objects)->Get(chunk);
+    if (!tile.ok()) return tile.status();
+    ChunkRegion region =
+        ObjectRecarveRegion(**tile, coarse_volume, /*margin_cells=*/1, ceiling_reach_m);
+    if (region.empty()) continue;
+    region_volume += std::ldexp(double(region.count()), -3 * region.depth());
+    again.push_back(RecarveChunk{chunk, std::move(region)});
   }
   counts["recarved_chunks"] = again.size();
-  if (again.empty()) return absl::OkStatus();
   // The share of those chunks' volume carved again.
-  counts["recarved_volume_fraction"] = region_volume / double(again.size());
+  if (!again.empty()) counts["recarved_volume_fraction"] = region_volume / double(again.size());
+  return again;
+}
+
+// The caller's re-carve of `again` (timed from `t0`, when RecarveRegions began).
+absl::StatusOr<RecarvePass> RecarveChunks(const MergeOptions& options,
+                                          std::vector<RecarveChunk> again, nlohmann::json& timings,
+                                          Clock::time_point t0) {
+  const double res = options.object_resolution_m;
   absl::StatusOr<std::string> dir = options.recarve(again, res);
   if (!dir.ok()) {
     return absl::Status(dir.status().code(), absl::StrCat("re-carving ", again.size(),
@@ -303,12 +329,22 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
                                                           dir.status().message()));
   }
   timings["merge.recarve"] = SecondsSince(t0);
-  ChunkRegionMap regions;  // the same regions, now by chunk, for the second segmentation
-  for (RecarveChunk& c : again) regions.emplace(c.chunk, std::move(c.region));
+  RecarvePass pass;
+  pass.recarved_dir = *std::move(dir);
+  for (RecarveChunk& c : again) pass.regions.emplace(c.chunk, std::move(c.region));
+  return pass;
+}
 
-  t0 = Clock::now();
+absl::Status SegmentRecarvedObjects(const MergeOptions& options,
+                                    std::span<const PlanLevelInput> inputs, const OctreeGrid& grid,
+                                    const fs::path& work, const RecarvePass& pass,
+                                    ObjectSource& source, nlohmann::json& counts,
+                                    nlohmann::json& timings,
+                                    const MergeProgressCallback& progress) {
+  const double res = options.object_resolution_m;
+  const Clock::time_point t0 = Clock::now();
   absl::StatusOr<std::unique_ptr<TileSet>> tiles =
-      TileSet::Open(*dir, res, options.cache_budget_bytes);
+      TileSet::Open(pass.recarved_dir, res, options.cache_budget_bytes);
   if (!tiles.ok()) return tiles.status();
   SegmentOptions seg;
   seg.plan_tolerance_m = grid.resolution_m();
@@ -316,16 +352,81 @@ absl::Status RecarveObjects(const MergeOptions& options, std::span<const PlanLev
       RasterizePlanVolume(inputs, res, seg.trim_distance_m + 2 * grid.resolution_m());
   if (!volume.ok()) return volume.status();
   source.dir = (work / "finer_objects").string();
-  absl::StatusOr<SegmentTilesResult> segmented =
-      SegmentTiles(**tiles, *volume, seg, "", source.dir,
-                   StageProgress(progress, "recarve_segmentation"), MergeThreads(options),
-                   &regions);
+  absl::StatusOr<SegmentTilesResult> segmented = SegmentTiles(
+      **tiles, *volume, seg, "", source.dir, StageProgress(progress, "recarve_segmentation"),
+      MergeThreads(options), &pass.regions);
   if (!segmented.ok()) return segmented.status();
   counts["recarved_object_cells"] = segmented->object_cells;
   source.resolution_m = res;
   source.finer_volume = std::move(*volume);
   timings["merge.recarve_segmentation"] = SecondsSince(t0);
   return absl::OkStatus();
+}
+
+// What BuildingStage makes, for SegmentStage to add to job.json.
+struct BuildingPart {
+  TriangleMesh mesh;  // mesh/building.ply as written
+  nlohmann::json counts = nlohmann::json::object();
+  nlohmann::json timings = nlohmann::json::object();
+  std::vector<std::string> outputs;
+  std::vector<std::string> warnings;
+};
+
+// The building tiles' (<work>/building) faces, regions and planar mesh ➜ mesh/building.ply;
+// the building volume's dense mesh when the planar mesher fails. Touches nothing of the
+// caller's but the output file, so it can run beside the re-carve.
+absl::StatusOr<BuildingPart> BuildingStage(const MergeOptions& options, const OctreeGrid& grid,
+                                           const fs::path& work, const fs::path& out,
+                                           const MergeProgressCallback& progress) {
+  const Clock::time_point t0 = Clock::now();
+  BuildingPart part;
+  nlohmann::json& counts = part.counts;
+  nlohmann::json& timings = part.timings;
+  std::vector<std::string>& outputs = part.outputs;
+  std::vector<std::string>& warnings = part.warnings;
+  std::optional<TriangleMesh> building;
+  absl::StatusOr<std::unique_ptr<TileSet>> btiles =
+      TileSet::Open((work / "building").string(), grid.resolution_m(), options.cache_budget_bytes);
+  if (!btiles.ok()) return btiles.status();
+  absl::StatusOr<std::vector<BoundaryFace>> bfaces = CollectBoundaryFaces(
+      **btiles, StageProgress(progress, "building_faces"), MergeThreads(options));
+  if (!bfaces.ok()) return bfaces.status();
+  (*btiles)->ReleaseCache();  // read again only by the dense fallback below
+  if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
+  // These regions only shape the planar mesh, so they are grown for it (mesh_growth:
+  // fewer, bigger regions, §4.3.3); the floor plans were made from the job's own regions.
+  absl::StatusOr<PlanarRegionSet> bregions = FitPlanarRegions(*bfaces, grid, MeshRegionOptions());
+  if (!bregions.ok()) return bregions.status();
+  counts["building_planar_regions"] = bregions->regions.size();
+  absl::StatusOr<std::optional<TriangleMesh>> planar =
+      PlanarBuildingMesh(*bfaces, *bregions, grid, out, counts, timings, outputs, warnings);
+  if (!planar.ok()) return planar.status();
+  building = std::move(*planar);
+  if (!building) {
+    // The planar mesher failed (its reason is in the warnings): the building volume's dense
+    // mesh stands in, watertight by construction, so combined.ply stays whole.
+    absl::StatusOr<DenseMeshResult> dense = BuildDenseMesh(
+        **btiles, StageProgress(progress, "building_dense_mesh"), MergeThreads(options));
+    if (!dense.ok()) return dense.status();
+    if (absl::Status s = WritePly((out / "mesh" / "building.ply").string(), dense->mesh); !s.ok()) {
+      return s;
+    }
+    warnings.push_back(
+        "segmentation: mesh/building.ply is the dense mesh of the building "
+        "volume, not a planar one");
+    outputs.push_back("mesh/building.ply");
+    counts["building_vertices"] = dense->mesh.vertices.size();
+    counts["building_triangles"] = dense->mesh.triangles.size();
+    counts["building_watertight"] = CheckMesh(dense->mesh).watertight();
+    CountSelfIntersectionsInto(dense->mesh, "building", counts, timings, &warnings);
+    counts["building_planar"] = false;
+    building = std::move(dense->mesh);
+  } else {
+    counts["building_planar"] = true;
+  }
+  part.mesh = std::move(*building);
+  timings["merge.planar_mesh"] = SecondsSince(t0);
+  return part;
 }
 
 // docs/DESIGN.md §6 stages 6–8 (§5.5, §5.6): the tiles segmented against the extruded plans into
@@ -351,10 +452,9 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   const fs::path work = out / ".segment";
   std::error_code ec;
   fs::remove_all(work, ec);
-  absl::StatusOr<SegmentTilesResult> segmented =
-      SegmentTiles(tiles, *volume, seg_options, (work / "building").string(),
-                   (work / "objects").string(), StageProgress(progress, "segmentation"),
-                   MergeThreads(options));
+  absl::StatusOr<SegmentTilesResult> segmented = SegmentTiles(
+      tiles, *volume, seg_options, (work / "building").string(), (work / "objects").string(),
+      StageProgress(progress, "segmentation"), MergeThreads(options));
   if (!segmented.ok()) return segmented.status();
   tiles.ReleaseCache();  // the job's tiles are read again only by the first outputs, in order
   counts["segmented_chunks"] = segmented->chunks;
@@ -379,71 +479,61 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
     timings["merge.trimmed_points"] = SecondsSince(t0);
   }
 
-  // The building: faces, regions and planar mesh of the building tiles.
-  t0 = Clock::now();
-  std::optional<TriangleMesh> building;
-  {
-    absl::StatusOr<std::unique_ptr<TileSet>> btiles =
-        TileSet::Open((work / "building").string(), grid.resolution_m(),
-                      options.cache_budget_bytes);
-    if (!btiles.ok()) return btiles.status();
-    absl::StatusOr<std::vector<BoundaryFace>> bfaces = CollectBoundaryFaces(
-        **btiles, StageProgress(progress, "building_faces"), MergeThreads(options));
-    if (!bfaces.ok()) return bfaces.status();
-    (*btiles)->ReleaseCache();  // read again only by the dense fallback below
-    if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
-    // These regions only shape the planar mesh, so they are grown for it (mesh_growth:
-    // fewer, bigger regions, §4.3.3); the floor plans were made from the job's own regions.
-    absl::StatusOr<PlanarRegionSet> bregions =
-        FitPlanarRegions(*bfaces, grid, MeshRegionOptions());
-    if (!bregions.ok()) return bregions.status();
-    counts["building_planar_regions"] = bregions->regions.size();
-    absl::StatusOr<std::optional<TriangleMesh>> planar =
-        PlanarBuildingMesh(*bfaces, *bregions, grid, out, counts, timings, outputs, warnings);
-    if (!planar.ok()) return planar.status();
-    building = std::move(*planar);
-    if (!building) {
-      // The planar mesher failed (its reason is in the warnings): the building volume's dense
-      // mesh stands in, watertight by construction, so combined.ply stays whole.
-      absl::StatusOr<DenseMeshResult> dense = BuildDenseMesh(
-          **btiles, StageProgress(progress, "building_dense_mesh"), MergeThreads(options));
-      if (!dense.ok()) return dense.status();
-      if (absl::Status s = WritePly((out / "mesh" / "building.ply").string(), dense->mesh);
-          !s.ok()) {
-        return s;
-      }
-      warnings.push_back("segmentation: mesh/building.ply is the dense mesh of the building "
-                         "volume, not a planar one");
-      outputs.push_back("mesh/building.ply");
-      counts["building_vertices"] = dense->mesh.vertices.size();
-      counts["building_triangles"] = dense->mesh.triangles.size();
-      counts["building_watertight"] = CheckMesh(dense->mesh).watertight();
-      CountSelfIntersectionsInto(dense->mesh, "building", counts, timings, &warnings);
-      counts["building_planar"] = false;
-      building = std::move(dense->mesh);
-    } else {
-      counts["building_planar"] = true;
-    }
-    result.building_triangles = building->triangles.size();
-  }
-  timings["merge.planar_mesh"] = SecondsSince(t0);
-
-  // The objects: dense mesh of the object tiles (carved again finer first when the caller
-  // can, §5.6.1), split into closed pieces.
+  // The building's planar mesh, and the objects' re-carve (§5.6.1) when the caller can: the
+  // building is made while the workers re-carve, so that neither waits for the other, then
+  // the re-carved tiles are segmented. Its outputs, counts and warnings go into job.json in
+  // the same order either way.
   std::vector<SegmentedObject> objects;
   ObjectSplitReport split_report;
-  t0 = Clock::now();
-  if (segmented->object_tiles > 0) {
-    ObjectSource source{(work / "objects").string(), grid.resolution_m(), std::nullopt};
-    const bool finer = options.recarve && options.object_resolution_m > 0 &&
-                       options.object_resolution_m < grid.resolution_m();
-    if (finer) {
-      absl::Status s = RecarveObjects(options, inputs, segmented->object_chunks, grid, *volume,
-                                      work, source, counts, timings, progress);
+  ObjectSource source{(work / "objects").string(), grid.resolution_m(), std::nullopt};
+  const bool finer = segmented->object_tiles > 0 && options.recarve &&
+                     options.object_resolution_m > 0 &&
+                     options.object_resolution_m < grid.resolution_m();
+  absl::StatusOr<BuildingPart> building = absl::UnknownError("not made");
+  if (!finer) {
+    building = BuildingStage(options, grid, work, out, progress);
+  } else {
+    const Clock::time_point t_recarve = Clock::now();
+    absl::StatusOr<std::vector<RecarveChunk>> again =
+        RecarveRegions(options, segmented->object_chunks, grid, *volume, source, counts, progress);
+    if (!again.ok()) return again.status();
+    if (again->empty()) {
+      building = BuildingStage(options, grid, work, out, progress);
+    } else {
+      absl::StatusOr<RecarvePass> pass = absl::UnknownError("not made");
+      {
+        std::atomic<bool> stop{false};
+        // The building reports no stage of its own meanwhile (the re-carve's is the one that
+        // tells the user how long): it only stops when the merge is stopped. The re-carve, a
+        // wait on the workers, is the one on another thread, so that the building's memory
+        // comes from the arenas the earlier stages freed.
+        const MergeProgressCallback building_progress = [&](const MergeProgress&) {
+          return !stop.load();
+        };
+        std::jthread recarve_thread([&] {
+          pass = RecarveChunks(options, *std::move(again), timings, t_recarve);
+          if (!pass.ok()) stop = true;
+        });
+        building = BuildingStage(options, grid, work, out, building_progress);
+      }
+      if (!pass.ok()) return pass.status();
+      if (!building.ok()) return building.status();
+      absl::Status s = SegmentRecarvedObjects(options, inputs, grid, work, *pass, source, counts,
+                                              timings, progress);
       if (!s.ok()) return s;
     }
+  }
+  if (!building.ok()) return building.status();
+  AddInto(building->counts, counts);
+  AddInto(building->timings, timings);
+  outputs.insert(outputs.end(), building->outputs.begin(), building->outputs.end());
+  warnings.insert(warnings.end(), building->warnings.begin(), building->warnings.end());
+  result.building_triangles = building->mesh.triangles.size();
+
+  // The objects: dense mesh of the (finer) object tiles, split into closed pieces.
+  t0 = Clock::now();
+  if (segmented->object_tiles > 0) {
     counts["object_resolution_m"] = source.resolution_m;
-    t0 = Clock::now();
     absl::StatusOr<std::unique_ptr<TileSet>> otiles =
         TileSet::Open(source.dir, source.resolution_m, options.cache_budget_bytes);
     if (!otiles.ok()) return otiles.status();
@@ -498,8 +588,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   }
   outputs.push_back("mesh/objects.ply");
   // combined = building + objects; face property `object`: −1 for the building.
-  TriangleMesh combined = building ? std::move(*building) : TriangleMesh{};
-  building.reset();
+  TriangleMesh combined = std::move(building->mesh);
   std::vector<int> combined_object(combined.triangles.size(), -1);
   combined.Append(all_objects);
   combined_object.insert(combined_object.end(), object_of_face.begin(), object_of_face.end());

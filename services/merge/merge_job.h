@@ -16,7 +16,9 @@
 //                    planar mesh of everything
 //   recarve, recarve_segmentation   with MergeOptions::recarve (§5.6.1): the chunks holding
 //                    objects carved again at object_resolution_m around their objects, and
-//                    segmented again, in <out>/.segment/finer_objects
+//                    segmented again, in <out>/.segment/finer_objects. The building's faces
+//                    and planar mesh are made while the caller re-carves (its workers' wait is
+//                    the merge's idle time), reporting no stage of their own
 //   object_mesh      dual contouring of the (finer) object tiles, split into objects ➜
 //                    mesh/objects.ply (face property `object`), mesh/objects/<id>.ply,
 //                    mesh/combined.ply (`object`, −1 = building); job.json "objects"
