@@ -1322,6 +1322,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       return keep_going;
     };
     req.recarve = [this, &job_id](const std::vector<RecarveChunk>& chunks, double resolution_m) {
+      LogScope log_scope({{"job", job_id}});  // the merge may call it from a thread of its own
       return RecarveStage(job_id, chunks, resolution_m);
     };
     if (spec_.merge) {

@@ -365,6 +365,7 @@ absl::Status MergeServer::Impl::Serve(grpc::ServerContext& ctx, Stream& stream) 
   uint64_t next_request = 0;
   if (job.recarve_available()) {
     req.recarve = [&](const std::vector<RecarveChunk>& chunks, double resolution_m) {
+      LogScope log_scope({{"job", job.job_id()}});  // the merge calls it from a thread of its own
       return Recarve(stream, ++next_request, chunks, resolution_m);
     };
   }
