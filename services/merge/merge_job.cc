@@ -68,20 +68,6 @@ uint64_t CountSelfIntersectionsInto(const TriangleMesh& mesh, const std::string&
   return s.pairs;
 }
 
-// `from`'s keys into `into`: numbers already there are summed (merge.self_intersections is
-// timed in more than one stage), others set.
-void AddInto(const nlohmann::json& from, nlohmann::json& into) {
-  for (const auto& [key, value] : from.items()) {
-    if (into.contains(key) && into[key].is_number_unsigned() && value.is_number_unsigned()) {
-      into[key] = into[key].get<uint64_t>() + value.get<uint64_t>();
-    } else if (into.contains(key) && into[key].is_number() && value.is_number()) {
-      into[key] = into[key].get<double>() + value.get<double>();
-    } else {
-      into[key] = value;
-    }
-  }
-}
-
 absl::Status InStage(const char* stage, const absl::Status& s) {
   if (s.ok() || absl::IsCancelled(s)) return s;
   return absl::Status(s.code(), absl::StrCat("merge ", stage, ": ", s.message()));
@@ -317,10 +303,10 @@ absl::StatusOr<std::vector<RecarveChunk>> RecarveRegions(
   return again;
 }
 
-// The caller's re-carve of `again` (timed from `t0`, when RecarveRegions began).
+// The caller's re-carve of `again`. Touches nothing of the merge's, so it can wait on the
+// workers beside the building (SegmentStage).
 absl::StatusOr<RecarvePass> RecarveChunks(const MergeOptions& options,
-                                          std::vector<RecarveChunk> again, nlohmann::json& timings,
-                                          Clock::time_point t0) {
+                                          std::vector<RecarveChunk> again) {
   const double res = options.object_resolution_m;
   absl::StatusOr<std::string> dir = options.recarve(again, res);
   if (!dir.ok()) {
@@ -328,7 +314,6 @@ absl::StatusOr<RecarvePass> RecarveChunks(const MergeOptions& options,
                                                           " object chunks at ", res, " m: ",
                                                           dir.status().message()));
   }
-  timings["merge.recarve"] = SecondsSince(t0);
   RecarvePass pass;
   pass.recarved_dir = *std::move(dir);
   for (RecarveChunk& c : again) pass.regions.emplace(c.chunk, std::move(c.region));
@@ -363,28 +348,15 @@ absl::Status SegmentRecarvedObjects(const MergeOptions& options,
   return absl::OkStatus();
 }
 
-// What BuildingStage makes, for SegmentStage to add to job.json.
-struct BuildingPart {
-  TriangleMesh mesh;  // mesh/building.ply as written
-  nlohmann::json counts = nlohmann::json::object();
-  nlohmann::json timings = nlohmann::json::object();
-  std::vector<std::string> outputs;
-  std::vector<std::string> warnings;
-};
-
 // The building tiles' (<work>/building) faces, regions and planar mesh ➜ mesh/building.ply;
-// the building volume's dense mesh when the planar mesher fails. Touches nothing of the
-// caller's but the output file, so it can run beside the re-carve.
-absl::StatusOr<BuildingPart> BuildingStage(const MergeOptions& options, const OctreeGrid& grid,
+// the building volume's dense mesh when the planar mesher fails. Returns the mesh written.
+absl::StatusOr<TriangleMesh> BuildingStage(const MergeOptions& options, const OctreeGrid& grid,
                                            const fs::path& work, const fs::path& out,
+                                           nlohmann::json& counts, nlohmann::json& timings,
+                                           std::vector<std::string>& outputs,
+                                           std::vector<std::string>& warnings,
                                            const MergeProgressCallback& progress) {
   const Clock::time_point t0 = Clock::now();
-  BuildingPart part;
-  nlohmann::json& counts = part.counts;
-  nlohmann::json& timings = part.timings;
-  std::vector<std::string>& outputs = part.outputs;
-  std::vector<std::string>& warnings = part.warnings;
-  std::optional<TriangleMesh> building;
   absl::StatusOr<std::unique_ptr<TileSet>> btiles =
       TileSet::Open((work / "building").string(), grid.resolution_m(), options.cache_budget_bytes);
   if (!btiles.ok()) return btiles.status();
@@ -401,7 +373,7 @@ absl::StatusOr<BuildingPart> BuildingStage(const MergeOptions& options, const Oc
   absl::StatusOr<std::optional<TriangleMesh>> planar =
       PlanarBuildingMesh(*bfaces, *bregions, grid, out, counts, timings, outputs, warnings);
   if (!planar.ok()) return planar.status();
-  building = std::move(*planar);
+  std::optional<TriangleMesh> building = *std::move(planar);
   if (!building) {
     // The planar mesher failed (its reason is in the warnings): the building volume's dense
     // mesh stands in, watertight by construction, so combined.ply stays whole.
@@ -424,9 +396,8 @@ absl::StatusOr<BuildingPart> BuildingStage(const MergeOptions& options, const Oc
   } else {
     counts["building_planar"] = true;
   }
-  part.mesh = std::move(*building);
   timings["merge.planar_mesh"] = SecondsSince(t0);
-  return part;
+  return *std::move(building);
 }
 
 // docs/DESIGN.md §6 stages 6–8 (§5.5, §5.6): the tiles segmented against the extruded plans into
@@ -481,54 +452,52 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
 
   // The building's planar mesh, and the objects' re-carve (§5.6.1) when the caller can: the
   // building is made while the workers re-carve, so that neither waits for the other, then
-  // the re-carved tiles are segmented. Its outputs, counts and warnings go into job.json in
-  // the same order either way.
+  // the re-carved tiles are segmented.
   std::vector<SegmentedObject> objects;
   ObjectSplitReport split_report;
   ObjectSource source{(work / "objects").string(), grid.resolution_m(), std::nullopt};
-  const bool finer = segmented->object_tiles > 0 && options.recarve &&
-                     options.object_resolution_m > 0 &&
-                     options.object_resolution_m < grid.resolution_m();
-  absl::StatusOr<BuildingPart> building = absl::UnknownError("not made");
-  if (!finer) {
-    building = BuildingStage(options, grid, work, out, progress);
-  } else {
-    const Clock::time_point t_recarve = Clock::now();
-    absl::StatusOr<std::vector<RecarveChunk>> again =
+  std::vector<RecarveChunk> again;
+  const Clock::time_point t_recarve = Clock::now();
+  if (segmented->object_tiles > 0 && options.recarve && options.object_resolution_m > 0 &&
+      options.object_resolution_m < grid.resolution_m()) {
+    absl::StatusOr<std::vector<RecarveChunk>> regions =
         RecarveRegions(options, segmented->object_chunks, grid, *volume, source, counts, progress);
-    if (!again.ok()) return again.status();
-    if (again->empty()) {
-      building = BuildingStage(options, grid, work, out, progress);
-    } else {
-      absl::StatusOr<RecarvePass> pass = absl::UnknownError("not made");
-      {
-        std::atomic<bool> stop{false};
-        // The building reports no stage of its own meanwhile (the re-carve's is the one that
-        // tells the user how long): it only stops when the merge is stopped. The re-carve, a
-        // wait on the workers, is the one on another thread, so that the building's memory
-        // comes from the arenas the earlier stages freed.
-        const MergeProgressCallback building_progress = [&](const MergeProgress&) {
-          return !stop.load();
-        };
-        std::jthread recarve_thread([&] {
-          pass = RecarveChunks(options, *std::move(again), timings, t_recarve);
-          if (!pass.ok()) stop = true;
-        });
-        building = BuildingStage(options, grid, work, out, building_progress);
-      }
-      if (!pass.ok()) return pass.status();
-      if (!building.ok()) return building.status();
-      absl::Status s = SegmentRecarvedObjects(options, inputs, grid, work, *pass, source, counts,
-                                              timings, progress);
-      if (!s.ok()) return s;
+    if (!regions.ok()) return regions.status();
+    again = *std::move(regions);
+  }
+  absl::StatusOr<TriangleMesh> building = absl::UnknownError("not made");
+  if (again.empty()) {
+    building =
+        BuildingStage(options, grid, work, out, counts, timings, outputs, warnings, progress);
+  } else {
+    absl::StatusOr<RecarvePass> pass = absl::UnknownError("not made");
+    double recarve_s = 0;
+    {
+      std::atomic<bool> stop{false};
+      // The building reports no stage of its own meanwhile (the re-carve's is the one that
+      // tells the user how long): it only stops when the merge is stopped. The re-carve, a
+      // wait on the workers, is the one on another thread, so that the building's memory
+      // comes from the arenas the earlier stages freed.
+      const MergeProgressCallback building_progress = [&](const MergeProgress&) {
+        return !stop.load();
+      };
+      std::jthread recarve_thread([&] {
+        pass = RecarveChunks(options, std::move(again));
+        recarve_s = SecondsSince(t_recarve);
+        if (!pass.ok()) stop = true;
+      });
+      building = BuildingStage(options, grid, work, out, counts, timings, outputs, warnings,
+                               building_progress);
     }
+    if (!pass.ok()) return pass.status();
+    timings["merge.recarve"] = recarve_s;
+    if (!building.ok()) return building.status();
+    absl::Status s = SegmentRecarvedObjects(options, inputs, grid, work, *pass, source, counts,
+                                            timings, progress);
+    if (!s.ok()) return s;
   }
   if (!building.ok()) return building.status();
-  AddInto(building->counts, counts);
-  AddInto(building->timings, timings);
-  outputs.insert(outputs.end(), building->outputs.begin(), building->outputs.end());
-  warnings.insert(warnings.end(), building->warnings.begin(), building->warnings.end());
-  result.building_triangles = building->mesh.triangles.size();
+  result.building_triangles = building->triangles.size();
 
   // The objects: dense mesh of the (finer) object tiles, split into closed pieces.
   t0 = Clock::now();
@@ -588,7 +557,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   }
   outputs.push_back("mesh/objects.ply");
   // combined = building + objects; face property `object`: −1 for the building.
-  TriangleMesh combined = std::move(building->mesh);
+  TriangleMesh combined = *std::move(building);
   std::vector<int> combined_object(combined.triangles.size(), -1);
   combined.Append(all_objects);
   combined_object.insert(combined_object.end(), object_of_face.begin(), object_of_face.end());

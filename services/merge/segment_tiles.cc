@@ -21,7 +21,6 @@ absl::StatusOr<SegmentTilesResult> SegmentTiles(TileSet& tiles, const PlanVolume
   }
   SegmentTilesResult result;
   const ChunkRegion none;
-  size_t index = 0;  // of the chunk being taken, in tiles.chunks()
   absl::Status s = ForEachChunk<SegmentedChunk>(
       tiles, tiles.chunks(), /*low_only=*/false, threads,
       [&](const ChunkNeighbourhood& hood) {
@@ -33,7 +32,6 @@ absl::StatusOr<SegmentTilesResult> SegmentTiles(TileSet& tiles, const PlanVolume
         return SegmentChunk(hood, plan, options, region);
       },
       [&](SegmentedChunk&& seg) -> absl::Status {
-        const ChunkKey& chunk = tiles.chunks()[index++];
         if (!building_dir.empty()) {
           if (absl::StatusOr<std::string> w = WriteTile(building_dir, seg.building); !w.ok()) {
             return w.status();
@@ -45,7 +43,7 @@ absl::StatusOr<SegmentTilesResult> SegmentTiles(TileSet& tiles, const PlanVolume
             return w.status();
           }
           ++result.object_tiles;
-          result.object_chunks.push_back(chunk);
+          result.object_chunks.push_back(seg.objects.chunk);
         }
         result.object_cells += seg.object_cells;
         result.unobserved_object_cells += seg.unobserved_object_cells;
