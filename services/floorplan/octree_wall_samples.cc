@@ -45,7 +45,8 @@ uint64_t CellKey(int64_t i, int64_t j) {
 // exterior): the edges of what the walk saw, through doorways and windows, are vertical too
 // but are no walls.
 bool SeenSurface(const BoundaryFace& f) {
-  return f.exterior.stored && LabelFromStats(f.exterior.stats) == OctreeLabel::kExterior;
+  // The exterior leaf is not interior (p ≤ 0.5), so LabelFromStats reduces to its weight.
+  return f.exterior_observed && f.exterior_weight >= kMinLabelWeightSum;
 }
 
 // The four corners of a face's square, moved onto its isosurface point (Fig 4.9).
@@ -54,7 +55,7 @@ std::array<Vector3d, 4> FaceCorners(const BoundaryFace& f) {
   const double h = f.size_m / 2;
   std::array<Vector3d, 4> c;
   for (int k = 0; k < 4; ++k) {
-    c[k] = f.isosurface;
+    c[k] = f.isosurface();
     c[k][a] += (k & 1) ? h : -h;
     c[k][b] += (k & 2) ? h : -h;
   }
@@ -233,15 +234,15 @@ absl::StatusOr<WallSampleSet> OctreeWallSamples(std::span<const BoundaryFace> fa
     double area = 0, wz = 0;
     for (uint32_t fi : r.faces) {
       const BoundaryFace& f = faces[fi];
-      if (!in_level(f.isosurface.z()) || !SeenSurface(f)) continue;
+      if (!in_level(f.isosurface().z()) || !SeenSurface(f)) continue;
       area += f.area_m2();
-      wz += f.area_m2() * f.isosurface.z();
+      wz += f.area_m2() * f.isosurface().z();
     }
     if (area <= 0 || area < options.min_horizontal_area_m2) continue;
     ++rep.horizontal_regions;
     const double z = wz / area;  // the plane's elevation over the faces on this level
     for (uint32_t fi : r.faces) {
-      if (in_level(faces[fi].isosurface.z()) && SeenSurface(faces[fi])) {
+      if (in_level(faces[fi].isosurface().z()) && SeenSurface(faces[fi])) {
         horizontal.Add(faces[fi], z, r.normal.z() > 0);
       }
     }
@@ -274,7 +275,7 @@ absl::StatusOr<WallSampleSet> OctreeWallSamples(std::span<const BoundaryFace> fa
     std::vector<uint32_t> mine;
     for (uint32_t fi : r.faces) {
       const BoundaryFace& f = faces[fi];
-      if (!in_level(f.isosurface.z()) || !SeenSurface(f)) continue;
+      if (!in_level(f.isosurface().z()) || !SeenSurface(f)) continue;
       mine.push_back(fi);
       area += f.area_m2();
       for (const Vector3d& c : FaceCorners(f)) {
@@ -293,11 +294,11 @@ absl::StatusOr<WallSampleSet> OctreeWallSamples(std::span<const BoundaryFace> fa
     // region's own normal comes from all its faces, and relaxation (§4.2.4) chains pieces up
     // to 15° apart: along a 30 m corridor a 3° error moves the wall's end by 1.5 m.
     Vector2d mean = Vector2d::Zero();
-    for (uint32_t fi : mine) mean += faces[fi].area_m2() * faces[fi].isosurface.head<2>();
+    for (uint32_t fi : mine) mean += faces[fi].area_m2() * faces[fi].isosurface().head<2>();
     mean /= area;
     Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
     for (uint32_t fi : mine) {
-      const Vector2d d = faces[fi].isosurface.head<2>() - mean;
+      const Vector2d d = faces[fi].isosurface().head<2>() - mean;
       cov += faces[fi].area_m2() * d * d.transpose();
     }
     Vector2d nh = n_xy.normalized();
@@ -318,7 +319,7 @@ absl::StatusOr<WallSampleSet> OctreeWallSamples(std::span<const BoundaryFace> fa
       Vector2d m = Vector2d::Zero();
       double w = 0;
       for (uint32_t fi : mine) {
-        const Vector2d p = faces[fi].isosurface.head<2>();
+        const Vector2d p = faces[fi].isosurface().head<2>();
         if (std::abs(nh.dot(p) - offset) > 2 * res) continue;
         m += faces[fi].area_m2() * p;
         w += faces[fi].area_m2();
@@ -327,7 +328,7 @@ absl::StatusOr<WallSampleSet> OctreeWallSamples(std::span<const BoundaryFace> fa
       m /= w;
       Eigen::Matrix2d c = Eigen::Matrix2d::Zero();
       for (uint32_t fi : mine) {
-        const Vector2d p = faces[fi].isosurface.head<2>();
+        const Vector2d p = faces[fi].isosurface().head<2>();
         if (std::abs(nh.dot(p) - offset) > 2 * res) continue;
         c += faces[fi].area_m2() * (p - m) * (p - m).transpose();
       }
@@ -364,7 +365,7 @@ absl::StatusOr<WallSampleSet> OctreeWallSamples(std::span<const BoundaryFace> fa
       range(u_lo, u_hi, i0, i1);
       range(f_lo, f_hi, j0, j1);
       const double a = faces[fi].area_m2();
-      const double o = nh.dot(faces[fi].isosurface.head<2>());
+      const double o = nh.dot(faces[fi].isosurface().head<2>());
       for (int64_t i = i0; i <= i1; ++i) {
         for (int64_t j = j0; j <= j1; ++j) on_region.insert(CellKey(i, j));
         auto& [sum, weight] = column_offset[i];

@@ -67,16 +67,14 @@ OctreeLabel SceneLabel(const Vector3d& p) {
 
 BoundaryFace Face(int axis, double sign, const Vector3d& center) {
   BoundaryFace f;
-  f.axis = axis;
-  f.normal = Eigen::Vector3f::Zero();
-  f.normal[axis] = static_cast<float>(sign);
-  f.center = f.isosurface = center;
+  f.axis = static_cast<int8_t>(axis);
+  f.sign = sign > 0 ? 1 : -1;
+  f.center = center;
+  f.isosurface_m = center[axis];
   f.size_m = kRes;
   // Seen: the exterior leaf was observed solid.
-  f.exterior.stored = true;
-  f.exterior.stats.Add(0.05, 1.0);
-  f.interior.stored = true;
-  f.interior.stats.Add(0.95, 1.0);
+  f.exterior_observed = true;
+  f.exterior_weight = 1.0f;
   return f;
 }
 
@@ -97,7 +95,7 @@ Scene MakeScene() {
     for (size_t i = first; i < s.faces.size(); ++i) {
       r.faces.push_back(static_cast<uint32_t>(i));
       r.area_m2 += s.faces[i].area_m2();
-      r.centroid += s.faces[i].area_m2() * s.faces[i].isosurface;
+      r.centroid += s.faces[i].area_m2() * s.faces[i].isosurface();
       s.regions.face_region.push_back(r.id);
     }
     r.centroid /= r.area_m2;
@@ -130,7 +128,8 @@ Scene MakeScene() {
   for (double y = kRes / 2; y < 6; y += kRes) {
     for (double z = kRes / 2; z < 2.5; z += kRes) {
       BoundaryFace f = Face(0, -1, Vector3d(3, y, z));
-      f.exterior = OctreeLeafRef{};
+      f.exterior_observed = false;
+      f.exterior_weight = 0;
       s.faces.push_back(f);
     }
   }
@@ -241,7 +240,7 @@ TEST(OctreeWallSamples, FloorAndCeilingFromTheNearestHorizontalRegions) {
       if (!(f.center.y() > 3 && f.center.z() > 2.25)) wall.push_back(static_cast<uint32_t>(i));
     } else if (s.regions.face_region[i] == 2) {
       if (f.center.y() > 3) {
-        f.center.z() = f.isosurface.z() = 2.25;
+        f.center.z() = f.isosurface_m = 2.25;  // a horizontal face: along z
         low.push_back(static_cast<uint32_t>(i));
       } else {
         high.push_back(static_cast<uint32_t>(i));
@@ -406,12 +405,9 @@ TEST_P(CarvedOctreeWallSamples, SamplesLieOnTheTrueWalls) {
             f.center.y() > y1) {
           continue;
         }
-        std::printf("face axis %d n %+.0f c %.3f %.3f %.3f iso %.3f size %.3f ext %d p %.3f n %u "
-                    "w %.3f int p %.3f n %u\n",
-                    f.axis, f.normal[f.axis], f.center.x(), f.center.y(), f.center.z(),
-                    f.isosurface[f.axis], f.size_m, f.exterior.stored, f.exterior.stats.p(),
-                    f.exterior.stats.count, f.exterior.stats.sum_w, f.interior.stats.p(),
-                    f.interior.stats.count);
+        std::printf("face axis %d n %+d c %.3f %.3f %.3f iso %.3f size %.3f ext observed %d w %.3f\n",
+                    int{f.axis}, int{f.sign}, f.center.x(), f.center.y(), f.center.z(),
+                    f.isosurface_m, f.size_m, int{f.exterior_observed}, f.exterior_weight);
       }
     }
   }

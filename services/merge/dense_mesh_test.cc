@@ -100,7 +100,7 @@ TEST(DenseMesh, TinyCacheGivesTheSameMeshAsALargeOne) {
   ASSERT_EQ(fa->size(), fb->size());
   double area = 0;
   for (size_t i = 0; i < fa->size(); ++i) {
-    EXPECT_EQ((*fa)[i].isosurface, (*fb)[i].isosurface);
+    EXPECT_EQ((*fa)[i].isosurface(), (*fb)[i].isosurface());
     area += (*fa)[i].area_m2();
   }
   const double res = (*big)->grid().resolution_m();
@@ -135,8 +135,10 @@ TEST(DenseMesh, ThreadsGiveTheSameMeshAndFacesAsOne) {
     ASSERT_TRUE(faces.ok()) << faces.status();
     ASSERT_EQ(faces->size(), one_faces->size());
     for (size_t i = 0; i < faces->size(); ++i) {
-      ASSERT_EQ((*faces)[i].isosurface, (*one_faces)[i].isosurface) << i;
-      ASSERT_EQ((*faces)[i].interior.min_cell, (*one_faces)[i].interior.min_cell) << i;
+      ASSERT_EQ((*faces)[i].isosurface(), (*one_faces)[i].isosurface()) << i;
+      ASSERT_EQ((*faces)[i].size_m, (*one_faces)[i].size_m) << i;
+      ASSERT_EQ((*faces)[i].sign, (*one_faces)[i].sign) << i;
+      ASSERT_EQ((*faces)[i].exterior_weight, (*one_faces)[i].exterior_weight) << i;
     }
   }
   // Cancelled in a batch: no later chunk is reported.

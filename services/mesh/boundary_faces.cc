@@ -215,11 +215,8 @@ struct FaceBuilder {
     const double res = grid.resolution_m();
     const int cells = 1 << (k - depth);
     BoundaryFace f;
-    f.interior = interior;
-    f.exterior = ext;
-    f.axis = axis;
-    f.normal = Eigen::Vector3f::Zero();
-    f.normal[axis] = static_cast<float>(-sign);
+    f.axis = static_cast<int8_t>(axis);
+    f.sign = static_cast<int8_t>(-sign);
     f.size_m = cells * res;
     LeafKey corner = min_cell;  // min corner of the shared square, finest cells
     if (sign < 0) corner[axis] += cells;
@@ -227,8 +224,11 @@ struct FaceBuilder {
     f.center[axis] = corner[axis] * res;
     const double x = IsosurfaceOffsetM(interior.stats.p(), ext.stats.p(), res,
                                        kIsosurfaceLimitFraction * res);
-    f.isosurface = f.center;
-    f.isosurface[axis] += sign * x;
+    f.isosurface_m = f.center[axis] + sign * x;
+    if (ext.stored && ext.stats.observed()) {
+      f.exterior_observed = true;
+      f.exterior_weight = static_cast<float>(ext.stats.sum_w);
+    }
     out.emplace_back(std::array<int, 5>{axis, corner.x(), corner.y(), corner.z(), cells},
                      std::move(f));
   }

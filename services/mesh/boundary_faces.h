@@ -32,23 +32,42 @@ struct OctreeLeafRef {
 
 // One boundary face. Its geometry is the square shared by the two leaves, i.e. a face of the
 // smaller one (a big leaf next to small ones has one face per small neighbour).
+// Kept small (48 bytes): the merge holds every face of the building at once while it
+// fits the planar regions and meshes them (millions of faces for a large building), so a face
+// keeps only what those stages read, not the two leaves it lies between.
 struct BoundaryFace {
-  OctreeLeafRef interior;
-  OctreeLeafRef exterior;
-  int axis = 0;               // 0, 1, 2: the face is perpendicular to x, y or z
+  Eigen::Vector3d center;  // centre of the shared square, on the leaves' common plane, m
+  double size_m = 0;       // side of the shared square, m
+  // Fig 4.9: the coordinate along `axis` of the point on the line through `center` where p,
+  // linearly interpolated between the finest cells on either side of the face
+  // (IsosurfaceOffsetM: each leaf's p taken at its cell beside the face), is 0.5, clamped to
+  // within kIsosurfaceLimitFraction × the grid resolution: strictly between those two cells'
+  // centres. isosurface() is the point.
+  double isosurface_m = 0;
+  // The exterior leaf's Σ w (eq 4.8) when it is stored and observed, else 0.
+  float exterior_weight = 0;
+  int8_t axis = 0;  // 0, 1, 2: the face is perpendicular to x, y or z
+  // The sign of normal() along `axis`: +1 when the interior leaf is on the face's +axis side.
+  int8_t sign = 1;
+  // The exterior leaf is stored and observed (a ray reached it): a surface the scanners saw,
+  // not one that closes the carved volume against unobserved space (no tile row, or no ray).
+  bool exterior_observed = false;
+
+  [[nodiscard]] double area_m2() const { return size_m * size_m; }
   // Unit normal along `axis` pointing from the exterior leaf into the interior leaf (into free
   // space: a floor's faces point up, a ceiling's down).
-  Eigen::Vector3f normal = Eigen::Vector3f::UnitZ();
-  Eigen::Vector3d center;     // centre of the shared square, on the leaves' common plane, m
-  double size_m = 0;          // side of the shared square, m
-  // Fig 4.9: the point on the line through `center` along `axis` where p, linearly
-  // interpolated between the finest cells on either side of the face (IsosurfaceOffsetM: each
-  // leaf's p taken at its cell beside the face), is 0.5, clamped to within
-  // kIsosurfaceLimitFraction × the grid resolution. Equals `center` moved along the axis,
-  // strictly between those two cells' centres.
-  Eigen::Vector3d isosurface;
-  [[nodiscard]] double area_m2() const { return size_m * size_m; }
+  [[nodiscard]] Eigen::Vector3f normal() const {
+    Eigen::Vector3f n = Eigen::Vector3f::Zero();
+    n[axis] = sign;
+    return n;
+  }
+  [[nodiscard]] Eigen::Vector3d isosurface() const {
+    Eigen::Vector3d p = center;
+    p[axis] = isosurface_m;
+    return p;
+  }
 };
+static_assert(sizeof(BoundaryFace) <= 48, "the merge holds millions of these at once");
 
 // A chunk's tile and its 26 neighbours' (nullptr: no tile there, all unobserved). Index of
 // neighbour (dx, dy, dz) ∈ {−1, 0, 1}³: (dx + 1) + 3 (dy + 1) + 9 (dz + 1); 13 is the chunk

@@ -77,7 +77,7 @@ std::multiset<FinestFace> Expand(const std::vector<BoundaryFace>& faces, const O
   for (const BoundaryFace& f : faces) {
     const int a = f.axis, u = (a + 1) % 3, w = (a + 2) % 3;
     const int cells = static_cast<int>(std::lround(f.size_m / res));
-    const int towards_ext = f.normal[a] < 0 ? 1 : -1;
+    const int towards_ext = f.sign < 0 ? 1 : -1;
     LeafKey lo;
     lo[a] = static_cast<int>(std::lround(f.center[a] / res)) - (towards_ext > 0 ? 1 : 0);
     lo[u] = static_cast<int>(std::lround(f.center[u] / res - 0.5 * cells));
@@ -139,16 +139,16 @@ TEST_P(BoxRoom, AreaCountAndOffsetsMatchTheBox) {
   double area = 0;
   for (const BoundaryFace& f : faces) {
     area += f.area_m2();
-    EXPECT_TRUE(f.interior.stored);
-    EXPECT_EQ(f.exterior.stored, exterior_shell);
+    EXPECT_EQ(f.exterior_observed, exterior_shell);
+    EXPECT_EQ(f.exterior_weight, exterior_shell ? 1.5f : 0.0f);  // StatsWithP: Σ w = 1.5
     EXPECT_NEAR(f.size_m, res, 1e-12);
     // normal points into the box
-    const double offset = (f.isosurface - f.center).dot(f.normal.cast<double>());
+    const double offset = (f.isosurface() - f.center).dot(f.normal().cast<double>());
     // Fig 4.9 with p_i = 0.9 at −res/2, p_e = 0.3 at +res/2: t = 0.4/0.6, x = res/6 outwards;
     // unobserved (0.5): the exterior centre, clamped to 0.45 res.
     const double expected = exterior_shell ? res / 6 : 0.45 * res;
     EXPECT_NEAR(-offset, expected, 1e-9);
-    EXPECT_NEAR((f.isosurface - f.center).norm(), expected, 1e-9);
+    EXPECT_NEAR((f.isosurface() - f.center).norm(), expected, 1e-9);
   }
   EXPECT_NEAR(area, 6.0 * side * side * res * res, 1e-9);
   EXPECT_EQ(Expand(faces, grid), BruteForceFaces(Densify(tiles, grid)));
@@ -172,25 +172,25 @@ TEST(BoundaryFaces, BigInteriorNextToSmallExteriorGivesOneFacePerSmallNeighbour)
     if (f.axis == 0 && f.center.x() > 0.9) {
       ++plus_x;
       EXPECT_NEAR(f.size_m, 0.5, 1e-12);
-      EXPECT_EQ(f.exterior.depth, 2);
-      EXPECT_EQ(f.interior.depth, 1);
-      EXPECT_EQ(f.normal, Eigen::Vector3f(-1, 0, 0));
+      EXPECT_EQ(f.normal(), Eigen::Vector3f(-1, 0, 0));
+      EXPECT_TRUE(f.exterior_observed);
       // Each leaf's p at its finest cell beside the face (0.25 m either side), not at the
       // 1 m interior leaf's centre: IsosurfaceOffsetM.
-      const double pe = f.exterior.stats.p();
+      const int j = static_cast<int>(f.center.y() / 0.5) + 2 * static_cast<int>(f.center.z() / 0.5);
+      const double pe = ps[j];
       const double t = (0.9 - 0.5) / (0.9 - pe);
       const double x = std::clamp(-0.25 + 0.5 * t, -0.45 * 0.5, 0.45 * 0.5);
-      EXPECT_NEAR(f.isosurface.x(), 1.0 + x, 1e-9) << pe;
+      EXPECT_NEAR(f.isosurface().x(), 1.0 + x, 1e-9) << pe;
     } else if (f.axis == 1 && f.center.y() > 0.9) {
       ++plus_y;
       EXPECT_NEAR(f.size_m, 1.0, 1e-12);
-      EXPECT_NEAR(f.isosurface.y(), 1.0 + (-0.25 + 0.5 * 0.4 / 0.7), 1e-9);
+      EXPECT_NEAR(f.isosurface().y(), 1.0 + (-0.25 + 0.5 * 0.4 / 0.7), 1e-9);
       EXPECT_NEAR(f.center.x(), 0.5, 1e-12);
       EXPECT_NEAR(f.center.z(), 0.5, 1e-12);
     } else {
       ++others;
       EXPECT_NEAR(f.size_m, 1.0, 1e-12);  // unobserved neighbours, as big as the leaf
-      EXPECT_FALSE(f.exterior.stored);
+      EXPECT_FALSE(f.exterior_observed);
     }
   }
   EXPECT_EQ(plus_x, 4);
@@ -203,14 +203,23 @@ TEST(BoundaryFaces, UnobservedNeighbourIsTheMaximalUnobservedNode) {
   grid.chunk_depth = 3;
   Tiles tiles;
   AddLeaf(tiles, grid, LeafKey(0, 0, 0), 3, 0.9);  // one finest interior cell at the corner
-  auto faces = ChunkBoundaryFaces(HoodOf(tiles, grid, ChunkKey(0, 0, 0)));
+  const ChunkNeighbourhood hood = HoodOf(tiles, grid, ChunkKey(0, 0, 0));
+  auto faces = ChunkBoundaryFaces(hood);
   ASSERT_TRUE(faces.ok()) << faces.status();
   ASSERT_EQ(faces->size(), 6u);
+  auto index = NeighbourhoodIndex::Build(hood);
+  ASSERT_TRUE(index.ok()) << index.status();
   for (const BoundaryFace& f : *faces) {
-    EXPECT_FALSE(f.exterior.stored);
-    const bool outside_chunk = f.normal[f.axis] > 0;  // the −axis side: the chunk below
+    EXPECT_FALSE(f.exterior_observed);
+    EXPECT_EQ(f.exterior_weight, 0.0f);
+    EXPECT_NEAR(f.size_m, grid.resolution_m(), 1e-12);
+    const bool outside_chunk = f.sign > 0;  // the exterior on the −axis side: the chunk below
+    LeafKey across(0, 0, 0);
+    across[f.axis] = outside_chunk ? -1 : 1;
+    const OctreeLeafRef ext = index->LeafAt(across);
+    EXPECT_FALSE(ext.stored);
     // Below: a chunk without a tile, unobserved as a whole; inside: the 1-cell sibling.
-    EXPECT_EQ(f.exterior.depth, outside_chunk ? 0 : 3) << f.axis;
+    EXPECT_EQ(ext.depth, outside_chunk ? 0 : 3) << int{f.axis};
   }
   // Sorted by axis, then min corner.
   for (size_t i = 1; i < faces->size(); ++i) {
@@ -235,12 +244,9 @@ TEST(BoundaryFaces, RandomTilesGiveEveryFinestFaceOnce) {
     ASSERT_GT(expected.size(), 100u);
     EXPECT_EQ(Expand(faces, grid), expected) << "trial " << trial;
     for (const BoundaryFace& f : faces) {
-      EXPECT_TRUE(f.interior.stats.interior());
-      EXPECT_FALSE(f.exterior.stats.interior());
-      const double off = (f.isosurface - f.center).norm();
+      const double off = (f.isosurface() - f.center).norm();
       EXPECT_LE(off, 0.45 * grid.resolution_m() + 1e-12);
-      EXPECT_EQ(f.size_m, std::min(grid.resolution_m() * (1 << (3 - f.interior.depth)),
-                                   grid.resolution_m() * (1 << (3 - f.exterior.depth))));
+      EXPECT_EQ(f.exterior_observed, f.exterior_weight > 0);
     }
   }
 }

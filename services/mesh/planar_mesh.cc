@@ -101,7 +101,7 @@ absl::StatusOr<FaceSquare> SquareOf(const BoundaryFace& face, double res, size_t
   if (face.axis < 0 || face.axis > 2) {
     return absl::InvalidArgumentError(absl::StrCat("planar_mesh: face ", index, ": bad axis"));
   }
-  sq.sign = face.normal[face.axis] >= 0 ? 1 : -1;
+  sq.sign = face.sign;
   const double size_cells = face.size_m / res;
   sq.size = static_cast<int>(std::llround(size_cells));
   bool ok = sq.size >= 1 && std::abs(size_cells - sq.size) < 1e-6;

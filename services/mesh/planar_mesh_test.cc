@@ -109,7 +109,6 @@ std::vector<BoundaryFace> FacesOf(const VoxelWorld& world, const OctreeGrid& gri
           groups[{leaf_of[world.Index(c)], leaf_of[world.Index(n)], dir}].push_back(c);
         }
       }
-  const int k = grid.chunk_depth;
   std::vector<BoundaryFace> faces;
   for (const auto& [key, cells] : groups) {
     const auto [li, le, dir] = key;
@@ -120,24 +119,15 @@ std::vector<BoundaryFace> FacesOf(const VoxelWorld& world, const OctreeGrid& gri
     Eigen::Vector3i lo = cells[0];
     for (const Eigen::Vector3i& c : cells) lo = lo.cwiseMin(c);
     BoundaryFace f;
-    f.axis = axis;
-    f.normal = Eigen::Vector3f::Zero();
-    f.normal[axis] = static_cast<float>(-sign);  // from the exterior leaf into the interior one
+    f.axis = static_cast<int8_t>(axis);
+    f.sign = static_cast<int8_t>(-sign);  // from the exterior leaf into the interior one
     f.size_m = size * res;
     Eigen::Vector3d center = lo.cast<double>() + Eigen::Vector3d::Constant(0.5 * size);
     center[axis] = sign > 0 ? lo[axis] + 1.0 : lo[axis];
     f.center = center * res;
-    f.isosurface = f.center + iso_offset_cells * res * f.normal.cast<double>();
-    auto ref = [&](const Leaf& leaf, bool interior) {
-      OctreeLeafRef r;
-      r.min_cell = leaf.min;
-      r.depth = k - static_cast<int>(std::log2(leaf.size));
-      r.stored = true;
-      r.stats = StatsWithP(interior ? 0.9 : 0.1);
-      return r;
-    };
-    f.interior = ref(in, true);
-    f.exterior = ref(ex, false);
+    f.isosurface_m = f.center[axis] + iso_offset_cells * res * f.sign;
+    f.exterior_observed = true;
+    f.exterior_weight = 1.5f;
     faces.push_back(f);
   }
   return faces;
@@ -145,7 +135,7 @@ std::vector<BoundaryFace> FacesOf(const VoxelWorld& world, const OctreeGrid& gri
 
 std::array<Eigen::Vector3d, 4> FaceCorners(const BoundaryFace& f) {
   const int u = (f.axis + 1) % 3, w = (f.axis + 2) % 3;
-  const Eigen::Vector3d shift = f.isosurface - f.center;
+  const Eigen::Vector3d shift = f.isosurface() - f.center;
   std::array<Eigen::Vector3d, 4> c;
   for (int i = 0; i < 4; ++i) {
     c[i] = f.center + shift;
@@ -177,7 +167,7 @@ PlanarRegionSet RegionsFromLabels(const std::vector<BoundaryFace>& faces,
     for (uint32_t f : r.faces) {
       for (const Eigen::Vector3d& c : FaceCorners(faces[f])) mean += faces[f].area_m2() * c;
       w += 4 * faces[f].area_m2();
-      nsum += faces[f].area_m2() * faces[f].normal.cast<double>();
+      nsum += faces[f].area_m2() * faces[f].normal().cast<double>();
       r.area_m2 += faces[f].area_m2();
     }
     mean /= w;
@@ -201,7 +191,7 @@ PlanarRegionSet RegionsFromLabels(const std::vector<BoundaryFace>& faces,
 PlanarRegionSet AxisRegions(const std::vector<BoundaryFace>& faces, double res) {
   std::vector<int64_t> label;
   for (const BoundaryFace& f : faces) {
-    const int sign = f.normal[f.axis] > 0 ? 1 : 0;
+    const int sign = f.normal()[f.axis] > 0 ? 1 : 0;
     const int64_t plane = std::llround(f.center[f.axis] / res);
     label.push_back((plane + 100000) * 8 + f.axis * 2 + sign);
   }
@@ -384,12 +374,12 @@ TEST(PlanarMeshTest, SlopedStaircaseRegionLiesOnItsPlane) {
   std::vector<int64_t> label;
   for (const BoundaryFace& f : faces) {
     const double x = f.center.x() / res, z = f.center.z() / res;
-    const bool tread = f.axis == 2 && f.normal.z() > 0 && x > 10 && x < 16;
-    const bool riser = f.axis == 0 && f.normal.x() < 0 && x > 10.5 && x < 16.5 && z < 8;
+    const bool tread = f.axis == 2 && f.normal().z() > 0 && x > 10 && x < 16;
+    const bool riser = f.axis == 0 && f.normal().x() < 0 && x > 10.5 && x < 16.5 && z < 8;
     if (tread || riser) {
       label.push_back(-1);
     } else {
-      const int sign = f.normal[f.axis] > 0 ? 1 : 0;
+      const int sign = f.normal()[f.axis] > 0 ? 1 : 0;
       label.push_back((std::llround(f.center[f.axis] / res) + 1000) * 8 + f.axis * 2 + sign);
     }
   }
@@ -428,11 +418,11 @@ TEST(PlanarMeshTest, NearlyParallelRegionsDoNotExplode) {
   for (const BoundaryFace& f : faces) {
     const double x = f.center.x() / res, y = f.center.y() / res;
     const bool step = f.axis == 1 && std::abs(y - 12) < 1e-9 && x < 3;
-    const bool near_wall = f.axis == 0 && f.normal.x() > 0 && std::abs(x - 3) < 1e-9;
+    const bool near_wall = f.axis == 0 && f.normal().x() > 0 && std::abs(x - 3) < 1e-9;
     if (step || near_wall) {
       label.push_back(-1);
     } else {
-      const int sign = f.normal[f.axis] > 0 ? 1 : 0;
+      const int sign = f.normal()[f.axis] > 0 ? 1 : 0;
       label.push_back((std::llround(f.center[f.axis] / res) + 1000) * 8 + f.axis * 2 + sign);
     }
   }
@@ -471,8 +461,8 @@ std::vector<int64_t> NearestPlaneLabels(const std::vector<BoundaryFace>& faces,
     int best = -1;
     double best_d = 1e300;
     for (size_t i = 0; i < planes.size(); ++i) {
-      if (planes[i].first.dot(f.normal.cast<double>()) < -1e-9) continue;
-      const double d = std::abs(planes[i].first.dot(f.isosurface - planes[i].second));
+      if (planes[i].first.dot(f.normal().cast<double>()) < -1e-9) continue;
+      const double d = std::abs(planes[i].first.dot(f.isosurface() - planes[i].second));
       if (d < best_d) best_d = d, best = static_cast<int>(i);
     }
     // Faces farther than a grid cell or two from every plane (pockets) are no part of them.
@@ -557,7 +547,7 @@ TEST_P(NoisyRoomTest, Watertight) {
   std::vector<int64_t> label = NearestPlaneLabels(faces, planes);
   // Faces far from every plane (interior islands) keep their own axis-plane region.
   for (size_t f = 0; f < faces.size(); ++f) {
-    const int sign = faces[f].normal[faces[f].axis] > 0 ? 1 : 0;
+    const int sign = faces[f].normal()[faces[f].axis] > 0 ? 1 : 0;
     if (label[f] < 0) label[f] = 100 + (std::llround(faces[f].center[faces[f].axis] / res) + 1000) * 8 + faces[f].axis * 2 + sign;
   }
   const PlanarRegionSet regions = RegionsFromLabels(faces, label);
@@ -681,7 +671,7 @@ TEST_P(NoisyFittedRoomTest, AlwaysWatertight) {
   }
   std::vector<BoundaryFace> faces = FacesOf(world, grid, leaf);
   for (BoundaryFace& f : faces) {
-    f.isosurface[f.axis] += (u(rng) - 0.5) * 0.9 * std::min(f.size_m, res);
+    f.isosurface_m += (u(rng) - 0.5) * 0.9 * std::min(f.size_m, res);
   }
   RecordProperty("faces", static_cast<int>(faces.size()));
   for (const bool mesh_growth : {false, true}) {
@@ -1041,7 +1031,7 @@ class RegionFaceObserved {
       : bucket_m_(4 * res) {
     for (size_t i = 0; i < faces.size(); ++i) {
       buckets_[Key(regions.face_region[i], faces[i].center)].push_back(
-          {faces[i].center, faces[i].exterior.stats.observed()});
+          {faces[i].center, faces[i].exterior_observed});
     }
   }
   [[nodiscard]] bool operator()(int region, const Eigen::Vector3d& x) const {

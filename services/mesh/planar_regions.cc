@@ -184,13 +184,13 @@ class Fitter {
     for (size_t i = 0; i < n; ++i) {
       const BoundaryFace& f = in_[i];
       if (f.axis < 0 || f.axis > 2 || !(f.size_m > 0) || !std::isfinite(f.size_m) ||
-          !f.center.allFinite() || !f.isosurface.allFinite() || !f.normal.allFinite()) {
+          !f.center.allFinite() || !std::isfinite(f.isosurface_m) || (f.sign != 1 && f.sign != -1)) {
         return absl::InvalidArgumentError(
             absl::StrCat("planar_regions: face ", i, " has a bad axis, size or position"));
       }
       LatticeFace& l = lf[i];
       l.axis = f.axis;
-      l.sign = f.normal[f.axis] >= 0 ? 1 : -1;
+      l.sign = f.sign;
       l.side = std::max(1, static_cast<int>(std::lround(f.size_m / res_)));
       for (int j = 0; j < 3; ++j) {
         const double lo = j == f.axis ? f.center[j] : f.center[j] - 0.5 * f.size_m;
@@ -211,17 +211,17 @@ class Fitter {
       const auto ky = std::make_tuple(y.axis, y.sign, y.corner[y.axis], y.corner.x(),
                                       y.corner.y(), y.corner.z(), y.side);
       if (kx != ky) return kx < ky;
-      const Vector3d& pa = in_[a].isosurface;
-      const Vector3d& pb = in_[b].isosurface;
+      const Vector3d pa = in_[a].isosurface();
+      const Vector3d pb = in_[b].isosurface();
       if (pa != pb) return std::lexicographical_compare(pa.data(), pa.data() + 3, pb.data(),
                                                         pb.data() + 3);
       return a < b;
     });
     faces_.resize(n);
     for (size_t i = 0; i < n; ++i) faces_[i] = lf[order[i]];
-    if (n > 0) origin_ = in_[faces_[0].input].isosurface;
+    if (n > 0) origin_ = in_[faces_[0].input].isosurface();
     points_.resize(n);
-    for (size_t i = 0; i < n; ++i) points_[i] = in_[faces_[i].input].isosurface - origin_;
+    for (size_t i = 0; i < n; ++i) points_[i] = in_[faces_[i].input].isosurface() - origin_;
     return absl::OkStatus();
   }
 

@@ -48,17 +48,14 @@ std::vector<BoundaryFace> VoxelFaces(double res, const Vector3i& lo, const Vecto
           const double f_free = fa > 0 ? fa : fb;
           const double f_solid = fa > 0 ? fb : fa;
           BoundaryFace f;
-          f.axis = axis;
-          f.normal = Eigen::Vector3f::Zero();
-          f.normal[axis] = free_c[axis] > solid_c[axis] ? 1.0f : -1.0f;
+          f.axis = static_cast<int8_t>(axis);
+          f.sign = free_c[axis] > solid_c[axis] ? 1 : -1;
           f.size_m = res;
           f.center = 0.5 * (center(a) + center(b));
           const double t = std::clamp(f_solid / (f_solid - f_free), 0.0, 1.0);
-          f.isosurface = center(solid_c) + t * (center(free_c) - center(solid_c));
-          if (jitter_cells > 0) f.isosurface[axis] += jitter_cells * res * u(rng);
-          f.interior.min_cell = free_c;
-          f.interior.depth = 0;
-          f.exterior.min_cell = solid_c;
+          // The two cells differ along `axis` only.
+          f.isosurface_m = (center(solid_c) + t * (center(free_c) - center(solid_c)))[axis];
+          if (jitter_cells > 0) f.isosurface_m += jitter_cells * res * u(rng);
           faces.push_back(f);
         }
       }
@@ -124,7 +121,7 @@ void CheckBoxRoom(const std::vector<BoundaryFace>& faces) {
       EXPECT_NEAR(r.eigenvalues[0], 0.0, 1e-9);  // exactly planar
       for (uint32_t f : r.faces) {
         EXPECT_EQ(set->face_region[f], r.id);
-        EXPECT_GT(faces[f].normal.cast<double>().dot(e.normal), 0.99);
+        EXPECT_GT(faces[f].normal().cast<double>().dot(e.normal), 0.99);
       }
     }
     EXPECT_EQ(found, 1) << e.normal.transpose();
@@ -140,7 +137,7 @@ TEST(PlanarRegions, MixedFaceSizesAreAdjacent) {
   std::vector<BoundaryFace> faces;
   std::map<std::pair<int, int>, int> coarse;  // 2×2 blocks of floor faces with x < 2 m
   for (const BoundaryFace& f : BoxRoomFaces()) {
-    if (f.axis == 2 && f.normal.z() > 0 && f.center.x() < 2.0) {
+    if (f.axis == 2 && f.normal().z() > 0 && f.center.x() < 2.0) {
       const int i = int(std::floor(f.center.x() / kRes)) / 2;
       const int j = int(std::floor(f.center.y() / kRes)) / 2;
       ++coarse[{i, j}];
@@ -154,7 +151,7 @@ TEST(PlanarRegions, MixedFaceSizesAreAdjacent) {
     f.axis = 2;
     f.size_m = 2 * kRes;
     f.center = Vector3d((ij.first + 0.5) * 2 * kRes, (ij.second + 0.5) * 2 * kRes, 0.0);
-    f.isosurface = f.center;
+    f.isosurface_m = 0.0;
     faces.push_back(f);
   }
   CheckBoxRoom(faces);
@@ -252,7 +249,7 @@ TEST(PlanarRegions, OppositeFacesOfAThinSlabStayApart) {
   int up = 0, down = 0;
   for (const PlanarRegion& r : set->regions) {
     for (uint32_t f : r.faces) {
-      EXPECT_GT(faces[f].normal.cast<double>().dot(r.normal), 0) << "region " << r.id;
+      EXPECT_GT(faces[f].normal().cast<double>().dot(r.normal), 0) << "region " << r.id;
     }
     if (Deg(r.normal, Vector3d::UnitZ()) < 1) {
       ++up;
@@ -283,9 +280,9 @@ TEST(PlanarRegions, MeshGrowthKeepsTheSidesOfAThinSlabApart) {
   for (const PlanarRegion& r : set->regions) {
     int ups = 0, downs = 0;
     for (uint32_t f : r.faces) {
-      EXPECT_GT(faces[f].normal.cast<double>().dot(r.normal), -0.5) << "region " << r.id;
-      ups += faces[f].normal.z() > 0.5;
-      downs += faces[f].normal.z() < -0.5;
+      EXPECT_GT(faces[f].normal().cast<double>().dot(r.normal), -0.5) << "region " << r.id;
+      ups += faces[f].normal().z() > 0.5;
+      downs += faces[f].normal().z() < -0.5;
     }
     EXPECT_TRUE(ups == 0 || downs == 0) << "region " << r.id;
     // Each side holds its whole 1 m² face, plus at most the 0.25 m² ring of one-cell sides.
@@ -379,7 +376,7 @@ TEST(PlanarRegions, MeshGrowthFollowsACurvedSurface) {
   auto off_plane = [&](const PlanarRegion& r) {
     double sum2 = 0, worst = 0;
     for (uint32_t f : r.faces) {
-      const double d = std::abs(r.normal.dot(faces[f].isosurface - r.centroid));
+      const double d = std::abs(r.normal.dot(faces[f].isosurface() - r.centroid));
       sum2 += d * d;
       worst = std::max(worst, d);
     }
@@ -466,7 +463,7 @@ TEST(PlanarRegions, RejectsBadInput) {
   EXPECT_EQ(FitPlanarRegions({}, Grid(), o).status().code(), absl::StatusCode::kInvalidArgument);
   std::vector<BoundaryFace> faces(1);
   faces[0].size_m = 0;
-  faces[0].center = faces[0].isosurface = Vector3d::Zero();
+  faces[0].center = Vector3d::Zero();
   EXPECT_EQ(FitPlanarRegions(faces, Grid(), {}).status().code(),
             absl::StatusCode::kInvalidArgument);
   absl::StatusOr<PlanarRegionSet> empty = FitPlanarRegions({}, Grid(), {});

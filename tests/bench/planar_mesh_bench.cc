@@ -111,9 +111,9 @@ int main(int argc, char** argv) {
     double area[3][2][4] = {};  // class, observed, region size class
     for (size_t f = 0; f < faces->size(); ++f) {
       const BoundaryFace& face = (*faces)[f];
-      const double db = building(face.isosurface), dob = objects(face.isosurface);
+      const double db = building(face.isosurface()), dob = objects(face.isosurface());
       const int cls = db <= 0.05 && db <= dob ? 0 : dob <= 0.05 ? 1 : 2;
-      const bool observed = face.exterior.stored && face.exterior.stats.observed();
+      const bool observed = face.exterior_observed;
       const double ra = regions->regions[regions->face_region[f]].area_m2;
       const int size = ra >= 1 ? 0 : ra >= 0.25 ? 1 : ra >= 0.05 ? 2 : 3;
       area[cls][observed][size] += face.area_m2();
