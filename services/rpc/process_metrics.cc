@@ -15,6 +15,7 @@
 #include <spdlog/spdlog.h>
 
 #include "absl/strings/str_cat.h"
+#include "services/system/process_memory.h"
 
 namespace carvemap {
 namespace {
@@ -45,15 +46,13 @@ ProcessStats ReadProcessStats() {
     std::ifstream status("/proc/self/status");
     std::string line;
     while (std::getline(status, line)) {
-      unsigned long long kib = 0;
       long long n = 0;
-      if (std::sscanf(line.c_str(), "VmRSS: %llu kB", &kib) == 1) s.resident_bytes = kib << 10;
-      if (std::sscanf(line.c_str(), "VmHWM: %llu kB", &kib) == 1) {
-        s.peak_resident_bytes = kib << 10;
-      }
       if (std::sscanf(line.c_str(), "Threads: %lld", &n) == 1) s.threads = n;
     }
   }
+  const ProcessMemory memory = ReadProcessMemory();
+  s.resident_bytes = memory.resident_bytes;
+  s.peak_resident_bytes = memory.peak_resident_bytes;
   {
     std::ifstream io("/proc/self/io");
     std::string line;

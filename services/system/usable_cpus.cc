@@ -9,6 +9,8 @@
 #include <string>
 #include <thread>
 
+#include "services/system/cgroup_files.h"
+
 namespace carvemap {
 namespace {
 
@@ -19,43 +21,18 @@ std::optional<double> ParseNumber(std::string_view text) {
   return v;
 }
 
-std::optional<std::string> ReadFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return std::nullopt;
-  std::ostringstream out;
-  out << in.rdbuf();
-  return out.str();
-}
-
-// The path of the process's cgroup v2 group ("0::/kubepods/..."), empty without one.
-std::string CgroupV2Path() {
-  std::ifstream in("/proc/self/cgroup");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("0::", 0) == 0) return line.substr(3);
-  }
-  return {};
-}
-
 std::optional<double> QuotaCpus() {
   std::optional<double> cpus;
   auto take = [&](std::optional<double> c) {
     if (c && (!cpus || *c < *cpus)) cpus = c;
   };
-  // v2: a limit anywhere above the process's group binds it too.
-  std::string group = CgroupV2Path();
-  while (!group.empty()) {
-    if (std::optional<std::string> t = ReadFile("/sys/fs/cgroup" + group + "/cpu.max")) {
-      take(CpusOfCpuMax(*t));
-    }
-    if (group == "/") break;
-    const size_t slash = group.rfind('/');
-    group = slash == 0 ? "/" : group.substr(0, slash);
+  for (const std::string& file : CgroupV2Files("cpu.max")) {
+    if (std::optional<std::string> t = ReadSmallFile(file)) take(CpusOfCpuMax(*t));
   }
   // v1 (hybrid hosts): the cpu controller as mounted in the process's namespace.
   for (const char* dir : {"/sys/fs/cgroup/cpu", "/sys/fs/cgroup/cpu,cpuacct"}) {
-    std::optional<std::string> quota = ReadFile(std::string(dir) + "/cpu.cfs_quota_us");
-    std::optional<std::string> period = ReadFile(std::string(dir) + "/cpu.cfs_period_us");
+    std::optional<std::string> quota = ReadSmallFile(std::string(dir) + "/cpu.cfs_quota_us");
+    std::optional<std::string> period = ReadSmallFile(std::string(dir) + "/cpu.cfs_period_us");
     if (quota && period) take(CpusOfCfsQuota(*quota, *period));
   }
   return cpus;

@@ -18,6 +18,7 @@
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -26,12 +27,24 @@
 #include "services/mesh/mesh_checks.h"
 #include "services/mesh/planar_mesh.h"
 #include "services/mesh/planar_regions.h"
+#include "services/system/process_memory.h"
 #include "storage/ply_io.h"
 #include "tests/support/truth_distance.h"
 
 namespace {
 
 double CpuSeconds() { return double(std::clock()) / CLOCKS_PER_SEC; }
+
+// What the merge's memory budget is sized by: the resident memory after a stage and the
+// stage's own peak. The peak (VmHWM) is reset after each print ("5" to clear_refs,
+// proc(5)), so each stage's peak is its own.
+void PrintMemory(const char* after) {
+  const carvemap::ProcessMemory m = carvemap::ReadProcessMemory();
+  std::printf("memory after %s: resident %.0f MiB, peak in the stage %.0f MiB\n", after,
+              double(m.resident_bytes) / (1 << 20), double(m.peak_resident_bytes) / (1 << 20));
+  std::fflush(stdout);
+  std::ofstream("/proc/self/clear_refs") << "5";
+}
 
 }  // namespace
 
@@ -77,7 +90,8 @@ int main(int argc, char** argv) {
   const double faces_s = CpuSeconds() - t;
   std::printf("tiles %zu, resolution %.4f m; faces %zu in %.2f s cpu\n", (*tiles)->chunks().size(),
               grid.resolution_m(), faces->size(), faces_s);
-  std::fflush(stdout);
+  (*tiles)->ReleaseCache();  // as the merge does before the regions
+  PrintMemory("faces");
   t = CpuSeconds();
   absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(*faces, grid, region_options);
   if (!regions.ok()) {
@@ -85,6 +99,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   const double regions_s = CpuSeconds() - t;
+  PrintMemory("regions");
   // Region sizes: how much of the surface lies in regions of at least 0.25 / 1 m².
   double total = 0, big1 = 0, big025 = 0;
   size_t single = 0;
@@ -133,6 +148,7 @@ int main(int argc, char** argv) {
   t = CpuSeconds();
   absl::StatusOr<PlanarMesh> planar = BuildPlanarMesh(*faces, *regions, grid);
   const double planar_s = CpuSeconds() - t;
+  PrintMemory("planar mesh");
   size_t planar_triangles = 0;
   if (!planar.ok()) {
     std::printf("planar mesh FAILED in %.2f s cpu: %s\n", planar_s,

@@ -1,0 +1,55 @@
+#include "services/system/process_memory.h"
+
+#include <cstdio>
+#include <fstream>
+#include <string>
+
+#include "services/system/cgroup_files.h"
+
+namespace carvemap {
+
+ProcessMemory ReadProcessMemory() {
+  ProcessMemory m;
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    unsigned long long kib = 0;
+    if (std::sscanf(line.c_str(), "VmRSS: %llu kB", &kib) == 1) m.resident_bytes = kib << 10;
+    if (std::sscanf(line.c_str(), "VmHWM: %llu kB", &kib) == 1) m.peak_resident_bytes = kib << 10;
+  }
+  return m;
+}
+
+std::optional<uint64_t> BytesOfMemoryMax(std::string_view text) {
+  const std::string s(text);
+  unsigned long long bytes = 0;
+  int end = 0;
+  if (std::sscanf(s.c_str(), " %llu%n", &bytes, &end) != 1) return std::nullopt;  // "max"
+  if (s.find_first_not_of(" \t\n", end) != std::string::npos) return std::nullopt;
+  // cgroup v1 writes its "no limit" as the largest page-aligned signed 64-bit value.
+  if (bytes >= (1ull << 62)) return std::nullopt;
+  return bytes;
+}
+
+std::optional<uint64_t> CgroupMemoryLimit() {
+  std::optional<uint64_t> limit;
+  auto take = [&](std::optional<uint64_t> b) {
+    if (b && (!limit || *b < *limit)) limit = b;
+  };
+  for (const std::string& file : CgroupV2Files("memory.max")) {
+    if (std::optional<std::string> t = ReadSmallFile(file)) take(BytesOfMemoryMax(*t));
+  }
+  if (std::optional<std::string> t = ReadSmallFile("/sys/fs/cgroup/memory/memory.limit_in_bytes")) {
+    take(BytesOfMemoryMax(*t));
+  }
+  return limit;
+}
+
+uint64_t MemoryBudgetBytes(double mib) {
+  if (mib > 0) return static_cast<uint64_t>(mib * (1 << 20));
+  if (mib < 0) return 0;
+  const std::optional<uint64_t> limit = CgroupMemoryLimit();
+  return limit ? *limit / 10 * 9 : 0;
+}
+
+}  // namespace carvemap

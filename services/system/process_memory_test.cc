@@ -1,0 +1,36 @@
+#include "services/system/process_memory.h"
+
+#include <cstring>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace carvemap {
+namespace {
+
+TEST(ProcessMemory, ResidentGrowsWithTouchedMemoryAndPeakHoldsIt) {
+  const ProcessMemory before = ReadProcessMemory();
+  ASSERT_GT(before.resident_bytes, 0u);
+  EXPECT_GE(before.peak_resident_bytes, before.resident_bytes);
+  {
+    std::vector<char> block(size_t{64} << 20);
+    std::memset(block.data(), 1, block.size());  // touched: resident
+    const ProcessMemory during = ReadProcessMemory();
+    EXPECT_GE(during.resident_bytes, before.resident_bytes + (size_t{60} << 20));
+    EXPECT_GE(during.peak_resident_bytes, during.resident_bytes);
+  }
+  const ProcessMemory after = ReadProcessMemory();
+  EXPECT_GE(after.peak_resident_bytes, before.resident_bytes + (size_t{60} << 20));
+}
+
+TEST(ProcessMemory, MemoryMaxTexts) {
+  EXPECT_EQ(BytesOfMemoryMax("max\n"), std::nullopt);                  // v2: no limit
+  EXPECT_EQ(BytesOfMemoryMax("4294967296\n"), 4294967296u);            // a 4 GiB pod
+  EXPECT_EQ(BytesOfMemoryMax("9223372036854771712\n"), std::nullopt);  // v1: no limit
+  EXPECT_EQ(BytesOfMemoryMax(""), std::nullopt);
+  EXPECT_EQ(BytesOfMemoryMax("12 GiB"), std::nullopt);
+  EXPECT_EQ(BytesOfMemoryMax("-1"), std::nullopt);
+}
+
+}  // namespace
+}  // namespace carvemap
