@@ -22,6 +22,7 @@
 #include "services/cli/commands.h"
 #include "services/cli/progress.h"
 #include "services/merge/merge_job.h"
+#include "services/system/process_memory.h"
 
 namespace carvemap {
 namespace {
@@ -31,6 +32,7 @@ namespace fs = std::filesystem;
 struct MergeFlags {
   MergeOptions options;
   double cache_mb = 256;
+  double memory_mb = 0;  // MemoryBudgetBytes
   bool quiet = false;
   NorthFlags north;  // mode "" = what the carve recorded (TILES/../north.json), else auto
 };
@@ -79,6 +81,7 @@ absl::Status ResolveNorth(MergeFlags& flags) {
 
 absl::Status RunMergeCommand(MergeFlags& flags) {
   flags.options.cache_budget_bytes = static_cast<uint64_t>(flags.cache_mb * (1 << 20));
+  flags.options.memory_budget_bytes = MemoryBudgetBytes(flags.memory_mb);
   flags.options.job = {{"command", "carvemap merge"},
                        {"params",
                         {{"floorplan", flags.options.floorplan_method},
@@ -161,6 +164,11 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
   cmd->add_option("--resolution", flags->options.resolution_m,
                   "Octree resolution in m (2 m / 2^k); default: the tiles'");
   cmd->add_option("--cache-mb", flags->cache_mb, "Decoded-tile cache budget in MiB")
+      ->capture_default_str();
+  cmd->add_option("--memory-mb", flags->memory_mb,
+                  "Memory the merge may use, MiB: a building whose planar mesh would not fit "
+                  "fails with why before it is made. 0: 90 % of the cgroup's memory limit, none "
+                  "without one; < 0: no budget")
       ->capture_default_str();
   cmd->add_option("--threads", flags->options.threads,
                   "Threads for the per-chunk stages (boundary faces, dense meshes); 0 = one per "

@@ -26,6 +26,7 @@
 #include "services/rpc/process_util.h"
 #include "services/rpc/server_log.h"
 #include "services/rpc/worker_service.h"
+#include "services/system/process_memory.h"
 
 namespace carvemap {
 namespace {
@@ -368,6 +369,7 @@ void RegisterWorker(CLI::App& app, int& exit_code) {
 
 struct MergerFlags {
   MergeServerSpec spec;
+  double memory_mb = 0;  // MemoryBudgetBytes
   std::string port_file;
   std::string secret_file;
   std::string log_format = "text";
@@ -379,6 +381,11 @@ absl::Status RunMerger(MergerFlags flags, LogFormat log_format) {
   absl::StatusOr<std::string> secret = LoadClusterSecret(flags.secret_file);
   if (!secret.ok()) return secret.status();
   flags.spec.cluster_secret = *std::move(secret);
+  flags.spec.memory_budget_bytes = MemoryBudgetBytes(flags.memory_mb);
+  if (flags.spec.memory_budget_bytes > 0) {
+    spdlog::info("merger: memory budget {:.0f} MiB",
+                 double(flags.spec.memory_budget_bytes) / (1 << 20));
+  }
   return ServeUntilSignal<MergeServer>(
       "merger", [&] { return MergeServer::Start(flags.spec); },
       [&](MergeServer& server) {
@@ -425,6 +432,11 @@ void RegisterMerger(CLI::App& app, int& exit_code) {
   cmd->add_option("--metrics-listen", s.metrics_listen_address,
                   "Serve Prometheus metrics over HTTP at http://HOST:PORT/metrics (merges "
                   "running and queued, seconds per stage, peak memory; no job ids or tenants)");
+  cmd->add_option("--memory-mb", flags->memory_mb,
+                  "Memory a merge may use, MiB: a building whose planar mesh would not fit fails "
+                  "with why before it is made. 0: 90 % of the cgroup's memory limit (a pod's "
+                  "limit), none without one; < 0: no budget")
+      ->capture_default_str();
   AddLogFlags(cmd, flags->log_format, flags->verbose);
   cmd->callback([flags, &exit_code] {
     const LogFormat format = SetUpLogging(flags->log_format, "merger", flags->verbose);

@@ -43,6 +43,12 @@ struct MergeOptions {
   // CPUs the process may use (UsableCpus: affinity and cgroup quota). The outputs do not
   // depend on it.
   int threads = 0;
+  // RunMerge only: the most memory the merge process may hold, bytes; 0 = no bound. The planar
+  // regions and the planar mesh are made for the whole building at once (every level
+  // together), and their memory grows with its boundary faces: before each, RunMerge
+  // estimates it (kPlanarBytesPerFace) and fails with ResourceExhausted, naming the faces per
+  // level, the estimate and this budget, rather than be killed for memory later.
+  uint64_t memory_budget_bytes = 0;
   // Gray scale of topdown.png: 0 = no open height, 255 = ≥ this many metres (linear).
   double topdown_max_height_m = 3.0;
   // The elevations of each level (§5.2, services/levels): level_<k>/topdown.png integrates

@@ -7,7 +7,9 @@
 #include <filesystem>
 #include <limits>
 #include <optional>
+#include <span>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -19,6 +21,7 @@
 #include "services/floorplan/scan_cloud_stream.h"
 #include "services/levels/level_split.h"
 #include "services/merge/dense_mesh.h"
+#include "services/merge/memory_budget.h"
 #include "services/merge/segment_tiles.h"
 #include "services/merge/tile_set.h"
 #include "services/merge/trimmed_points.h"
@@ -28,6 +31,7 @@
 #include "services/mesh/self_intersections.h"
 #include "services/segment/object_meshes.h"
 #include "services/segment/plan_volume.h"
+#include "services/system/process_memory.h"
 #include "services/system/usable_cpus.h"
 #include "storage/atomic_file.h"
 #include "storage/ply_io.h"
@@ -71,6 +75,14 @@ uint64_t CountSelfIntersectionsInto(const TriangleMesh& mesh, const std::string&
 absl::Status InStage(const char* stage, const absl::Status& s) {
   if (s.ok() || absl::IsCancelled(s)) return s;
   return absl::Status(s.code(), absl::StrCat("merge ", stage, ": ", s.message()));
+}
+
+// CheckPlanarMemory against what this process holds now.
+absl::Status CheckPlanarMemory(const MergeOptions& options, std::string_view what,
+                               std::span<const BoundaryFace> faces, std::span<const Level> levels) {
+  if (options.memory_budget_bytes == 0) return absl::OkStatus();
+  return CheckPlanarMemory(what, faces, levels, ReadProcessMemory().resident_bytes,
+                           options.memory_budget_bytes);
 }
 
 int MergeThreads(const MergeOptions& options) {
@@ -351,8 +363,9 @@ absl::Status SegmentRecarvedObjects(const MergeOptions& options,
 // The building tiles' (<work>/building) faces, regions and planar mesh ➜ mesh/building.ply;
 // the building volume's dense mesh when the planar mesher fails. Returns the mesh written.
 absl::StatusOr<TriangleMesh> BuildingStage(const MergeOptions& options, const OctreeGrid& grid,
-                                           const fs::path& work, const fs::path& out,
-                                           nlohmann::json& counts, nlohmann::json& timings,
+                                           std::span<const Level> levels, const fs::path& work,
+                                           const fs::path& out, nlohmann::json& counts,
+                                           nlohmann::json& timings,
                                            std::vector<std::string>& outputs,
                                            std::vector<std::string>& warnings,
                                            const MergeProgressCallback& progress) {
@@ -364,6 +377,10 @@ absl::StatusOr<TriangleMesh> BuildingStage(const MergeOptions& options, const Oc
       **btiles, StageProgress(progress, "building_faces"), MergeThreads(options));
   if (!bfaces.ok()) return bfaces.status();
   (*btiles)->ReleaseCache();  // read again only by the dense fallback below
+  if (absl::Status s = CheckPlanarMemory(options, "the building's planar mesh", *bfaces, levels);
+      !s.ok()) {
+    return s;
+  }
   if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
   // These regions only shape the planar mesh, so they are grown for it (mesh_growth:
   // fewer, bigger regions, §4.3.3); the floor plans were made from the job's own regions.
@@ -414,8 +431,10 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   const SegmentOptions seg_options;
   Clock::time_point t0 = Clock::now();
   std::vector<PlanLevelInput> inputs;
+  std::vector<Level> levels;
   for (const auto& [level, plan] : plans) {
     inputs.push_back(PlanLevelInput{&plan, level.index, level.split_z_low, level.split_z_high});
+    levels.push_back(level);
   }
   absl::StatusOr<PlanVolume> volume = RasterizePlanVolume(
       inputs, grid.resolution_m(), seg_options.trim_distance_m + 2 * grid.resolution_m());
@@ -467,8 +486,8 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   }
   absl::StatusOr<TriangleMesh> building = absl::UnknownError("not made");
   if (again.empty()) {
-    building =
-        BuildingStage(options, grid, work, out, counts, timings, outputs, warnings, progress);
+    building = BuildingStage(options, grid, levels, work, out, counts, timings, outputs, warnings,
+                             progress);
   } else {
     absl::StatusOr<RecarvePass> pass = absl::UnknownError("not made");
     double recarve_s = 0;
@@ -486,7 +505,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
         recarve_s = SecondsSince(t_recarve);
         if (!pass.ok()) stop = true;
       });
-      building = BuildingStage(options, grid, work, out, counts, timings, outputs, warnings,
+      building = BuildingStage(options, grid, levels, work, out, counts, timings, outputs, warnings,
                                building_progress);
     }
     if (!pass.ok()) return pass.status();
@@ -586,6 +605,16 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
                                       const MergeProgressCallback& progress) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   if (absl::Status s = ParseFloorPlanMethod(options.floorplan_method).status(); !s.ok()) return s;
+  {
+    // job.json, written last, says the merge finished: an earlier merge's must not stand
+    // beside this one's outputs if this one fails partway.
+    std::error_code ec;
+    fs::remove(fs::path(options.output_dir) / "job.json", ec);
+    if (ec && ec != std::errc::no_such_file_or_directory) {
+      return absl::UnavailableError(
+          absl::StrCat(options.output_dir, "/job.json: cannot remove: ", ec.message()));
+    }
+  }
   if (!options.meshes) return MergeFirstOutputs(options, progress);
   const Clock::time_point t_start = Clock::now();
 
@@ -618,6 +647,12 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   counts["boundary_faces"] = faces->size();
   counts["boundary_area_m2"] = face_area;
   timings["merge.boundary_faces"] = SecondsSince(t0);
+  // The levels come from these regions, so the faces cannot be told apart by level yet.
+  if (absl::Status s =
+          CheckPlanarMemory(options, "the whole building's planar regions", *faces, {});
+      !s.ok()) {
+    return InStage("planar_regions", s);
+  }
 
   // planar regions (stage 2, §4.2.4)
   t0 = Clock::now();
@@ -710,6 +745,10 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
                              : "trimmed_points: no floor plan to trim by, so no points.ply");
     }
     if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
+    if (absl::Status s = CheckPlanarMemory(options, "the planar mesh", *faces, levels->levels);
+        !s.ok()) {
+      return InStage("planar_mesh", s);
+    }
     // The regions above made the levels (and would have made the floor plans); the planar
     // mesh gets its own, grown for it (mesh_growth, §4.3.3).
     absl::StatusOr<PlanarRegionSet> mesh_regions =

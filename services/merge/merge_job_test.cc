@@ -58,6 +58,33 @@ nlohmann::json ReadJson(const std::string& path) {
   return nlohmann::json::parse(in);
 }
 
+// A memory budget the planar regions cannot fit: the merge stops before them, says why, and
+// leaves no job.json (whose presence means the merge finished), not even an earlier merge's.
+TEST(RunMerge, MemoryBudgetTooSmallFailsBeforeThePlanarRegions) {
+  const std::string root = FreshDir();
+  MergeOptions options;
+  options.tiles_dir = WriteBoxRoom(root + "/tiles", LeafKey(-8, -4, 0), LeafKey(24, 20, 20));
+  options.output_dir = root + "/out";
+  options.memory_budget_bytes = uint64_t{64} << 30;  // one the merge fits: as without one
+  ASSERT_TRUE(RunMerge(options).ok());
+  ASSERT_TRUE(fs::exists(options.output_dir + "/job.json"));
+  options.memory_budget_bytes = uint64_t{1} << 20;  // less than the process itself
+  std::vector<std::string> stages;
+  absl::StatusOr<MergeSummary> s = RunMerge(options, [&](const MergeProgress& p) {
+    if (stages.empty() || stages.back() != p.stage) stages.push_back(p.stage);
+    return true;
+  });
+  ASSERT_EQ(s.status().code(), absl::StatusCode::kResourceExhausted) << s.status();
+  const std::string m(s.status().message());
+  EXPECT_NE(m.find("merge planar_regions: the whole building's planar regions: 3776 boundary "
+                   "faces need about 1 MiB"),
+            std::string::npos)
+      << m;
+  EXPECT_NE(m.find("over its memory budget of 1 MiB"), std::string::npos) << m;
+  EXPECT_EQ(stages, std::vector<std::string>{"boundary_faces"});
+  EXPECT_FALSE(fs::exists(options.output_dir + "/job.json"));
+}
+
 TEST(RunMerge, BoxRoomGivesEveryOutput) {
   const std::string root = FreshDir();
   // 4 m × 3 m × 2.5 m from (−1, −0.5, 0): crosses chunk borders in x and y.

@@ -11,8 +11,8 @@
 
 namespace carvemap {
 
-MergeFunction LocalMerge() {
-  return [](const MergeJobRequest& req) -> absl::Status {
+MergeFunction LocalMerge(uint64_t memory_budget_bytes) {
+  return [memory_budget_bytes](const MergeJobRequest& req) -> absl::Status {
     MergeOptions options;
     options.tiles_dir = req.tiles_dir;
     options.output_dir = req.output_dir;
@@ -23,6 +23,7 @@ MergeFunction LocalMerge() {
     options.min_object_volume_m3 = req.min_object_volume_m3;  // ≤ 0: RunMerge's default
     options.world_yaw_rad = req.world_yaw_rad;
     options.recarve = req.recarve;
+    options.memory_budget_bytes = memory_budget_bytes;
     // The scan through the descriptor checked here (ConfinedFile: "/proc/self/fd/N"), as the
     // ingest reads it; its errors then name the path as the tenant gave it.
     std::optional<ConfinedFile> scan;

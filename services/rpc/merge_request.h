@@ -58,7 +58,8 @@ using MergeFunction = std::function<absl::Status(const MergeJobRequest&)>;
 
 // RunMerge in this process. Not thread-safe with other HDF5 use in the process: callers
 // serialize (the coordinator with its HDF5 lock, the merge service one merge at a time).
-MergeFunction LocalMerge();
+// memory_budget_bytes: MergeOptions::memory_budget_bytes (0: none).
+MergeFunction LocalMerge(uint64_t memory_budget_bytes = 0);
 
 }  // namespace carvemap
 

@@ -102,7 +102,7 @@ absl::Status MergeServerSpec::Validate() const {
 class MergeServer::Impl {
  public:
   explicit Impl(MergeServerSpec spec) : spec_(std::move(spec)) {
-    if (!spec_.merge) spec_.merge = LocalMerge();
+    if (!spec_.merge) spec_.merge = LocalMerge(spec_.memory_budget_bytes);
   }
   ~Impl() { Shutdown(); }
 

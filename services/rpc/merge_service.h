@@ -39,7 +39,10 @@ struct MergeServerSpec {
   // Largest message accepted from the coordinator (the MergeJob and re-carve answers are
   // small).
   int max_request_bytes = 1 << 20;
-  // What a call runs; empty = LocalMerge(). Tests put their own in front of it.
+  // LocalMerge's MergeOptions::memory_budget_bytes: a merge whose planar mesh would not fit
+  // fails with why before it starts it (0: no budget).
+  uint64_t memory_budget_bytes = 0;
+  // What a call runs; empty = LocalMerge(memory_budget_bytes). Tests put their own in front.
   MergeFunction merge;
 
   absl::Status Validate() const;

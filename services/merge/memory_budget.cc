@@ -1,0 +1,62 @@
+#include "services/merge/memory_budget.h"
+
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "services/mesh/planar_mesh.h"
+
+namespace carvemap {
+namespace {
+
+std::string Bytes(uint64_t bytes) {
+  return bytes < (uint64_t{1} << 30) ? absl::StrFormat("%.0f MiB", double(bytes) / (1 << 20))
+                                     : absl::StrFormat("%.2f GiB", double(bytes) / (1 << 30));
+}
+
+std::string Faces(uint64_t n) {
+  return n >= 100000 ? absl::StrFormat("%.2f M", double(n) / 1e6) : absl::StrCat(n);
+}
+
+}  // namespace
+
+absl::Status CheckPlanarMemory(std::string_view what, std::span<const BoundaryFace> faces,
+                               std::span<const Level> levels, uint64_t held_bytes,
+                               uint64_t budget_bytes) {
+  const uint64_t need = uint64_t{faces.size()} * kPlanarBytesPerFace;
+  if (budget_bytes == 0 || held_bytes + need <= budget_bytes) return absl::OkStatus();
+  std::string where;
+  if (!levels.empty()) {
+    std::vector<uint64_t> on(levels.size(), 0);
+    uint64_t elsewhere = 0;  // above or below every level's split range
+    for (const BoundaryFace& f : faces) {
+      const double z = f.isosurface().z();
+      size_t k = 0;
+      while (k < levels.size() && !(z >= levels[k].split_z_low && z < levels[k].split_z_high)) {
+        ++k;
+      }
+      if (k < levels.size()) {
+        ++on[k];
+      } else {
+        ++elsewhere;
+      }
+    }
+    where = " (";
+    for (size_t k = 0; k < levels.size(); ++k) {
+      absl::StrAppend(&where, k > 0 ? ", " : "", "level ", levels[k].index, ": ", Faces(on[k]));
+    }
+    if (elsewhere > 0) absl::StrAppend(&where, ", outside the levels: ", Faces(elsewhere));
+    absl::StrAppend(&where, ")");
+  }
+  return absl::ResourceExhaustedError(absl::StrCat(
+      std::string(what), ": ", Faces(faces.size()), " boundary faces", where, " need about ",
+      Bytes(need), " on top of the ", Bytes(held_bytes),
+      " the merge holds, over its memory budget of ", Bytes(budget_bytes),
+      ". The planar regions and mesh are made for every level at once, not "
+      "level by level: give the merge more memory (--memory-mb of `carvemap merge` or "
+      "`carvemap merger`; by default 90 % of the process's cgroup memory limit) or carve at a "
+      "coarser --resolution"));
+}
+
+}  // namespace carvemap

@@ -1,0 +1,26 @@
+// The merge's memory budget (MergeOptions::memory_budget_bytes): the planar regions and the
+// planar mesh are made for the whole building at once, all levels together (§4.2.4, §4.3.3),
+// and their memory grows with its boundary faces. Before each, the merge checks that what it
+// holds plus kPlanarBytesPerFace per face fits the budget, and fails with a message that says
+// where the faces are and what to change, instead of being killed for memory partway.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string_view>
+
+#include "absl/status/status.h"
+#include "services/levels/level_split.h"
+#include "services/mesh/boundary_faces.h"
+
+namespace carvemap {
+
+// OK when budget_bytes is 0 (no budget) or held_bytes + faces × kPlanarBytesPerFace fits it;
+// else ResourceExhausted naming `what` (the stage), the faces (per level of `levels`, by
+// their isosurface's height, when levels are known), the estimate, held_bytes and the budget.
+[[nodiscard]] absl::Status CheckPlanarMemory(std::string_view what,
+                                             std::span<const BoundaryFace> faces,
+                                             std::span<const Level> levels, uint64_t held_bytes,
+                                             uint64_t budget_bytes);
+
+}  // namespace carvemap
