@@ -750,4 +750,10 @@ size_t ChunkOctree::num_leaves() const {
   return n;
 }
 
+size_t ChunkOctree::memory_bytes() const {
+  size_t n = 0;
+  for (const Level& level : levels_) n += level.capacity() * (sizeof(Level::value_type) + 1);
+  return n;
+}
+
 }  // namespace carvemap

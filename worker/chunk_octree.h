@@ -103,6 +103,9 @@ class ChunkOctree {
   [[nodiscard]] const OctreeGrid& grid() const { return grid_; }
   [[nodiscard]] const ChunkKey& chunk() const { return chunk_; }
   [[nodiscard]] size_t num_leaves() const;
+  // Bytes the leaves' hash maps take: their slots at their capacity (a map has up to twice
+  // the slots it fills after it grows) and a control byte per slot.
+  [[nodiscard]] size_t memory_bytes() const;
   [[nodiscard]] bool simplified() const { return simplified_; }
   [[nodiscard]] uint64_t num_wedges() const { return num_wedges_; }  // carved, incl. misses
   [[nodiscard]] uint64_t num_leaf_updates() const { return num_leaf_updates_; }  // Add() calls

@@ -18,9 +18,6 @@
 namespace carvemap {
 namespace {
 
-// About what the finest sums of one leaf cost in a ChunkOctree (hash entry and slack).
-constexpr size_t kBytesPerLeaf = 64;
-
 // A frame of one sensor: its rays are RayId::index within it.
 struct FrameKey {
   uint32_t sensor;
@@ -108,7 +105,7 @@ struct SliceCarver::Impl {
   std::deque<Batch> open;  // oldest first
   int64_t carved_up_to = -1;  // batches up to this one are carved
   std::map<ChunkKey, ChunkOctree, ChunkKeyLess> trees;
-  size_t tree_leaves = 0;
+  size_t tree_bytes = 0;  // Σ ChunkOctree::memory_bytes() of `trees`
   // CarveBatch's working memory, kept from one chunk and batch to the next.
   IndexedWedges chunk_wedges;
   std::vector<uint32_t> local_of;    // batch ray id → the chunk's ray index (kNoRay: none yet)
@@ -281,13 +278,17 @@ absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
       in.wedges.push_back(ref);
     }
     for (uint32_t id : chunk_rays) local_of[id] = kNoRay;
-    const size_t before = tree.num_leaves();
+    const size_t before = tree.memory_bytes();
     if (absl::Status s = tree.CarveIndexed(in); !s.ok()) return s;
-    tree_leaves += tree.num_leaves() - before;
+    tree_bytes += tree.memory_bytes() - before;
     // The chunk's wedges are done with: give the memory back now, not at the batch's end.
     wedges = std::vector<uint32_t>();
+    // Checked after every chunk, not once per batch: a batch's chunks can add more sums than
+    // the whole budget. Each chunk is carved once per batch, so a flush here splits no chunk.
+    if (tree_bytes > options.memory_budget_bytes) {
+      if (absl::Status s = Flush(); !s.ok()) return s;
+    }
   }
-  if (tree_leaves * kBytesPerLeaf > options.memory_budget_bytes) return Flush();
   return absl::OkStatus();
 }
 
@@ -301,7 +302,7 @@ absl::Status SliceCarver::Impl::Flush() {
   // The votes counted so far stay in the stats: the trees go.
   for (const auto& [chunk, tree] : trees) flushed_updates += tree.num_leaf_updates();
   trees.clear();
-  tree_leaves = 0;
+  tree_bytes = 0;
   return absl::OkStatus();
 }
 

@@ -7,7 +7,8 @@
 // Memory is bounded whatever the slice's length: frames are carved in batches of about
 // batch_rays own rays (a ray votes in the batch of its frame; the wedges joining two batches
 // go to both, each voting its own rays), and the chunks' sums go out as sections
-// (PartialSumsWriter) whenever they exceed memory_budget_bytes, and at the end.
+// (PartialSumsWriter) whenever their hash maps exceed memory_budget_bytes (checked after each
+// chunk is carved), and at the end.
 //
 // Deterministic: batches, flushes and the order of every sum follow from the slice and the
 // options alone, so the same slice gives the same sections on any worker.
@@ -43,7 +44,8 @@ struct SliceCarveOptions {
   // whole. Must outlive the carver.
   const std::map<ChunkKey, ChunkRegion, ChunkKeyLess>* regions = nullptr;
   uint64_t batch_rays = 500'000;             // own rays per batch of frames
-  size_t memory_budget_bytes = 256u << 20;   // chunks' sums held before they are flushed
+  // Chunks' sums held before they are flushed: ChunkOctree::memory_bytes(), the maps' real size.
+  size_t memory_budget_bytes = 256u << 20;
   [[nodiscard]] absl::Status Validate() const;
 };
 

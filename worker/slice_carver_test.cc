@@ -247,6 +247,19 @@ TEST_F(SliceCarverTest, SlicesBatchesAndFlushesChangeOnlyTheRounding) {
   ExpectSameTiles(*reference_, c.tiles, 1e-12, /*same_wedges=*/false);
 }
 
+// One batch whose chunks add more sums than the budget: flushed between its chunks, not once
+// at its end, so the sums held stay near the budget whatever a batch holds.
+TEST_F(SliceCarverTest, TheBudgetIsCheckedAfterEachChunkOfABatch) {
+  SliceCarveOptions o = Options(CarveEvaluation::kExact);
+  o.batch_rays = uint64_t{1} << 40;
+  o.memory_budget_bytes = 256u << 10;
+  const Carved c = CarveBySlices("one_batch_small_budget", 1e6, o);
+  EXPECT_EQ(c.slices, 1u);
+  EXPECT_EQ(c.batches, 1u);
+  EXPECT_GE(c.flushes, 4u);
+  ExpectSameTiles(*reference_, c.tiles, 1e-12);
+}
+
 // The same slices carved in another order (as workers finish them) give the same bytes.
 TEST_F(SliceCarverTest, SameSlicesSameBytesWhateverTheOrder) {
   const SliceCarveOptions o = Options(CarveEvaluation::kFast);
