@@ -405,9 +405,10 @@ TEST_P(CarvedOctreeWallSamples, SamplesLieOnTheTrueWalls) {
             f.center.y() > y1) {
           continue;
         }
-        std::printf("face axis %d n %+d c %.3f %.3f %.3f iso %.3f size %.3f ext observed %d w %.3f\n",
-                    int{f.axis}, int{f.sign}, f.center.x(), f.center.y(), f.center.z(),
-                    f.isosurface_m, f.size_m, int{f.exterior_observed}, f.exterior_weight);
+        std::printf(
+            "face axis %d n %+d c %.3f %.3f %.3f iso %.3f size %.3f ext observed %d w %.3f\n",
+            int{f.axis}, int{f.sign}, f.center.x(), f.center.y(), f.center.z(), f.isosurface_m,
+            f.size_m, int{f.exterior_observed}, f.exterior_weight);
       }
     }
   }

@@ -184,7 +184,8 @@ class Fitter {
     for (size_t i = 0; i < n; ++i) {
       const BoundaryFace& f = in_[i];
       if (f.axis < 0 || f.axis > 2 || !(f.size_m > 0) || !std::isfinite(f.size_m) ||
-          !f.center.allFinite() || !std::isfinite(f.isosurface_m) || (f.sign != 1 && f.sign != -1)) {
+          !f.center.allFinite() || !std::isfinite(f.isosurface_m) ||
+          (f.sign != 1 && f.sign != -1)) {
         return absl::InvalidArgumentError(
             absl::StrCat("planar_regions: face ", i, " has a bad axis, size or position"));
       }
