@@ -66,6 +66,8 @@ absl::StatusOr<std::vector<BoundaryFace>> CollectBoundaryFaces(TileSet& tiles,
       [&](std::vector<BoundaryFace>&& f) { faces.insert(faces.end(), f.begin(), f.end()); },
       progress, "boundary_faces");
   if (!s.ok()) return s;
+  // Grown by doubling, the vector can hold twice its faces; the later stages keep it whole.
+  faces.shrink_to_fit();
   return faces;
 }
 
