@@ -236,12 +236,7 @@ absl::StatusOr<std::vector<WallSampleSet>> PointCloudWallSamples(
     poses[k] = KeepPoses(path, levels[k], options.min_pose_spacing_m);
     rep[k].poses = poses[k].xy.size();
   }
-  auto level_of = [&](double z) -> int {
-    for (size_t k = 0; k < nl; ++k) {
-      if (z >= levels[k].split_z_low && z < levels[k].split_z_high) return static_cast<int>(k);
-    }
-    return -1;
-  };
+  auto level_of = [&](double z) { return LevelContaining(levels, z); };
 
   // Pass 2: per-cell statistics.
   std::vector<absl::flat_hash_map<uint64_t, CellStats>> cells(nl);

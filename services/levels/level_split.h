@@ -72,6 +72,14 @@ struct Level {
   double ceiling_weight = 0;  // same for the ceiling peak
 };
 
+// The position in `levels` of the level whose [split_z_low, split_z_high) holds `z`, or −1.
+[[nodiscard]] inline int LevelContaining(std::span<const Level> levels, double z) {
+  for (size_t k = 0; k < levels.size(); ++k) {
+    if (z >= levels[k].split_z_low && z < levels[k].split_z_high) return static_cast<int>(k);
+  }
+  return -1;
+}
+
 // A weighted elevation: a horizontal region (centroid z, area) or a histogram bin (centre,
 // count).
 struct HeightSample {

@@ -31,12 +31,8 @@ absl::Status CheckPlanarMemory(std::string_view what, std::span<const BoundaryFa
     std::vector<uint64_t> on(levels.size(), 0);
     uint64_t elsewhere = 0;  // above or below every level's split range
     for (const BoundaryFace& f : faces) {
-      const double z = f.isosurface().z();
-      size_t k = 0;
-      while (k < levels.size() && !(z >= levels[k].split_z_low && z < levels[k].split_z_high)) {
-        ++k;
-      }
-      if (k < levels.size()) {
+      const int k = LevelContaining(levels, f.isosurface().z());
+      if (k >= 0) {
         ++on[k];
       } else {
         ++elsewhere;
