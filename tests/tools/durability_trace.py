@@ -31,11 +31,35 @@ STR = re.compile(r'"((?:[^"\\]|\\.)*)"')
 RUNTIME_FILES = {'port', 'merger-port'}
 
 
+UNFINISHED = re.compile(r'^(\d+)\s+(.*) <unfinished \.\.\.>$')
+RESUMED = re.compile(r'^(\d+)\s+<\.\.\. \w+ resumed>(.*)$')
+
+
+def joined(lines):
+    """The trace's lines with each call that strace split in two (another thread's call came
+    between its start and its end: `<unfinished ...>`, then `<... NAME resumed>`) put back
+    together as one line."""
+    started = {}
+    for line in lines:
+        line = line.strip()
+        m = UNFINISHED.match(line)
+        if m:
+            started[m.group(1)] = m.group(2)
+            continue
+        m = RESUMED.match(line)
+        if m:
+            head = started.pop(m.group(1), None)
+            if head is not None:
+                yield f'{m.group(1)} {head}{m.group(2)}'
+            continue
+        yield line
+
+
 def parse(lines):
     """Yields (pid, kind, args) for each completed, successful call: kind 'sync' with the synced
     path, or 'rename' with (source, destination)."""
-    for line in lines:
-        m = CALL.match(line.strip())
+    for line in joined(lines):
+        m = CALL.match(line)
         if not m or int(m.group(4)) != 0:
             continue
         pid, name, args = int(m.group(1)), m.group(2), m.group(3)
@@ -131,6 +155,13 @@ def selftest():
     assert check(job_first, '/', out)[0], 'missed job.json renamed before another output'
     store_first = good[-1:] + good[:-1]
     assert check(store_first, '/', out)[0], 'missed the job store committing before job.json'
+    # Threads' calls interleaved: strace splits each in two around the other's.
+    split = good[:1] + ['10 rename("/o/tiles/a.h5.partial", "/o/tiles/a.h5" <unfinished ...>',
+                        '11 fsync(4</o/x.ply.partial> <unfinished ...>',
+                        '10 <... rename resumed>) = 0',
+                        '11 <... fsync resumed>) = 0'] + good[2:3] + good[4:]
+    problems, checked = check(split, '/', out)
+    assert not problems and checked == 3, ('split calls', problems, checked)
     failed_call = [l.replace(') = 0', ') = -1') if 'fsync(3' in l else l for l in good]
     assert check(failed_call, '/', out)[0], 'took a failed fsync for a sync'
     print('selftest: ok')
