@@ -18,6 +18,7 @@
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
 
 #include "absl/container/flat_hash_map.h"
+#include "absl/container/inlined_vector.h"
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "services/geometry/union_find.h"
@@ -167,6 +168,11 @@ absl::StatusOr<FaceSurface> BuildSurface(std::span<const BoundaryFace> faces, do
   std::sort(lines.begin(), lines.end());
 
   s.poly_start.reserve(faces.size() + 1);
+  // Four corners per face and a few more where a face meets smaller ones: reserved with some
+  // room, as doubling these two arrays made the stage's peak.
+  const size_t corners_guess = 4 * faces.size() + faces.size() / 16 + 64;
+  s.corner_vertex.reserve(corners_guess);
+  s.corner_face.reserve(corners_guess);
   for (size_t f = 0; f < faces.size(); ++f) {
     s.poly_start.push_back(static_cast<int>(s.corner_vertex.size()));
     const auto c = square_corners(squares[f]);
@@ -183,16 +189,16 @@ absl::StatusOr<FaceSurface> BuildSurface(std::span<const BoundaryFace> faces, do
           std::upper_bound(lines.begin(), lines.end(), LinePoint{d, k1, k2, lo, INT32_MAX});
       auto last =
           std::lower_bound(lines.begin(), lines.end(), LinePoint{d, k1, k2, hi, INT32_MIN});
-      std::vector<int> between;
-      for (auto it = first; it != last; ++it) between.push_back((*it)[4]);
-      if (a[d] > b[d]) std::reverse(between.begin(), between.end());
-      for (int v : between) {
-        s.corner_vertex.push_back(v);
+      const auto n_between = last - first;
+      for (ptrdiff_t k = 0; k < n_between; ++k) {  // from a towards b
+        s.corner_vertex.push_back((a[d] < b[d] ? first[k] : last[-1 - k])[4]);
         s.corner_face.push_back(static_cast<int>(f));
       }
     }
   }
   s.poly_start.push_back(static_cast<int>(s.corner_vertex.size()));
+  std::vector<LinePoint>().swap(lines);
+  absl::flat_hash_map<LatticeKey, int>().swap(vertex_index);
   const int num_corners = static_cast<int>(s.corner_vertex.size());
 
   // Pair directed edges with their reverses.
@@ -267,6 +273,7 @@ absl::StatusOr<FaceSurface> BuildSurface(std::span<const BoundaryFace> faces, do
     }
     i = j;
   }
+  std::vector<EdgeUse>().swap(uses);
   // Topological vertices: corners joined across twin edges.
   UnionFind<int> corners(num_corners);
   for (int c = 0; c < num_corners; ++c) {
@@ -479,17 +486,19 @@ PlaneFrame FrameOf(const PlanarRegion& region) {
 struct WorkMesh {
   enum Kind : char { kInterior, kChain, kAnchor };
   std::vector<Eigen::Vector3d> pos;
-  std::vector<std::vector<int>> regions_of;  // sorted
   std::vector<char> kind;
   std::vector<char> vertex_alive;
   std::vector<std::array<int, 3>> tri;
   std::vector<int> tri_region;
   std::vector<char> alive;
-  std::vector<std::vector<int>> incident;  // may hold stale entries; see Tris()
+  // A lattice vertex has about six triangles around it: kept inline, as one small heap block
+  // per vertex would be the largest part of the work mesh.
+  using TriList = absl::InlinedVector<int, 6>;
+  std::vector<TriList> incident;  // may hold stale entries; see Tris()
 
   // Alive triangles around v (compacts the list).
-  const std::vector<int>& Tris(int v) {
-    std::vector<int>& list = incident[v];
+  const TriList& Tris(int v) {
+    TriList& list = incident[v];
     list.erase(std::remove_if(list.begin(), list.end(),
                               [&](int t) {
                                 return !alive[t] || (tri[t][0] != v && tri[t][1] != v && tri[t][2] != v);
@@ -507,9 +516,17 @@ struct WorkMesh {
     for (int v : {a, b, c}) incident[v].push_back(t);
     return t;
   }
-  int AddVertex(const Eigen::Vector3d& x, std::vector<int> regs, Kind k) {
+  void Reserve(size_t vertices, size_t triangles) {
+    pos.reserve(vertices);
+    kind.reserve(vertices);
+    vertex_alive.reserve(vertices);
+    incident.reserve(vertices);
+    tri.reserve(triangles);
+    tri_region.reserve(triangles);
+    alive.reserve(triangles);
+  }
+  int AddVertex(const Eigen::Vector3d& x, Kind k) {
     pos.push_back(x);
-    regions_of.push_back(std::move(regs));
     kind.push_back(k);
     vertex_alive.push_back(1);
     incident.emplace_back();
@@ -525,7 +542,7 @@ double SignedArea(const WorkMesh& m, const std::vector<PlaneFrame>& frames, int 
 // Collapses u into v when that keeps the surface a manifold and no triangle gets worse than
 // `min_area` in its region's plane (§4.2.5: the chains stay where the regions meet).
 bool TryCollapse(WorkMesh& m, const std::vector<PlaneFrame>& frames, int u, int v, double min_area) {
-  const std::vector<int> tu = m.Tris(u);
+  const WorkMesh::TriList tu = m.Tris(u);
   std::vector<int> shared, moved;
   for (int t : tu) {
     const auto& x = m.tri[t];
@@ -996,27 +1013,47 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces, cons
     if (region_of_corner(c) != region_of_corner(s.twin[c])) ++out_count[s.corner_tv[c]];
   }
   WorkMesh m;
+  // About one vertex per lattice vertex and two triangles per face (a few more where faces
+  // of different sizes meet): made at their size, as the work mesh is this stage's peak.
+  m.Reserve(s.num_tv, 2 * faces.size());
   for (int v = 0; v < s.num_tv; ++v) {
     const Eigen::Vector3d x0 = s.lattice[s.tv_lattice[v]].cast<double>() * res;
     const std::vector<int>& regs = tv_regions[v];
     if (regs.size() == 1) {
-      m.AddVertex(frames[regs[0]].Project(x0), regs, WorkMesh::kInterior);
+      m.AddVertex(frames[regs[0]].Project(x0), WorkMesh::kInterior);
     } else {
       const WorkMesh::Kind k = regs.size() == 2 && out_count[v] == 2 ? WorkMesh::kChain : WorkMesh::kAnchor;
-      m.AddVertex(PlaceVertex(x0, regs, regions, options, res), regs, k);
+      m.AddVertex(PlaceVertex(x0, regs, regions, options, res), k);
     }
   }
+  std::vector<std::vector<int>>().swap(tv_regions);
   // Two sheets may still share an edge when the faces around both of its ends are connected
   // (interior cells touching along the edge and joined through their other neighbours): give
   // each sheet its own midpoint on that edge.
   auto edge_key = [](int a, int b) {
     return (uint64_t{static_cast<uint32_t>(std::min(a, b))} << 32) | static_cast<uint32_t>(std::max(a, b));
   };
-  absl::flat_hash_map<uint64_t, int> edge_uses;
-  for (int c = 0; c < num_corners; ++c) ++edge_uses[edge_key(s.corner_tv[c], s.corner_tv[s.Next(c)])];
+  // The edges used by more than two corners, found by sorting all the edges' keys once
+  // (a sorted array of 8 bytes per corner, freed at once, rather than a hash map of all edges
+  // held to the end): there are few of them.
+  std::vector<uint64_t> shared_edges;
+  {
+    std::vector<uint64_t> keys(num_corners);
+    for (int c = 0; c < num_corners; ++c) keys[c] = edge_key(s.corner_tv[c], s.corner_tv[s.Next(c)]);
+    std::sort(keys.begin(), keys.end());
+    for (size_t i = 0; i < keys.size();) {
+      size_t e = i + 1;
+      while (e < keys.size() && keys[e] == keys[i]) ++e;
+      if (e - i > 2) shared_edges.push_back(keys[i]);
+      i = e;
+    }
+  }
   absl::flat_hash_map<int, int> midpoint;  // min(corner, twin) → vertex
   auto midpoint_of = [&](int c) {
-    if (edge_uses[edge_key(s.corner_tv[c], s.corner_tv[s.Next(c)])] <= 2) return -1;
+    if (!std::binary_search(shared_edges.begin(), shared_edges.end(),
+                            edge_key(s.corner_tv[c], s.corner_tv[s.Next(c)]))) {
+      return -1;
+    }
     const int k = std::min(c, s.twin[c]);
     auto it = midpoint.find(k);
     if (it != midpoint.end()) return it->second;
@@ -1026,8 +1063,8 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces, cons
     std::sort(regs.begin(), regs.end());
     regs.erase(std::unique(regs.begin(), regs.end()), regs.end());
     const int v = regs.size() == 1
-                      ? m.AddVertex(frames[regs[0]].Project(x0), regs, WorkMesh::kInterior)
-                      : m.AddVertex(PlaceVertex(x0, regs, regions, options, res), regs, WorkMesh::kChain);
+                      ? m.AddVertex(frames[regs[0]].Project(x0), WorkMesh::kInterior)
+                      : m.AddVertex(PlaceVertex(x0, regs, regions, options, res), WorkMesh::kChain);
     midpoint[k] = v;
     return v;
   };
@@ -1044,7 +1081,7 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces, cons
       m.AddTriangle(poly[0], poly[2], poly[3], r);
     } else {
       // A face with T-junction vertices on its sides: a fan around its centre.
-      const int center = m.AddVertex(frames[r].Project(faces[f].center), {r}, WorkMesh::kInterior);
+      const int center = m.AddVertex(frames[r].Project(faces[f].center), WorkMesh::kInterior);
       for (int i = 0; i < n; ++i) m.AddTriangle(center, poly[i], poly[(i + 1) % n], r);
     }
   }

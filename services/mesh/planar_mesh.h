@@ -27,10 +27,10 @@ namespace carvemap {
 // Memory the planar regions (FitPlanarRegions) and then the planar mesh take per boundary
 // face, on top of the faces themselves (sizeof(BoundaryFace)): what a merge checks a memory
 // budget against before it starts them. Measured with tests/bench/planar_mesh_bench (each
-// stage's own peak) on office2 at 6.25 cm, 1.19 M faces: 338 B per face while the regions are
-// fitted, 290 B while the mesh is made with the regions kept (docs/BENCHMARKS.md "The merge's
-// memory budget"); rounded up for the allocator's slack.
-inline constexpr uint64_t kPlanarBytesPerFace = 400;
+// stage's own peak) on office2 at 6.25 cm, 1.19 M faces: 212 B per face while the regions are
+// fitted, 201 B while the mesh is made with the regions kept (docs/BENCHMARKS.md "The planar
+// stages' own memory"); rounded up for the allocator's slack.
+inline constexpr uint64_t kPlanarBytesPerFace = 256;
 
 struct PlanarMeshOptions {
   // eq 4.9: a singular direction of the stacked plane normals is trusted only when its singular

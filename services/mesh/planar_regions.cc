@@ -123,19 +123,22 @@ struct Link {
   Boundary boundary;
 };
 
-// Sorts links by (a, b) and sums the boundaries of equal pairs.
+// Sorts links by (a, b) and sums the boundaries of equal pairs, in place: the face links are
+// the largest structure of the stage (about two per face), so no second copy is made.
 std::vector<Link> Aggregate(std::vector<Link> links) {
   std::sort(links.begin(), links.end(),
             [](const Link& x, const Link& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); });
-  std::vector<Link> out;
-  for (const Link& l : links) {
-    if (!out.empty() && out.back().a == l.a && out.back().b == l.b) {
-      out.back().boundary.Add(l.boundary);
+  size_t kept = 0;
+  for (size_t i = 0; i < links.size(); ++i) {
+    if (kept > 0 && links[kept - 1].a == links[i].a && links[kept - 1].b == links[i].b) {
+      links[kept - 1].boundary.Add(links[i].boundary);
     } else {
-      out.push_back(l);
+      links[kept++] = links[i];
     }
   }
-  return out;
+  links.resize(kept);
+  links.shrink_to_fit();
+  return links;
 }
 
 // A connected set of same-direction faces (flood fill) or a grown region: members are
@@ -268,7 +271,17 @@ class Fitter {
       }
     }
     std::sort(keys.begin(), keys.end());
+    // One link per pair of faces sharing a unit edge: counted first, so the vector is made at
+    // its size instead of doubling (it and the keys are the stage's peak).
+    size_t pairs = 0;
+    for (size_t g = 0; g < keys.size();) {
+      size_t e = g + 1;
+      while (e < keys.size() && keys[e].first == keys[g].first) ++e;
+      pairs += (e - g) * (e - g - 1) / 2;
+      g = e;
+    }
     std::vector<Link> links;
+    links.reserve(pairs);
     for (size_t g = 0; g < keys.size();) {
       size_t e = g + 1;
       while (e < keys.size() && keys[e].first == keys[g].first) ++e;
@@ -290,6 +303,7 @@ class Fitter {
       }
       g = e;
     }
+    std::vector<std::pair<uint64_t, uint32_t>>().swap(keys);
     face_links_ = Aggregate(std::move(links));
     return absl::OkStatus();
   }
@@ -391,12 +405,15 @@ class Fitter {
       g.plane = FitPlane(g.moments);
       g.max_dist = MaxDist(g, g.plane);
     }
-    std::vector<Link> links;
-    for (const Link& l : face_links_) {
-      uint32_t a = face_comp_[l.a], b = face_comp_[l.b];
+    // The face links become the groups' links in place: nothing reads them after this.
+    std::vector<Link> links = std::move(face_links_);
+    size_t kept = 0;
+    for (size_t i = 0; i < links.size(); ++i) {
+      const uint32_t a = face_comp_[links[i].a], b = face_comp_[links[i].b];
       if (a == b) continue;
-      links.push_back({std::min(a, b), std::max(a, b), l.boundary});
+      links[kept++] = {std::min(a, b), std::max(a, b), links[i].boundary};
     }
+    links.resize(kept);
     comp_links_ = Aggregate(std::move(links));
     comp_adj_.assign(comps_.size(), {});
     for (uint32_t i = 0; i < comp_links_.size(); ++i) {

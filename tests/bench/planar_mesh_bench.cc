@@ -3,8 +3,10 @@
 // building tiles), with the counts and CPU seconds of each stage. For docs/BENCHMARKS.md and
 // for tuning on kept carves without re-running the whole merge.
 //
-//   planar_mesh_bench TILES_DIR [--mesh-growth] [--no-dense] [--out DIR] [--gt GT_DIR]
+//   planar_mesh_bench TILES_DIR [--mesh-growth] [--no-dense] [--regions-only] [--out DIR]
+//                     [--gt GT_DIR]
 //
+// --regions-only stops after the regions, so that a heap profiler's peak is theirs.
 // --mesh-growth fits the regions as the merge does for mesh/building.ply
 // (PlanarRegionOptions::mesh_growth); without it, as for the levels and floor plans.
 // --out writes DIR/building.ply (face property `region`) and DIR/dense.ply. --gt (a simulated
@@ -52,12 +54,14 @@ int main(int argc, char** argv) {
   using namespace carvemap;
   if (argc < 2) {
     std::fprintf(stderr,
-                 "usage: %s TILES_DIR [--mesh-growth] [--no-dense] [--out DIR] [--gt GT_DIR]\n",
+                 "usage: %s TILES_DIR [--mesh-growth] [--no-dense] [--regions-only] [--out DIR] "
+                 "[--gt GT_DIR]\n",
                  argv[0]);
     return 2;
   }
   const std::string dir = argv[1];
   bool dense = true;
+  bool mesh = true;  // --regions-only: stop after the regions (to profile them alone)
   std::string out, gt;
   PlanarRegionOptions region_options;
   for (int i = 2; i < argc; ++i) {
@@ -65,6 +69,9 @@ int main(int argc, char** argv) {
     if (a == "--mesh-growth") {
       region_options.mesh_growth = true;
     } else if (a == "--no-dense") {
+      dense = false;
+    } else if (a == "--regions-only") {
+      mesh = false;
       dense = false;
     } else if (a == "--out" && i + 1 < argc) {
       out = argv[++i];
@@ -145,6 +152,7 @@ int main(int argc, char** argv) {
       }
     }
   }
+  if (!mesh) return 0;
   t = CpuSeconds();
   absl::StatusOr<PlanarMesh> planar = BuildPlanarMesh(*faces, *regions, grid);
   const double planar_s = CpuSeconds() - t;
