@@ -4,6 +4,7 @@
 // for each mesh it writes (job.json "counts": <mesh>_self_intersections).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 
 #include "storage/ply_io.h"
@@ -21,9 +22,15 @@ struct SelfIntersections {
   uint64_t unchecked = 0;
 };
 
+// Triangles per slab: CGAL's boxes for one slab take ~110 bytes per triangle, ~30 MB.
+inline constexpr size_t kSelfIntersectionTrianglesPerSlab = size_t{1} << 18;
+
 // CGAL's Polygon_mesh_processing::self_intersections on the mesh as a Surface_mesh, with exact
 // predicates (EPICK): boxes of the triangles intersected first, then each candidate pair
-// tested exactly. Memory: ~150 bytes per triangle while it runs.
-[[nodiscard]] SelfIntersections CountSelfIntersections(const TriangleMesh& mesh);
+// tested exactly. Run on slabs along x of about `triangles_per_slab` triangles each, so that
+// CGAL's boxes exist for one slab at a time; the count does not depend on the slabs. Memory:
+// ~70 bytes per triangle (the Surface_mesh) plus one slab's boxes.
+[[nodiscard]] SelfIntersections CountSelfIntersections(
+    const TriangleMesh& mesh, size_t triangles_per_slab = kSelfIntersectionTrianglesPerSlab);
 
 }  // namespace carvemap
