@@ -52,6 +52,7 @@ struct RunFlags {
   double heartbeat_interval_s = 1.0;
   double worker_timeout_s = 5.0;
   double lease_timeout_s = 30.0;
+  double merge_memory_mb = 0;  // the merge service's --memory-mb; 0: its default
   bool quiet = false;
 };
 
@@ -158,10 +159,14 @@ absl::Status Run(const RunFlags& flags, RunState& state) {
   // The merge service first: the coordinator is told where it is. It reads the tiles and
   // writes the outputs by path, as on a cluster's shared volume.
   const fs::path merger_log = work / "merger.log";
-  absl::StatusOr<pid_t> merger =
-      SpawnSelf({"merger", "--listen", "127.0.0.1:0", "--port-file",
-                 (work / "merger-port").string(), "--cluster-secret-file", secret_file.string()},
-                merger_log.string());
+  std::vector<std::string> merger_args = {
+      "merger", "--listen", "127.0.0.1:0", "--port-file", (work / "merger-port").string(),
+      "--cluster-secret-file", secret_file.string()};
+  if (flags.merge_memory_mb != 0) {
+    merger_args.push_back("--memory-mb");
+    merger_args.push_back(absl::StrCat(flags.merge_memory_mb));
+  }
+  absl::StatusOr<pid_t> merger = SpawnSelf(merger_args, merger_log.string());
   if (!merger.ok()) return merger.status();
   {
     absl::MutexLock lock(&state.mu);
@@ -337,6 +342,11 @@ void RegisterRun(CLI::App& app, int& exit_code) {
                   "A silent worker is lost after this long and its chunks are requeued")
       ->capture_default_str();
   cmd->add_option("--lease-timeout-s", flags->lease_timeout_s, "Lease deadline")
+      ->capture_default_str();
+  cmd->add_option("--merge-memory-mb", flags->merge_memory_mb,
+                  "Memory the merge may use, MiB: a building whose planar mesh would not fit "
+                  "fails with why before it is made. 0: 90 % of the cgroup's memory limit, none "
+                  "without one; < 0: no budget")
       ->capture_default_str();
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress line");
   cmd->callback([flags, &exit_code] {

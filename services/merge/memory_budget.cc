@@ -51,8 +51,8 @@ absl::Status CheckPlanarMemory(std::string_view what, std::span<const BoundaryFa
       " the merge holds, over its memory budget of ", Bytes(budget_bytes),
       ". The planar regions and mesh are made for every level at once, not "
       "level by level: give the merge more memory (--memory-mb of `carvemap merge` or "
-      "`carvemap merger`; by default 90 % of the process's cgroup memory limit) or carve at a "
-      "coarser --resolution"));
+      "`carvemap merger`, --merge-memory-mb of `carvemap run`; by default 90 % of the "
+      "process's cgroup memory limit) or carve at a coarser --resolution"));
 }
 
 }  // namespace carvemap
