@@ -1,23 +1,28 @@
 #include "services/system/process_memory.h"
 
+#include <algorithm>
 #include <cstdio>
-#include <fstream>
 #include <string>
 
 #include "services/system/cgroup_files.h"
 
 namespace carvemap {
 
-ProcessMemory ReadProcessMemory() {
+ProcessMemory ParseProcessMemory(std::string_view status) {
   ProcessMemory m;
-  std::ifstream status("/proc/self/status");
-  std::string line;
-  while (std::getline(status, line)) {
+  for (size_t start = 0; start < status.size();) {
+    const size_t end = std::min(status.find('\n', start), status.size());
+    const std::string line(status.substr(start, end - start));
+    start = end + 1;
     unsigned long long kib = 0;
     if (std::sscanf(line.c_str(), "VmRSS: %llu kB", &kib) == 1) m.resident_bytes = kib << 10;
     if (std::sscanf(line.c_str(), "VmHWM: %llu kB", &kib) == 1) m.peak_resident_bytes = kib << 10;
   }
   return m;
+}
+
+ProcessMemory ReadProcessMemory() {
+  return ParseProcessMemory(ReadSmallFile("/proc/self/status").value_or(""));
 }
 
 std::optional<uint64_t> BytesOfMemoryMax(std::string_view text) {

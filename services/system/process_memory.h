@@ -14,7 +14,10 @@ struct ProcessMemory {
   uint64_t peak_resident_bytes = 0;  // VmHWM: the largest VmRSS since the process started
 };
 
-// From /proc/self/status; fields stay 0 where it does not say.
+// From the text of a /proc/<pid>/status; fields stay 0 where it does not say.
+ProcessMemory ParseProcessMemory(std::string_view status);
+
+// ParseProcessMemory of /proc/self/status.
 ProcessMemory ReadProcessMemory();
 
 // The bytes a cgroup v2 `memory.max` (or v1 `memory.limit_in_bytes`) text allows: nullopt for

@@ -23,6 +23,17 @@ TEST(ProcessMemory, ResidentGrowsWithTouchedMemoryAndPeakHoldsIt) {
   EXPECT_GE(after.peak_resident_bytes, before.resident_bytes + (size_t{60} << 20));
 }
 
+TEST(ProcessMemory, StatusText) {
+  const ProcessMemory m = ParseProcessMemory(
+      "Name:\tcarvemap\nVmPeak:\t 900000 kB\nVmHWM:\t  812344 kB\nVmRSS:\t  402112 kB\n"
+      "Threads:\t7\n");
+  EXPECT_EQ(m.resident_bytes, uint64_t{402112} << 10);
+  EXPECT_EQ(m.peak_resident_bytes, uint64_t{812344} << 10);
+  const ProcessMemory none = ParseProcessMemory("Name:\tx\nVmRSS: lots\n");
+  EXPECT_EQ(none.resident_bytes, 0u);
+  EXPECT_EQ(none.peak_resident_bytes, 0u);
+}
+
 TEST(ProcessMemory, MemoryMaxTexts) {
   EXPECT_EQ(BytesOfMemoryMax("max\n"), std::nullopt);                  // v2: no limit
   EXPECT_EQ(BytesOfMemoryMax("4294967296\n"), 4294967296u);            // a 4 GiB pod
