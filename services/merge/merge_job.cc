@@ -51,12 +51,12 @@ double SecondsSince(Clock::time_point t0) {
 // one name; "<name>_triangles_not_tested" when some could not be), timed under
 // merge.self_intersections, with a warning when any (`warnings` null: the caller warns once
 // for many meshes): a watertight mesh that crosses itself is not a valid solid. Returns the
-// pairs found.
+// pairs found. `threads` for a large mesh (the dense one).
 uint64_t CountSelfIntersectionsInto(const TriangleMesh& mesh, const std::string& name,
                                     nlohmann::json& counts, nlohmann::json& timings,
-                                    std::vector<std::string>* warnings) {
+                                    std::vector<std::string>* warnings, int threads = 1) {
   const Clock::time_point t0 = Clock::now();
-  const SelfIntersections s = CountSelfIntersections(mesh);
+  const SelfIntersections s = CountSelfIntersections(mesh, threads);
   const std::string key = name + "_self_intersections";
   counts[key] = counts.value(key, uint64_t{0}) + s.pairs;
   if (s.unchecked > 0) {
@@ -407,7 +407,8 @@ absl::StatusOr<TriangleMesh> BuildingStage(const MergeOptions& options, const Oc
     counts["building_vertices"] = dense->mesh.vertices.size();
     counts["building_triangles"] = dense->mesh.triangles.size();
     counts["building_watertight"] = CheckMesh(dense->mesh).watertight();
-    CountSelfIntersectionsInto(dense->mesh, "building", counts, timings, &warnings);
+    CountSelfIntersectionsInto(dense->mesh, "building", counts, timings, &warnings,
+                               MergeThreads(options));
     counts["building_planar"] = false;
     building = std::move(dense->mesh);
   } else {
@@ -717,7 +718,8 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
     dense_triangles = dense->mesh.triangles.size();
     counts["dense_vertices"] = dense->mesh.vertices.size();
     counts["dense_triangles"] = dense_triangles;
-    CountSelfIntersectionsInto(dense->mesh, "dense", counts, timings, &warnings);
+    CountSelfIntersectionsInto(dense->mesh, "dense", counts, timings, &warnings,
+                               MergeThreads(options));
   }
   outputs.push_back("mesh/dense.ply");
   timings["merge.dense_mesh"] = SecondsSince(t0);

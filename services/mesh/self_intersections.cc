@@ -1,7 +1,10 @@
 #include "services/mesh/self_intersections.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <functional>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -13,7 +16,8 @@
 
 namespace carvemap {
 
-SelfIntersections CountSelfIntersections(const TriangleMesh& mesh, size_t triangles_per_slab) {
+SelfIntersections CountSelfIntersections(const TriangleMesh& mesh, int threads,
+                                         size_t triangles_per_slab) {
   triangles_per_slab = std::max<size_t>(triangles_per_slab, 1);
   using K = CGAL::Exact_predicates_inexact_constructions_kernel;
   using Mesh = CGAL::Surface_mesh<K::Point_3>;
@@ -59,27 +63,41 @@ SelfIntersections CountSelfIntersections(const TriangleMesh& mesh, size_t triang
   auto slab_of = [&starts](float x) {
     return size_t(std::upper_bound(starts.begin(), starts.end(), x) - starts.begin());
   };
-  uint64_t pairs = 0;
-  std::vector<Mesh::Face_index> slab_faces;
-  for (size_t slab = 0; slab <= starts.size(); ++slab) {
-    const float lo = slab == 0 ? -INFINITY : starts[slab - 1];
-    const float hi = slab == starts.size() ? INFINITY : starts[slab];
-    slab_faces.clear();
-    for (size_t f = 0; f < x_range.size(); ++f) {
-      if (x_range[f].second >= lo && x_range[f].first < hi) {
-        slab_faces.push_back(Mesh::Face_index(Mesh::size_type(f)));
+  // Slabs are independent (CGAL only reads the mesh), so `threads` take them in turn, each
+  // with its own count: the sum does not depend on which thread counted which slab.
+  const size_t num_slabs = starts.size() + 1;
+  std::atomic<size_t> next_slab{0};
+  std::vector<uint64_t> counted(size_t(std::max(threads, 1)), 0);
+  auto work = [&](uint64_t& pairs) {
+    std::vector<Mesh::Face_index> slab_faces;
+    for (size_t slab = next_slab++; slab < num_slabs; slab = next_slab++) {
+      const float lo = slab == 0 ? -INFINITY : starts[slab - 1];
+      const float hi = slab == starts.size() ? INFINITY : starts[slab];
+      slab_faces.clear();
+      for (size_t f = 0; f < x_range.size(); ++f) {
+        if (x_range[f].second >= lo && x_range[f].first < hi) {
+          slab_faces.push_back(Mesh::Face_index(Mesh::size_type(f)));
+        }
       }
+      // Counted as they come: the pairs themselves are not kept.
+      CGAL::Polygon_mesh_processing::self_intersections(
+          slab_faces, sm,
+          boost::make_function_output_iterator(
+              [&](const std::pair<Mesh::Face_index, Mesh::Face_index>& p) {
+                const float x = std::max(x_range[size_t(p.first)].first,
+                                         x_range[size_t(p.second)].first);
+                if (slab_of(x) == slab) ++pairs;
+              }));
     }
-    // Counted as they come: the pairs themselves are not kept.
-    CGAL::Polygon_mesh_processing::self_intersections(
-        slab_faces, sm,
-        boost::make_function_output_iterator(
-            [&](const std::pair<Mesh::Face_index, Mesh::Face_index>& p) {
-              const float x = std::max(x_range[size_t(p.first)].first,
-                                       x_range[size_t(p.second)].first);
-              if (slab_of(x) == slab) ++pairs;
-            }));
+  };
+  std::vector<std::thread> pool;
+  for (size_t t = 1; t < counted.size() && t < num_slabs; ++t) {
+    pool.emplace_back(work, std::ref(counted[t]));
   }
+  work(counted[0]);
+  for (std::thread& th : pool) th.join();
+  uint64_t pairs = 0;
+  for (uint64_t c : counted) pairs += c;
   out.pairs = pairs;
   return out;
 }

@@ -28,9 +28,10 @@ inline constexpr size_t kSelfIntersectionTrianglesPerSlab = size_t{1} << 18;
 // CGAL's Polygon_mesh_processing::self_intersections on the mesh as a Surface_mesh, with exact
 // predicates (EPICK): boxes of the triangles intersected first, then each candidate pair
 // tested exactly. Run on slabs along x of about `triangles_per_slab` triangles each, so that
-// CGAL's boxes exist for one slab at a time; the count does not depend on the slabs. Memory:
-// ~70 bytes per triangle (the Surface_mesh) plus one slab's boxes.
+// CGAL's boxes exist for one slab at a time, on `threads` threads; the count depends on
+// neither. Memory: ~70 bytes per triangle (the Surface_mesh) plus one slab's boxes per thread.
 [[nodiscard]] SelfIntersections CountSelfIntersections(
-    const TriangleMesh& mesh, size_t triangles_per_slab = kSelfIntersectionTrianglesPerSlab);
+    const TriangleMesh& mesh, int threads = 1,
+    size_t triangles_per_slab = kSelfIntersectionTrianglesPerSlab);
 
 }  // namespace carvemap

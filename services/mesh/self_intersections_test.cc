@@ -56,19 +56,22 @@ TEST(SelfIntersections, AFoldedNeighbourIsFound) {
   EXPECT_EQ(CountSelfIntersections(m).pairs, 0u);
 }
 
-TEST(SelfIntersections, TheCountDoesNotDependOnTheSlabs) {
+TEST(SelfIntersections, TheCountDoesNotDependOnTheSlabsNorTheThreads) {
   // A row of cubes along x, each pushed into the one before it (and a few apart): pairs cross
   // in many places, some at slab boundaries whatever the slab size.
   TriangleMesh m;
   for (int i = 0; i < 12; ++i) {
     AddCube(m, Eigen::Vector3f(0.7f * i + (i % 4 == 3 ? 0.4f : 0.f), 0.1f * (i % 3), 0), 1);
   }
-  const SelfIntersections whole = CountSelfIntersections(m, m.triangles.size());
+  const SelfIntersections whole = CountSelfIntersections(m, 1, m.triangles.size());
   EXPECT_GT(whole.pairs, 0u);
-  for (size_t per_slab : {1, 5, 12, 30, 100}) {
-    const SelfIntersections s = CountSelfIntersections(m, per_slab);
-    EXPECT_EQ(s.pairs, whole.pairs) << per_slab << " triangles per slab";
-    EXPECT_EQ(s.unchecked, 0u);
+  for (int threads : {1, 3}) {
+    for (size_t per_slab : {1, 5, 12, 30, 100}) {
+      const SelfIntersections s = CountSelfIntersections(m, threads, per_slab);
+      EXPECT_EQ(s.pairs, whole.pairs) << per_slab << " triangles per slab, " << threads
+                                      << " threads";
+      EXPECT_EQ(s.unchecked, 0u);
+    }
   }
 }
 
