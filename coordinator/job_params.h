@@ -9,6 +9,7 @@
 #include "absl/status/statusor.h"
 #include "services/geometry/carving_types.h"  // CarveEvaluation
 #include "services/geometry/north_alignment.h"  // NorthMode
+#include "services/merge/merge_params.h"
 
 namespace carvemap {
 
@@ -57,6 +58,15 @@ struct JobParams {
   // no north → none.
   // Text that is not a JSON object gives the defaults.
   static JobParams FromJson(const std::string& text);
+  // What the merge gets of them, with the turn to north the job's tiles were carved with.
+  [[nodiscard]] MergeParams merge_params(double world_yaw_rad) const {
+    return {.resolution_m = resolution_m,
+            .object_resolution_m = object_resolution_m,
+            .floorplan_method = floorplan_method,
+            .trimmed_points = trimmed_points,
+            .min_object_volume_m3 = min_object_volume_m3,
+            .world_yaw_rad = world_yaw_rad};
+  }
   bool operator==(const JobParams&) const = default;
 };
 

@@ -44,6 +44,13 @@ TEST(JobParamsTest, EveryFieldTakesItsValue) {
   EXPECT_TRUE(p->trimmed_points);
   EXPECT_EQ(p->min_object_volume_m3, 0.01);
   EXPECT_EQ(p->evaluation, CarveEvaluation::kExact);
+  // What the merge gets: these, with the turn the tiles were carved with.
+  EXPECT_EQ(p->merge_params(0.5), (MergeParams{.resolution_m = 0.03125,
+                                               .object_resolution_m = 0.015625,
+                                               .floorplan_method = "eigencrust",
+                                               .trimmed_points = true,
+                                               .min_object_volume_m3 = 0.01,
+                                               .world_yaw_rad = 0.5}));
 }
 
 TEST(JobParamsTest, BadFieldsFailNamingThem) {

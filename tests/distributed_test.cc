@@ -302,7 +302,7 @@ TEST_F(DistributedTest, MergeCarvesChunksAgainFinerThroughTheWorkers) {
   std::vector<int> fine_above, coarse_above;             // leaves in the chunk's upper half
   double object_resolution = 0;
   merge_hook_ = [&](const MergeJobRequest& req) -> absl::Status {
-    object_resolution = req.object_resolution_m;
+    object_resolution = req.params.object_resolution_m;
     for (const auto& e : fs::directory_iterator(req.tiles_dir)) {
       absl::StatusOr<TileData> tile = ReadTile(e.path().string());
       if (tile.ok() && tile->chunk.z() == 0 && tile->params.num_wedges > 100 && again.size() < 3) {

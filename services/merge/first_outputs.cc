@@ -45,7 +45,7 @@ absl::Status ReportMergeProgress(const MergeProgressCallback& progress, const ch
   return absl::OkStatus();
 }
 
-absl::Status MergeOptions::Validate() const {
+absl::Status FirstOutputsOptions::Validate() const {
   if (tiles_dir.empty()) return absl::InvalidArgumentError("merge: tiles_dir is empty");
   if (output_dir.empty()) return absl::InvalidArgumentError("merge: output_dir is empty");
   if (resolution_m != 0) {
@@ -53,16 +53,6 @@ absl::Status MergeOptions::Validate() const {
     if (!grid.ok()) {
       return absl::InvalidArgumentError(absl::StrCat("merge: ", grid.status().message()));
     }
-  }
-  if (object_resolution_m != 0) {
-    absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(object_resolution_m);
-    if (!grid.ok()) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("merge: object resolution: ", grid.status().message()));
-    }
-  }
-  if (!std::isfinite(min_object_volume_m3)) {
-    return absl::InvalidArgumentError("merge: min_object_volume_m3 must be finite");
   }
   if (!job.is_object() && !job.is_null()) {
     return absl::InvalidArgumentError("merge: job must be a JSON object");
@@ -74,7 +64,7 @@ absl::Status MergeOptions::Validate() const {
   return absl::OkStatus();
 }
 
-absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
+absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& options,
                                                const MergeProgressCallback& progress) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   const Clock::time_point t_start = Clock::now();

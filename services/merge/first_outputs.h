@@ -18,12 +18,13 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/chunk_region.h"
 #include "services/merge/topdown_map.h"
 
 namespace carvemap {
 
-struct MergeOptions {
+// What the first outputs are made from and where they go. RunMerge (services/merge/merge_job.h)
+// fills it from its MergeOptions once the levels are known.
+struct FirstOutputsOptions {
   std::string tiles_dir;   // holds c_<x>_<y>_<z>.h5 tiles (storage/TILE_FORMAT.md)
   std::string output_dir;  // created if missing; existing outputs are replaced
   // 2 m / 2^k; 0 = take it from the tiles. When set, every tile must have it (else
@@ -39,56 +40,11 @@ struct MergeOptions {
   // Bound on the decoded tiles held in memory at once (TileSet's LRU cache). At least one
   // chunk is always held, whatever the budget.
   uint64_t cache_budget_bytes = uint64_t{256} << 20;
-  // RunMerge only: threads for the per-chunk stages (boundary faces, dense meshes); ≤ 0: the
-  // CPUs the process may use (UsableCpus: affinity and cgroup quota). The outputs do not
-  // depend on it.
-  int threads = 0;
-  // RunMerge only: the most memory the merge process may hold, bytes; 0 = no bound. The planar
-  // regions and the planar mesh are made for the whole building at once (every level
-  // together), and their memory grows with its boundary faces: before each, RunMerge
-  // estimates it (kPlanarBytesPerFace) and fails with ResourceExhausted, naming the faces per
-  // level, the estimate and this budget, rather than be killed for memory later.
-  uint64_t memory_budget_bytes = 0;
   // Gray scale of topdown.png: 0 = no open height, 255 = ≥ this many metres (linear).
   double topdown_max_height_m = 3.0;
   // The elevations of each level (§5.2, services/levels): level_<k>/topdown.png integrates
   // levels[k]. Empty: one level_0 over the whole height.
   std::vector<TopdownZRange> levels;
-  // RunMerge only (services/merge/merge_job.h): false skips the meshing stages (faces, regions,
-  // levels, dense and planar meshes), leaving the first outputs.
-  bool meshes = true;
-  // RunMerge only: the job's scan.h5 (docs/DESIGN.md §3), whose /path (poses, small) gives the
-  // floor plans their scanner positions (§3.3.1 lines of sight, §3.3.2 unentered rooms). Empty: no
-  // floor plans (job.json says why under "warnings").
-  std::string scan_path;
-  // RunMerge only: the §2.3 turn to north the tiles were carved with
-  // (ScanReader::OpenOptions::world_yaw_rad): the scan's path and points are read turned by
-  // it, so that they lie where the tiles do.
-  double world_yaw_rad = 0;
-  // RunMerge only, §5.5 on request: OUT/points.ply, the scan's returns in the world frame
-  // without those the floor plans trim (services/merge/trimmed_points.h). Needs scan_path
-  // and floor plans: without either, job.json warns and there is no file (the other outputs
-  // do not depend on it, so the job goes on).
-  bool trimmed_points = false;
-  // RunMerge only: objects with less volume than this are specks, dropped (§5.6;
-  // ObjectSplitOptions::min_volume_m3), m³. ≤ 0: that default (5 litres). Pieces under its
-  // speck_volume_m3 (1 litre) go whatever this says.
-  double min_object_volume_m3 = 0;
-  // RunMerge only: the floor-plan method, "rooms" (§3.3) or "eigencrust" (§3.2); another name
-  // is InvalidArgument before any work.
-  std::string floorplan_method = "rooms";
-  // RunMerge only, §5.6.1 (Fig 5.17): the chunks that hold objects are carved again at this
-  // finer resolution (2 m / 2^k, below resolution_m), so that the furniture's boards, legs and
-  // rods, thinner than a cell, survive; the objects are then segmented and meshed from those
-  // tiles. Carving needs the job's wedges, which the merge does not have: `recarve` does it
-  // (the coordinator leases the chunks to its workers; tests carve in process). 0 or no
-  // `recarve`: the objects come from the job's tiles.
-  double object_resolution_m = 0;
-  // Carves each of `chunks`, inside its region only, at `resolution_m` into one tile each and
-  // returns the directory that holds them (storage/TILE_FORMAT.md names). Errors fail the merge.
-  std::function<absl::StatusOr<std::string>(const std::vector<RecarveChunk>& chunks,
-                                            double resolution_m)>
-      recarve;
 
   // InvalidArgument for empty dirs, a resolution that is not 2 m / 2^k, a non-object job or a
   // non-positive topdown_max_height_m.
@@ -154,7 +110,7 @@ struct MergeSummary {
 // unexpected resolution; OutOfRange for chunks beyond OctoMap's 16-level key space; Cancelled
 // when `progress` returns false; Unavailable for I/O errors on the outputs.
 // Not thread-safe with other HDF5 use in the process (storage/tile_store.h).
-absl::StatusOr<MergeSummary> MergeFirstOutputs(const MergeOptions& options,
+absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& options,
                                                const MergeProgressCallback& progress = nullptr);
 
 }  // namespace carvemap

@@ -39,8 +39,8 @@ class FirstOutputsTest : public ::testing::Test {
     std::mt19937 rng(7);
     ASSERT_TRUE(WriteTile(tiles_dir_, testing::RandomTile(rng, 4, ChunkKey(-3, 2, -1))).ok());
   }
-  MergeOptions Options() const {
-    MergeOptions o;
+  FirstOutputsOptions Options() const {
+    FirstOutputsOptions o;
     o.tiles_dir = tiles_dir_;
     o.output_dir = dir_ + "/out";
     o.job = {{"job_id", "j42"}, {"counts", {{"frames", 1000}}}, {"outputs", {"scan.h5"}}};
@@ -50,7 +50,7 @@ class FirstOutputsTest : public ::testing::Test {
 };
 
 TEST_F(FirstOutputsTest, MergeTimeCountsTheStagesBeforeIt) {
-  MergeOptions o = Options();
+  FirstOutputsOptions o = Options();
   o.job["stage_seconds"] = {{"carve", 5.0}, {"merge", 0.0}};
   o.seconds_before = 40.0;
   auto summary = MergeFirstOutputs(o, nullptr);
@@ -133,14 +133,14 @@ TEST_F(FirstOutputsTest, CorruptTileIsDataLossNamingIt) {
 }
 
 TEST_F(FirstOutputsTest, WrongResolutionIsInvalidArgument) {
-  MergeOptions o = Options();
+  FirstOutputsOptions o = Options();
   o.resolution_m = 0.0625;
   auto summary = MergeFirstOutputs(o);
   EXPECT_EQ(summary.status().code(), absl::StatusCode::kInvalidArgument);
 }
 
-TEST(MergeOptions, Validate) {
-  MergeOptions o;
+TEST(FirstOutputsOptions, Validate) {
+  FirstOutputsOptions o;
   EXPECT_EQ(o.Validate().code(), absl::StatusCode::kInvalidArgument);
   o.tiles_dir = "t";
   o.output_dir = "o";
@@ -156,7 +156,7 @@ TEST(MergeOptions, Validate) {
 }
 
 TEST(MergeFirstOutputs, MissingTilesDirIsNotFound) {
-  MergeOptions o;
+  FirstOutputsOptions o;
   o.tiles_dir = "/nonexistent/tiles";
   o.output_dir = FreshDir();
   EXPECT_EQ(MergeFirstOutputs(o).status().code(), absl::StatusCode::kNotFound);
@@ -180,7 +180,7 @@ TEST(MergeFirstOutputs, DISABLED_LargeSyntheticSet) {
     leaves += tile.leaves.size();
     ASSERT_TRUE(WriteTile(dir + "/tiles", tile).ok());
   }
-  MergeOptions o;
+  FirstOutputsOptions o;
   o.tiles_dir = dir + "/tiles";
   o.output_dir = dir + "/out";
   o.cache_budget_bytes = 8 << 20;

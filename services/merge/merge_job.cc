@@ -602,10 +602,25 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
 
 }  // namespace
 
+absl::Status MergeOptions::Validate() const {
+  if (absl::Status s = MergeParams::Validate(); !s.ok()) return s;
+  return FirstOutputs().Validate();
+}
+
+FirstOutputsOptions MergeOptions::FirstOutputs() const {
+  FirstOutputsOptions first;
+  first.tiles_dir = tiles_dir;
+  first.output_dir = output_dir;
+  first.resolution_m = resolution_m;
+  first.job = job;
+  first.cache_budget_bytes = cache_budget_bytes;
+  first.topdown_max_height_m = topdown_max_height_m;
+  return first;
+}
+
 absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
                                       const MergeProgressCallback& progress) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
-  if (absl::Status s = ParseFloorPlanMethod(options.floorplan_method).status(); !s.ok()) return s;
   {
     // job.json, written last, says the merge finished: an earlier merge's must not stand
     // beside this one's outputs if this one fails partway.
@@ -616,7 +631,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
           absl::StrCat(options.output_dir, "/job.json: cannot remove: ", ec.message()));
     }
   }
-  if (!options.meshes) return MergeFirstOutputs(options, progress);
+  if (!options.meshes) return MergeFirstOutputs(options.FirstOutputs(), progress);
   const Clock::time_point t_start = Clock::now();
 
   absl::StatusOr<std::unique_ptr<TileSet>> opened =
@@ -669,8 +684,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   if (absl::Status s = ReportMergeProgress(progress, "levels", 0, 1); !s.ok()) return s;
   absl::StatusOr<LevelSplit> levels = SplitLevels(regions->regions, nullptr);
   if (!levels.ok()) return InStage("levels", levels.status());
-  MergeOptions first = options;
-  first.levels.clear();
+  FirstOutputsOptions first = options.FirstOutputs();
   for (const Level& level : levels->levels) {
     first.levels.push_back(TopdownZRange{level.split_z_low, level.split_z_high});
   }

@@ -30,10 +30,64 @@
 // building volume's dense mesh instead (counts.building_planar = false).
 #pragma once
 
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "services/geometry/chunk_region.h"
 #include "services/merge/first_outputs.h"
+#include "services/merge/merge_params.h"
 
 namespace carvemap {
+
+// The job's parameters (MergeParams) and where and how this process runs its merge.
+struct MergeOptions : MergeParams {
+  std::string tiles_dir;   // holds c_<x>_<y>_<z>.h5 tiles (storage/TILE_FORMAT.md)
+  std::string output_dir;  // created if missing; existing outputs are replaced
+  // The caller's job document: FirstOutputsOptions::job.
+  nlohmann::json job = nlohmann::json::object();
+  // Bound on the decoded tiles each stage holds at once (TileSet's LRU cache).
+  uint64_t cache_budget_bytes = uint64_t{256} << 20;
+  // Threads for the per-chunk stages (boundary faces, dense meshes, segmentation,
+  // self-intersections); ≤ 0: the CPUs the process may use (UsableCpus: affinity and cgroup
+  // quota). The outputs do not depend on it.
+  int threads = 0;
+  // The most memory the merge process may hold, bytes; 0 = no bound. The planar regions and
+  // the planar mesh are made for the whole building at once (every level together), and their
+  // memory grows with its boundary faces: before each, RunMerge estimates it
+  // (kPlanarBytesPerFace, services/merge/memory_budget.h) and fails with ResourceExhausted,
+  // naming the faces per level, the estimate and this budget, rather than be killed for memory
+  // later.
+  uint64_t memory_budget_bytes = 0;
+  double topdown_max_height_m = 3.0;  // FirstOutputsOptions::topdown_max_height_m
+  // False skips the meshing stages (faces, regions, levels, dense and planar meshes), leaving
+  // the first outputs.
+  bool meshes = true;
+  // The job's scan.h5 (docs/DESIGN.md §3), whose /path (poses, small) gives the floor plans
+  // their scanner positions (§3.3.1 lines of sight, §3.3.2 unentered rooms), and whose returns
+  // make points.ply. Empty: no floor plans and no points.ply (job.json says why under
+  // "warnings"; the other outputs do not depend on them, so the job goes on).
+  std::string scan_path;
+  // Carves each of `chunks`, inside its region only, at `resolution_m` into one tile each and
+  // returns the directory that holds them (storage/TILE_FORMAT.md names): §5.6.1's re-carve at
+  // object_resolution_m, which needs the job's wedges the merge does not have (the coordinator
+  // leases the chunks to its workers; tests carve in process). Errors fail the merge. Empty:
+  // the objects come from the job's tiles.
+  std::function<absl::StatusOr<std::string>(const std::vector<RecarveChunk>& chunks,
+                                            double resolution_m)>
+      recarve;
+
+  // MergeParams::Validate, and InvalidArgument for empty dirs, a non-object job or a
+  // non-positive topdown_max_height_m.
+  [[nodiscard]] absl::Status Validate() const;
+  // What MergeFirstOutputs gets: these folders, job, cache and scale; the caller adds the levels.
+  [[nodiscard]] FirstOutputsOptions FirstOutputs() const;
+};
 
 // Progress stages are the names above; errors are MergeFirstOutputs's, those of each stage
 // (naming the stage), and Cancelled when `progress` returns false.

@@ -1258,12 +1258,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
       req.tiles_dir = rt.tiles_dir;
       req.output_dir = rt.output_dir;
       // Filled in below, through a confined descriptor as in the ingest.
-      req.resolution_m = rt.params.resolution_m;
-      req.object_resolution_m = rt.params.object_resolution_m;
-      req.floorplan_method = rt.params.floorplan_method;
-      req.trimmed_points = rt.params.trimmed_points;
-      req.min_object_volume_m3 = rt.params.min_object_volume_m3;
-      req.world_yaw_rad = rt.world_yaw_rad;
+      req.params = rt.params.merge_params(rt.world_yaw_rad);
       nlohmann::json doc = {{"job_id", job_id},
                             {"input_path", job->input_path},
                             {"output_name", job->output_name},

@@ -14,14 +14,9 @@ namespace carvemap {
 MergeFunction LocalMerge(uint64_t memory_budget_bytes) {
   return [memory_budget_bytes](const MergeJobRequest& req) -> absl::Status {
     MergeOptions options;
+    static_cast<MergeParams&>(options) = req.params;
     options.tiles_dir = req.tiles_dir;
     options.output_dir = req.output_dir;
-    options.resolution_m = req.resolution_m;
-    options.object_resolution_m = req.object_resolution_m;
-    options.floorplan_method = req.floorplan_method;
-    options.trimmed_points = req.trimmed_points;  // without a scan RunMerge warns, no points
-    options.min_object_volume_m3 = req.min_object_volume_m3;  // ≤ 0: RunMerge's default
-    options.world_yaw_rad = req.world_yaw_rad;
     options.recarve = req.recarve;
     options.memory_budget_bytes = memory_budget_bytes;
     // The scan through the descriptor checked here (ConfinedFile: "/proc/self/fd/N"), as the

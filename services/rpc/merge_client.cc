@@ -20,6 +20,7 @@
 #include "proto/carvemap/v1/merge.grpc.pb.h"
 #include "services/grpc_status.h"
 #include "services/rpc/grpc_security.h"
+#include "services/rpc/merge_params_proto.h"
 
 namespace carvemap {
 namespace fs = std::filesystem;
@@ -184,12 +185,7 @@ class MergeCall {
       job->set_output_dir(req_.output_dir);
       job->set_scan_root(req_.scan_root);
       job->set_scan_path(req_.scan_input);
-      job->set_resolution_m(req_.resolution_m);
-      job->set_object_resolution_m(req_.object_resolution_m);
-      job->set_floorplan_method(req_.floorplan_method);
-      job->set_trimmed_points(req_.trimmed_points);
-      job->set_min_object_volume_m3(req_.min_object_volume_m3);
-      job->set_world_yaw_rad(req_.world_yaw_rad);
+      MergeParamsToProto(req_.params, job);
       job->set_recarve_available(static_cast<bool>(req_.recarve));
       job->set_job_json(req_.job_json);
       job->set_attempt(attempt);

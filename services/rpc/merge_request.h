@@ -16,6 +16,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "services/geometry/chunk_region.h"
+#include "services/merge/merge_params.h"
 
 namespace carvemap {
 
@@ -30,15 +31,11 @@ struct MergeJobRequest {
   // errors name the tenant's path. Both empty: no scan (no floor plans).
   std::string scan_root;
   std::string scan_input;
-  double resolution_m = 0.0625;
-  // §5.6.1: the object chunks are carved again at this resolution by `recarve` (the
-  // coordinator leases them to its workers once more, each limited to its region, and returns
-  // the directory of their tiles). Equal to resolution_m, or no `recarve`: no re-carving.
-  double object_resolution_m = 0.0625;
-  std::string floorplan_method = "rooms";  // §3.3 "rooms" or §3.2 "eigencrust"
-  bool trimmed_points = false;             // §5.5 on request: points.ply (needs the scan)
-  double min_object_volume_m3 = 0;         // §5.6 specks, m³; 0 = the merge's default
-  double world_yaw_rad = 0;                // §2.3's turn to north the tiles were carved with
+  // What the merge makes (resolutions, floor-plan method, points.ply, specks, the turn to
+  // north). Its object_resolution_m is carved by `recarve`: the coordinator leases the object
+  // chunks to its workers once more, each limited to its region, and returns the directory of
+  // their tiles. No `recarve`: no re-carving.
+  MergeParams params;
   std::function<absl::StatusOr<std::string>(const std::vector<RecarveChunk>& chunks,
                                             double resolution_m)>
       recarve;

@@ -20,6 +20,7 @@
 #include "services/grpc_status.h"
 #include "services/rpc/bearer_tokens.h"
 #include "services/rpc/grpc_security.h"
+#include "services/rpc/merge_params_proto.h"
 #include "services/rpc/merge_metrics.h"
 #include "services/rpc/process_metrics.h"
 #include "services/rpc/server_log.h"
@@ -327,13 +328,7 @@ absl::Status MergeServer::Impl::Serve(grpc::ServerContext& ctx, Stream& stream) 
   req.output_dir = job.output_dir();
   req.scan_root = job.scan_root();
   req.scan_input = job.scan_path();
-  req.resolution_m = job.resolution_m();
-  req.object_resolution_m =
-      job.object_resolution_m() > 0 ? job.object_resolution_m() : job.resolution_m();
-  req.floorplan_method = job.floorplan_method().empty() ? "rooms" : job.floorplan_method();
-  req.trimmed_points = job.trimmed_points();
-  req.min_object_volume_m3 = job.min_object_volume_m3();
-  req.world_yaw_rad = job.world_yaw_rad();
+  req.params = MergeParamsFromProto(job);
   req.job_json = job.job_json();
   req.attempt = std::max(1, job.attempt());
   std::string last_stage;

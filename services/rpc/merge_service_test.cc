@@ -66,11 +66,12 @@ MergeJobRequest Request(const fs::path& out, Recorder* recorder = nullptr) {
   req.job_id = "j-test";
   req.tiles_dir = (out / "tiles").string();
   req.output_dir = out.string();
-  req.resolution_m = 0.0625;
-  req.object_resolution_m = 0.03125;
-  req.floorplan_method = "eigencrust";
-  req.trimmed_points = true;
-  req.min_object_volume_m3 = 0.002;
+  req.params = {.resolution_m = 0.0625,
+                .object_resolution_m = 0.03125,
+                .floorplan_method = "eigencrust",
+                .trimmed_points = true,
+                .min_object_volume_m3 = 0.002,
+                .world_yaw_rad = -0.25};
   req.job_json = R"({"job_id": "j-test"})";
   if (recorder != nullptr) {
     req.progress = [recorder](const std::string& stage, uint64_t, uint64_t) {
@@ -273,11 +274,7 @@ TEST_F(MergeServiceTest, ProgressFlowsAndTheMergesOwnFailureIsFinal) {
   EXPECT_EQ(seen.output_dir, req.output_dir);
   EXPECT_EQ(seen.scan_root, req.scan_root);
   EXPECT_EQ(seen.scan_input, "sim/scan.h5");
-  EXPECT_DOUBLE_EQ(seen.resolution_m, 0.0625);
-  EXPECT_DOUBLE_EQ(seen.object_resolution_m, 0.03125);
-  EXPECT_EQ(seen.floorplan_method, "eigencrust");
-  EXPECT_TRUE(seen.trimmed_points);
-  EXPECT_DOUBLE_EQ(seen.min_object_volume_m3, 0.002);
+  EXPECT_EQ(seen.params, req.params);  // every parameter across the wire
   EXPECT_EQ(seen.job_json, req.job_json);
   EXPECT_EQ(seen.attempt, 1);
   EXPECT_FALSE(seen.recarve);  // the request offered none
