@@ -165,10 +165,7 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
                   "Octree resolution in m (2 m / 2^k); default: the tiles'");
   cmd->add_option("--cache-mb", flags->cache_mb, "Decoded-tile cache budget in MiB")
       ->capture_default_str();
-  cmd->add_option("--memory-mb", flags->memory_mb,
-                  "Memory the merge may use, MiB: a building whose planar mesh would not fit "
-                  "fails with why before it is made. 0: 90 % of the cgroup's memory limit, none "
-                  "without one; < 0: no budget")
+  cmd->add_option("--memory-mb", flags->memory_mb, kMergeMemoryBudgetHelp)
       ->capture_default_str();
   cmd->add_option("--threads", flags->options.threads,
                   "Threads for the per-chunk stages (boundary faces, dense meshes); 0 = one per "

@@ -31,6 +31,7 @@
 #include "services/rpc/bearer_tokens.h"
 #include "services/rpc/job_client.h"
 #include "services/rpc/process_util.h"
+#include "services/system/process_memory.h"
 
 namespace carvemap {
 namespace {
@@ -343,10 +344,7 @@ void RegisterRun(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--lease-timeout-s", flags->lease_timeout_s, "Lease deadline")
       ->capture_default_str();
-  cmd->add_option("--merge-memory-mb", flags->merge_memory_mb,
-                  "Memory the merge may use, MiB: a building whose planar mesh would not fit "
-                  "fails with why before it is made. 0: 90 % of the cgroup's memory limit, none "
-                  "without one; < 0: no budget")
+  cmd->add_option("--merge-memory-mb", flags->merge_memory_mb, kMergeMemoryBudgetHelp)
       ->capture_default_str();
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress line");
   cmd->callback([flags, &exit_code] {

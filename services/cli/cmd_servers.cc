@@ -432,10 +432,7 @@ void RegisterMerger(CLI::App& app, int& exit_code) {
   cmd->add_option("--metrics-listen", s.metrics_listen_address,
                   "Serve Prometheus metrics over HTTP at http://HOST:PORT/metrics (merges "
                   "running and queued, seconds per stage, peak memory; no job ids or tenants)");
-  cmd->add_option("--memory-mb", flags->memory_mb,
-                  "Memory a merge may use, MiB: a building whose planar mesh would not fit fails "
-                  "with why before it is made. 0: 90 % of the cgroup's memory limit (a pod's "
-                  "limit), none without one; < 0: no budget")
+  cmd->add_option("--memory-mb", flags->memory_mb, kMergeMemoryBudgetHelp)
       ->capture_default_str();
   AddLogFlags(cmd, flags->log_format, flags->verbose);
   cmd->callback([flags, &exit_code] {

@@ -81,7 +81,7 @@ absl::Status InStage(const char* stage, const absl::Status& s) {
 absl::Status CheckPlanarMemory(const MergeOptions& options, std::string_view what,
                                std::span<const BoundaryFace> faces, std::span<const Level> levels) {
   if (options.memory_budget_bytes == 0) return absl::OkStatus();
-  return CheckPlanarMemory(what, faces, levels, ReadProcessMemory().resident_bytes,
+  return CheckPlanarMemory(what, faces, levels, ReadProcessStatus().resident_bytes,
                            options.memory_budget_bytes);
 }
 

@@ -15,8 +15,6 @@
 #include <spdlog/spdlog.h>
 
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_split.h"
-#include "services/system/cgroup_files.h"
 #include "services/system/process_memory.h"
 
 namespace carvemap {
@@ -44,14 +42,10 @@ prometheus::MetricFamily One(const std::string& name, const std::string& help,
 
 ProcessStats ReadProcessStats() {
   ProcessStats s;
-  const std::string status = ReadSmallFile("/proc/self/status").value_or("");
-  for (absl::string_view line : absl::StrSplit(status, '\n')) {
-    long long n = 0;
-    if (std::sscanf(std::string(line).c_str(), "Threads: %lld", &n) == 1) s.threads = n;
-  }
-  const ProcessMemory memory = ParseProcessMemory(status);
-  s.resident_bytes = memory.resident_bytes;
-  s.peak_resident_bytes = memory.peak_resident_bytes;
+  const ProcessStatus status = ReadProcessStatus();
+  s.threads = status.threads;
+  s.resident_bytes = status.resident_bytes;
+  s.peak_resident_bytes = status.peak_resident_bytes;
   {
     std::ifstream io("/proc/self/io");
     std::string line;

@@ -8,8 +8,8 @@
 
 namespace carvemap {
 
-ProcessMemory ParseProcessMemory(std::string_view status) {
-  ProcessMemory m;
+ProcessStatus ParseProcessStatus(std::string_view status) {
+  ProcessStatus m;
   for (size_t start = 0; start < status.size();) {
     const size_t end = std::min(status.find('\n', start), status.size());
     const std::string line(status.substr(start, end - start));
@@ -17,12 +17,14 @@ ProcessMemory ParseProcessMemory(std::string_view status) {
     unsigned long long kib = 0;
     if (std::sscanf(line.c_str(), "VmRSS: %llu kB", &kib) == 1) m.resident_bytes = kib << 10;
     if (std::sscanf(line.c_str(), "VmHWM: %llu kB", &kib) == 1) m.peak_resident_bytes = kib << 10;
+    long long threads = 0;
+    if (std::sscanf(line.c_str(), "Threads: %lld", &threads) == 1) m.threads = threads;
   }
   return m;
 }
 
-ProcessMemory ReadProcessMemory() {
-  return ParseProcessMemory(ReadSmallFile("/proc/self/status").value_or(""));
+ProcessStatus ReadProcessStatus() {
+  return ParseProcessStatus(ReadSmallFile("/proc/self/status").value_or(""));
 }
 
 std::optional<uint64_t> BytesOfMemoryMax(std::string_view text) {

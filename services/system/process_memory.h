@@ -9,16 +9,18 @@
 
 namespace carvemap {
 
-struct ProcessMemory {
+// What /proc/<pid>/status says of a process's memory and threads.
+struct ProcessStatus {
   uint64_t resident_bytes = 0;       // VmRSS
   uint64_t peak_resident_bytes = 0;  // VmHWM: the largest VmRSS since the process started
+  int64_t threads = 0;               // Threads
 };
 
 // From the text of a /proc/<pid>/status; fields stay 0 where it does not say.
-ProcessMemory ParseProcessMemory(std::string_view status);
+ProcessStatus ParseProcessStatus(std::string_view status);
 
-// ParseProcessMemory of /proc/self/status.
-ProcessMemory ReadProcessMemory();
+// ParseProcessStatus of /proc/self/status.
+ProcessStatus ReadProcessStatus();
 
 // The bytes a cgroup v2 `memory.max` (or v1 `memory.limit_in_bytes`) text allows: nullopt for
 // "max", for v1's "no limit" (a value of 2^62 or more) and for text that does not parse.
@@ -32,6 +34,11 @@ std::optional<uint64_t> CgroupMemoryLimit();
 // CgroupMemoryLimit() (the rest for the allocator's slack and what no estimate counts), or no
 // budget (0 bytes) when the process has no limit; < 0 = no budget.
 uint64_t MemoryBudgetBytes(double mib);
+// What the merge's MemoryBudgetBytes flag means, for the `--help` of every command that takes it.
+inline constexpr char kMergeMemoryBudgetHelp[] =
+    "Memory the merge may use, MiB: a building whose planar mesh would not fit fails with why "
+    "before it is made. 0: 90 % of the cgroup's memory limit (a pod's limit), none without one; "
+    "< 0: no budget";
 
 }  // namespace carvemap
 

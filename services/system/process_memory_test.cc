@@ -8,33 +8,34 @@
 namespace carvemap {
 namespace {
 
-TEST(ProcessMemory, ResidentGrowsWithTouchedMemoryAndPeakHoldsIt) {
-  const ProcessMemory before = ReadProcessMemory();
+TEST(ProcessStatus, ResidentGrowsWithTouchedMemoryAndPeakHoldsIt) {
+  const ProcessStatus before = ReadProcessStatus();
   ASSERT_GT(before.resident_bytes, 0u);
   EXPECT_GE(before.peak_resident_bytes, before.resident_bytes);
   {
     std::vector<char> block(size_t{64} << 20);
     std::memset(block.data(), 1, block.size());  // touched: resident
-    const ProcessMemory during = ReadProcessMemory();
+    const ProcessStatus during = ReadProcessStatus();
     EXPECT_GE(during.resident_bytes, before.resident_bytes + (size_t{60} << 20));
     EXPECT_GE(during.peak_resident_bytes, during.resident_bytes);
   }
-  const ProcessMemory after = ReadProcessMemory();
+  const ProcessStatus after = ReadProcessStatus();
   EXPECT_GE(after.peak_resident_bytes, before.resident_bytes + (size_t{60} << 20));
 }
 
-TEST(ProcessMemory, StatusText) {
-  const ProcessMemory m = ParseProcessMemory(
+TEST(ProcessStatus, StatusText) {
+  const ProcessStatus m = ParseProcessStatus(
       "Name:\tcarvemap\nVmPeak:\t 900000 kB\nVmHWM:\t  812344 kB\nVmRSS:\t  402112 kB\n"
       "Threads:\t7\n");
   EXPECT_EQ(m.resident_bytes, uint64_t{402112} << 10);
   EXPECT_EQ(m.peak_resident_bytes, uint64_t{812344} << 10);
-  const ProcessMemory none = ParseProcessMemory("Name:\tx\nVmRSS: lots\n");
+  EXPECT_EQ(m.threads, 7);
+  const ProcessStatus none = ParseProcessStatus("Name:\tx\nVmRSS: lots\n");
   EXPECT_EQ(none.resident_bytes, 0u);
   EXPECT_EQ(none.peak_resident_bytes, 0u);
 }
 
-TEST(ProcessMemory, MemoryMaxTexts) {
+TEST(ProcessStatus, MemoryMaxTexts) {
   EXPECT_EQ(BytesOfMemoryMax("max\n"), std::nullopt);                  // v2: no limit
   EXPECT_EQ(BytesOfMemoryMax("4294967296\n"), 4294967296u);            // a 4 GiB pod
   EXPECT_EQ(BytesOfMemoryMax("9223372036854771712\n"), std::nullopt);  // v1: no limit

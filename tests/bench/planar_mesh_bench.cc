@@ -41,7 +41,7 @@ double CpuSeconds() { return double(std::clock()) / CLOCKS_PER_SEC; }
 // stage's own peak. The peak (VmHWM) is reset after each print ("5" to clear_refs,
 // proc(5)), so each stage's peak is its own.
 void PrintMemory(const char* after) {
-  const carvemap::ProcessMemory m = carvemap::ReadProcessMemory();
+  const carvemap::ProcessStatus m = carvemap::ReadProcessStatus();
   std::printf("memory after %s: resident %.0f MiB, peak in the stage %.0f MiB\n", after,
               double(m.resident_bytes) / (1 << 20), double(m.peak_resident_bytes) / (1 << 20));
   std::fflush(stdout);
