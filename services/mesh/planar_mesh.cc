@@ -21,6 +21,7 @@
 #include "absl/container/inlined_vector.h"
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "services/geometry/sorted_runs.h"
 #include "services/geometry/union_find.h"
 #include "services/mesh/mesh_checks.h"
 
@@ -225,9 +226,8 @@ absl::StatusOr<FaceSurface> BuildSurface(std::span<const BoundaryFace> faces, do
     c[(sq.axis + 2) % 3] += sq.size;
     return c;
   };
-  for (size_t i = 0; i < uses.size();) {
-    size_t j = i;
-    while (j < uses.size() && uses[j].key == uses[i].key) ++j;
+  // The corners along one edge: paired, or why the faces are not a closed surface.
+  const auto pair_run = [&](size_t i, size_t j) -> absl::Status {
     std::vector<int> fwd, bwd;
     for (size_t k = i; k < j; ++k) (uses[k].forward ? fwd : bwd).push_back(uses[k].corner);
     if (fwd.size() != bwd.size() || fwd.size() > 2) {
@@ -271,8 +271,14 @@ absl::StatusOr<FaceSurface> BuildSurface(std::span<const BoundaryFace> faces, do
         if (s.twin[c] < 0) return absl::InvalidArgumentError("planar_mesh: inconsistent face orientation at a non-manifold edge");
       }
     }
-    i = j;
-  }
+    return absl::OkStatus();
+  };
+  absl::Status paired;
+  ForEachRun(uses, [](const EdgeUse& u) { return u.key; }, [&](size_t i, size_t j) {
+    paired = pair_run(i, j);
+    return paired.ok();
+  });
+  if (!paired.ok()) return paired;
   std::vector<EdgeUse>().swap(uses);
   // Topological vertices: corners joined across twin edges.
   UnionFind<int> corners(num_corners);
@@ -1041,12 +1047,9 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces, cons
     std::vector<uint64_t> keys(num_corners);
     for (int c = 0; c < num_corners; ++c) keys[c] = edge_key(s.corner_tv[c], s.corner_tv[s.Next(c)]);
     std::sort(keys.begin(), keys.end());
-    for (size_t i = 0; i < keys.size();) {
-      size_t e = i + 1;
-      while (e < keys.size() && keys[e] == keys[i]) ++e;
+    ForEachRun(keys, [](uint64_t k) { return k; }, [&](size_t i, size_t e) {
       if (e - i > 2) shared_edges.push_back(keys[i]);
-      i = e;
-    }
+    });
   }
   absl::flat_hash_map<int, int> midpoint;  // min(corner, twin) → vertex
   auto midpoint_of = [&](int c) {

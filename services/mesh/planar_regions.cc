@@ -16,6 +16,7 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "services/geometry/sorted_runs.h"
 #include "services/geometry/union_find.h"
 
 namespace carvemap {
@@ -273,18 +274,12 @@ class Fitter {
     std::sort(keys.begin(), keys.end());
     // One link per pair of faces sharing a unit edge: counted first, so the vector is made at
     // its size instead of doubling (it and the keys are the stage's peak).
+    const auto edge_of = [](const auto& k) { return k.first; };
     size_t pairs = 0;
-    for (size_t g = 0; g < keys.size();) {
-      size_t e = g + 1;
-      while (e < keys.size() && keys[e].first == keys[g].first) ++e;
-      pairs += (e - g) * (e - g - 1) / 2;
-      g = e;
-    }
+    ForEachRun(keys, edge_of, [&](size_t g, size_t e) { pairs += (e - g) * (e - g - 1) / 2; });
     std::vector<Link> links;
     links.reserve(pairs);
-    for (size_t g = 0; g < keys.size();) {
-      size_t e = g + 1;
-      while (e < keys.size() && keys[e].first == keys[g].first) ++e;
+    ForEachRun(keys, edge_of, [&](size_t g, size_t e) {
       if (e - g > 1) {
         const uint64_t k = keys[g].first;
         const int dir = int(k & 3);
@@ -301,8 +296,7 @@ class Fitter {
           }
         }
       }
-      g = e;
-    }
+    });
     std::vector<std::pair<uint64_t, uint32_t>>().swap(keys);
     face_links_ = Aggregate(std::move(links));
     return absl::OkStatus();
