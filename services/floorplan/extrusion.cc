@@ -16,6 +16,11 @@ namespace {
 
 uint64_t EdgeKey(uint32_t a, uint32_t b) { return (static_cast<uint64_t>(a) << 32) | b; }
 
+// How far apart the columns of a vertex where the plan touches itself are moved, m: far below
+// the plan's accuracy (§3.3: centimetres), far above float rounding at building coordinates
+// (~1e-5 m at 100 m).
+constexpr double kPinchSeparationM = 1e-3;
+
 double Median(std::vector<double>& values) {
   const size_t mid = values.size() / 2;
   std::nth_element(values.begin(), values.begin() + mid, values.end());
@@ -95,17 +100,25 @@ absl::StatusOr<TriangleMesh> ExtrudeFloorPlan(const FloorPlan& plan) {
   std::vector<int> column_of(corners, -1);
   std::vector<std::vector<double>> column;
   std::vector<uint32_t> column_vertex;
+  std::vector<Eigen::Vector2d> column_inward;  // Σ unit vectors to the fan's triangles' centroids
+  std::vector<int> fans_at(plan.vertices.size(), 0);
   for (uint32_t c = 0; c < corners; ++c) {
     const uint32_t root = find(c);
+    const auto& tri = plan.triangles[c / 3];
     if (column_of[root] < 0) {
       column_of[root] = static_cast<int>(column.size());
       column.emplace_back();
-      column_vertex.push_back(plan.triangles[c / 3][c % 3]);
+      column_vertex.push_back(tri[c % 3]);
+      column_inward.push_back(Eigen::Vector2d::Zero());
+      ++fans_at[tri[c % 3]];
     }
     column_of[c] = column_of[root];
     const FloorPlanRoom& room = plan.rooms[plan.triangle_room[c / 3]];
     column[column_of[c]].push_back(room.floor_z);
     column[column_of[c]].push_back(room.ceiling_z);
+    const Eigen::Vector2d centroid =
+        (plan.vertices[tri[0]] + plan.vertices[tri[1]] + plan.vertices[tri[2]]) / 3.0;
+    column_inward[column_of[c]] += (centroid - plan.vertices[tri[c % 3]]).normalized();
   }
   TriangleMesh mesh;
   std::vector<int> first(column.size(), 0);
@@ -114,7 +127,13 @@ absl::StatusOr<TriangleMesh> ExtrudeFloorPlan(const FloorPlan& plan) {
     std::sort(c.begin(), c.end());
     c.erase(std::unique(c.begin(), c.end()), c.end());
     first[k] = static_cast<int>(mesh.vertices.size());
-    const Eigen::Vector2d& xy = plan.vertices[column_vertex[k]];
+    Eigen::Vector2d xy = plan.vertices[column_vertex[k]];
+    // Where the boundary touches itself, the fans' columns would coincide: the solid would
+    // touch itself along them (a self-intersection to CGAL, and no longer a surface once equal
+    // positions are welded). Each moves kPinchSeparationM into its own fan instead.
+    if (fans_at[column_vertex[k]] > 1 && column_inward[k].norm() > 0) {
+      xy += kPinchSeparationM * column_inward[k].normalized();
+    }
     for (double z : c) {
       mesh.vertices.emplace_back(static_cast<float>(xy.x()), static_cast<float>(xy.y()),
                                  static_cast<float>(z));

@@ -25,8 +25,8 @@ void AssignRoomHeights(FloorPlan& plan);
 // No T-junctions: every 2D vertex has a column of 3D vertices at the distinct heights of the
 // rooms around it, and every vertical face is fanned through all the column vertices in its
 // height range. Where the plan's boundary touches itself at a vertex (two fans of triangles
-// meeting only there), each fan gets its own column (coincident 3D vertices), so the solid is
-// not pinched. Watertight (CheckMesh) unless the cross-section at some height touches itself
+// meeting only there), each fan gets its own column, moved 1 mm into the fan, so the solid is
+// neither pinched nor touching itself (no self-intersection there). Watertight (CheckMesh) unless the cross-section at some height touches itself
 // within one fan: four rooms around a vertex whose diagonal pairs alone span some height, or a
 // room's ceiling exactly at a neighbour's floor, give non-manifold edges.
 // Vertices are float (PLY): coordinates carry float rounding (~1e-7 relative).

@@ -9,6 +9,7 @@
 
 #include "services/floorplan/floorplan_simplify.h"
 #include "services/mesh/mesh_checks.h"
+#include "services/mesh/self_intersections.h"
 
 namespace carvemap {
 namespace {
@@ -109,15 +110,31 @@ TEST(ExtrusionTest, RoomWithColumn) {
 }
 
 TEST(ExtrusionTest, PlanTouchingItselfAtAVertex) {
-  // Two cells of room 0 and one of room 1 meeting only at (1, 1) across the exterior: the
-  // vertex's fans get separate columns.
+  // One cell of room 0 and one of room 1 meeting only at (1, 1) across the exterior: the
+  // vertex's fans get separate columns, 1 mm into each fan, so the solid does not touch itself.
   FloorPlan plan = GridPlan(
       2, 2, 1.0, [](int i, int j) { return i == j ? (i == 0 ? 0 : 1) : -1; }, 2);
   plan.rooms[0] = {.floor_z = 0, .ceiling_z = 2.5};
   plan.rooms[1] = {.floor_z = 0.5, .ceiling_z = 2.0};
-  ExpectClosedSolid(plan);
-  plan.rooms[1] = plan.rooms[0];
-  ExpectClosedSolid(plan);
+  for (int same = 0; same < 2; ++same) {
+    if (same) plan.rooms[1] = plan.rooms[0];
+    ExpectClosedSolid(plan, /*relative=*/1e-3);  // the moved columns change the volume by ~1e-4
+    absl::StatusOr<TriangleMesh> mesh = ExtrudeFloorPlan(plan);
+    ASSERT_TRUE(mesh.ok());
+    const SelfIntersections si = CountSelfIntersections(*mesh);
+    EXPECT_EQ(si.pairs, 0u) << "same heights: " << same;
+    EXPECT_EQ(si.unchecked, 0u);
+    // Each fan's column at (1, 1) lies 1 mm from it, toward its own cell's centre.
+    int near_pinch = 0;
+    for (const Eigen::Vector3f& v : mesh->vertices) {
+      const Eigen::Vector2d d(v.x() - 1.0, v.y() - 1.0);
+      if (d.norm() > 0.01) continue;
+      ++near_pinch;
+      EXPECT_NEAR(d.norm(), 1e-3, 1e-6);
+      EXPECT_NEAR(std::abs(d.x()), std::abs(d.y()), 1e-6);  // along the diagonal
+    }
+    EXPECT_EQ(near_pinch, 4);  // two heights in each of the two columns
+  }
 }
 
 TEST(ExtrusionTest, EqualHeightsShareVerticesWithoutSteps) {
