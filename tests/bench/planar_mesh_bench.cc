@@ -64,6 +64,7 @@ int main(int argc, char** argv) {
   bool mesh = true;  // --regions-only: stop after the regions (to profile them alone)
   std::string out, gt;
   PlanarRegionOptions region_options;
+  PlanarMeshOptions mesh_options;
   for (int i = 2; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--mesh-growth") {
@@ -77,6 +78,8 @@ int main(int argc, char** argv) {
       out = argv[++i];
     } else if (a == "--gt" && i + 1 < argc) {
       gt = argv[++i];
+    } else if (a == "--max-displacement" && i + 1 < argc) {
+      mesh_options.max_displacement_cells = std::atof(argv[++i]);
     } else {
       std::fprintf(stderr, "%s: unknown argument %s\n", argv[0], a.c_str());
       return 2;
@@ -154,7 +157,7 @@ int main(int argc, char** argv) {
   }
   if (!mesh) return 0;
   t = CpuSeconds();
-  absl::StatusOr<PlanarMesh> planar = BuildPlanarMesh(*faces, *regions, grid);
+  absl::StatusOr<PlanarMesh> planar = BuildPlanarMesh(*faces, *regions, grid, mesh_options);
   const double planar_s = CpuSeconds() - t;
   PrintMemory("planar mesh");
   size_t planar_triangles = 0;
