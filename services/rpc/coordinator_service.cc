@@ -369,8 +369,14 @@ class CoordinatorServer::Impl {
                                            const std::vector<RecarveChunk>& chunks,
                                            double resolution_m);
   void FailJob(const std::string& job_id, const std::string& why);
-  // Job.error as the tenant may read it (coordinator/job_folders.h TenantView).
-  std::string TenantView(const JobRuntime& rt, std::string text) const {
+  // Job.error as the tenant may read it (coordinator/job_folders.h TenantView). A job no
+  // longer running has no runtime entry (CleanUp drops it) and none is made for it here: its
+  // text still has the work folder hidden.
+  std::string TenantView(const std::string& job_id, std::string text) const
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    static const JobRuntime kEnded;
+    const auto it = runtime_.find(job_id);
+    const JobRuntime& rt = it != runtime_.end() ? it->second : kEnded;
     return carvemap::TenantView(std::move(text),
                                 JobFolders{rt.output_dir, rt.tiles_dir, rt.partials_dir},
                                 folders_.work_dir);
@@ -788,7 +794,7 @@ void CoordinatorServer::Impl::FailJob(const std::string& job_id, const std::stri
   std::string why;
   {
     absl::MutexLock lock(&mu_);
-    why = TenantView(runtime_[job_id], raw);
+    why = TenantView(job_id, raw);
   }
   absl::Status s = store_->TransitionJob(job_id, {JobState::kFailed, why, NowMs()});
   JobsChanged();
@@ -820,7 +826,10 @@ void CoordinatorServer::Impl::CleanUp(const std::string& job_id, bool succeeded)
     fs::remove_all(tiles, ec);
     fs::remove_all(ObjectTilesDir(tiles), ec);
   }
-  EnterStage(job_id, "");
+  // The job's plan, stage times and counts are in its job.json now (and it no longer counts as
+  // active): a coordinator that runs for months must not keep them for every job it ran.
+  absl::MutexLock lock(&mu_);
+  runtime_.erase(job_id);
 }
 
 absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
@@ -1973,7 +1982,7 @@ absl::Status CoordinatorServer::Impl::FailChunk(const pb::FailChunkRequest& req,
   const std::string job_id = *JobOfLease(req.lease_id());  // checked by CheckLeaseJob
   absl::StatusOr<bool> requeued =
       // The table prefixes "worker <id>: " itself; the reason may become the job's error.
-      table_->Fail(req.lease_id(), req.generation(), TenantView(runtime_[job_id], req.reason()),
+      table_->Fail(req.lease_id(), req.generation(), TenantView(job_id, req.reason()),
                    req.retryable());
   if (!requeued.ok()) return requeued.status();
   if (*requeued) WorkMayBeQueued();
