@@ -4,8 +4,9 @@
 // for tuning on kept carves without re-running the whole merge.
 //
 //   planar_mesh_bench TILES_DIR [--mesh-growth] [--no-dense] [--regions-only] [--out DIR]
-//                     [--gt GT_DIR]
+//                     [--gt GT_DIR] [--max-displacement CELLS]
 //
+// --max-displacement sets PlanarMeshOptions::max_displacement_cells (eq 4.9's clamp).
 // --regions-only stops after the regions, so that a heap profiler's peak is theirs.
 // --mesh-growth fits the regions as the merge does for mesh/building.ply
 // (PlanarRegionOptions::mesh_growth); without it, as for the levels and floor plans.
@@ -55,7 +56,7 @@ int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr,
                  "usage: %s TILES_DIR [--mesh-growth] [--no-dense] [--regions-only] [--out DIR] "
-                 "[--gt GT_DIR]\n",
+                 "[--gt GT_DIR] [--max-displacement CELLS]\n",
                  argv[0]);
     return 2;
   }
