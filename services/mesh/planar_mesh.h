@@ -77,13 +77,17 @@ struct PlanarMesh {
 // did) are removed by flipping their longest edge within their region, else by collapsing
 // their shortest edge (a region border moves by that edge), else by moving one of their
 // vertices a hundredth of a cell off the line; none of these folds a triangle over. Unused
-// vertices are dropped.
+// vertices are dropped. (3) Where sheets of the surface meet only at a point (interior cells
+// touching along an edge or at a corner), each keeps its own vertex there, so that the mesh is
+// a manifold; those vertices coincide, and the surface would touch itself (a self-intersection
+// to CGAL). Each moves 0.02 cells into its own sheet, unless a triangle would then fold.
 struct PlanarMeshRepair {
   int dropped_pieces = 0;
   int flips = 0;
   int collapses = 0;
   int nudges = 0;
   int left = 0;  // triangles still below min_area_m2 (0 unless every repair was blocked)
+  int separated = 0;  // coincident vertices moved apart
 };
 PlanarMeshRepair RepairPlanarMesh(PlanarMesh& mesh, double res, double min_area_m2 = 1e-10);
 

@@ -17,6 +17,7 @@
 
 #include "services/mesh/mesh_checks.h"
 #include "services/mesh/planar_regions.h"
+#include "services/mesh/self_intersections.h"
 #ifdef CARVEMAP_PLANAR_CARVED_ONLY
 #include "services/building/building.h"
 #include "services/building/building_presets.h"
@@ -724,6 +725,38 @@ TEST(PlanarMeshTest, CellsTouchingAlongAnEdge) {
   ASSERT_TRUE(pm.ok()) << pm.status();
   EXPECT_TRUE(CheckMesh(pm->mesh).watertight()) << CheckMesh(pm->mesh).ToString();
   EXPECT_EQ(EulerCharacteristic(pm->mesh), 4);
+  // The two sheets' vertices along the edge were moved apart into their own sheets: the
+  // surface does not touch itself there.
+  const SelfIntersections si = CountSelfIntersections(pm->mesh);
+  EXPECT_EQ(si.pairs, 0u);
+  EXPECT_EQ(si.unchecked, 0u);
+  std::set<std::array<float, 3>> positions;
+  for (const Eigen::Vector3f& v : pm->mesh.vertices) positions.insert({v.x(), v.y(), v.z()});
+  EXPECT_EQ(positions.size(), pm->mesh.vertices.size());
+}
+
+// Two interior cells touching only at a corner: one vertex per sheet there, moved apart.
+TEST(PlanarMeshTest, CellsTouchingAtACornerDoNotTouchInTheMesh) {
+  const OctreeGrid grid = Grid();
+  VoxelWorld world({12, 12, 12});
+  world.Fill({2, 2, 2}, {6, 6, 6}, true);
+  world.Fill({6, 6, 6}, {10, 10, 10}, true);
+  const std::vector<BoundaryFace> faces = FacesOf(world, grid);
+  const PlanarRegionSet regions = AxisRegions(faces, grid.resolution_m());
+  absl::StatusOr<PlanarMesh> pm = BuildPlanarMesh(faces, regions, grid, NoQuadtree());
+  ASSERT_TRUE(pm.ok()) << pm.status();
+  EXPECT_TRUE(CheckMesh(pm->mesh).watertight()) << CheckMesh(pm->mesh).ToString();
+  EXPECT_EQ(CountSelfIntersections(pm->mesh).pairs, 0u);
+  // The corner's two copies lie 0.02 cells from it, each inside its own box's corner.
+  const Eigen::Vector3f corner = (6 * grid.resolution_m()) * Eigen::Vector3f::Ones();
+  int near = 0;
+  for (const Eigen::Vector3f& v : pm->mesh.vertices) {
+    const Eigen::Vector3f d = v - corner;
+    if (d.norm() > 0.1 * grid.resolution_m()) continue;
+    ++near;
+    EXPECT_NEAR(d.norm(), 0.02 * grid.resolution_m(), 1e-5);
+  }
+  EXPECT_EQ(near, 2);
 }
 
 TEST(PlanarMeshTest, RejectsBadInput) {
