@@ -12,17 +12,8 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
-from cluster_harness import Cluster, TestFailure, fresh_dir, log, state  # noqa: E402
-
-
-def status_kib(pid):
-    out = {}
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            key, _, value = line.partition(":")
-            if key in ("VmRSS", "VmSize"):
-                out[key] = int(value.split()[0])
-    return out
+from cluster_harness import (Cluster, TestFailure, fresh_dir, log, proc_status,  # noqa: E402
+                             state)
 
 
 def main():
@@ -54,7 +45,8 @@ def main():
             if state(job) != "SUCCEEDED":
                 raise TestFailure(f"job {n}: {state(job)} {job.error}")
             if n == 1 or n % a.every == 0:
-                s = status_kib(pid)
+                s = {k: int(v.split()[0]) for k, v in proc_status(pid).items()
+                     if k in ("VmRSS", "VmSize")}
                 log(f"{n:4d}  {s['VmRSS']:9d}  {s['VmSize']:10d}")
     finally:
         cluster.stop()

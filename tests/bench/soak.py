@@ -50,7 +50,7 @@ import urllib.request
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
 from cluster_harness import (TERMINAL, VOLATILE, Cluster, TestFailure, fresh_dir,  # noqa: E402
-                             log, random_secret, read_text, state, stubs)
+                             log, proc_status, random_secret, read_text, state, stubs)
 
 TENANTS = ["acme", "beta", "gamma", "delta"]
 RESOLUTION = 0.0625
@@ -118,11 +118,7 @@ def parse_metrics(text):
 
 def proc_sample(pid):
     """The same numbers from /proc/<pid>, when a scrape fails."""
-    status = {}
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            k, _, v = line.partition(":")
-            status[k] = v.strip()
+    status = proc_status(pid)
     return {"fds": len(os.listdir(f"/proc/{pid}/fd")), "threads": int(status["Threads"]),
             "rss": int(status["VmRSS"].split()[0]) * 1024,
             "peak": int(status["VmHWM"].split()[0]) * 1024, "cpu": None, "src": "proc"}
@@ -132,8 +128,7 @@ def proc_extra(pid):
     """What /metrics does not say: VmSize, and the anonymous mappings of exactly a default
     thread stack's size (RLIMIT_STACK, 8 MiB here): one per thread whose stack is still
     mapped, running or finished but never joined (process_threads counts running ones only)."""
-    with open(f"/proc/{pid}/status") as f:
-        vmsize = next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmSize:"))
+    vmsize = int(proc_status(pid)["VmSize"].split()[0]) * 1024
     stacks = maps = 0
     with open(f"/proc/{pid}/maps") as f:
         for line in f:

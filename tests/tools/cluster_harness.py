@@ -440,6 +440,16 @@ def summarize(files):
     return f"{tiles} tiles, {objects} object tiles, {meshes} meshes, {len(files)} files"
 
 
+def proc_status(pid):
+    """/proc/<pid>/status as {field: text}, e.g. {"VmRSS": "40724 kB", "Threads": "17"}."""
+    out = {}
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            key, _, value = line.partition(":")
+            out[key] = value.strip()
+    return out
+
+
 def fresh_dir(path):
     shutil.rmtree(path, ignore_errors=True)
     os.makedirs(path)
