@@ -1278,25 +1278,26 @@ int SeparateCoincidentVertices(PlanarMesh& mesh, double step, double min_area_m2
   std::sort(order.begin(), order.end(), [&](int a, int b) {
     return std::make_pair(position(a), a) < std::make_pair(position(b), b);
   });
-  absl::flat_hash_map<int, std::vector<int>> around;  // coincident vertex → its triangles
+  // The coincident vertices in vertex order (the result depends on the order: a vertex's
+  // direction uses its neighbours' positions), each with its triangles.
+  std::vector<int> coincident;
   ForEachRun(order, position, [&](size_t b, size_t e) {
-    for (size_t i = b; e - b > 1 && i < e; ++i) around[order[i]];
+    for (size_t i = b; e - b > 1 && i < e; ++i) coincident.push_back(order[i]);
   });
-  if (around.empty()) return 0;
+  if (coincident.empty()) return 0;
+  std::sort(coincident.begin(), coincident.end());
+  std::vector<int> slot(vs.size(), -1);
+  for (size_t i = 0; i < coincident.size(); ++i) slot[coincident[i]] = static_cast<int>(i);
+  std::vector<std::vector<int>> around(coincident.size());
   for (int t = 0; t < static_cast<int>(mesh.mesh.triangles.size()); ++t) {
     for (int i = 0; i < 3; ++i) {
-      if (auto it = around.find(mesh.mesh.triangles[t][i]); it != around.end()) {
-        it->second.push_back(t);
-      }
+      if (const int k = slot[mesh.mesh.triangles[t][i]]; k >= 0) around[k].push_back(t);
     }
   }
-  // In vertex order, so that the result does not depend on the hash map's.
-  std::vector<int> coincident;
-  for (const auto& [v, tris] : around) coincident.push_back(v);
-  std::sort(coincident.begin(), coincident.end());
   int moved = 0;
-  for (int v : coincident) {
-    const std::vector<int>& tris = around[v];
+  for (size_t k = 0; k < coincident.size(); ++k) {
+    const int v = coincident[k];
+    const std::vector<int>& tris = around[k];
     const Eigen::Vector3d p = OutPos(mesh, v);
     Eigen::Vector3d inward = Eigen::Vector3d::Zero();
     for (int t : tris) {
