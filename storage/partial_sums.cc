@@ -353,20 +353,39 @@ namespace {
 constexpr char kRegionsMagic[8] = {'C', 'M', 'R', 'E', 'G', 'N', 'S', '1'};
 }  // namespace
 
-absl::Status WriteRegionsFile(const std::string& path, const ChunkRegions& regions) {
+absl::Status WriteRegionsFile(const std::string& path, std::span<const RecarveChunk> regions) {
+  std::vector<const RecarveChunk*> sorted;
+  sorted.reserve(regions.size());
+  for (const RecarveChunk& c : regions) {
+    if (absl::Status s = ChunkRegion::CheckEncoding(c.depth, c.cells); !s.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(path, ": the region of chunk ", c.chunk.x(), ",", c.chunk.y(), ",",
+                       c.chunk.z(), ": ", s.message()));
+    }
+    sorted.push_back(&c);
+  }
+  std::sort(sorted.begin(), sorted.end(), [](const RecarveChunk* a, const RecarveChunk* b) {
+    return ChunkKeyLess{}(a->chunk, b->chunk);
+  });
+  for (size_t i = 1; i < sorted.size(); ++i) {
+    if (sorted[i]->chunk == sorted[i - 1]->chunk) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(path, ": chunk ", sorted[i]->chunk.x(), ",", sorted[i]->chunk.y(), ",",
+                       sorted[i]->chunk.z(), " is listed twice"));
+    }
+  }
   std::string bytes(kRegionsMagic, 8);
   char u[4];
   const auto put = [&](uint32_t v) {
     PutU32(v, u);
     bytes.append(u, 4);
   };
-  put(uint32_t(regions.size()));
-  for (const auto& [chunk, region] : regions) {
-    for (int a = 0; a < 3; ++a) put(uint32_t(chunk[a]));
-    put(uint32_t(region.depth()));
-    const std::string cells = region.Encode();
-    put(uint32_t(cells.size()));
-    bytes += cells;
+  put(uint32_t(sorted.size()));
+  for (const RecarveChunk* c : sorted) {
+    for (int a = 0; a < 3; ++a) put(uint32_t(c->chunk[a]));
+    put(uint32_t(c->depth));
+    put(uint32_t(c->cells.size()));
+    bytes += c->cells;
   }
   put(Crc32c(bytes));
   const std::string tmp = TempPathFor(path);
@@ -379,7 +398,7 @@ absl::Status WriteRegionsFile(const std::string& path, const ChunkRegions& regio
   return SyncFolderOf(path);
 }
 
-absl::StatusOr<ChunkRegions> ReadRegionsFile(const std::string& path) {
+absl::StatusOr<RecarveRegionMap> ReadRegionsFile(const std::string& path) {
   Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
   if (fd.get() < 0) {
     if (errno == ENOENT) return absl::NotFoundError(absl::StrCat("regions file ", path,
@@ -405,7 +424,7 @@ absl::StatusOr<ChunkRegions> ReadRegionsFile(const std::string& path) {
   const char* end = bytes.data() + bytes.size() - 4;
   const uint32_t count = GetU32(p);
   p += 4;
-  ChunkRegions out;
+  RecarveRegionMap out;
   for (uint32_t i = 0; i < count; ++i) {
     if (end - p < 20) return corrupt(absl::StrCat("region ", i, " truncated"));
     ChunkKey chunk;
@@ -414,10 +433,15 @@ absl::StatusOr<ChunkRegions> ReadRegionsFile(const std::string& path) {
     const uint32_t size = GetU32(p + 16);
     p += 20;
     if (uint64_t(end - p) < size) return corrupt(absl::StrCat("region ", i, " truncated"));
-    absl::StatusOr<ChunkRegion> region = ChunkRegion::Decode(depth, std::string_view(p, size));
-    if (!region.ok()) return corrupt(absl::StrCat("region ", i, ": ", region.status().message()));
+    const std::string_view cells(p, size);
+    if (absl::Status s = ChunkRegion::CheckEncoding(depth, cells); !s.ok()) {
+      return corrupt(absl::StrCat("region ", i, ": ", s.message()));
+    }
     p += size;
-    out.emplace(chunk, *std::move(region));
+    if (!out.emplace(chunk, RecarveChunk{chunk, depth, std::string(cells)}).second) {
+      return corrupt(absl::StrCat("region ", i, ": chunk ", chunk.x(), ",", chunk.y(), ",",
+                                  chunk.z(), " listed twice"));
+    }
   }
   if (p != end) return corrupt("bytes after the last region");
   return out;

@@ -70,11 +70,14 @@ class PartialSumsWriter {
                                               std::vector<TileLeaf>& out);
 
 // §5.6.1's re-carving pass: the chunks to carve again and each one's region, in one file that
-// every slice of the pass reads (storage/PARTIAL_FORMAT.md "Regions"). Written through
-// "<path>.<random>.tmp" and renamed; I/O errors name the file. The reader: NotFound for a
-// missing file, DataLoss naming the file for a damaged one.
-using ChunkRegions = std::map<ChunkKey, ChunkRegion, ChunkKeyLess>;
-[[nodiscard]] absl::Status WriteRegionsFile(const std::string& path, const ChunkRegions& regions);
-[[nodiscard]] absl::StatusOr<ChunkRegions> ReadRegionsFile(const std::string& path);
+// every slice of the pass reads (storage/PARTIAL_FORMAT.md "Regions"). The writer takes the
+// regions encoded, as the coordinator receives them, and writes them in ChunkKeyLess order
+// (InvalidArgument naming a chunk listed twice or a region that does not decode). Written
+// through "<path>.<random>.tmp" and renamed; I/O errors name the file. The reader keeps them
+// encoded (each region's bits checked against its depth; a slice decodes those it reaches):
+// NotFound for a missing file, DataLoss naming the file for a damaged one.
+[[nodiscard]] absl::Status WriteRegionsFile(const std::string& path,
+                                            std::span<const RecarveChunk> regions);
+[[nodiscard]] absl::StatusOr<RecarveRegionMap> ReadRegionsFile(const std::string& path);
 
 }  // namespace carvemap

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 namespace carvemap {
@@ -151,19 +152,43 @@ TEST(PartialSumsTest, UnfinishedWriterLeavesNothingAndBadLeavesAreRefused) {
 }
 
 TEST(PartialSumsTest, RegionsFileRoundTripAndDamage) {
-  ChunkRegions regions;
-  regions.emplace(ChunkKey(-3, 0, 7), ChunkRegion(3, {{1, 2, 3}, {7, 7, 7}}));
-  regions.emplace(ChunkKey(0, 0, 0), ChunkRegion(5, {{31, 0, 0}}));
+  // Not in ChunkKeyLess order: the file is, whatever order the writer is given.
+  const std::vector<RecarveChunk> regions = {
+      RecarveChunk::Of(ChunkKey(0, 0, 0), ChunkRegion(5, {{31, 0, 0}})),
+      RecarveChunk::Of(ChunkKey(-3, 0, 7), ChunkRegion(3, {{1, 2, 3}, {7, 7, 7}}))};
   const std::string path = TempPath("regions.bin");
   ASSERT_TRUE(WriteRegionsFile(path, regions).ok());
-  absl::StatusOr<ChunkRegions> back = ReadRegionsFile(path);
+  absl::StatusOr<RecarveRegionMap> back = ReadRegionsFile(path);
   ASSERT_TRUE(back.ok()) << back.status();
   ASSERT_EQ(back->size(), 2u);
-  for (const auto& [chunk, region] : regions) {
-    ASSERT_TRUE(back->count(chunk));
-    EXPECT_EQ(back->at(chunk).depth(), region.depth());
-    EXPECT_EQ(back->at(chunk).Encode(), region.Encode());
+  for (const RecarveChunk& c : regions) {
+    ASSERT_TRUE(back->count(c.chunk));
+    EXPECT_EQ(back->at(c.chunk).depth, c.depth);
+    EXPECT_EQ(back->at(c.chunk).cells, c.cells);
+    absl::StatusOr<ChunkRegion> decoded = back->at(c.chunk).Decode();
+    ASSERT_TRUE(decoded.ok()) << decoded.status();
+    EXPECT_EQ(decoded->Encode(), c.cells);
   }
+  {
+    const std::string reversed = TempPath("regions_reversed.bin");
+    const std::vector<RecarveChunk> backwards(regions.rbegin(), regions.rend());
+    ASSERT_TRUE(WriteRegionsFile(reversed, backwards).ok());
+    std::ifstream a(path, std::ios::binary), b(reversed, std::ios::binary);
+    EXPECT_EQ(std::string(std::istreambuf_iterator<char>(a), {}),
+              std::string(std::istreambuf_iterator<char>(b), {}));
+  }
+  // What the writer refuses: a chunk twice, and bits of the wrong size for their depth.
+  const std::string refused = TempPath("regions_refused.bin");
+  std::vector<RecarveChunk> twice = {regions[0], regions[1], regions[0]};
+  absl::Status s = WriteRegionsFile(refused, twice);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(s.message()), testing::HasSubstr("chunk 0,0,0 is listed twice"));
+  std::vector<RecarveChunk> short_bits = {regions[1]};
+  short_bits[0].cells.pop_back();
+  s = WriteRegionsFile(refused, short_bits);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(s.message()), testing::HasSubstr("chunk -3,0,7"));
+  EXPECT_FALSE(fs::exists(refused));
   std::string bytes;
   {
     std::ifstream in(path, std::ios::binary);

@@ -307,10 +307,10 @@ TEST_F(DistributedTest, MergeCarvesChunksAgainFinerThroughTheWorkers) {
       absl::StatusOr<TileData> tile = ReadTile(e.path().string());
       if (tile.ok() && tile->chunk.z() == 0 && tile->params.num_wedges > 100 && again.size() < 3) {
         // The first two whole (the one cell of depth 0), the third only in its lower half.
-        again.push_back(RecarveChunk{
+        again.push_back(RecarveChunk::Of(
             tile->chunk, again.size() < 2 ? ChunkRegion(0, {{0, 0, 0}})
                                           : ChunkRegion(1, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0},
-                                                            {1, 1, 0}})});
+                                                            {1, 1, 0}})));
       }
     }
     if (!req.recarve) return absl::InternalError("no recarve in the merge request");

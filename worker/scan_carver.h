@@ -33,7 +33,7 @@ struct ScanCarveOptions {
   SlicePlanOptions slices;
   WedgeBuilderOptions wedges;
   // §5.6.1's second pass: only these chunks, each only inside its region (null: all, whole).
-  const std::map<ChunkKey, ChunkRegion, ChunkKeyLess>* regions = nullptr;
+  const RecarveRegionMap* regions = nullptr;
   size_t memory_budget_bytes = 256u << 20;  // per slice being carved
   bool keep_partials = false;
   // §2.3's turn to north, applied to every pose read (ScanReader::OpenOptions).

@@ -105,6 +105,8 @@ struct SliceCarver::Impl {
   std::deque<Batch> open;  // oldest first
   int64_t carved_up_to = -1;  // batches up to this one are carved
   std::map<ChunkKey, ChunkOctree, ChunkKeyLess> trees;
+  // The pass's regions (options.regions) decoded so far: those of chunks a wedge reached.
+  std::map<ChunkKey, ChunkRegion, ChunkKeyLess> decoded;
   size_t tree_bytes = 0;  // Σ ChunkOctree::memory_bytes() of `trees`
   // CarveBatch's working memory, kept from one chunk and batch to the next.
   IndexedWedges chunk_wedges;
@@ -142,6 +144,21 @@ struct SliceCarver::Impl {
     return &*at;
   }
 
+  // The pass's region of `chunk`, decoded the first time it is asked for; null when the chunk
+  // is not in the pass.
+  absl::StatusOr<const ChunkRegion*> RegionOf(const ChunkKey& chunk) {
+    auto it = decoded.find(chunk);
+    if (it != decoded.end()) return &it->second;
+    auto encoded = options.regions->find(chunk);
+    if (encoded == options.regions->end()) return nullptr;
+    absl::StatusOr<ChunkRegion> region = encoded->second.Decode();
+    if (!region.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("slice carve: the region of chunk ",
+                                                     chunk.x(), ",", chunk.y(), ",", chunk.z(),
+                                                     ": ", region.status().message()));
+    }
+    return &decoded.emplace(chunk, *std::move(region)).first->second;
+  }
   absl::Status OnWedge(const Wedge& wedge, std::span<const RayId> ids);
   absl::Status CarveBatch(Batch& batch);
   absl::Status Flush();
@@ -212,12 +229,17 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
   std::vector<ChunkKey> chunks = ChunksOfWedge(hull);
   if (options.regions != nullptr) {
     // §5.6.1: only chunks of the pass, and only where the hull's box meets their region.
-    std::erase_if(chunks, [&](const ChunkKey& c) {
-      auto it = options.regions->find(c);
-      if (it == options.regions->end()) return true;
+    size_t kept = 0;
+    for (const ChunkKey& c : chunks) {
+      absl::StatusOr<const ChunkRegion*> region = RegionOf(c);
+      if (!region.ok()) return region.status();
       const Eigen::Vector3d origin = c.cast<double>() * kChunkSizeM;
-      return !it->second.IntersectsBox(hull.box.min() - origin, hull.box.max() - origin);
-    });
+      if (*region != nullptr &&
+          (*region)->IntersectsBox(hull.box.min() - origin, hull.box.max() - origin)) {
+        chunks[kept++] = c;
+      }
+    }
+    chunks.resize(kept);
   }
   for (int r = 0; r < wedge.num_rays; ++r) {
     if (!Owned(ids[r].sensor, ids[r].frame)) continue;
@@ -254,7 +276,7 @@ absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
     if (inserted) {
       tree.SetPartial(true);
       tree.SetEvaluation(options.evaluation);
-      if (options.regions != nullptr) tree.RestrictTo(options.regions->at(chunk));
+      if (options.regions != nullptr) tree.RestrictTo(decoded.at(chunk));
     }
     IndexedWedges& in = chunk_wedges;
     in.rays.clear();

@@ -40,9 +40,10 @@ struct SliceCarveOptions {
   OctreeGrid grid;
   CarveEvaluation evaluation = CarveEvaluation::kFast;
   WedgeBuilderOptions wedges;
-  // §5.6.1's second pass: only these chunks, each only inside its region. Null: every chunk,
-  // whole. Must outlive the carver.
-  const std::map<ChunkKey, ChunkRegion, ChunkKeyLess>* regions = nullptr;
+  // §5.6.1's second pass: only these chunks, each only inside its region, decoded when a
+  // wedge first reaches the chunk (a slice reaches a small part of a building's pass). Null:
+  // every chunk, whole. Must outlive the carver.
+  const RecarveRegionMap* regions = nullptr;
   uint64_t batch_rays = 500'000;             // own rays per batch of frames
   // Chunks' sums held before they are flushed: ChunkOctree::memory_bytes(), the maps' real size.
   size_t memory_budget_bytes = 256u << 20;

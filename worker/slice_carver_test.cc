@@ -305,9 +305,10 @@ TEST_F(SliceCarverTest, RegionsCarveOnlyThere) {
             ChunkKeyLess()(x, y));
   });
   busiest.resize(2);
-  std::map<ChunkKey, ChunkRegion, ChunkKeyLess> regions;
+  RecarveRegionMap regions;
   for (const ChunkKey& c : busiest) {
-    regions.emplace(c, ChunkRegion(1, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}}));
+    regions.emplace(
+        c, RecarveChunk::Of(c, ChunkRegion(1, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}})));
   }
   SliceCarveOptions o = Options(CarveEvaluation::kExact);
   o.regions = &regions;
@@ -325,8 +326,10 @@ TEST_F(SliceCarverTest, RegionsCarveOnlyThere) {
     testing::AddTilePair(&inside, &c.tiles.at(chunk), agreement);
     EXPECT_EQ(agreement.LabelShare(), 1.0) << chunk.transpose();
     EXPECT_LT(agreement.max_dp, 1e-9) << chunk.transpose();
+    absl::StatusOr<ChunkRegion> region = regions.at(chunk).Decode();
+    ASSERT_TRUE(region.ok()) << region.status();
     for (const TileLeaf& l : c.tiles.at(chunk).leaves) {
-      EXPECT_TRUE(regions.at(chunk).Intersects(l.node)) << l.node.local.transpose();
+      EXPECT_TRUE(region->Intersects(l.node)) << l.node.local.transpose();
     }
   }
 }

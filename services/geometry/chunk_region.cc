@@ -149,7 +149,7 @@ std::string ChunkRegion::Encode() const {
   return bytes;
 }
 
-absl::StatusOr<ChunkRegion> ChunkRegion::Decode(int depth, std::string_view bits) {
+absl::Status ChunkRegion::CheckEncoding(int depth, std::string_view bits) {
   if (depth < 0 || depth > kMaxDepth) {
     return absl::InvalidArgumentError(
         absl::StrCat("chunk region: depth ", depth, " outside [0, ", kMaxDepth, "]"));
@@ -160,6 +160,12 @@ absl::StatusOr<ChunkRegion> ChunkRegion::Decode(int depth, std::string_view bits
                                                    " bytes for depth ", depth, " (expected ",
                                                    (cells + 7) / 8, ")"));
   }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<ChunkRegion> ChunkRegion::Decode(int depth, std::string_view bits) {
+  if (absl::Status s = CheckEncoding(depth, bits); !s.ok()) return s;
+  const size_t cells = size_t{1} << (3 * depth);
   std::vector<bool> set(cells, false);
   for (size_t i = 0; i < cells; ++i) set[i] = (uint8_t(bits[i / 8]) >> (i % 8)) & 1u;
   ChunkRegion region;

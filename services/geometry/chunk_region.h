@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <map>
 #include <span>
 #include <string>
 #include <string_view>
@@ -55,6 +56,8 @@ class ChunkRegion {
   // InvalidArgument for a depth outside [0, kMaxDepth] or a size that is not (2^depth)³ / 8
   // bytes (rounded up).
   static absl::StatusOr<ChunkRegion> Decode(int depth, std::string_view bits);
+  // Decode's checks alone, without building the region's tables.
+  static absl::Status CheckEncoding(int depth, std::string_view bits);
 
  private:
   void Build(std::vector<bool> cells);
@@ -74,10 +77,26 @@ class ChunkRegion {
   std::array<std::vector<CellRun>, 3> row_runs_;
 };
 
-// One chunk of a second carving pass and the part of it to carve.
+// One chunk of a second carving pass and the part of it to carve, as ChunkRegion::Encode's
+// bits. Regions are passed and kept in this form (from the merge to the coordinator, into the
+// pass's regions file, and while the merge waits for the pass) and decoded only by the one
+// working on the chunk: a decoded region's tables (the summed-volume table over its bounding
+// box, the rows' runs) take up to ~40 times its 4 KiB of bits at depth 5, and a large
+// building's pass has thousands of chunks.
 struct RecarveChunk {
   ChunkKey chunk = ChunkKey::Zero();
-  ChunkRegion region;
+  int depth = 0;
+  std::string cells;  // ChunkRegion::Encode() of the region
+
+  static RecarveChunk Of(const ChunkKey& chunk, const ChunkRegion& region) {
+    return RecarveChunk{chunk, region.depth(), region.Encode()};
+  }
+  [[nodiscard]] absl::StatusOr<ChunkRegion> Decode() const {
+    return ChunkRegion::Decode(depth, cells);
+  }
 };
+
+// A second pass's chunks and their regions, encoded.
+using RecarveRegionMap = std::map<ChunkKey, RecarveChunk, ChunkKeyLess>;
 
 }  // namespace carvemap

@@ -282,7 +282,7 @@ struct ObjectSource {
 // SegmentRecarvedObjects.
 struct RecarvePass {
   std::string recarved_dir;
-  ChunkRegionMap regions;  // the chunks' regions, for the second segmentation
+  RecarveRegionMap regions;  // the chunks' regions, for the second segmentation
 };
 
 absl::StatusOr<std::vector<RecarveChunk>> RecarveRegions(
@@ -307,7 +307,7 @@ absl::StatusOr<std::vector<RecarveChunk>> RecarveRegions(
         ObjectRecarveRegion(**tile, coarse_volume, /*margin_cells=*/1, ceiling_reach_m);
     if (region.empty()) continue;
     region_volume += std::ldexp(double(region.count()), -3 * region.depth());
-    again.push_back(RecarveChunk{chunk, std::move(region)});
+    again.push_back(RecarveChunk::Of(chunk, region));
   }
   counts["recarved_chunks"] = again.size();
   // The share of those chunks' volume carved again.
@@ -328,7 +328,10 @@ absl::StatusOr<RecarvePass> RecarveChunks(const MergeOptions& options,
   }
   RecarvePass pass;
   pass.recarved_dir = *std::move(dir);
-  for (RecarveChunk& c : again) pass.regions.emplace(c.chunk, std::move(c.region));
+  for (RecarveChunk& c : again) {
+    const ChunkKey chunk = c.chunk;
+    pass.regions.emplace(chunk, std::move(c));
+  }
   return pass;
 }
 

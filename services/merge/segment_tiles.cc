@@ -12,7 +12,7 @@ absl::StatusOr<SegmentTilesResult> SegmentTiles(TileSet& tiles, const PlanVolume
                                                 const std::string& building_dir,
                                                 const std::string& objects_dir,
                                                 const ChunkProgressFn& progress, int threads,
-                                                const ChunkRegionMap* only_in) {
+                                                const RecarveRegionMap* only_in) {
   for (const std::string& dir : {building_dir, objects_dir}) {
     if (dir.empty()) continue;
     std::error_code ec;
@@ -23,13 +23,13 @@ absl::StatusOr<SegmentTilesResult> SegmentTiles(TileSet& tiles, const PlanVolume
   const ChunkRegion none;
   absl::Status s = ForEachChunk<SegmentedChunk>(
       tiles, tiles.chunks(), /*low_only=*/false, threads,
-      [&](const ChunkNeighbourhood& hood) {
-        const ChunkRegion* region = nullptr;
-        if (only_in != nullptr) {
-          auto it = only_in->find(hood.chunk);
-          region = it != only_in->end() ? &it->second : &none;
-        }
-        return SegmentChunk(hood, plan, options, region);
+      [&](const ChunkNeighbourhood& hood) -> absl::StatusOr<SegmentedChunk> {
+        if (only_in == nullptr) return SegmentChunk(hood, plan, options, nullptr);
+        auto it = only_in->find(hood.chunk);
+        if (it == only_in->end()) return SegmentChunk(hood, plan, options, &none);
+        absl::StatusOr<ChunkRegion> region = it->second.Decode();
+        if (!region.ok()) return region.status();
+        return SegmentChunk(hood, plan, options, &*region);
       },
       [&](SegmentedChunk&& seg) -> absl::Status {
         if (!building_dir.empty()) {

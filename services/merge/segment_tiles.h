@@ -17,7 +17,6 @@
 
 namespace carvemap {
 
-using ChunkRegionMap = std::map<ChunkKey, ChunkRegion, ChunkKeyLess>;
 
 struct SegmentTilesResult {
   uint64_t chunks = 0;
@@ -32,7 +31,8 @@ struct SegmentTilesResult {
 // Writes building tiles to `building_dir` and object tiles to `objects_dir` (both created;
 // tiles replace any there). An empty `building_dir` writes no building tiles (the finer
 // re-carving of §5.6.1 wants the objects only). `only_in` (that pass): each chunk's objects
-// only inside its region (SegmentChunk); a chunk not in the map has none. Only chunks with a
+// only inside its region (SegmentChunk), decoded by the thread that segments the chunk; a
+// chunk not in the map has none. Only chunks with a
 // tile are segmented: object volume in a chunk that no wedge reached is not found. Errors:
 // TileSet::Get's, SegmentChunk's, WriteTile's (naming the file), Unavailable naming a directory
 // that cannot be created, Cancelled. The chunks are segmented on `threads` threads and written in
@@ -40,6 +40,6 @@ struct SegmentTilesResult {
 [[nodiscard]] absl::StatusOr<SegmentTilesResult> SegmentTiles(
     TileSet& tiles, const PlanVolume& plan, const SegmentOptions& options,
     const std::string& building_dir, const std::string& objects_dir,
-    const ChunkProgressFn& progress, int threads, const ChunkRegionMap* only_in = nullptr);
+    const ChunkProgressFn& progress, int threads, const RecarveRegionMap* only_in = nullptr);
 
 }  // namespace carvemap

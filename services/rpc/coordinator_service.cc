@@ -1086,14 +1086,10 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
   if (ec) {
     return absl::FailedPreconditionError(absl::StrCat(dir, ": cannot create: ", ec.message()));
   }
-  ChunkRegions regions;
   std::vector<ChunkCoord> keys;
-  for (const RecarveChunk& c : chunks) {
-    regions.emplace(c.chunk, c.region);
-    keys.push_back({c.chunk.x(), c.chunk.y(), c.chunk.z()});
-  }
+  for (const RecarveChunk& c : chunks) keys.push_back({c.chunk.x(), c.chunk.y(), c.chunk.z()});
   const std::string regions_path = (fs::path(pass_dir) / "regions.bin").string();
-  if (absl::Status s = WriteRegionsFile(regions_path, regions); !s.ok()) return s;
+  if (absl::Status s = WriteRegionsFile(regions_path, chunks); !s.ok()) return s;
   const auto restore = [&] {
     absl::MutexLock lock(&mu_);
     JobRuntime& rt = runtime_[job_id];

@@ -70,7 +70,7 @@ std::string RecarveKey(const std::vector<RecarveChunk>& chunks, double resolutio
   std::string key = absl::StrCat(resolution_m, ";");
   for (const RecarveChunk& c : chunks) {
     absl::StrAppend(&key, c.chunk.x(), ",", c.chunk.y(), ",", c.chunk.z(), ",",
-                    c.region.depth(), ",", c.region.Encode().size(), ":", c.region.Encode(), ";");
+                    c.depth, ",", c.cells.size(), ":", c.cells, ";");
   }
   return key;
 }
@@ -221,21 +221,21 @@ class MergeCall {
           ctx.TryCancel();
         }
       } else if (msg.has_recarve()) {
-        const pb::RecarveRequest& r = msg.recarve();
+        pb::RecarveRequest& r = *msg.mutable_recarve();
         if (pending.empty() && pending_error.ok()) {
           pending_id = r.request_id();
           pending_resolution = r.resolution_m();
         }
-        for (const pb::RecarveChunk& c : r.chunks()) {
-          absl::StatusOr<ChunkRegion> region = ChunkRegion::Decode(c.region_depth(), c.region());
-          if (!region.ok()) {
-            pending_error = absl::InvalidArgumentError(absl::StrCat(
-                "RecarveRequest chunk (", c.chunk().x(), ",", c.chunk().y(), ",", c.chunk().z(),
-                "): ", region.status().message()));
+        for (pb::RecarveChunk& c : *r.mutable_chunks()) {
+          // Checked, not decoded: the coordinator only writes the regions for the workers.
+          if (absl::Status s = ChunkRegion::CheckEncoding(c.region_depth(), c.region()); !s.ok()) {
+            pending_error = absl::InvalidArgumentError(
+                absl::StrCat("RecarveRequest chunk (", c.chunk().x(), ",", c.chunk().y(), ",",
+                             c.chunk().z(), "): ", s.message()));
             continue;
           }
           pending.push_back(RecarveChunk{ChunkKey(c.chunk().x(), c.chunk().y(), c.chunk().z()),
-                                         *std::move(region)});
+                                         c.region_depth(), std::move(*c.mutable_region())});
         }
         if (!r.last()) continue;
         absl::StatusOr<std::string> dir =

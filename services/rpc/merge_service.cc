@@ -278,8 +278,8 @@ absl::StatusOr<std::string> MergeServer::Impl::Recarve(Stream& stream, uint64_t 
     out->mutable_chunk()->set_x(c.chunk.x());
     out->mutable_chunk()->set_y(c.chunk.y());
     out->mutable_chunk()->set_z(c.chunk.z());
-    out->set_region_depth(c.region.depth());
-    out->set_region(c.region.Encode());
+    out->set_region_depth(c.depth);
+    out->set_region(c.cells);
     bytes += out->region().size() + 32;
     if (bytes >= kRecarvePartBytes && !send(false)) {
       return absl::CancelledError("the coordinator went away");

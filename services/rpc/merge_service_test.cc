@@ -352,7 +352,9 @@ TEST_F(MergeServiceTest, CancellingAlsoWorksBetweenReports) {
 // failure, comes back to the merge.
 TEST_F(MergeServiceTest, RecarveRoundTrip) {
   std::vector<RecarveChunk> asked;
-  for (int i = 0; i < 12; ++i) asked.push_back({ChunkKey(i, -i, 2 * i), PatternRegion(i)});
+  for (int i = 0; i < 12; ++i) {
+    asked.push_back(RecarveChunk::Of(ChunkKey(i, -i, 2 * i), PatternRegion(i)));
+  }
   absl::StatusOr<std::string> first = absl::UnknownError("not called");
   absl::StatusOr<std::string> second = absl::UnknownError("not called");
   auto server = Start([&](const MergeJobRequest& req) -> absl::Status {
@@ -377,9 +379,8 @@ TEST_F(MergeServiceTest, RecarveRoundTrip) {
   EXPECT_DOUBLE_EQ(got[0].second, 0.0078125);
   for (size_t i = 0; i < asked.size(); ++i) {
     EXPECT_EQ(got[0].first[i].chunk, asked[i].chunk);
-    EXPECT_EQ(got[0].first[i].region.depth(), 7);
-    EXPECT_EQ(got[0].first[i].region.count(), asked[i].region.count());
-    EXPECT_EQ(got[0].first[i].region.Encode(), asked[i].region.Encode());
+    EXPECT_EQ(got[0].first[i].depth, 7);
+    EXPECT_EQ(got[0].first[i].cells, asked[i].cells);
   }
   ASSERT_TRUE(first.ok()) << first.status();
   EXPECT_EQ(*first, (root_ / "out" / "object_tiles").string());
@@ -387,12 +388,38 @@ TEST_F(MergeServiceTest, RecarveRoundTrip) {
   EXPECT_THAT(second.status().message(), HasSubstr("attempt 3 of 3 failed"));
 }
 
+// A region whose bits do not fit their depth is refused where it arrives, naming its chunk,
+// and never reaches the coordinator's `recarve`.
+TEST_F(MergeServiceTest, RecarveRefusesARegionThatDoesNotDecode) {
+  std::vector<RecarveChunk> asked = {RecarveChunk::Of(ChunkKey(1, 2, 0), PatternRegion(1)),
+                                     RecarveChunk::Of(ChunkKey(3, -4, 5), PatternRegion(2))};
+  asked[1].cells.resize(asked[1].cells.size() / 2);
+  absl::StatusOr<std::string> answer = absl::UnknownError("not called");
+  auto server = Start([&](const MergeJobRequest& req) -> absl::Status {
+    answer = req.recarve(asked, 0.0078125);
+    return absl::OkStatus();
+  });
+  ASSERT_NE(server, nullptr);
+  int called = 0;
+  MergeJobRequest req = Request(root_ / "out");
+  req.recarve = [&](const std::vector<RecarveChunk>&, double) -> absl::StatusOr<std::string> {
+    ++called;
+    return (root_ / "out" / "object_tiles").string();
+  };
+  absl::Status s = Remote({Address(*server)})(req);
+  ASSERT_TRUE(s.ok()) << s;
+  EXPECT_EQ(called, 0);
+  EXPECT_EQ(answer.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(answer.status().message(), HasSubstr("RecarveRequest chunk (3,-4,5)"));
+  EXPECT_THAT(answer.status().message(), HasSubstr("bytes for depth 7"));
+}
+
 // A merge service lost mid-merge (here shut down; tests/tools/fault_test.py SIGKILLs one):
 // the merge runs again on the next service, and the object chunks already carved again for
 // the lost attempt are not carved a second time.
 TEST_F(MergeServiceTest, ALostServiceIsRetriedOnTheNext) {
-  const std::vector<RecarveChunk> asked = {{ChunkKey(1, 2, 0), PatternRegion(1)},
-                                           {ChunkKey(2, 2, 0), PatternRegion(2)}};
+  const std::vector<RecarveChunk> asked = {RecarveChunk::Of(ChunkKey(1, 2, 0), PatternRegion(1)),
+                                           RecarveChunk::Of(ChunkKey(2, 2, 0), PatternRegion(2))};
   absl::Notification in_first;
   std::atomic<int> first_attempt{0}, second_attempt{0};
   auto a = Start([&](const MergeJobRequest& req) -> absl::Status {

@@ -371,13 +371,13 @@ absl::Status WorkerServer::Impl::Carve(const pb::Lease& lease, pb::TileInfo& til
     slice.own_rays = uint64_t(task.own_rays());
     for (const pb::RowRange& r : task.own()) slice.own.push_back({r.begin(), r.end()});
     for (const pb::RowRange& r : task.read()) slice.read.push_back({r.begin(), r.end()});
-    ChunkRegions regions;
+    RecarveRegionMap regions;
     SliceCarveOptions options;
     options.grid = *grid;
     options.evaluation = evaluation;
     options.memory_budget_bytes = spec_.slice_memory_bytes;
     if (!task.regions_path().empty()) {
-      absl::StatusOr<ChunkRegions> read = ReadRegionsFile(task.regions_path());
+      absl::StatusOr<RecarveRegionMap> read = ReadRegionsFile(task.regions_path());
       if (!read.ok()) return read.status();
       regions = *std::move(read);
       options.regions = &regions;

@@ -615,7 +615,7 @@ void PartialSumsSeeds(const std::vector<Node>& nodes, const fs::path& out) {
   auto writer = PartialSumsWriter::Create(path.string(), grid.chunk_depth, 3);
   Check(writer.status());
   int written = 0;
-  ChunkRegions regions;
+  std::vector<RecarveChunk> regions;
   for (const auto& [chunk, cells] : leaves) {
     if (written++ == 2) break;
     std::vector<TileLeaf> list;
@@ -628,7 +628,7 @@ void PartialSumsSeeds(const std::vector<Node>& nodes, const fs::path& out) {
     }
     Check((*writer)->AddSection(chunk, 40, list));
     Check((*writer)->AddSection(chunk, 1, std::span(list).first(list.size() / 2)));
-    regions.emplace(chunk, ChunkRegion(2, {{0, 0, 0}, {3, 1, 2}}));
+    regions.push_back(RecarveChunk::Of(chunk, ChunkRegion(2, {{0, 0, 0}, {3, 1, 2}})));
   }
   Check((*writer)->Finish().status());
   Check(WriteRegionsFile((out / "regions.bin").string(), regions));

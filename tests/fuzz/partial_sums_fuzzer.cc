@@ -52,13 +52,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     }
   }
   const std::string regions_path = fuzz::WriteInput("regions.bin", data, size);
-  absl::StatusOr<ChunkRegions> regions = ReadRegionsFile(regions_path);
+  absl::StatusOr<RecarveRegionMap> regions = ReadRegionsFile(regions_path);
   if (!regions.ok()) {
     fuzz::Require(regions.status().code() == absl::StatusCode::kDataLoss, "errors are DataLoss");
     fuzz::RequireNamesFile(regions.status(), regions_path);
   } else {
-    for (const auto& [chunk, region] : *regions) {
-      fuzz::Require(region.depth() >= 0 && region.depth() <= ChunkRegion::kMaxDepth, "depths");
+    // What the reader accepts, a slice can decode.
+    for (const auto& [chunk, encoded] : *regions) {
+      fuzz::Require(encoded.chunk == chunk, "each region under its own chunk");
+      absl::StatusOr<ChunkRegion> region = encoded.Decode();
+      fuzz::Require(region.ok(), "accepted regions decode");
+      fuzz::Require(region->depth() >= 0 && region->depth() <= ChunkRegion::kMaxDepth, "depths");
     }
   }
   return 0;

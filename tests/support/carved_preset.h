@@ -81,8 +81,8 @@ inline auto InProcessRecarve(std::string scan_path, std::string tiles_dir, int t
     absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(resolution_m);
     if (!grid.ok()) return grid.status();
     std::filesystem::remove_all(tiles_dir);
-    std::map<ChunkKey, ChunkRegion, ChunkKeyLess> regions;
-    for (const RecarveChunk& c : chunks) regions.emplace(c.chunk, c.region);
+    RecarveRegionMap regions;
+    for (const RecarveChunk& c : chunks) regions.emplace(c.chunk, c);
     ScanCarveOptions carve;
     carve.grid = *grid;
     carve.job_id = "carved_preset";
