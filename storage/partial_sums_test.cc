@@ -12,6 +12,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "storage/crc32c.h"
+
 namespace carvemap {
 namespace {
 
@@ -189,6 +191,23 @@ TEST(PartialSumsTest, RegionsFileRoundTripAndDamage) {
   EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_THAT(std::string(s.message()), testing::HasSubstr("chunk -3,0,7"));
   EXPECT_FALSE(fs::exists(refused));
+  {
+    // A file listing a chunk twice (its CRC right) is damaged: which region counts is not
+    // for the reader to guess.
+    const std::string one = TempPath("regions_one.bin");
+    ASSERT_TRUE(WriteRegionsFile(one, std::vector<RecarveChunk>{regions[1]}).ok());
+    std::ifstream in(one, std::ios::binary);
+    const std::string bytes(std::istreambuf_iterator<char>(in), {});
+    const std::string record = bytes.substr(12, bytes.size() - 16);  // after magic and count
+    std::string twice = bytes.substr(0, 8) + std::string("\x02\0\0\0", 4) + record + record;
+    const uint32_t crc = Crc32c(twice);
+    for (int i = 0; i < 4; ++i) twice.push_back(char((crc >> (8 * i)) & 0xff));
+    const std::string doubled = TempPath("regions_doubled.bin");
+    std::ofstream(doubled, std::ios::binary) << twice;
+    absl::Status read = ReadRegionsFile(doubled).status();
+    EXPECT_EQ(read.code(), absl::StatusCode::kDataLoss) << read;
+    EXPECT_THAT(std::string(read.message()), testing::HasSubstr("chunk -3,0,7 listed twice"));
+  }
   std::string bytes;
   {
     std::ifstream in(path, std::ios::binary);
