@@ -14,8 +14,9 @@ class RateWindow {
  public:
   using Time = std::chrono::steady_clock::time_point;
 
-  // Rates over the last `window_s` seconds (> 0).
-  explicit RateWindow(double window_s = 10.0) : window_(window_s) {}
+  // Rates over the last `window_s` seconds (> 0). The default spans six of a worker's 5-s
+  // heartbeats: over two, the rate swung with when a batch's chunks happened to be carved.
+  explicit RateWindow(double window_s = 30.0) : window_(window_s) {}
 
   // `amount` more was done by `now` (times non-decreasing).
   void Add(Time now, double amount);

@@ -101,6 +101,9 @@ struct SliceCarver::Impl {
   std::vector<uint64_t> next_row;
   int64_t batch = 0;           // the batch own frames go to now
   uint64_t batch_own_rays = 0;  // own rays in it so far
+  std::vector<uint64_t> own_rays_of_batch;  // by batch index
+  uint64_t own_rays_carved = 0;             // of the batches carved whole
+  std::function<void(uint64_t)> progress;
 
   std::deque<Batch> open;  // oldest first
   int64_t carved_up_to = -1;  // batches up to this one are carved
@@ -268,9 +271,14 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
 absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
   ++stats.batches;
   carved_up_to = batch.index;
+  const uint64_t own =
+      size_t(batch.index) < own_rays_of_batch.size() ? own_rays_of_batch[batch.index] : 0;
+  uint64_t pairs = 0, pairs_done = 0;
+  for (const auto& [chunk, wedges] : batch.chunks) pairs += wedges.size();
   // A chunk's rays are numbered in the order its wedges first name them, each once.
   local_of.assign(batch.rays.size(), kNoRay);
   for (auto& [chunk, wedges] : batch.chunks) {
+    pairs_done += wedges.size();
     auto [it, inserted] = trees.try_emplace(chunk, options.grid, chunk);
     ChunkOctree& tree = it->second;
     if (inserted) {
@@ -310,7 +318,12 @@ absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
     if (tree_bytes > options.memory_budget_bytes) {
       if (absl::Status s = Flush(); !s.ok()) return s;
     }
+    if (progress) {
+      progress(own_rays_carved + uint64_t(double(own) * double(pairs_done) / double(pairs)));
+    }
   }
+  own_rays_carved += own;
+  if (progress) progress(own_rays_carved);
   return absl::OkStatus();
 }
 
@@ -424,6 +437,8 @@ absl::Status SliceCarver::AddFrame(const ScanFrame& frame, const FrameContext& c
     }
     m.frame_batch[s][frame.row - m.slice.own[s].begin] = m.batch;
     m.batch_own_rays += frame.points_sensor.size();
+    if (m.own_rays_of_batch.size() <= size_t(m.batch)) m.own_rays_of_batch.resize(m.batch + 1, 0);
+    m.own_rays_of_batch[m.batch] += frame.points_sensor.size();
     m.last_batch_fed[s] = m.batch;
     ++m.stats.frames;
     m.stats.rays += frame.points_sensor.size();
@@ -442,7 +457,14 @@ absl::StatusOr<SliceCarveStats> SliceCarver::Finish() {
   if (absl::Status s = m.CarveCompleteBatches(true); !s.ok()) return s;
   if (absl::Status s = m.Flush(); !s.ok()) return s;
   m.stats.leaf_updates = m.flushed_updates;
+  // Own rays of batches no wedge reached were never carved, but are done.
+  m.own_rays_carved = m.stats.rays;
+  if (m.progress) m.progress(m.own_rays_carved);
   return m.stats;
+}
+
+void SliceCarver::SetProgress(std::function<void(uint64_t)> progress) {
+  impl_->progress = std::move(progress);
 }
 
 ScanReader::OpenOptions SliceOpenOptions(const ScanSlice& slice) {
@@ -475,9 +497,7 @@ absl::StatusOr<SliceCarveStats> CarveSliceToFile(ScanReader& reader, const ScanS
     if (!s.ok()) return s.status();
     stream = *std::move(s);
   }
-  using Clock = std::chrono::steady_clock;
-  Clock::time_point last_report = Clock::now();
-  uint64_t own_rays = 0;
+  if (progress) (*carver)->SetProgress(progress);
   ScanFrame frame;
   while (true) {
     absl::StatusOr<bool> more;
@@ -495,19 +515,11 @@ absl::StatusOr<SliceCarveStats> CarveSliceToFile(ScanReader& reader, const ScanS
     if (absl::Status s = (*carver)->AddFrame(frame, *ctx); !s.ok()) {
       return absl::Status(s.code(), absl::StrCat(reader.file(), ": ", s.message()));
     }
-    if (frame.row >= slice.own[frame.sensor].begin && frame.row < slice.own[frame.sensor].end) {
-      own_rays += frame.points_sensor.size();
-    }
-    if (progress && Clock::now() - last_report > std::chrono::milliseconds(250)) {
-      last_report = Clock::now();
-      progress(own_rays);
-    }
   }
   absl::StatusOr<SliceCarveStats> stats = (*carver)->Finish();
   if (!stats.ok()) return stats.status();
   stats->default_covariance = cov.empty();
   if (absl::StatusOr<uint64_t> bytes = (*writer)->Finish(); !bytes.ok()) return bytes.status();
-  if (progress) progress(own_rays);
   return stats;
 }
 

@@ -82,6 +82,11 @@ class SliceCarver {
   absl::Status AddFrame(const ScanFrame& frame, const FrameContext& context);
   // Carves what is left and flushes every chunk. Call once, after the last frame.
   absl::StatusOr<SliceCarveStats> Finish();
+  // `progress` gets the slice's own rays carved so far, after every chunk a batch carves: a
+  // batch's own rays count in proportion to its (wedge, chunk) pairs carved, so the count
+  // moves while a batch is carved (seconds at the rig's rate), not when its frames are read.
+  // Finish ends it at SliceCarveStats::rays.
+  void SetProgress(std::function<void(uint64_t own_rays_carved)> progress);
 
  private:
   struct Impl;
@@ -96,7 +101,7 @@ class SliceCarver {
 // The I/O around it: streams slice.read from `reader` (opened with SliceOpenOptions, or with
 // the whole path), writes the sections to `partial_path`
 // (storage/partial_sums.h, atomically: nothing under that name unless complete). `progress`,
-// if set, gets the own rays read so far, about every 0.25 s. REQUIRES: HDF5 calls serialized
+// if set, gets the own rays carved so far (SliceCarver::SetProgress). REQUIRES: HDF5 calls serialized
 // (scan_reader.h): the reader is used from this thread only.
 absl::StatusOr<SliceCarveStats> CarveSliceToFile(
     ScanReader& reader, const ScanSlice& slice, const SliceCarveOptions& options,

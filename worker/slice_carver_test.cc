@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
 #include <span>
 #include <sstream>
 #include <string>
@@ -258,6 +259,59 @@ TEST_F(SliceCarverTest, TheBudgetIsCheckedAfterEachChunkOfABatch) {
   EXPECT_EQ(c.batches, 1u);
   EXPECT_GE(c.flushes, 4u);
   ExpectSameTiles(*reference_, c.tiles, 1e-12);
+}
+
+// The progress moves while a batch is carved, chunk by chunk: with the whole slice in one
+// batch, counting at the frames read would jump from 0 to all before the carve began.
+TEST_F(SliceCarverTest, ProgressCountsRaysAsTheirChunksAreCarved) {
+  SliceCarveOptions o = Options(CarveEvaluation::kFast);
+  o.batch_rays = uint64_t{1} << 40;
+  absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(*scan_);
+  ASSERT_TRUE(reader.ok()) << reader.status();
+  std::vector<std::vector<FrameRecord>> frames;
+  std::vector<SensorKind> kinds;
+  for (size_t s = 0; s < (*reader)->sensors().size(); ++s) {
+    frames.push_back(*(*reader)->FrameRecords(int(s)));
+    kinds.push_back((*reader)->sensors()[s].kind);
+  }
+  absl::StatusOr<std::vector<ScanSlice>> slices = PlanSlices(frames, kinds, 1e6);
+  ASSERT_TRUE(slices.ok()) << slices.status();
+  ASSERT_EQ(slices->size(), 1u);
+  // Fed frame by frame, as CarveSliceToFile does, with the one batch carved by Finish.
+  const ScanSlice& slice = slices->front();
+  absl::StatusOr<std::unique_ptr<SliceCarver>> carver = SliceCarver::Create(
+      (*reader)->sensors(), slice, o,
+      [](const ChunkKey&, uint64_t, std::span<const TileLeaf>) { return absl::OkStatus(); });
+  ASSERT_TRUE(carver.ok()) << carver.status();
+  std::vector<uint64_t> seen;
+  (*carver)->SetProgress([&seen](uint64_t rays) { seen.push_back(rays); });
+  absl::StatusOr<std::unique_ptr<ScanReader::FrameStream>> stream =
+      (*reader)->StreamFrames(slice.read);
+  ASSERT_TRUE(stream.ok()) << stream.status();
+  std::span<const PathCovariance> cov;
+  if ((*reader)->path_covariance().has_value()) cov = *(*reader)->path_covariance();
+  ScanFrame frame;
+  while (true) {
+    absl::StatusOr<bool> more = (*stream)->Next(frame);
+    ASSERT_TRUE(more.ok()) << more.status();
+    if (!*more) break;
+    absl::StatusOr<FrameContext> ctx =
+        FrameContextAt((*reader)->timed_path(), cov, frame.t, o.wedges.noise);
+    ASSERT_TRUE(ctx.ok()) << ctx.status();
+    ASSERT_TRUE((*carver)->AddFrame(frame, *ctx).ok());
+  }
+  EXPECT_TRUE(seen.empty()) << "progress before any chunk was carved: " << seen.front();
+  absl::StatusOr<SliceCarveStats> st = (*carver)->Finish();
+  ASSERT_TRUE(st.ok()) << st.status();
+  EXPECT_EQ(st->batches, 1u);
+  ASSERT_FALSE(seen.empty());
+  EXPECT_EQ(seen.back(), st->rays);
+  EXPECT_TRUE(std::is_sorted(seen.begin(), seen.end()));
+  std::set<uint64_t> between;
+  for (uint64_t r : seen) {
+    if (r > 0 && r < st->rays) between.insert(r);
+  }
+  EXPECT_GE(between.size(), 10u) << "of " << st->rays << " rays";
 }
 
 // The same slices carved in another order (as workers finish them) give the same bytes.
