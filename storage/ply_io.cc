@@ -3,6 +3,7 @@
 #include <bit>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <ostream>
 #include <sstream>
 
@@ -42,6 +43,45 @@ absl::Status WritePly(const std::string& path, const TriangleMesh& mesh,
       out.write(reinterpret_cast<const char*>(&three), 1);
       out.write(reinterpret_cast<const char*>(mesh.triangles[i].data()), 3 * sizeof(int));
       if (face_values) out.write(reinterpret_cast<const char*>(&(*face_values)[i]), sizeof(int));
+    }
+  });
+}
+
+absl::Status WritePlyParts(const std::string& path, std::span<const PlyPart> parts,
+                           const std::string& face_property) {
+  static_assert(std::endian::native == std::endian::little, "PLY writer assumes little-endian");
+  size_t vertices = 0, triangles = 0;
+  for (const PlyPart& part : parts) {
+    vertices += part.mesh->vertices.size();
+    triangles += part.mesh->triangles.size();
+  }
+  if (vertices > size_t(std::numeric_limits<int>::max())) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": ", vertices, " vertices do not fit PLY's int indices"));
+  }
+  return WriteFileAtomically(path, [&](std::ostream& out) {
+    out << "ply\nformat binary_little_endian 1.0\ncomment carvemap\n"
+        << "element vertex " << vertices << "\n"
+        << "property float x\nproperty float y\nproperty float z\n"
+        << "element face " << triangles << "\n"
+        << "property list uchar int vertex_indices\n"
+        << "property int " << face_property << "\n"
+        << "end_header\n";
+    for (const PlyPart& part : parts) {
+      for (const Eigen::Vector3f& v : part.mesh->vertices) {
+        out.write(reinterpret_cast<const char*>(v.data()), 3 * sizeof(float));
+      }
+    }
+    const unsigned char three = 3;
+    int offset = 0;
+    for (const PlyPart& part : parts) {
+      for (const Eigen::Vector3i& t : part.mesh->triangles) {
+        const Eigen::Vector3i shifted = (t.array() + offset).matrix();
+        out.write(reinterpret_cast<const char*>(&three), 1);
+        out.write(reinterpret_cast<const char*>(shifted.data()), 3 * sizeof(int));
+        out.write(reinterpret_cast<const char*>(&part.face_value), sizeof(int));
+      }
+      offset += int(part.mesh->vertices.size());
     }
   });
 }

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <optional>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -27,6 +28,18 @@ struct TriangleMesh {
 absl::Status WritePly(const std::string& path, const TriangleMesh& mesh,
                       const std::vector<int>* face_values = nullptr,
                       const std::string& face_property = "label");
+
+// One mesh of several written as one PLY (WritePlyParts); its triangles carry `face_value`.
+struct PlyPart {
+  const TriangleMesh* mesh = nullptr;
+  int face_value = 0;
+};
+
+// The same bytes as WritePly of the parts appended in order (TriangleMesh::Append), each
+// part's triangles with its face_value, without making that mesh: a large building's objects
+// are hundreds of MB, and objects.ply and combined.ply are each all of them.
+absl::Status WritePlyParts(const std::string& path, std::span<const PlyPart> parts,
+                           const std::string& face_property);
 
 // A mesh read back from PLY, with its integer face properties by name.
 struct PlyMesh {

@@ -57,6 +57,33 @@ TEST(PlyIoTest, FaceValuesAndAppend) {
   EXPECT_EQ(WritePly(path, a, &wrong).code(), absl::StatusCode::kInvalidArgument);
 }
 
+// Parts written as one file: the very bytes of their concatenation with per-face values.
+TEST(PlyIoTest, PartsAreTheirConcatenation) {
+  TriangleMesh a, b, c;
+  a.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
+  a.triangles = {{0, 1, 2}, {2, 1, 3}};
+  b.vertices = {{5, 5, 5}, {6, 5, 5}, {5, 6, 5}};
+  b.triangles = {{0, 2, 1}};
+  c.vertices = {{-1, -2, -3}, {-1, -2, 4}, {-1, 7, -3}};
+  c.triangles = {{1, 0, 2}};
+  TriangleMesh whole = a;
+  whole.Append(b);
+  whole.Append(TriangleMesh{});
+  whole.Append(c);
+  const std::vector<int> values = {-1, -1, 4, 11};
+  const std::string dir = testing::TempDir();
+  ASSERT_TRUE(WritePly(dir + "/whole.ply", whole, &values, "object").ok());
+  const TriangleMesh empty;
+  const std::vector<PlyPart> parts = {{&a, -1}, {&b, 4}, {&empty, 8}, {&c, 11}};
+  ASSERT_TRUE(WritePlyParts(dir + "/parts.ply", parts, "object").ok());
+  EXPECT_EQ(ReadAll(dir + "/parts.ply"), ReadAll(dir + "/whole.ply"));
+  // No parts: a valid empty mesh, as WritePly writes one.
+  const std::vector<int> none;
+  ASSERT_TRUE(WritePly(dir + "/empty_whole.ply", TriangleMesh{}, &none, "object").ok());
+  ASSERT_TRUE(WritePlyParts(dir + "/empty_parts.ply", {}, "object").ok());
+  EXPECT_EQ(ReadAll(dir + "/empty_parts.ply"), ReadAll(dir + "/empty_whole.ply"));
+}
+
 TEST(PlyIoTest, UnwritableDirectoryIsAClearError) {
   TriangleMesh mesh;
   absl::Status s = WritePly("/nonexistent-dir/x.ply", mesh);

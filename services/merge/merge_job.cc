@@ -532,6 +532,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
     absl::StatusOr<DenseMeshResult> dense =
         BuildDenseMesh(**otiles, StageProgress(progress, "object_mesh"), MergeThreads(options));
     if (!dense.ok()) return dense.status();
+    if (absl::Status s = ReportMergeProgress(progress, "object_split", 0, 1); !s.ok()) return s;
     objects = SplitObjects(dense->mesh, source.finer_volume ? *source.finer_volume : *volume,
                            SplitOptionsFor(options, grid), &split_report);
   }
@@ -543,11 +544,17 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
     return absl::UnavailableError(
         absl::StrCat(objects_dir.string(), ": cannot create: ", ec.message()));
   }
-  TriangleMesh all_objects;
-  std::vector<int> object_of_face;
+  uint64_t object_triangles = 0;
   uint64_t objects_crossing = 0;  // objects whose mesh crosses itself: one warning for all
   nlohmann::json listed = nlohmann::json::array();
-  for (SegmentedObject& o : objects) {
+  // Each object's file and self-intersection check: minutes on a large building (office4
+  // 10 Hz: 1,250 objects, 19.5 M triangles), so a stage of its own with a count to go by.
+  for (size_t i = 0; i < objects.size(); ++i) {
+    if (absl::Status s = ReportMergeProgress(progress, "object_files", i, objects.size());
+        !s.ok()) {
+      return s;
+    }
+    SegmentedObject& o = objects[i];
     const std::string name = absl::StrCat("mesh/objects/", o.id, ".ply");
     if (absl::Status s = WritePly((out / name).string(), o.mesh); !s.ok()) return s;
     // Each object on its own: objects that touch one another are separate models.
@@ -555,8 +562,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
       ++objects_crossing;
     }
     outputs.push_back(name);
-    all_objects.Append(o.mesh);
-    object_of_face.insert(object_of_face.end(), o.mesh.triangles.size(), o.id);
+    object_triangles += o.mesh.triangles.size();
     listed.push_back({{"id", o.id},
                       {"level", o.level},
                       {"room", o.room},
@@ -565,7 +571,6 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
                       {"volume_m3", o.volume_m3},
                       {"triangles", o.mesh.triangles.size()},
                       {"mesh", name}});
-    o.mesh = TriangleMesh{};  // in all_objects now
   }
   if (objects_crossing > 0) {
     warnings.push_back(absl::StrCat("objects: the meshes of ", objects_crossing, " objects cross "
@@ -573,26 +578,26 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
                                                                  uint64_t{0}),
                                     " pairs of triangles)"));
   }
-  if (absl::Status s = WritePly((out / "mesh" / "objects.ply").string(), all_objects,
-                                &object_of_face, "object");
+  // objects.ply and combined.ply (face property `object`: −1 for the building) are written
+  // from the objects' own meshes, not from copies of them joined.
+  std::vector<PlyPart> parts;
+  parts.push_back({&*building, -1});
+  for (const SegmentedObject& o : objects) parts.push_back({&o.mesh, o.id});
+  if (absl::Status s = WritePlyParts((out / "mesh" / "objects.ply").string(),
+                                     std::span(parts).subspan(1), "object");
       !s.ok()) {
     return s;
   }
   outputs.push_back("mesh/objects.ply");
-  // combined = building + objects; face property `object`: −1 for the building.
-  TriangleMesh combined = *std::move(building);
-  std::vector<int> combined_object(combined.triangles.size(), -1);
-  combined.Append(all_objects);
-  combined_object.insert(combined_object.end(), object_of_face.begin(), object_of_face.end());
-  if (absl::Status s = WritePly((out / "mesh" / "combined.ply").string(), combined,
-                                &combined_object, "object");
+  if (absl::Status s = ReportMergeProgress(progress, "combined_ply", 0, 1); !s.ok()) return s;
+  if (absl::Status s = WritePlyParts((out / "mesh" / "combined.ply").string(), parts, "object");
       !s.ok()) {
     return s;
   }
   outputs.push_back("mesh/combined.ply");
   job["objects"] = listed;
   counts["objects"] = objects.size();
-  counts["object_triangles"] = all_objects.triangles.size();
+  counts["object_triangles"] = object_triangles;
   counts["object_components"] = split_report.components;
   counts["objects_dropped_small"] = split_report.dropped_small;
   counts["objects_dropped_cavities"] = split_report.dropped_cavities;

@@ -110,10 +110,30 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   m.object_resolution_m = EnvOr("CARVEMAP_SEG_OBJECT_RES", pc.object_resolution_m);
   m.recarve = testing::InProcessRecarve(carved->scan_path, root + "/object_tiles", o.threads);
   m.trimmed_points = pc.trimmed_points;  // §5.5 for the point cloud too (checked below)
-  absl::StatusOr<MergeSummary> merged = RunMerge(m);
+  // The stages after the objects' dense mesh, and each object counted as it is written.
+  std::vector<std::string> late_stages;
+  std::vector<uint64_t> files_done;
+  uint64_t files_total = 0;
+  absl::StatusOr<MergeSummary> merged = RunMerge(m, [&](const MergeProgress& p) {
+    const bool late = p.stage == "object_split" || p.stage == "object_files" ||
+                      p.stage == "combined_ply";
+    if (late && (late_stages.empty() || late_stages.back() != p.stage)) {
+      late_stages.push_back(p.stage);
+    }
+    if (p.stage == "object_files") {
+      files_done.push_back(p.done);
+      files_total = p.total;
+    }
+    return true;
+  });
   ASSERT_TRUE(merged.ok()) << merged.status();
   const auto t2 = std::chrono::steady_clock::now();
   const nlohmann::json& job = merged->job;
+  EXPECT_EQ(late_stages,
+            (std::vector<std::string>{"object_split", "object_files", "combined_ply"}));
+  EXPECT_EQ(files_total, job.at("objects").size());
+  EXPECT_EQ(files_done.size(), files_total);
+  EXPECT_TRUE(std::is_sorted(files_done.begin(), files_done.end()));
   for (const auto& w : job.value("warnings", nlohmann::json::array())) {
     std::printf("[%s] warning: %s\n", pc.name, w.get<std::string>().c_str());
   }
