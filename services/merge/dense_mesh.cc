@@ -52,7 +52,7 @@ absl::StatusOr<DenseMeshResult> BuildDenseMesh(TileSet& tiles, const ChunkProgre
       progress, "dense_mesh");
   if (!s.ok()) return s;
   result.chunks = chunks.size();
-  result.mesh = WeldChunkMeshes(meshes, &result.vertex_observed);
+  result.mesh = WeldChunkMeshes(std::move(meshes), &result.vertex_observed);
   return result;
 }
 

@@ -78,7 +78,8 @@ struct ChunkMesh {
 // order. The result is watertight when the chunks cover every chunk that owns a corner of an
 // interior cell (DenseMeshChunks).
 // `vertex_observed`, when given, receives ChunkMesh::vertex_observed per welded vertex.
-[[nodiscard]] TriangleMesh WeldChunkMeshes(std::span<const ChunkMesh> chunks,
+// The chunks are taken (moved in), and each one's arrays are freed as soon as they are used.
+[[nodiscard]] TriangleMesh WeldChunkMeshes(std::vector<ChunkMesh> chunks,
                                            std::vector<uint8_t>* vertex_observed = nullptr);
 
 // The chunks whose corners may touch an interior cell of a tile in `tile_chunks`: each tile's

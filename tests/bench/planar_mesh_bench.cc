@@ -193,8 +193,10 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "dense: %s\n", std::string(d.status().message()).c_str());
       return 1;
     }
+    const double dense_s = CpuSeconds() - t;
+    PrintMemory("dense mesh");  // before the check, whose edge map is larger than the weld
     std::printf("dense mesh %zu triangles in %.2f s cpu: %s\n", d->mesh.triangles.size(),
-                CpuSeconds() - t, CheckMesh(d->mesh).ToString().c_str());
+                dense_s, CheckMesh(d->mesh).ToString().c_str());
     if (!gt.empty() && planar.ok()) {
       const testing::TruthDistance to_planar(testing::MeshTriangles(planar->mesh), 0.25, 0.2);
       const testing::TruthDistance to_dense(testing::MeshTriangles(d->mesh), 0.25, 0.2);
