@@ -304,6 +304,8 @@ class CoordinatorServer::Impl {
     int64_t rays_to_carve = 0;  // the slices' own rays, planned
     // Rays as the workers' heartbeats report them, mid-slice too: the live rate.
     RateWindow carve_rate;
+    // Tasks completed: the ETA once every ray is carved and the chunks' combines remain.
+    RateWindow task_rate;
     // What the slices of the job's carve measured (job.json "carve"): frames, rays, returns,
     // wedges, wedge-chunk pairs, votes, partial bytes; from `slices_counted` slices (fewer
     // than all after a restart: then job.json has no counts).
@@ -1098,6 +1100,7 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
     rt.rays_carved = saved.rays_carved;
     rt.rays_to_carve = saved.rays_to_carve;
     rt.carve_rate = saved.carve_rate;
+    rt.task_rate = saved.task_rate;
     rt.pass = 0;
     rt.pass_dir = saved.partials_dir;
     rt.regions_path.clear();
@@ -1117,6 +1120,7 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
     rt.pass_chunks = keys;
     rt.rays_carved = 0;
     rt.carve_rate = RateWindow();
+    rt.task_rate = RateWindow();
     // The pass's slices: tasks of their own, or those of an earlier pass of this number (a
     // merge retried) put back in the queue.
     std::vector<ChunkRecord> fresh;
@@ -1637,7 +1641,14 @@ bool CoordinatorServer::Impl::WriteProgress(grpc::ServerWriter<pb::JobEvent>& wr
           p->set_rays_done(int64_t(done));
           p->set_rays_total(int64_t(total));
           p->set_rays_per_s(rate);
-          if (rate > 0) p->set_eta_s((total - done) / rate);
+          const int64_t tasks_left = job->counters.chunks_total - job->counters.chunks_done;
+          if (done >= total && tasks_left > 0) {
+            // Every ray carved: what is left are the chunks' combines, at their own rate.
+            const double tasks_per_s = r.task_rate.Rate(now);
+            if (tasks_per_s > 0) p->set_eta_s(double(tasks_left) / tasks_per_s);
+          } else if (rate > 0) {
+            p->set_eta_s((total - done) / rate);
+          }
         } else if (state == JobState::kMerging && r.merge_total > 0) {
           p->set_stage_done(int64_t(r.merge_done));
           p->set_stage_total(int64_t(r.merge_total));
@@ -1947,6 +1958,7 @@ absl::Status CoordinatorServer::Impl::CompleteChunk(const pb::CompleteChunkReque
   TasksChanged();
   JobRuntime& rt = runtime_[job_id];
   rt.rays_carved += req.stats().rays();
+  rt.task_rate.Add(std::chrono::steady_clock::now(), 1);
   metrics_.ChunkCompleted(req.stats().rays());
   if (rt.pass == 0 && req.stats().rays() > 0) {
     // A slice of the job's carve: its counts for job.json "carve".

@@ -300,7 +300,12 @@ std::string FormatProgress(const WatchUpdate& u) {
     absl::StrAppend(&line, " [", std::string(filled, '#'), std::string(kWidth - filled, '.'), "] ");
     // Tasks: a carve's slices, then its chunks (docs/RPC.md "Slices").
     absl::StrAppendFormat(&line, "%d/%d tasks", u.chunks_done, u.chunks_total);
-    if (u.state == "CARVING" || u.rays_per_s > 0) {
+    if (u.rays_total > 0 && u.rays_done >= u.rays_total && u.chunks_done < u.chunks_total) {
+      // Every ray carved: the tasks left add up the chunks' partial sums.
+      absl::StrAppendFormat(&line, "  %.1f M rays carved, combining chunks  %d worker(s)",
+                            u.rays_total * 1e-6, u.active_workers);
+      eta(line);
+    } else if (u.state == "CARVING" || u.rays_per_s > 0) {
       absl::StrAppendFormat(&line, "  %.1f/%.1f M rays  %.2f M rays/s  %d worker(s)",
                             u.rays_done * 1e-6, u.rays_total * 1e-6, u.rays_per_s * 1e-6,
                             u.active_workers);

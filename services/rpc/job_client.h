@@ -86,8 +86,10 @@ class JobClient {
   std::unique_ptr<Impl> impl_;
 };
 
-// "carve  12/40 chunks  1.2 M rays/s  ETA 0:14" for a progress line; `elapsed_s` is the time
-// since the watch began.
+// One progress line: the state, the tasks done, then while carving the rays carved and their
+// rate ("CARVING   [###.....] 2/9 tasks  3.8/9.5 M rays  0.08 M rays/s  2 worker(s)  ETA 1:09"),
+// once every ray is carved the chunks' combines ("9.5 M rays carved, combining chunks"), while
+// merging the stage's own counts; each with its ETA, and the running stage and its seconds.
 std::string FormatProgress(const WatchUpdate& u);
 // One line per job for `list`/`status`.
 std::string FormatJob(const JobInfo& job);
