@@ -1,8 +1,10 @@
 #include "services/segment/object_meshes.h"
 
 #include <algorithm>
+#include <cmath>
 #include <tuple>
 
+#include "absl/container/flat_hash_map.h"
 #include "services/geometry/union_find.h"
 
 namespace carvemap {
@@ -29,6 +31,41 @@ double FootprintOverlap(const Eigen::AlignedBox3d& a, const Eigen::AlignedBox3d&
   return smaller > 0 ? i.volume() / smaller : 0;
 }
 
+// The pieces whose footprints could overlap a box's, on its level: the members' footprints
+// bucketed on an xy grid. Why: a building's finer re-carve leaves hundreds of thousands of
+// specks, and testing each against every piece grows with their product.
+class FootprintGrid {
+ public:
+  static constexpr double kCellM = 0.5;
+
+  void Add(int index, const SegmentedObject& piece) {
+    ForCells(piece.box, [&](int64_t x, int64_t y) { cells_[{piece.level, x, y}].push_back(index); });
+  }
+
+  // Members sharing a cell with `box` on `level`, in increasing order, each once.
+  void Candidates(const Eigen::AlignedBox3d& box, int level, std::vector<int>& out) const {
+    out.clear();
+    ForCells(box, [&](int64_t x, int64_t y) {
+      if (auto it = cells_.find({level, x, y}); it != cells_.end()) {
+        out.insert(out.end(), it->second.begin(), it->second.end());
+      }
+    });
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+  }
+
+ private:
+  template <typename F>
+  static void ForCells(const Eigen::AlignedBox3d& box, F&& f) {
+    const auto cell = [](double v) { return static_cast<int64_t>(std::floor(v / kCellM)); };
+    for (int64_t y = cell(box.min().y()); y <= cell(box.max().y()); ++y) {
+      for (int64_t x = cell(box.min().x()); x <= cell(box.max().x()); ++x) f(x, y);
+    }
+  }
+
+  absl::flat_hash_map<std::tuple<int, int64_t, int64_t>, std::vector<int>> cells_;
+};
+
 // Pieces on one level stacked over each other (footprints overlapping by stack_overlap of the
 // smaller, vertical gap at most stack_gap_m) become one object, transitively.
 std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
@@ -46,21 +83,29 @@ std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
     const double overlap = FootprintOverlap(a, b);
     return gap <= options.stack_gap_m && overlap >= options.stack_overlap ? overlap : 0.0;
   };
+  // Only footprints that overlap stack, so only pieces sharing a grid cell need the test.
   std::vector<bool> small(n);
-  for (int i = 0; i < n; ++i) small[i] = Speck(pieces[i], options);
+  FootprintGrid footprints;
   for (int i = 0; i < n; ++i) {
-    for (int j = i + 1; j < n; ++j) {
-      if (!small[i] && !small[j] && stacked(i, j) > 0) groups.Union(i, j);
+    small[i] = Speck(pieces[i], options);
+    if (!small[i]) footprints.Add(i, pieces[i]);
+  }
+  std::vector<int> near;
+  for (int i = 0; i < n; ++i) {
+    if (small[i]) continue;
+    footprints.Candidates(pieces[i].box, pieces[i].level, near);
+    for (int j : near) {
+      if (j > i && stacked(i, j) > 0) groups.Union(i, j);
     }
   }
   // A speck joins the one object it overlaps most, so specks never link two objects (a desk
-  // and the chair beside it share specks in the gap between them).
+  // and the chair beside it share specks in the gap between them). Ties go to the first piece.
   for (int i = 0; i < n; ++i) {
     if (!small[i]) continue;
     int best = -1;
     double best_overlap = 0;
-    for (int j = 0; j < n; ++j) {
-      if (small[j]) continue;
+    footprints.Candidates(pieces[i].box, pieces[i].level, near);
+    for (int j : near) {
       if (const double o = stacked(i, j); o > best_overlap) best = j, best_overlap = o;
     }
     if (best >= 0) groups.Union(i, best);

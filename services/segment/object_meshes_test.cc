@@ -117,6 +117,26 @@ TEST_F(ObjectMeshesTest, StackedPiecesAreOneObject) {
   EXPECT_EQ(SplitObjects(all, volume_, pieces).size(), 7u);
 }
 
+// Pieces are matched wherever their footprints meet, not only near their corners: a cabinet
+// and a speck under and over the far end of a 3.6 m table join it; a speck as far from
+// everything stays alone and is dropped.
+TEST_F(ObjectMeshesTest, PiecesStackWhereverTheirFootprintsMeet) {
+  TriangleMesh all;
+  all.Append(InwardBox({0.2f, 0.2f, 0.7f}, {3.8f, 3.8f, 0.75f}));     // a table top
+  all.Append(InwardBox({3.3f, 3.3f, 0.0f}, {3.7f, 3.7f, 0.6f}));      // a cabinet under it
+  all.Append(InwardBox({3.6f, 0.3f, 0.8f}, {3.63f, 0.33f, 0.83f}));   // a speck on it
+  all.Append(InwardBox({6.0f, 3.0f, 0.8f}, {6.03f, 3.03f, 0.83f}));   // a speck alone
+  ObjectSplitReport report;
+  const std::vector<SegmentedObject> objects =
+      SplitObjects(all, volume_, ObjectSplitOptions{}, &report);
+  EXPECT_EQ(report.grouped, 2u);
+  EXPECT_EQ(report.dropped_small, 1u);
+  ASSERT_EQ(objects.size(), 1u);
+  EXPECT_TRUE(objects[0].box.isApprox(
+      Eigen::AlignedBox3d(Eigen::Vector3d(0.2, 0.2, 0), Eigen::Vector3d(3.8, 3.8, 0.83)), 1e-6));
+  EXPECT_EQ(objects[0].mesh.triangles.size(), 3u * 12u);
+}
+
 TEST_F(ObjectMeshesTest, EmptyMeshHasNoObjects) {
   ObjectSplitReport report;
   EXPECT_TRUE(SplitObjects(TriangleMesh{}, volume_, ObjectSplitOptions{}, &report).empty());
