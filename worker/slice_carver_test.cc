@@ -103,6 +103,19 @@ class SliceCarverTest : public ::testing::Test {
     delete reference_;
   }
 
+  // The reader's scan cut into slices of `slice_s`.
+  static absl::StatusOr<std::vector<ScanSlice>> SlicesOf(ScanReader& reader, double slice_s) {
+    std::vector<std::vector<FrameRecord>> frames;
+    std::vector<SensorKind> kinds;
+    for (size_t s = 0; s < reader.sensors().size(); ++s) {
+      absl::StatusOr<std::vector<FrameRecord>> rows = reader.FrameRecords(int(s));
+      if (!rows.ok()) return rows.status();
+      frames.push_back(*std::move(rows));
+      kinds.push_back(reader.sensors()[s].kind);
+    }
+    return PlanSlices(frames, kinds, slice_s);
+  }
+
   // Plans slices of `slice_s`, carves them in `order` (indices into the plan) with `options`,
   // combines every chunk; returns the tiles by chunk and the partial files by slice.
   struct Carved {
@@ -117,13 +130,7 @@ class SliceCarverTest : public ::testing::Test {
     Carved out;
     absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(*scan_);
     EXPECT_TRUE(reader.ok()) << reader.status();
-    std::vector<std::vector<FrameRecord>> frames;
-    std::vector<SensorKind> kinds;
-    for (size_t s = 0; s < (*reader)->sensors().size(); ++s) {
-      frames.push_back(*(*reader)->FrameRecords(int(s)));
-      kinds.push_back((*reader)->sensors()[s].kind);
-    }
-    absl::StatusOr<std::vector<ScanSlice>> slices = PlanSlices(frames, kinds, slice_s);
+    absl::StatusOr<std::vector<ScanSlice>> slices = SlicesOf(**reader, slice_s);
     EXPECT_TRUE(slices.ok()) << slices.status();
     out.slices = slices->size();
     const std::string dir = *root_ + "/" + name;
@@ -268,13 +275,7 @@ TEST_F(SliceCarverTest, ProgressCountsRaysAsTheirChunksAreCarved) {
   o.batch_rays = uint64_t{1} << 40;
   absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(*scan_);
   ASSERT_TRUE(reader.ok()) << reader.status();
-  std::vector<std::vector<FrameRecord>> frames;
-  std::vector<SensorKind> kinds;
-  for (size_t s = 0; s < (*reader)->sensors().size(); ++s) {
-    frames.push_back(*(*reader)->FrameRecords(int(s)));
-    kinds.push_back((*reader)->sensors()[s].kind);
-  }
-  absl::StatusOr<std::vector<ScanSlice>> slices = PlanSlices(frames, kinds, 1e6);
+  absl::StatusOr<std::vector<ScanSlice>> slices = SlicesOf(**reader, 1e6);
   ASSERT_TRUE(slices.ok()) << slices.status();
   ASSERT_EQ(slices->size(), 1u);
   // Fed frame by frame, as CarveSliceToFile does, with the one batch carved by Finish.

@@ -6,7 +6,6 @@
 #pragma once
 
 #include <cstdint>
-#include <map>
 #include <string>
 #include <vector>
 
@@ -16,7 +15,6 @@
 #include "services/segment/segment_chunk.h"
 
 namespace carvemap {
-
 
 struct SegmentTilesResult {
   uint64_t chunks = 0;
@@ -32,11 +30,11 @@ struct SegmentTilesResult {
 // tiles replace any there). An empty `building_dir` writes no building tiles (the finer
 // re-carving of §5.6.1 wants the objects only). `only_in` (that pass): each chunk's objects
 // only inside its region (SegmentChunk), decoded by the thread that segments the chunk; a
-// chunk not in the map has none. Only chunks with a
-// tile are segmented: object volume in a chunk that no wedge reached is not found. Errors:
-// TileSet::Get's, SegmentChunk's, WriteTile's (naming the file), Unavailable naming a directory
-// that cannot be created, Cancelled. The chunks are segmented on `threads` threads and written in
-// order on the calling thread: the tiles do not depend on the thread count.
+// chunk not in the map has none. Only chunks with a tile are segmented: object volume in a
+// chunk that no wedge reached is not found. Errors: TileSet::Get's, SegmentChunk's, WriteTile's
+// (naming the file), Unavailable naming a directory that cannot be created, Cancelled. The
+// chunks are segmented on `threads` threads and written in order on the calling thread: the
+// tiles do not depend on the thread count.
 [[nodiscard]] absl::StatusOr<SegmentTilesResult> SegmentTiles(
     TileSet& tiles, const PlanVolume& plan, const SegmentOptions& options,
     const std::string& building_dir, const std::string& objects_dir,
