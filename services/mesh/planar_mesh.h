@@ -60,35 +60,13 @@ struct PlanarMesh {
 
 // The planar mesh of `faces` partitioned by `regions` (regions.face_region.size() ==
 // faces.size()). Faces are the closed boundary of the interior (all chunks' faces together);
-// their corners must lie on `grid`'s lattice. Deterministic for the same input.
-// Errors: InvalidArgument for bad options, mismatched sizes, faces off the lattice or a face
-// boundary that is not closed; Internal when a region cannot be triangulated.
+// their corners must lie on `grid`'s lattice. Deterministic for the same input. Its last
+// step is RepairPlanarMesh (planar_mesh_repair.h). Errors: InvalidArgument for bad options,
+// mismatched sizes, faces off the lattice or a face boundary that is not closed; Internal when
+// a region cannot be triangulated.
 [[nodiscard]] absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
                                                          const PlanarRegionSet& regions,
                                                          const OctreeGrid& grid,
                                                          const PlanarMeshOptions& options = {});
-
-// The last step of BuildPlanarMesh, on the mesh as it is written (float positions: what
-// CheckMesh and any reader see), public for its tests. `mesh` must be closed and manifold;
-// it stays so. (1) Closed pieces of at most 16 vertices that enclose less than one grid cell
-// (res³) are dropped: a one-cell pocket whose corners eq 4.9 put onto (nearly) one plane, down
-// to two triangles on the same three vertices. (2) Triangles of less than `min_area_m2` (three
-// vertices on a line: eq 4.9 moved a chain vertex onto its neighbours' line, or float rounding
-// did) are removed by flipping their longest edge within their region, else by collapsing
-// their shortest edge (a region border moves by that edge), else by moving one of their
-// vertices a hundredth of a cell off the line; none of these folds a triangle over. Unused
-// vertices are dropped. (3) Where sheets of the surface meet only at a point (interior cells
-// touching along an edge or at a corner), each keeps its own vertex there, so that the mesh is
-// a manifold; those vertices coincide, and the surface would touch itself (a self-intersection
-// to CGAL). Each moves 0.02 cells into its own sheet, unless a triangle would then fold.
-struct PlanarMeshRepair {
-  int dropped_pieces = 0;
-  int flips = 0;
-  int collapses = 0;
-  int nudges = 0;
-  int left = 0;  // triangles still below min_area_m2 (0 unless every repair was blocked)
-  int separated = 0;  // coincident vertices moved apart
-};
-PlanarMeshRepair RepairPlanarMesh(PlanarMesh& mesh, double res, double min_area_m2 = 1e-10);
 
 }  // namespace carvemap
