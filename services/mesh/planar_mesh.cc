@@ -805,12 +805,13 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces, cons
   return m;
 }
 
-}  // namespace
+// Directed edge (a, b) as a key; undirected when a < b.
+uint64_t EdgeKey(int a, int b) {
+  return (uint64_t{static_cast<uint32_t>(a)} << 32) | static_cast<uint32_t>(b);
+}
+uint64_t UndirectedKey(int a, int b) { return EdgeKey(std::min(a, b), std::max(a, b)); }
 
-absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
-                                           const PlanarRegionSet& regions, const OctreeGrid& grid,
-                                           const PlanarMeshOptions& options) {
-  if (absl::Status st = options.Validate(); !st.ok()) return st;
+absl::Status CheckFaceRegions(std::span<const BoundaryFace> faces, const PlanarRegionSet& regions) {
   if (regions.face_region.size() != faces.size()) {
     return absl::InvalidArgumentError(absl::StrCat("planar_mesh: ", faces.size(), " faces but ",
                                                    regions.face_region.size(), " face regions"));
@@ -818,106 +819,121 @@ absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
   const int num_regions = static_cast<int>(regions.regions.size());
   for (size_t f = 0; f < faces.size(); ++f) {
     if (regions.face_region[f] < 0 || regions.face_region[f] >= num_regions) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("planar_mesh: face ", f, " has region ", regions.face_region[f], " of ", num_regions));
+      return absl::InvalidArgumentError(absl::StrCat("planar_mesh: face ", f, " has region ",
+                                                     regions.face_region[f], " of ", num_regions));
     }
   }
-  const double res = grid.resolution_m();
-  std::vector<PlaneFrame> frames;
-  frames.reserve(num_regions);
-  for (const PlanarRegion& r : regions.regions) frames.push_back(FrameOf(r));
-  absl::StatusOr<WorkMesh> work = BuildWorkMesh(faces, regions, frames, options, res);
-  if (!work.ok()) return work.status();
-  WorkMesh& m = *work;
-  Simplify(m, frames, options.chain_tolerance_cells * res, res);
+  return absl::OkStatus();
+}
 
-  // Region boundaries of the simplified mesh, counter-clockwise about the regions' normals.
+// Each region of the simplified mesh: its triangles, and its boundary as directed edges
+// (counter-clockwise about the region's normal) whose twin lies in another region.
+struct RegionOutlines {
+  std::vector<std::vector<std::pair<int, int>>> segs;
+  std::vector<std::vector<int>> tris;
+};
+
+absl::StatusOr<RegionOutlines> OutlinesOf(const WorkMesh& m, int num_regions) {
   absl::flat_hash_map<uint64_t, int> edge_tri;
-  auto key = [](int a, int b) {
-    return (uint64_t{static_cast<uint32_t>(a)} << 32) | static_cast<uint32_t>(b);
-  };
   for (int t = 0; t < static_cast<int>(m.tri.size()); ++t) {
     if (!m.alive[t]) continue;
-    for (int i = 0; i < 3; ++i) edge_tri[key(m.tri[t][i], m.tri[t][(i + 1) % 3])] = t;
+    for (int i = 0; i < 3; ++i) edge_tri[EdgeKey(m.tri[t][i], m.tri[t][(i + 1) % 3])] = t;
   }
-  std::vector<std::vector<std::pair<int, int>>> segs(num_regions);
-  std::vector<std::vector<int>> region_tris(num_regions);
+  RegionOutlines out;
+  out.segs.resize(num_regions);
+  out.tris.resize(num_regions);
   for (int t = 0; t < static_cast<int>(m.tri.size()); ++t) {
     if (!m.alive[t]) continue;
     const int r = m.tri_region[t];
-    region_tris[r].push_back(t);
+    out.tris[r].push_back(t);
     for (int i = 0; i < 3; ++i) {
       const int a = m.tri[t][i], b = m.tri[t][(i + 1) % 3];
-      auto it = edge_tri.find(key(b, a));
+      auto it = edge_tri.find(EdgeKey(b, a));
       if (it == edge_tri.end()) return absl::InternalError("planar_mesh: simplified mesh is open");
-      if (m.tri_region[it->second] != r) segs[r].push_back({a, b});
+      if (m.tri_region[it->second] != r) out.segs[r].push_back({a, b});
+    }
+  }
+  return out;
+}
+
+// How many triangles' edges join each pair of vertices of the simplified mesh, kept current
+// as regions are re-triangulated: a region's new triangulation must not add an edge that
+// another region already has (two regions joining the same two corners would make the mesh
+// non-manifold).
+class EdgeUsers {
+ public:
+  // `m` closed (OutlinesOf checked it): each edge is counted once, from its a < b side.
+  explicit EdgeUsers(const WorkMesh& m) {
+    for (int t = 0; t < static_cast<int>(m.tri.size()); ++t) {
+      if (!m.alive[t]) continue;
+      for (int i = 0; i < 3; ++i) {
+        const int a = m.tri[t][i], b = m.tri[t][(i + 1) % 3];
+        if (a < b) ++count_[UndirectedKey(a, b)];
+      }
     }
   }
 
+  // Replaces the inner edges of `old_tris` by those of `new_tris` (both of one region whose
+  // boundary is `segs`; negative ids are new Steiner points, whose edges are new) when no new
+  // inner edge is already in use elsewhere; false, and nothing changed, otherwise.
+  bool TryReplace(std::span<const std::pair<int, int>> segs,
+                  std::span<const std::array<int, 3>> old_tris,
+                  std::span<const std::array<int, 3>> new_tris) {
+    absl::flat_hash_map<uint64_t, char> boundary;
+    for (auto [a, b] : segs) boundary[UndirectedKey(a, b)] = 1;
+    const auto inner = [&](std::span<const std::array<int, 3>> tris) {
+      std::vector<uint64_t> e;
+      for (const auto& t : tris) {
+        for (int i = 0; i < 3; ++i) {
+          const int a = t[i], b = t[(i + 1) % 3];
+          if (a >= 0 && a < b && !boundary.contains(UndirectedKey(a, b))) {
+            e.push_back(UndirectedKey(a, b));
+          }
+        }
+      }
+      return e;
+    };
+    const std::vector<uint64_t> old_inner = inner(old_tris), new_inner = inner(new_tris);
+    for (uint64_t e : old_inner) --count_[e];
+    bool free = true;
+    for (uint64_t e : new_inner) free = free && count_[e] <= 0;
+    for (uint64_t e : free ? new_inner : old_inner) ++count_[e];
+    return free;
+  }
+
+ private:
+  absl::flat_hash_map<uint64_t, int> count_;
+};
+
+// The output mesh: each region re-triangulated in its plane (RetriangulateRegion) where its
+// outline allows and no edge would be shared with another region, else its simplified
+// triangles as they are.
+PlanarMesh Retriangulate(const WorkMesh& m, const std::vector<PlaneFrame>& frames,
+                         const RegionOutlines& outlines, const PlanarMeshOptions& options,
+                         double res) {
   PlanarMesh out;
   std::vector<int> out_vertex(m.pos.size(), -1);
-  auto vertex_id = [&](int v) {
+  const auto vertex_id = [&](int v) {
     if (out_vertex[v] < 0) {
       out_vertex[v] = static_cast<int>(out.mesh.vertices.size());
       out.mesh.vertices.push_back(m.pos[v].cast<float>());
     }
     return out_vertex[v];
   };
-  // Edges in use: a region's new triangulation must not add an edge that another region
-  // already has (two regions joining the same two corners would make it non-manifold).
-  auto ukey = [&](int a, int b) { return key(std::min(a, b), std::max(a, b)); };
-  absl::flat_hash_map<uint64_t, int> edge_users;
-  for (int t = 0; t < static_cast<int>(m.tri.size()); ++t) {
-    if (!m.alive[t]) continue;
-    for (int i = 0; i < 3; ++i) {
-      const int a = m.tri[t][i], b = m.tri[t][(i + 1) % 3];
-      if (a < b) ++edge_users[ukey(a, b)];
-      else if (!edge_tri.contains(key(b, a))) ++edge_users[ukey(a, b)];
-    }
-  }
-  auto interior_edges = [&](const std::vector<std::array<int, 3>>& tris) {
-    std::vector<uint64_t> e;
-    for (const auto& t : tris) {
-      for (int i = 0; i < 3; ++i) {
-        const int a = t[i], b = t[(i + 1) % 3];
-        if (a < b && a >= 0) e.push_back(ukey(a, b));  // Steiner edges (negative ids) are new
-      }
-    }
-    return e;
-  };
-  for (int r = 0; r < num_regions; ++r) {
+  EdgeUsers users(m);
+  for (int r = 0; r < static_cast<int>(outlines.tris.size()); ++r) {
+    std::vector<std::array<int, 3>> old_tris;
+    for (int t : outlines.tris[r]) old_tris.push_back(m.tri[t]);
     std::vector<std::array<int, 3>> tris;
     std::vector<Eigen::Vector3d> steiner;
-    std::vector<std::array<int, 3>> old_tris;
-    for (int t : region_tris[r]) old_tris.push_back(m.tri[t]);
-    bool remeshed = !segs[r].empty() &&
-                    RetriangulateRegion(m, frames[r], segs[r], options.quadtree_points,
-                                        options.min_quadtree_cells, res, tris, steiner);
-    if (remeshed) {
-      absl::flat_hash_map<uint64_t, char> boundary;
-      for (auto [a, b] : segs[r]) boundary[ukey(a, b)] = 1;
-      std::vector<uint64_t> old_inner, new_inner;
-      for (uint64_t e : interior_edges(old_tris)) if (!boundary.contains(e)) old_inner.push_back(e);
-      for (const auto& t : tris) {
-        for (int i = 0; i < 3; ++i) {
-          const int a = t[i], b = t[(i + 1) % 3];
-          if (a >= 0 && b >= 0 && !boundary.contains(ukey(a, b)) && a < b) new_inner.push_back(ukey(a, b));
-        }
-      }
-      for (uint64_t e : old_inner) --edge_users[e];
-      for (uint64_t e : new_inner) {
-        if (edge_users[e] > 0) remeshed = false;
-      }
-      if (remeshed) {
-        for (uint64_t e : new_inner) ++edge_users[e];
-      } else {
-        for (uint64_t e : old_inner) ++edge_users[e];
-      }
-    }
+    const bool remeshed = !outlines.segs[r].empty() &&
+                          RetriangulateRegion(m, frames[r], outlines.segs[r],
+                                              options.quadtree_points, options.min_quadtree_cells,
+                                              res, tris, steiner) &&
+                          users.TryReplace(outlines.segs[r], old_tris, tris);
     if (!remeshed) {
-      tris.clear();
+      tris = std::move(old_tris);
       steiner.clear();
-      for (int t : region_tris[r]) tris.push_back(m.tri[t]);
     }
     std::vector<int> steiner_id(steiner.size(), -1);
     for (const auto& t : tris) {
@@ -925,19 +941,40 @@ absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
       for (int i = 0; i < 3; ++i) {
         if (t[i] >= 0) {
           o[i] = vertex_id(t[i]);
-        } else {
-          const int s = -t[i] - 2;
-          if (steiner_id[s] < 0) {
-            steiner_id[s] = static_cast<int>(out.mesh.vertices.size());
-            out.mesh.vertices.push_back(steiner[s].cast<float>());
-          }
-          o[i] = steiner_id[s];
+          continue;
         }
+        const int s = -t[i] - 2;
+        if (steiner_id[s] < 0) {
+          steiner_id[s] = static_cast<int>(out.mesh.vertices.size());
+          out.mesh.vertices.push_back(steiner[s].cast<float>());
+        }
+        o[i] = steiner_id[s];
       }
       out.mesh.triangles.push_back(o);
       out.triangle_region.push_back(r);
     }
   }
+  return out;
+}
+
+}  // namespace
+
+absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
+                                           const PlanarRegionSet& regions, const OctreeGrid& grid,
+                                           const PlanarMeshOptions& options) {
+  if (absl::Status st = options.Validate(); !st.ok()) return st;
+  if (absl::Status st = CheckFaceRegions(faces, regions); !st.ok()) return st;
+  const double res = grid.resolution_m();
+  std::vector<PlaneFrame> frames;
+  frames.reserve(regions.regions.size());
+  for (const PlanarRegion& r : regions.regions) frames.push_back(FrameOf(r));
+  absl::StatusOr<WorkMesh> work = BuildWorkMesh(faces, regions, frames, options, res);
+  if (!work.ok()) return work.status();
+  Simplify(*work, frames, options.chain_tolerance_cells * res, res);
+  absl::StatusOr<RegionOutlines> outlines =
+      OutlinesOf(*work, static_cast<int>(regions.regions.size()));
+  if (!outlines.ok()) return outlines.status();
+  PlanarMesh out = Retriangulate(*work, frames, *outlines, options, res);
   RepairPlanarMesh(out, res);
   const MeshCheck check = CheckMesh(out.mesh);
   if (!check.watertight()) {
