@@ -1,6 +1,6 @@
-// `carvemap import graph|tum|ply|carmen INPUT -o scan.h5`: turns other inputs into scan.h5
-// (docs/DESIGN.md §3) through the importers in storage/import/, then re-opens and validates what
-// it wrote.
+// `carvemap import graph|tum|ply|carmen|rosbag INPUT -o scan.h5`: turns other inputs into
+// scan.h5 (docs/DESIGN.md §3) through the importers in storage/import/, then re-opens and
+// validates what it wrote.
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
@@ -17,6 +17,7 @@
 #include "storage/import/import_writer.h"
 #include "storage/import/octomap_graph_import.h"
 #include "storage/import/ply_import.h"
+#include "storage/import/rosbag_import.h"
 #include "storage/import/tum_import.h"
 #include "storage/scan_reader.h"
 
@@ -66,13 +67,14 @@ struct ImportFlags {
   TumOptions tum;
   PlyImportOptions ply;
   CarmenOptions carmen;
+  RosbagOptions rosbag;
 };
 
 void RegisterImport(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "import",
-      "Turn an OctoMap scan graph, TUM depth images, a PLY with sensor origins or a "
-      "CARMEN laser log into scan.h5 (validated after writing)");
+      "Turn an OctoMap scan graph, TUM depth images, a PLY with sensor origins, a "
+      "CARMEN laser log or a ROS 1 bag into scan.h5 (validated after writing)");
   cmd->require_subcommand(1);
   auto flags = std::make_shared<ImportFlags>();
 
@@ -196,6 +198,59 @@ void RegisterImport(CLI::App& app, int& exit_code) {
       std::cout << "\n";
     }
     exit_code = ReportStatus("import carmen", status);
+  });
+
+  RosbagOptions& bag = flags->rosbag;
+  CLI::App* bag_cmd = cmd->add_subcommand(
+      "rosbag",
+      "ROS 1 bag (format 2.0; chunks uncompressed or bz2) ➜ scan.h5: one topic as one sensor.\n"
+      "sensor_msgs/LaserScan ➜ a `line` sensor (ranges outside [range_min, range_max] are no "
+      "return);\nsensor_msgs/PointCloud2 (float32 x, y, z) ➜ a `grid` sensor when organized "
+      "(height > 1), else\n`points` (non-finite points are no return). Frame times are the "
+      "header stamps. The sensor's\nmounting is the /tf_static chain from its frame up to "
+      "--base-frame (default: the highest frame\njoined to it by /tf_static only, e.g. "
+      "base_link); /path is that frame's pose in --fixed-frame,\nthe /tf chain interpolated at "
+      "each frame's stamp. Frames outside the /tf links' time spans\nare skipped and counted.");
+  bag_cmd->add_option("input", flags->input, "The bag (.bag)")->required();
+  bag_cmd->add_option("-o,--output", flags->output, "The scan.h5 to write")->required();
+  bag_cmd->add_option("--topic", bag.topic, "The LaserScan or PointCloud2 topic, e.g. /scan")
+      ->required();
+  bag_cmd->add_option("--fixed-frame", bag.fixed_frame, "The world frame of /tf")
+      ->capture_default_str();
+  bag_cmd->add_option("--base-frame", bag.base_frame,
+                      "The system frame (the path's); default: see above");
+  bag_cmd
+      ->add_option("--max-range", bag.max_range_m,
+                   "Returns beyond this are no return, m; 0: the scans' range_max, or the "
+                   "clouds' farthest point")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  bag_cmd
+      ->add_option("--range-sigma", bag.range_sigma,
+                   "Range noise a + b·range, m: A B (a bag does not carry it)")
+      ->capture_default_str()
+      ->expected(2);
+  bag_cmd->callback([flags, &exit_code] {
+    RosbagReport report;
+    absl::StatusOr<RosbagImport> bag = RosbagImport::Open(flags->input, flags->rosbag);
+    absl::Status status = bag.status();
+    if (bag.ok()) {
+      status = Run(flags->output, bag->sensor(), [&](const FrameSink& sink) {
+        return bag->Run(sink, &report);
+      });
+    }
+    if (status.ok()) {
+      std::cout << report.messages << " " << report.message_type << " messages in frame \""
+                << report.sensor_frame << "\", mounted on \"" << report.base_frame << "\"; "
+                << report.transforms << " transforms; " << report.no_return_rays
+                << " no-return rays";
+      if (report.skipped_outside_tf > 0) {
+        std::cout << "; skipped " << report.skipped_outside_tf
+                  << " frames outside the /tf links' time spans";
+      }
+      std::cout << "\n";
+    }
+    exit_code = ReportStatus("import rosbag", status);
   });
 }
 

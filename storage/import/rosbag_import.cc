@@ -1,0 +1,391 @@
+#include "storage/import/rosbag_import.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "storage/import/rosbag_reader.h"
+
+namespace carvemap {
+
+absl::Status RosbagOptions::Validate() const {
+  if (topic.empty()) return absl::InvalidArgumentError("rosbag import: no topic given");
+  if (fixed_frame.empty()) return absl::InvalidArgumentError("rosbag import: no fixed frame");
+  if (!(max_range_m >= 0) || !std::isfinite(max_range_m)) {
+    return absl::InvalidArgumentError("rosbag import: max_range_m must be finite and >= 0");
+  }
+  if (!(range_sigma[0] >= 0) || !(range_sigma[1] >= 0) || !(sigma_t_s >= 0)) {
+    return absl::InvalidArgumentError("rosbag import: noise figures must be >= 0");
+  }
+  return absl::OkStatus();
+}
+
+namespace {
+
+// A child frame's pose in its parent (child ➜ parent).
+struct Pose {
+  Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d p = Eigen::Vector3d::Zero();
+};
+
+// a: B in A, b: C in B ➜ C in A.
+Pose Compose(const Pose& a, const Pose& b) { return {a.q * b.q, a.p + a.q * b.p}; }
+
+// The transform tree of /tf and /tf_static: each child frame has one parent.
+class TfTree {
+ public:
+  absl::Status Add(const RosTransform& t, bool is_static) {
+    if (t.child_frame_id.empty() || t.header.frame_id.empty() ||
+        t.child_frame_id == t.header.frame_id) {
+      return absl::InvalidArgumentError(absl::StrCat("a transform from \"", t.header.frame_id,
+                                                     "\" to \"", t.child_frame_id, "\""));
+    }
+    Link& link = links_[t.child_frame_id];
+    if (!link.parent.empty() && link.parent != t.header.frame_id) {
+      return absl::InvalidArgumentError(absl::StrCat("frame \"", t.child_frame_id,
+                                                     "\" has two parents, \"", link.parent,
+                                                     "\" and \"", t.header.frame_id, "\""));
+    }
+    link.parent = t.header.frame_id;
+    const Pose pose{t.rotation, t.translation};
+    if (is_static) {
+      link.fixed = pose;  // the latest publication wins, as in tf2
+      link.has_static = true;
+    } else {
+      link.samples.emplace_back(t.header.stamp, pose);
+    }
+    return absl::OkStatus();
+  }
+
+  // Samples in time order; a link with any /tf samples is dynamic.
+  void Finish() {
+    for (auto& [child, link] : links_) {
+      std::stable_sort(link.samples.begin(), link.samples.end(),
+                       [](const auto& a, const auto& b) { return a.first < b.first; });
+    }
+  }
+
+  // `frame`'s parent; it must have one (IsStatic).
+  [[nodiscard]] const std::string& Parent(const std::string& frame) const {
+    return links_.at(frame).parent;
+  }
+
+  [[nodiscard]] bool IsStatic(const std::string& frame) const {
+    auto it = links_.find(frame);
+    return it != links_.end() && it->second.samples.empty();
+  }
+
+  // The frames from `frame` up to `ancestor`, or why there is no such chain.
+  absl::StatusOr<std::vector<std::string>> Chain(const std::string& frame,
+                                                 const std::string& ancestor) const {
+    std::vector<std::string> chain{frame};
+    while (chain.back() != ancestor) {
+      auto it = links_.find(chain.back());
+      if (it == links_.end()) {
+        return absl::NotFoundError(absl::StrCat(
+            "no /tf chain from frame \"", frame, "\" to \"", ancestor, "\": \"", chain.back(),
+            "\" has no parent in /tf or /tf_static (frames with one: ", Frames(), ")"));
+      }
+      if (chain.size() > links_.size()) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("the /tf frames above \"", frame, "\" form a loop"));
+      }
+      chain.push_back(it->second.parent);
+    }
+    return chain;
+  }
+
+  // `frame`'s pose in `ancestor` at time t along `chain` (from Chain); nullopt when t lies
+  // outside a /tf link's samples.
+  [[nodiscard]] std::optional<Pose> PoseAt(const std::vector<std::string>& chain,
+                                           double t) const {
+    Pose pose;
+    for (size_t i = 0; i + 1 < chain.size(); ++i) {
+      const Link& link = links_.at(chain[i]);
+      std::optional<Pose> step = link.At(t);
+      if (!step) return std::nullopt;
+      pose = Compose(*step, pose);
+    }
+    return pose;
+  }
+
+ private:
+  struct Link {
+    std::string parent;
+    bool has_static = false;
+    Pose fixed;
+    std::vector<std::pair<double, Pose>> samples;
+
+    [[nodiscard]] std::optional<Pose> At(double t) const {
+      if (samples.empty()) return fixed;
+      if (t < samples.front().first || t > samples.back().first) return std::nullopt;
+      auto hi = std::upper_bound(samples.begin(), samples.end(), t,
+                                 [](double v, const auto& s) { return v < s.first; });
+      if (hi == samples.end()) return samples.back().second;
+      const auto& [t1, b] = *hi;
+      const auto& [t0, a] = *(hi - 1);
+      const double s = t1 > t0 ? (t - t0) / (t1 - t0) : 1.0;
+      return Pose{a.q.slerp(s, b.q), a.p + s * (b.p - a.p)};
+    }
+  };
+
+  [[nodiscard]] std::string Frames() const {
+    std::vector<std::string> names;
+    for (const auto& [child, link] : links_) names.push_back(child);
+    return names.empty() ? std::string("none") : absl::StrJoin(names, ", ");
+  }
+
+  std::map<std::string, Link> links_;
+};
+
+bool IsTf(const BagConnection& c) { return c.topic == "/tf" || c.topic == "/tf_static"; }
+
+std::string SensorName(const std::string& topic) {
+  std::string name = topic;
+  while (!name.empty() && name.front() == '/') name.erase(name.begin());
+  std::replace(name.begin(), name.end(), '/', '_');
+  return name.empty() ? std::string("scan") : name;
+}
+
+// A message's points in the sensor frame (NaN rows: no return), beyond `max_range` too.
+std::vector<Eigen::Vector3f> LaserPoints(const RosLaserScan& s, double max_range) {
+  std::vector<Eigen::Vector3f> pts(s.ranges.size());
+  for (size_t i = 0; i < s.ranges.size(); ++i) {
+    const double r = s.ranges[i];
+    if (!std::isfinite(r) || r < s.range_min || r > s.range_max || r > max_range) {
+      pts[i].setConstant(std::numeric_limits<float>::quiet_NaN());
+      continue;
+    }
+    const double a = double(s.angle_min) + double(i) * s.angle_increment;
+    pts[i] = Eigen::Vector3f(float(r * std::cos(a)), float(r * std::sin(a)), 0.f);
+  }
+  return pts;
+}
+
+}  // namespace
+
+struct RosbagImport::State {
+  std::string file;
+  RosbagOptions options;
+  SensorInfo sensor;
+  TfTree tf;
+  std::vector<std::string> chain;  // the system frame up to the fixed frame
+  RosbagReport report;             // what the first read found
+};
+
+RosbagImport::RosbagImport(std::unique_ptr<State> state) : state_(std::move(state)) {}
+RosbagImport::RosbagImport(RosbagImport&&) noexcept = default;
+RosbagImport& RosbagImport::operator=(RosbagImport&&) noexcept = default;
+RosbagImport::~RosbagImport() = default;
+
+const SensorInfo& RosbagImport::sensor() const { return state_->sensor; }
+
+absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
+                                                const RosbagOptions& options) {
+  if (absl::Status s = options.Validate(); !s.ok()) return s;
+  auto st = std::make_unique<State>();
+  st->file = file;
+  st->options = options;
+  RosbagReport& rep = st->report;
+  auto in_message = [&](const BagMessage& m, const absl::Status& s) {
+    return absl::Status(s.code(), absl::StrCat(file, ": message ", m.index, " (on ",
+                                               m.connection->topic, "): ", s.message()));
+  };
+  bool laser = false;
+  uint32_t rows = 0, cols = 0;
+  double max_range = 0, last_stamp = -std::numeric_limits<double>::infinity();
+  std::vector<BagConnection> connections;
+  absl::Status read = ReadBag(
+      file,
+      [&](const BagMessage& m) -> absl::Status {
+        const BagConnection& c = *m.connection;
+        if (c.topic == options.topic && c.type != kLaserScanType && c.type != kPointCloud2Type) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              file, ": topic ", c.topic, " carries ", c.type,
+              "; sensor_msgs/LaserScan or sensor_msgs/PointCloud2 can be imported"));
+        }
+        if (IsTf(c)) {
+          if (c.type != kTfMessageType) return absl::OkStatus();
+          absl::StatusOr<std::vector<RosTransform>> tfs = DecodeTfMessage(m.data);
+          if (!tfs.ok()) return in_message(m, tfs.status());
+          for (const RosTransform& t : *tfs) {
+            if (absl::Status s = st->tf.Add(t, c.topic == "/tf_static"); !s.ok()) {
+              return in_message(m, s);
+            }
+            ++rep.transforms;
+          }
+          return absl::OkStatus();
+        }
+        if (c.topic != options.topic) return absl::OkStatus();
+        laser = c.type == kLaserScanType;
+        rep.message_type = c.type;
+        RosHeader header;
+        uint32_t r = 0, k = 0;
+        if (laser) {
+          absl::StatusOr<RosLaserScan> s = DecodeLaserScan(m.data);
+          if (!s.ok()) return in_message(m, s.status());
+          header = s->header;
+          r = 1;
+          k = static_cast<uint32_t>(s->ranges.size());
+          if (std::isfinite(s->range_max)) max_range = std::max<double>(max_range, s->range_max);
+        } else {
+          absl::StatusOr<RosPointCloud> s = DecodePointCloud2(m.data);
+          if (!s.ok()) return in_message(m, s.status());
+          header = s->header;
+          r = s->height;
+          k = s->width;
+          for (const Eigen::Vector3f& p : s->points) {
+            if (p.allFinite()) max_range = std::max<double>(max_range, p.norm());
+          }
+        }
+        if (rep.messages == 0) {
+          rep.sensor_frame = header.frame_id;
+          rows = r;
+          cols = k;
+        } else if (header.frame_id != rep.sensor_frame) {
+          return in_message(m, absl::InvalidArgumentError(absl::StrCat(
+                                   "frame \"", header.frame_id, "\" where the first message had \"",
+                                   rep.sensor_frame, "\"")));
+        } else if ((laser || rows > 1 || r > 1) && (r != rows || k != cols)) {
+          return in_message(m, absl::InvalidArgumentError(absl::StrCat(
+                                   r, " × ", k, " rays where the first message had ", rows, " × ",
+                                   cols, " (every frame of a line or grid sensor has the same)")));
+        }
+        if (!(header.stamp > last_stamp)) {
+          return in_message(m, absl::InvalidArgumentError(absl::StrCat(
+                                   "stamp ", header.stamp, " s is not after the previous ",
+                                   last_stamp, " s")));
+        }
+        last_stamp = header.stamp;
+        ++rep.messages;
+        return absl::OkStatus();
+      },
+      &connections);
+  if (!read.ok()) return read;
+  if (rep.messages == 0) {
+    std::vector<std::string> topics;
+    for (const BagConnection& c : connections) {
+      topics.push_back(absl::StrCat(c.topic, " (", c.type, ")"));
+    }
+    return absl::NotFoundError(absl::StrCat(
+        file, ": no messages on topic ", options.topic,
+        "; the bag's topics: ", topics.empty() ? "none" : absl::StrJoin(topics, ", ")));
+  }
+  for (const BagConnection& c : connections) {
+    const char* md5 = c.type == kLaserScanType     ? kLaserScanMd5
+                      : c.type == kPointCloud2Type ? kPointCloud2Md5
+                      : c.type == kTfMessageType   ? kTfMessageMd5
+                                                   : nullptr;
+    if (md5 && (c.topic == options.topic || IsTf(c)) && c.md5sum != md5 && c.md5sum != "*") {
+      return absl::InvalidArgumentError(absl::StrCat(
+          file, ": topic ", c.topic, " says ", c.type, " with definition MD5 ", c.md5sum,
+          ", not the ", md5, " this reader knows"));
+    }
+  }
+  st->tf.Finish();
+  // The system frame: the highest frame above the sensor's joined to it by /tf_static only.
+  std::string base = options.base_frame;
+  if (base.empty()) {
+    base = rep.sensor_frame;
+    for (size_t up = 0; base != options.fixed_frame && st->tf.IsStatic(base) &&
+                        up < rep.transforms;
+         ++up) {
+      base = st->tf.Parent(base);
+    }
+  }
+  rep.base_frame = base;
+  absl::StatusOr<std::vector<std::string>> mount = st->tf.Chain(rep.sensor_frame, base);
+  if (!mount.ok()) {
+    return absl::Status(mount.status().code(), absl::StrCat(file, ": ", mount.status().message()));
+  }
+  for (size_t i = 0; i + 1 < mount->size(); ++i) {
+    if (!st->tf.IsStatic((*mount)[i])) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          file, ": the system frame \"", base, "\" is not joined to the sensor's frame \"",
+          rep.sensor_frame, "\" by /tf_static only (\"", (*mount)[i], "\" moves in /tf)"));
+    }
+  }
+  absl::StatusOr<std::vector<std::string>> path = st->tf.Chain(base, options.fixed_frame);
+  if (!path.ok()) {
+    return absl::Status(path.status().code(), absl::StrCat(file, ": ", path.status().message()));
+  }
+  st->chain = *std::move(path);
+  const Pose extrinsics = *st->tf.PoseAt(*mount, 0.0);
+
+  SensorInfo& s = st->sensor;
+  s.name = SensorName(options.topic);
+  s.kind = laser ? SensorKind::kLine : rows > 1 ? SensorKind::kGrid : SensorKind::kPoints;
+  if (s.kind == SensorKind::kGrid) {
+    s.rows = rows;
+    s.cols = cols;
+  }
+  s.R_s2c = extrinsics.q.toRotationMatrix();
+  s.T_s2c = extrinsics.p;
+  s.sigma_t_s = options.sigma_t_s;
+  s.range_sigma = options.range_sigma;
+  s.max_range_m = options.max_range_m > 0 ? options.max_range_m
+                  : max_range > 0         ? std::ceil(max_range * 100) / 100
+                                          : 1.0;
+  return RosbagImport(std::move(st));
+}
+
+absl::StatusOr<ImportedScan> RosbagImport::Run(const FrameSink& sink,
+                                               RosbagReport* report) const {
+  const State& st = *state_;
+  RosbagReport rep = st.report;
+  ImportedScan scan;
+  scan.sensor = st.sensor;
+  const double max_range = st.sensor.max_range_m;
+  absl::Status read = ReadBag(st.file, [&](const BagMessage& m) -> absl::Status {
+    if (m.connection->topic != st.options.topic) return absl::OkStatus();
+    RosHeader header;
+    std::vector<Eigen::Vector3f> pts;
+    const auto in_message = [&](const absl::Status& s) {
+      return absl::Status(s.code(), absl::StrCat(st.file, ": message ", m.index, " (on ",
+                                                 m.connection->topic, "): ", s.message()));
+    };
+    if (st.sensor.kind == SensorKind::kLine) {
+      absl::StatusOr<RosLaserScan> s = DecodeLaserScan(m.data);
+      if (!s.ok()) return in_message(s.status());
+      header = s->header;
+      pts = LaserPoints(*s, max_range);
+    } else {
+      absl::StatusOr<RosPointCloud> s = DecodePointCloud2(m.data);
+      if (!s.ok()) return in_message(s.status());
+      header = s->header;
+      pts = std::move(s->points);
+      for (Eigen::Vector3f& p : pts) {
+        if (p.allFinite() && p.norm() > max_range) {
+          p.setConstant(std::numeric_limits<float>::quiet_NaN());
+        }
+      }
+    }
+    const std::optional<Pose> pose = st.tf.PoseAt(st.chain, header.stamp);
+    if (!pose) {
+      ++rep.skipped_outside_tf;
+      return absl::OkStatus();
+    }
+    for (const Eigen::Vector3f& p : pts) rep.no_return_rays += !p.allFinite();
+    scan.path.push_back({header.stamp, pose->p.x(), pose->p.y(), pose->p.z(), pose->q.w(),
+                         pose->q.x(), pose->q.y(), pose->q.z()});
+    return EmitFrame(sink, header.stamp, pts, scan);
+  });
+  if (!read.ok()) return read;
+  if (scan.frame_count == 0) {
+    return absl::OutOfRangeError(absl::StrCat(
+        st.file, ": all ", rep.messages, " messages on ", st.options.topic,
+        " lie outside the time spans of the /tf links from \"", rep.base_frame, "\" to \"",
+        st.options.fixed_frame, "\""));
+  }
+  if (report) *report = rep;
+  return scan;
+}
+
+}  // namespace carvemap

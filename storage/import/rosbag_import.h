@@ -1,0 +1,84 @@
+// ROS 1 bags ➜ one sensor of scan.h5 (docs/DESIGN.md §3), read by rosbag_reader.h.
+//
+// The user names the scan topic and the fixed (world) frame. The topic's messages give the
+// sensor and its frames:
+//   - sensor_msgs/LaserScan: a `line` sensor; beam i at angle_min + i·angle_increment in the
+//     scan's frame becomes (r cos a, r sin a, 0); a range outside [range_min, range_max] or not
+//     finite is a no-return (NaN) ray. Every scan must have the same number of beams.
+//   - sensor_msgs/PointCloud2 with float32 x, y, z: organized (height > 1) a `grid` sensor of
+//     height × width, unorganized (height 1) a `points` sensor; a point with a non-finite
+//     coordinate is a no-return ray. Every organized cloud must have the same size.
+// A frame's time is its header stamp (the sensor's clock), strictly increasing.
+//
+// The frames come from tf2_msgs/TFMessage on /tf and /tf_static: each transform is its child
+// frame's pose in its parent frame. The system frame (`base_frame`, by default the highest frame
+// above the sensor's that only /tf_static links to it, e.g. base_link) carries the sensor at a
+// fixed pose: that static chain is the sensor's R_s2c, T_s2c. /path has one row per frame: the
+// system frame's pose in `fixed_frame` at the frame's time, the chain of /tf links interpolated
+// there (linear in position, SLERP in rotation). Frames whose time lies outside the /tf links'
+// time spans are skipped and counted (recording usually starts before the first /tf arrives);
+// a bag where that leaves none is an error.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "storage/import/scan_import.h"
+
+namespace carvemap {
+
+struct RosbagOptions {
+  std::string topic;                // required: a LaserScan or PointCloud2 topic
+  std::string fixed_frame = "map";  // the world frame
+  std::string base_frame;           // the system frame; empty: see above
+  // 0: the LaserScans' largest range_max, or the farthest point of the clouds (rounded up to
+  // the next centimetre). Otherwise returns beyond it are no-returns.
+  double max_range_m = 0;
+  // Range noise, a + b·range (m): a LaserScan carries none; a 2D lidar of the SICK or Hokuyo
+  // kind is within about 3 cm.
+  std::array<double, 2> range_sigma = {0.03, 0.0};
+  double sigma_t_s = 0.0;
+
+  [[nodiscard]] absl::Status Validate() const;
+};
+
+struct RosbagReport {
+  std::string message_type;  // the topic's: sensor_msgs/LaserScan or sensor_msgs/PointCloud2
+  std::string sensor_frame, base_frame;
+  uint64_t messages = 0;            // on the topic
+  uint64_t skipped_outside_tf = 0;  // frames outside the /tf links' time spans
+  uint64_t no_return_rays = 0;
+  uint64_t transforms = 0;          // read from /tf and /tf_static
+};
+
+// A bag read once (connections, /tf, /tf_static, the topic's sizes and ranges) so that the
+// sensor is known before its frames are written; Run() reads it again for the frames. Errors
+// name the file and say what is wrong: the topic missing (listing the bag's topics) or of
+// another type, no /tf chain from the sensor's frame to the fixed frame, a frame with two
+// parents, frames of different sizes, a stamp not after the previous one (naming the message),
+// every frame outside the /tf spans, and the reader's errors.
+class RosbagImport {
+ public:
+  static absl::StatusOr<RosbagImport> Open(const std::string& file, const RosbagOptions& options);
+  RosbagImport(RosbagImport&&) noexcept;
+  RosbagImport& operator=(RosbagImport&&) noexcept;
+  ~RosbagImport();
+
+  [[nodiscard]] const SensorInfo& sensor() const;
+  // Frames to `sink` (or into the result if `sink` is empty) in time order.
+  absl::StatusOr<ImportedScan> Run(const FrameSink& sink = nullptr,
+                                   RosbagReport* report = nullptr) const;
+
+  struct State;
+
+ private:
+  explicit RosbagImport(std::unique_ptr<State> state);
+  std::unique_ptr<State> state_;
+};
+
+}  // namespace carvemap

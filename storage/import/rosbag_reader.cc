@@ -1,0 +1,371 @@
+#include "storage/import/rosbag_reader.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <unordered_map>
+#include <utility>
+
+#include <bzlib.h>
+
+#include "absl/strings/str_cat.h"
+#include "storage/import/byte_reader.h"
+
+namespace carvemap {
+namespace {
+
+static_assert(std::endian::native == std::endian::little,
+              "ROS 1 serialization is little-endian; the reader copies numbers as they are");
+
+constexpr char kMagic[] = "#ROSBAG V2.0\n";
+constexpr uint8_t kOpMessage = 0x02, kOpChunk = 0x05, kOpConnection = 0x07;
+// A chunk's stated size is checked against this before it is allocated: rosbag writes chunks
+// of ~768 KiB, and bz2 compresses sensor data by far less than this factor.
+constexpr uint64_t kMaxChunkBytes = uint64_t{1} << 30;
+constexpr uint64_t kMaxChunkRatio = 200;
+
+// Sequential reads of ROS 1 serialized values from a byte span.
+class Cursor {
+ public:
+  explicit Cursor(std::span<const uint8_t> d) : d_(d) {}
+  [[nodiscard]] size_t left() const { return d_.size() - pos_; }
+
+  template <typename T>
+  bool Read(T& v) {
+    if (sizeof(T) > left()) return false;
+    std::memcpy(&v, d_.data() + pos_, sizeof(T));
+    pos_ += sizeof(T);
+    return true;
+  }
+  bool Bytes(uint64_t n, std::span<const uint8_t>& out) {
+    if (n > left()) return false;
+    out = d_.subspan(pos_, n);
+    pos_ += n;
+    return true;
+  }
+  bool String(std::string& s) {
+    uint32_t n = 0;
+    std::span<const uint8_t> b;
+    if (!Read(n) || !Bytes(n, b)) return false;
+    s.assign(reinterpret_cast<const char*>(b.data()), b.size());
+    return true;
+  }
+  bool Header(RosHeader& h) {
+    uint32_t sec = 0, nsec = 0;
+    if (!Read(h.seq) || !Read(sec) || !Read(nsec) || !String(h.frame_id)) return false;
+    h.stamp = sec + nsec * 1e-9;
+    return true;
+  }
+
+ private:
+  std::span<const uint8_t> d_;
+  size_t pos_ = 0;
+};
+
+absl::Status Short(absl::string_view what, absl::string_view field) {
+  return absl::InvalidArgumentError(
+      absl::StrCat(what, ": the message ends inside its ", field, " (not a ", what, "?)"));
+}
+
+absl::Status CheckAllRead(absl::string_view what, const Cursor& c) {
+  if (c.left() == 0) return absl::OkStatus();
+  return absl::InvalidArgumentError(
+      absl::StrCat(what, ": ", c.left(), " bytes left over after the message (not a ", what, "?)"));
+}
+
+// A record header's fields, name ➜ value bytes.
+using Fields = std::vector<std::pair<std::string, std::span<const uint8_t>>>;
+
+bool ParseFields(std::span<const uint8_t> bytes, Fields& out) {
+  out.clear();
+  Cursor c(bytes);
+  while (c.left() > 0) {
+    uint32_t n = 0;
+    std::span<const uint8_t> field;
+    if (!c.Read(n) || !c.Bytes(n, field) || field.empty()) return false;
+    const auto* eq = static_cast<const uint8_t*>(std::memchr(field.data(), '=', field.size()));
+    if (!eq) return false;
+    const size_t name_len = eq - field.data();
+    out.emplace_back(std::string(reinterpret_cast<const char*>(field.data()), name_len),
+                     field.subspan(name_len + 1));
+  }
+  return true;
+}
+
+const std::span<const uint8_t>* Find(const Fields& f, absl::string_view name) {
+  for (const auto& [n, v] : f) {
+    if (n == name) return &v;
+  }
+  return nullptr;
+}
+
+template <typename T>
+bool FieldNumber(const Fields& f, absl::string_view name, T& out) {
+  const std::span<const uint8_t>* v = Find(f, name);
+  if (!v || v->size() != sizeof(T)) return false;
+  std::memcpy(&out, v->data(), sizeof(T));
+  return true;
+}
+
+std::string FieldString(const Fields& f, absl::string_view name) {
+  const std::span<const uint8_t>* v = Find(f, name);
+  return v ? std::string(reinterpret_cast<const char*>(v->data()), v->size()) : std::string();
+}
+
+class BagParser {
+ public:
+  BagParser(const std::string& path, const BagMessageFn& fn) : path_(path), fn_(fn) {}
+
+  absl::Status Run(std::vector<BagConnection>* connections) {
+    absl::StatusOr<import_internal::ByteReader> r = import_internal::ByteReader::Open(path_);
+    if (!r.ok()) return r.status();
+    char magic[sizeof(kMagic) - 1];
+    if (!r->ReadBytes(magic, sizeof(magic)) || std::memcmp(magic, kMagic, sizeof(magic)) != 0) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          path_, ": not a ROS 1 bag of format 2.0 (it does not start with \"#ROSBAG V2.0\")"));
+    }
+    std::vector<uint8_t> header, data;
+    while (r->remaining() > 0) {
+      const uint64_t at = r->offset();
+      uint32_t header_len = 0, data_len = 0;
+      if (!r->Read(header_len) || header_len > r->remaining()) return CutShort(at);
+      header.resize(header_len);
+      if (!r->ReadBytes(header.data(), header_len) || !r->Read(data_len) ||
+          data_len > r->remaining()) {
+        return CutShort(at);
+      }
+      if (!ParseFields(header, fields_)) return Bad(at, "its header's fields are malformed");
+      uint8_t op = 0;
+      if (!FieldNumber(fields_, "op", op)) return Bad(at, "it has no op field");
+      if (op != kOpChunk && op != kOpConnection && op != kOpMessage) {
+        if (!r->Skip(data_len)) return CutShort(at);
+        continue;
+      }
+      data.resize(data_len);
+      if (!r->ReadBytes(data.data(), data_len)) return CutShort(at);
+      absl::Status s = op == kOpChunk ? Chunk(at, data) : Record(at, op, data);
+      if (!s.ok()) return s;
+    }
+    if (connections) {
+      connections->clear();
+      for (const auto& [id, c] : connections_) connections->push_back(c);
+      std::sort(connections->begin(), connections->end(),
+                [](const BagConnection& a, const BagConnection& b) { return a.id < b.id; });
+    }
+    return absl::OkStatus();
+  }
+
+ private:
+  absl::Status Bad(uint64_t at, absl::string_view why) const {
+    return absl::InvalidArgumentError(absl::StrCat(path_, ": record at byte ", at, ": ", why));
+  }
+  absl::Status CutShort(uint64_t at) const {
+    return absl::DataLossError(absl::StrCat(
+        path_, ": record at byte ", at, " runs past the end of the file (a bag cut short?)"));
+  }
+
+  // A chunk: its records, decompressed.
+  absl::Status Chunk(uint64_t at, std::span<const uint8_t> data) {
+    const std::string compression = FieldString(fields_, "compression");
+    uint32_t size = 0;
+    if (!FieldNumber(fields_, "size", size)) return Bad(at, "a chunk without its size");
+    std::span<const uint8_t> records = data;
+    if (compression == "bz2") {
+      if (size > kMaxChunkBytes || size > kMaxChunkRatio * data.size() + 4096) {
+        return Bad(at, absl::StrCat("a bz2 chunk claims ", size, " bytes from ", data.size()));
+      }
+      plain_.resize(size);
+      unsigned int out_len = size;
+      const int rc = BZ2_bzBuffToBuffDecompress(
+          reinterpret_cast<char*>(plain_.data()), &out_len,
+          const_cast<char*>(reinterpret_cast<const char*>(data.data())),
+          static_cast<unsigned int>(data.size()), 0, 0);
+      if (rc != BZ_OK || out_len != size) {
+        return Bad(at, absl::StrCat("its bz2 data does not decompress to its ", size,
+                                    " bytes (bzip2 error ", rc, ")"));
+      }
+      records = plain_;
+    } else if (compression == "lz4") {
+      return Bad(at, "lz4 chunks are not read; `rosbag decompress` or `rosbag compress --bz2` "
+                     "rewrites the bag");
+    } else if (compression != "none") {
+      return Bad(at, absl::StrCat("unknown chunk compression \"", compression, "\""));
+    } else if (size != data.size()) {
+      return Bad(at, absl::StrCat("an uncompressed chunk of ", data.size(), " bytes says ",
+                                  size));
+    }
+    // The inner records use the same layout; `at` stays the chunk's offset in errors.
+    Cursor c(records);
+    Fields chunk_fields = std::move(fields_);
+    while (c.left() > 0) {
+      uint32_t header_len = 0, data_len = 0;
+      std::span<const uint8_t> header, body;
+      if (!c.Read(header_len) || !c.Bytes(header_len, header) || !c.Read(data_len) ||
+          !c.Bytes(data_len, body)) {
+        return Bad(at, "a record inside the chunk runs past the chunk's end");
+      }
+      if (!ParseFields(header, fields_)) return Bad(at, "a record inside the chunk is malformed");
+      uint8_t op = 0;
+      if (!FieldNumber(fields_, "op", op)) return Bad(at, "a record inside the chunk has no op");
+      if (op != kOpConnection && op != kOpMessage) continue;
+      if (absl::Status s = Record(at, op, body); !s.ok()) return s;
+    }
+    fields_ = std::move(chunk_fields);
+    return absl::OkStatus();
+  }
+
+  // A connection or a message record (fields_ holds its header).
+  absl::Status Record(uint64_t at, uint8_t op, std::span<const uint8_t> data) {
+    uint32_t conn = 0;
+    if (!FieldNumber(fields_, "conn", conn)) return Bad(at, "a record without its connection");
+    if (op == kOpConnection) {
+      if (connections_.contains(conn)) return absl::OkStatus();  // repeated after the index
+      Fields info;
+      if (!ParseFields(data, info)) return Bad(at, "a connection's fields are malformed");
+      BagConnection c{conn, FieldString(fields_, "topic"), FieldString(info, "type"),
+                      FieldString(info, "md5sum")};
+      if (c.topic.empty()) c.topic = FieldString(info, "topic");
+      connections_.emplace(conn, std::move(c));
+      return absl::OkStatus();
+    }
+    auto it = connections_.find(conn);
+    if (it == connections_.end()) {
+      return Bad(at, absl::StrCat("a message of connection ", conn, ", which no record declared"));
+    }
+    uint32_t time[2] = {0, 0};
+    if (!FieldNumber(fields_, "time", time)) return Bad(at, "a message without its time");
+    BagMessage m{&it->second, time[0] + time[1] * 1e-9, data, next_index_++};
+    return fn_(m);
+  }
+
+  const std::string& path_;
+  const BagMessageFn& fn_;
+  Fields fields_;
+  std::vector<uint8_t> plain_;
+  std::unordered_map<uint32_t, BagConnection> connections_;
+  uint64_t next_index_ = 0;
+};
+
+}  // namespace
+
+absl::Status ReadBag(const std::string& path, const BagMessageFn& fn,
+                     std::vector<BagConnection>* connections) {
+  return BagParser(path, fn).Run(connections);
+}
+
+absl::StatusOr<RosLaserScan> DecodeLaserScan(std::span<const uint8_t> data) {
+  constexpr char kWhat[] = "LaserScan";
+  Cursor c(data);
+  RosLaserScan s;
+  if (!c.Header(s.header)) return Short(kWhat, "header");
+  for (float* f : {&s.angle_min, &s.angle_max, &s.angle_increment, &s.time_increment,
+                   &s.scan_time, &s.range_min, &s.range_max}) {
+    if (!c.Read(*f)) return Short(kWhat, "angles and ranges limits");
+  }
+  uint32_t n = 0;
+  std::span<const uint8_t> bytes;
+  if (!c.Read(n) || !c.Bytes(uint64_t{n} * 4, bytes)) return Short(kWhat, "ranges");
+  s.ranges.resize(n);
+  if (n > 0) std::memcpy(s.ranges.data(), bytes.data(), bytes.size());
+  if (!c.Read(n) || !c.Bytes(uint64_t{n} * 4, bytes)) return Short(kWhat, "intensities");
+  if (absl::Status st = CheckAllRead(kWhat, c); !st.ok()) return st;
+  return s;
+}
+
+absl::StatusOr<RosPointCloud> DecodePointCloud2(std::span<const uint8_t> data) {
+  constexpr char kWhat[] = "PointCloud2";
+  constexpr uint8_t kFloat32 = 7;  // sensor_msgs/PointField.FLOAT32
+  Cursor c(data);
+  RosPointCloud out;
+  uint32_t num_fields = 0;
+  if (!c.Header(out.header)) return Short(kWhat, "header");
+  if (!c.Read(out.height) || !c.Read(out.width) || !c.Read(num_fields)) {
+    return Short(kWhat, "size");
+  }
+  int64_t xyz[3] = {-1, -1, -1};
+  for (uint32_t i = 0; i < num_fields; ++i) {
+    std::string name;
+    uint32_t offset = 0, count = 0;
+    uint8_t datatype = 0;
+    if (!c.String(name) || !c.Read(offset) || !c.Read(datatype) || !c.Read(count)) {
+      return Short(kWhat, "fields");
+    }
+    const int axis = name == "x" ? 0 : name == "y" ? 1 : name == "z" ? 2 : -1;
+    if (axis < 0) continue;
+    if (datatype != kFloat32 || count > 1) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          kWhat, ": field ", name, " is of datatype ", int(datatype), " × ", count,
+          "; only one float32 (datatype 7) is read"));
+    }
+    xyz[axis] = offset;
+  }
+  uint8_t big_endian = 0, dense = 0;
+  uint32_t point_step = 0, row_step = 0, data_len = 0;
+  std::span<const uint8_t> bytes;
+  if (!c.Read(big_endian) || !c.Read(point_step) || !c.Read(row_step) || !c.Read(data_len) ||
+      !c.Bytes(data_len, bytes) || !c.Read(dense)) {
+    return Short(kWhat, "data");
+  }
+  if (absl::Status st = CheckAllRead(kWhat, c); !st.ok()) return st;
+  if (xyz[0] < 0 || xyz[1] < 0 || xyz[2] < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(kWhat, ": the cloud has no x, y and z fields"));
+  }
+  if (big_endian) {
+    return absl::InvalidArgumentError(absl::StrCat(kWhat, ": big-endian clouds are not read"));
+  }
+  for (int64_t o : xyz) {
+    if (o + 4 > point_step) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          kWhat, ": a field at byte ", o, " does not fit the point step of ", point_step));
+    }
+  }
+  if (uint64_t{out.width} * point_step > row_step ||
+      uint64_t{out.height} * row_step > bytes.size()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        kWhat, ": ", out.height, " rows of ", out.width, " points (point step ", point_step,
+        ", row step ", row_step, ") need more than its ", bytes.size(), " bytes of data"));
+  }
+  out.points.reserve(uint64_t{out.height} * out.width);
+  for (uint32_t v = 0; v < out.height; ++v) {
+    for (uint32_t u = 0; u < out.width; ++u) {
+      const uint8_t* p = bytes.data() + uint64_t{v} * row_step + uint64_t{u} * point_step;
+      Eigen::Vector3f q;
+      for (int d = 0; d < 3; ++d) std::memcpy(&q[d], p + xyz[d], 4);
+      if (!q.allFinite()) q.setConstant(std::numeric_limits<float>::quiet_NaN());
+      out.points.push_back(q);
+    }
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<RosTransform>> DecodeTfMessage(std::span<const uint8_t> data) {
+  constexpr char kWhat[] = "TFMessage";
+  Cursor c(data);
+  uint32_t n = 0;
+  if (!c.Read(n)) return Short(kWhat, "transform count");
+  // Each transform takes at least 84 bytes: bound the count before reserving.
+  if (n > c.left() / 84) return Short(kWhat, "transforms");
+  std::vector<RosTransform> out(n);
+  for (uint32_t i = 0; i < n; ++i) {
+    RosTransform& t = out[i];
+    double q[4];
+    if (!c.Header(t.header) || !c.String(t.child_frame_id) || !c.Read(t.translation.x()) ||
+        !c.Read(t.translation.y()) || !c.Read(t.translation.z()) || !c.Read(q[0]) ||
+        !c.Read(q[1]) || !c.Read(q[2]) || !c.Read(q[3])) {
+      return Short(kWhat, "transforms");
+    }
+    const Eigen::Quaterniond r(q[3], q[0], q[1], q[2]);
+    if (!t.translation.allFinite() || !r.coeffs().allFinite() || std::abs(r.norm() - 1) > 1e-3) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          kWhat, ": transform ", i, " (", t.header.frame_id, " ➜ ", t.child_frame_id,
+          ") is not finite or its rotation is not a unit quaternion"));
+    }
+    t.rotation = r.normalized();
+  }
+  if (absl::Status st = CheckAllRead(kWhat, c); !st.ok()) return st;
+  return out;
+}
+
+}  // namespace carvemap
