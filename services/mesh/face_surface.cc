@@ -18,9 +18,9 @@ using LatticeKey = std::array<int, 3>;
 
 struct FaceSquare {
   int axis = 0;
-  int sign = 1;                   // normal = sign · e_axis
-  Eigen::Vector3i min_corner;     // lattice
-  int size = 1;                   // lattice cells
+  int sign = 1;                // normal = sign · e_axis
+  Eigen::Vector3i min_corner;  // lattice
+  int size = 1;                // lattice cells
 };
 
 absl::StatusOr<FaceSquare> SquareOf(const BoundaryFace& face, double res, size_t index) {
@@ -34,7 +34,8 @@ absl::StatusOr<FaceSquare> SquareOf(const BoundaryFace& face, double res, size_t
   sq.size = static_cast<int>(std::llround(size_cells));
   bool ok = sq.size >= 1 && std::abs(size_cells - sq.size) < 1e-6;
   for (int d = 0; d < 3 && ok; ++d) {
-    const double lo = d == face.axis ? face.center[d] / res : (face.center[d] - 0.5 * face.size_m) / res;
+    const double lo =
+        d == face.axis ? face.center[d] / res : (face.center[d] - 0.5 * face.size_m) / res;
     sq.min_corner[d] = static_cast<int>(std::llround(lo));
     ok = std::abs(lo - sq.min_corner[d]) < 1e-6;
   }
@@ -53,8 +54,8 @@ absl::StatusOr<FaceSurface> BuildSurface(std::span<const BoundaryFace> faces, do
   squares.reserve(faces.size());
   absl::flat_hash_map<LatticeKey, int> vertex_index;
   auto vertex_of = [&](const Eigen::Vector3i& p) {
-    auto [it, inserted] = vertex_index.try_emplace(LatticeKey{p[0], p[1], p[2]},
-                                                   static_cast<int>(s.lattice.size()));
+    auto [it, inserted] =
+        vertex_index.try_emplace(LatticeKey{p[0], p[1], p[2]}, static_cast<int>(s.lattice.size()));
     if (inserted) s.lattice.push_back(p);
     return it->second;
   };
@@ -111,8 +112,7 @@ absl::StatusOr<FaceSurface> BuildSurface(std::span<const BoundaryFace> faces, do
       const int k1 = a[(d + 1) % 3], k2 = a[(d + 2) % 3];
       auto first =
           std::upper_bound(lines.begin(), lines.end(), LinePoint{d, k1, k2, lo, INT32_MAX});
-      auto last =
-          std::lower_bound(lines.begin(), lines.end(), LinePoint{d, k1, k2, hi, INT32_MIN});
+      auto last = std::lower_bound(lines.begin(), lines.end(), LinePoint{d, k1, k2, hi, INT32_MIN});
       const auto n_between = last - first;
       for (ptrdiff_t k = 0; k < n_between; ++k) {  // from a towards b
         s.corner_vertex.push_back((a[d] < b[d] ? first[k] : last[-1 - k])[4]);
@@ -127,8 +127,8 @@ absl::StatusOr<FaceSurface> BuildSurface(std::span<const BoundaryFace> faces, do
 
   // Pair directed edges with their reverses.
   struct EdgeUse {
-    uint64_t key;   // undirected (lo, hi)
-    bool forward;   // lo → hi
+    uint64_t key;  // undirected (lo, hi)
+    bool forward;  // lo → hi
     int corner;
   };
   std::vector<EdgeUse> uses;
@@ -191,16 +191,20 @@ absl::StatusOr<FaceSurface> BuildSurface(std::span<const BoundaryFace> faces, do
         }
       }
       for (int c : fwd) {
-        if (s.twin[c] < 0) return absl::InvalidArgumentError("planar_mesh: inconsistent face orientation at a non-manifold edge");
+        if (s.twin[c] < 0)
+          return absl::InvalidArgumentError(
+              "planar_mesh: inconsistent face orientation at a non-manifold edge");
       }
     }
     return absl::OkStatus();
   };
   absl::Status paired;
-  ForEachRun(uses, [](const EdgeUse& u) { return u.key; }, [&](size_t i, size_t j) {
-    paired = pair_run(i, j);
-    return paired.ok();
-  });
+  ForEachRun(
+      uses, [](const EdgeUse& u) { return u.key; },
+      [&](size_t i, size_t j) {
+        paired = pair_run(i, j);
+        return paired.ok();
+      });
   if (!paired.ok()) return paired;
   std::vector<EdgeUse>().swap(uses);
   // Topological vertices: corners joined across twin edges.

@@ -25,7 +25,7 @@ struct FaceSurface {
   std::vector<int> twin;                 // per corner c: the corner starting the twin edge
   std::vector<int> corner_tv;            // per corner: topological vertex
   int num_tv = 0;
-  std::vector<int> tv_lattice;           // per topological vertex: its lattice vertex
+  std::vector<int> tv_lattice;  // per topological vertex: its lattice vertex
 
   [[nodiscard]] int Next(int c) const {
     const int f = corner_face[c];

@@ -6,12 +6,8 @@
 #include <cstdint>
 #include <deque>
 #include <exception>
-#include <functional>
 #include <limits>
-#include <numeric>
 #include <utility>
-
-#include <Eigen/SVD>
 
 #include <CGAL/Constrained_Delaunay_triangulation_2.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
@@ -19,13 +15,11 @@
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
 
 #include "absl/container/flat_hash_map.h"
-#include "absl/container/inlined_vector.h"
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
-#include "services/geometry/sorted_runs.h"
-#include "services/mesh/face_surface.h"
 #include "services/mesh/mesh_checks.h"
 #include "services/mesh/planar_mesh_repair.h"
+#include "services/mesh/planar_work_mesh.h"
 
 namespace carvemap {
 
@@ -51,6 +45,12 @@ absl::Status PlanarMeshOptions::Validate() const {
 
 namespace {
 
+using planar_mesh_internal::BuildWorkMesh;
+using planar_mesh_internal::FrameOf;
+using planar_mesh_internal::PlaneFrame;
+using planar_mesh_internal::Simplify;
+using planar_mesh_internal::WorkMesh;
+
 using K = CGAL::Exact_predicates_inexact_constructions_kernel;
 struct CdtFaceInfo {
   int nesting = -1;
@@ -69,55 +69,8 @@ using CdtFb = CGAL::Constrained_triangulation_face_base_2<K, CdtFbInfo>;
 using CdtTds = CGAL::Triangulation_data_structure_2<CdtVb, CdtFb>;
 // Constraints are the regions' boundary chains, which must not cross or touch each other except
 // at their shared vertices: any intersection would add a vertex one neighbour does not have.
-using Cdt = CGAL::Constrained_Delaunay_triangulation_2<K, CdtTds, CGAL::No_constraint_intersection_tag>;
-
-// ---------------------------------------------------------------------------------------------
-// eq 4.9 (§4.3.3): the vertex of an octree corner x0 touched by the regions with normals n_i
-// (rows of M) through points P_i, p = diag(P Mᵀ) = (n_i · P_i):
-//   x = Σ_i (δ_i (p · u_i) / s_i + (1 − δ_i) (x0 · v_i)) v_i,   M = U S Vᵀ,
-// δ_i = 1 when s_i ≥ α. The dissertation sets α = 0.2 · s_min; read literally every s_i ≥ s_min > α
-// and nothing would ever be dropped (Fig 4.10 could not happen), so we read s as the largest
-// singular value, the scale of M: α = alpha_fraction · s_max. For two planes at angle θ the
-// singular values are √(1 ± cos θ), so their line is trusted only when tan(θ/2) ≥ 0.2, θ ≳ 22.6°
-// — just above the 15° of relaxation (§4.2.4); closer planes keep x0's coordinate along the
-// weak direction instead of flying to a far intersection (Fig 4.10's green star).
-Eigen::Vector3d PlaceVertex(const Eigen::Vector3d& x0, const std::vector<int>& region_ids,
-                            const PlanarRegionSet& regions, const PlanarMeshOptions& options,
-                            double res) {
-  const int m = static_cast<int>(region_ids.size());
-  Eigen::MatrixXd M(m, 3);
-  Eigen::VectorXd p(m);
-  for (int i = 0; i < m; ++i) {
-    const PlanarRegion& r = regions.regions[region_ids[i]];
-    M.row(i) = r.normal.transpose();
-    p[i] = r.normal.dot(r.centroid);
-  }
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(M, Eigen::ComputeThinU | Eigen::ComputeFullV);
-  const Eigen::VectorXd& s = svd.singularValues();
-  const double alpha = options.alpha_fraction * (s.size() > 0 ? s[0] : 0.0);
-  Eigen::Vector3d x = Eigen::Vector3d::Zero();
-  for (int i = 0; i < 3; ++i) {
-    const Eigen::Vector3d v = svd.matrixV().col(i);
-    const bool excited = i < s.size() && s[i] > 1e-9 && s[i] >= alpha;
-    const double coord = excited ? p.dot(svd.matrixU().col(i)) / s[i] : x0.dot(v);
-    x += coord * v;
-  }
-  // §4.2.5: shared vertices may move only up to a threshold from their grid position.
-  const double max_move = options.max_displacement_cells * res;
-  const Eigen::Vector3d move = x - x0;
-  if (move.norm() > max_move) x = x0 + move * (max_move / move.norm());
-  return x;
-}
-
-double DistanceToSegment(const Eigen::Vector3d& x, const Eigen::Vector3d& a,
-                         const Eigen::Vector3d& b) {
-  const Eigen::Vector3d ab = b - a;
-  const double len2 = ab.squaredNorm();
-  const double t = len2 > 0 ? std::clamp((x - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
-  return (a + t * ab - x).norm();
-}
-
-// 2D helpers for one region, in its plane basis.
+using Cdt =
+    CGAL::Constrained_Delaunay_triangulation_2<K, CdtTds, CGAL::No_constraint_intersection_tag>;
 
 struct Segment2 {
   Eigen::Vector2d a, b;
@@ -173,7 +126,8 @@ void QuadtreePoints(const std::vector<Segment2>& segs, const Eigen::Vector2d& lo
   if (side < min_side) return;
   const Eigen::Vector2d hi = lo + Eigen::Vector2d(side, side);
   const double eps = 1e-6 * res;
-  const Eigen::Vector2d lo_in = lo + Eigen::Vector2d(eps, eps), hi_in = hi - Eigen::Vector2d(eps, eps);
+  const Eigen::Vector2d lo_in = lo + Eigen::Vector2d(eps, eps),
+                        hi_in = hi - Eigen::Vector2d(eps, eps);
   bool crossed = false;
   for (const Segment2& s : segs) {
     if (SegmentMeetsOpenBox(s, lo_in, hi_in)) {
@@ -185,7 +139,8 @@ void QuadtreePoints(const std::vector<Segment2>& segs, const Eigen::Vector2d& lo
   if (!crossed) {
     if (!PointInside(center, segs)) return;
     auto emit = [&](const Eigen::Vector2d& q) {
-      const std::pair<int64_t, int64_t> key{std::llround(4 * q.x() / res), std::llround(4 * q.y() / res)};
+      const std::pair<int64_t, int64_t> key{std::llround(4 * q.x() / res),
+                                            std::llround(4 * q.y() / res)};
       if (!seen.try_emplace(key, 1).second) return;
       out.push_back(q);
     };
@@ -198,7 +153,8 @@ void QuadtreePoints(const std::vector<Segment2>& segs, const Eigen::Vector2d& lo
   }
   const double half = 0.5 * side;
   for (int i = 0; i < 4; ++i) {
-    QuadtreePoints(segs, lo + half * Eigen::Vector2d(i & 1, i >> 1), half, min_side, res, out, seen);
+    QuadtreePoints(segs, lo + half * Eigen::Vector2d(i & 1, i >> 1), half, min_side, res, out,
+                   seen);
   }
 }
 
@@ -233,346 +189,6 @@ void MarkDomains(Cdt& cdt) {
 }
 
 // Everything about the surface and its regions that does not depend on the simplification.
-
-// The plane of a region with a right-handed basis: e1 × e2 = n, so counter-clockwise in 2D is
-// counter-clockwise seen from free space.
-struct PlaneFrame {
-  Eigen::Vector3d c, n, e1, e2;
-  [[nodiscard]] Eigen::Vector2d To2(const Eigen::Vector3d& x) const {
-    return {(x - c).dot(e1), (x - c).dot(e2)};
-  }
-  [[nodiscard]] Eigen::Vector3d Project(const Eigen::Vector3d& x) const {
-    return x - n * n.dot(x - c);
-  }
-};
-
-PlaneFrame FrameOf(const PlanarRegion& region) {
-  PlaneFrame f;
-  f.c = region.centroid;
-  f.n = region.normal.normalized();
-  int least = 0;
-  for (int a = 1; a < 3; ++a) if (std::abs(f.n[a]) < std::abs(f.n[least])) least = a;
-  f.e1 = Eigen::Vector3d::Unit(least).cross(f.n).normalized();
-  f.e2 = f.n.cross(f.e1);
-  return f;
-}
-
-// The surface as triangles that are simplified by edge collapses. Every collapse keeps the mesh
-// a closed manifold (link condition), so watertightness never depends on geometry.
-struct WorkMesh {
-  enum Kind : char { kInterior, kChain, kAnchor };
-  std::vector<Eigen::Vector3d> pos;
-  std::vector<char> kind;
-  std::vector<char> vertex_alive;
-  std::vector<std::array<int, 3>> tri;
-  std::vector<int> tri_region;
-  std::vector<char> alive;
-  // A lattice vertex has about six triangles around it: kept inline, as one small heap block
-  // per vertex would be the largest part of the work mesh.
-  using TriList = absl::InlinedVector<int, 6>;
-  std::vector<TriList> incident;  // may hold stale entries; see Tris()
-
-  // Alive triangles around v (compacts the list).
-  const TriList& Tris(int v) {
-    TriList& list = incident[v];
-    list.erase(std::remove_if(list.begin(), list.end(),
-                              [&](int t) {
-                                return !alive[t] || (tri[t][0] != v && tri[t][1] != v && tri[t][2] != v);
-                              }),
-               list.end());
-    std::sort(list.begin(), list.end());
-    list.erase(std::unique(list.begin(), list.end()), list.end());
-    return list;
-  }
-  int AddTriangle(int a, int b, int c, int region) {
-    const int t = static_cast<int>(tri.size());
-    tri.push_back({a, b, c});
-    tri_region.push_back(region);
-    alive.push_back(1);
-    for (int v : {a, b, c}) incident[v].push_back(t);
-    return t;
-  }
-  void Reserve(size_t vertices, size_t triangles) {
-    pos.reserve(vertices);
-    kind.reserve(vertices);
-    vertex_alive.reserve(vertices);
-    incident.reserve(vertices);
-    tri.reserve(triangles);
-    tri_region.reserve(triangles);
-    alive.reserve(triangles);
-  }
-  int AddVertex(const Eigen::Vector3d& x, Kind k) {
-    pos.push_back(x);
-    kind.push_back(k);
-    vertex_alive.push_back(1);
-    incident.emplace_back();
-    return static_cast<int>(pos.size()) - 1;
-  }
-};
-
-double SignedArea(const WorkMesh& m, const std::vector<PlaneFrame>& frames, int region, int a, int b,
-                  int c) {
-  return 0.5 * frames[region].n.dot((m.pos[b] - m.pos[a]).cross(m.pos[c] - m.pos[a]));
-}
-
-// Collapses u into v when that keeps the surface a manifold and no triangle gets worse than
-// `min_area` in its region's plane (§4.2.5: the chains stay where the regions meet).
-bool TryCollapse(WorkMesh& m, const std::vector<PlaneFrame>& frames, int u, int v, double min_area) {
-  const WorkMesh::TriList tu = m.Tris(u);
-  std::vector<int> shared, moved;
-  for (int t : tu) {
-    const auto& x = m.tri[t];
-    (x[0] == v || x[1] == v || x[2] == v ? shared : moved).push_back(t);
-  }
-  if (shared.size() != 2) return false;
-  // Link condition: the common neighbours of u and v are the two opposite vertices.
-  std::vector<int> opposite;
-  for (int t : shared) {
-    for (int w : m.tri[t]) if (w != u && w != v) opposite.push_back(w);
-  }
-  if (opposite.size() != 2 || opposite[0] == opposite[1]) return false;
-  std::vector<int> nu, nv;
-  for (int t : tu) for (int w : m.tri[t]) if (w != u && w != v) nu.push_back(w);
-  for (int t : m.Tris(v)) for (int w : m.tri[t]) if (w != u && w != v) nv.push_back(w);
-  std::sort(nu.begin(), nu.end());
-  nu.erase(std::unique(nu.begin(), nu.end()), nu.end());
-  std::sort(nv.begin(), nv.end());
-  nv.erase(std::unique(nv.begin(), nv.end()), nv.end());
-  std::vector<int> common;
-  std::set_intersection(nu.begin(), nu.end(), nv.begin(), nv.end(), std::back_inserter(common));
-  std::sort(opposite.begin(), opposite.end());
-  if (common != opposite) return false;
-  // Small closed pieces (a tetrahedron) would fold into two coincident triangles: every vertex
-  // keeps at least three triangles.
-  if (tu.size() + m.Tris(v).size() - 4 < 3) return false;
-  for (int w : opposite) {
-    if (m.Tris(w).size() < 4) return false;
-  }
-  for (int t : moved) {
-    std::array<int, 3> x = m.tri[t];
-    const double before = SignedArea(m, frames, m.tri_region[t], x[0], x[1], x[2]);
-    for (int& w : x) if (w == u) w = v;
-    const double after = SignedArea(m, frames, m.tri_region[t], x[0], x[1], x[2]);
-    if (after < min_area && after < before) return false;
-  }
-  for (int t : shared) m.alive[t] = 0;
-  for (int t : moved) {
-    for (int& w : m.tri[t]) if (w == u) w = v;
-    m.incident[v].push_back(t);
-  }
-  m.vertex_alive[u] = 0;
-  m.incident[u].clear();
-  return true;
-}
-
-// The two triangles on edge (a, b) differ in region: a boundary edge between regions.
-bool IsRegionEdge(WorkMesh& m, int a, int b) {
-  int regs[2], n = 0;
-  for (int t : m.Tris(a)) {
-    const auto& x = m.tri[t];
-    if (x[0] == b || x[1] == b || x[2] == b) {
-      if (n < 2) regs[n] = m.tri_region[t];
-      ++n;
-    }
-  }
-  return n == 2 && regs[0] != regs[1];
-}
-
-
-// Vertices closer than this (grid cells) are one point: the output is float, whose step at
-// building coordinates (~5e-7 m at 5 m) would otherwise merge them into a flat triangle.
-constexpr double kCoincidentCells = 1e-3;
-
-// A triangle without area, or with an edge shorter than float can keep.
-bool Flat(const WorkMesh& m, const std::array<int, 3>& x, double min_area, double res) {
-  if ((m.pos[x[1]] - m.pos[x[0]]).cross(m.pos[x[2]] - m.pos[x[0]]).norm() <= 2 * min_area) return true;
-  for (int i = 0; i < 3; ++i) {
-    if ((m.pos[x[(i + 1) % 3]] - m.pos[x[i]]).norm() < kCoincidentCells * res) return true;
-  }
-  return false;
-}
-
-// A triangle whose third vertex lies on its longest edge: flip that edge when the triangle
-// beyond it is of the same region (the region's border does not move).
-bool FlipLongestEdge(WorkMesh& m, const std::vector<PlaneFrame>& frames, int t, double min_area) {
-  const auto x = m.tri[t];
-  int i = 0;
-  double longest = -1;
-  for (int k = 0; k < 3; ++k) {
-    const double len = (m.pos[x[(k + 1) % 3]] - m.pos[x[k]]).squaredNorm();
-    if (len > longest) longest = len, i = k;
-  }
-  const int a = x[i], b = x[(i + 1) % 3], c = x[(i + 2) % 3];
-  int other = -1, d = -1;
-  for (int u : m.Tris(a)) {
-    const auto& y = m.tri[u];
-    for (int k = 0; k < 3; ++k) {
-      if (u != t && y[k] == b && y[(k + 1) % 3] == a) other = u, d = y[(k + 2) % 3];
-    }
-  }
-  if (other < 0 || m.tri_region[other] != m.tri_region[t] || d == c) return false;
-  for (int u : m.Tris(c)) {
-    for (int w : m.tri[u]) if (w == d) return false;  // c–d is already an edge
-  }
-  const int r = m.tri_region[t];
-  if (SignedArea(m, frames, r, a, d, c) < min_area || SignedArea(m, frames, r, d, b, c) < min_area) {
-    return false;
-  }
-  m.tri[t] = {a, d, c};
-  m.tri[other] = {d, b, c};
-  m.incident[d].push_back(t);
-  m.incident[c].push_back(other);
-  return true;
-}
-
-// Chains first, while the regions' interiors are still fine (collapsing interiors first would
-// leave triangles spanning three vertices of one straight chain, which block its collapse),
-// then interiors, until nothing changes.
-void Simplify(WorkMesh& m, const std::vector<PlaneFrame>& frames, double tolerance_m, double res) {
-  const double min_area = 1e-6 * res * res;
-  auto pass = [&](WorkMesh::Kind kind) {
-    int collapsed = 0;
-    for (int u = 0; u < static_cast<int>(m.pos.size()); ++u) {
-      if (!m.vertex_alive[u] || m.kind[u] != kind) continue;
-      std::vector<int> nbrs;
-      for (int t : m.Tris(u)) for (int w : m.tri[t]) if (w != u) nbrs.push_back(w);
-      std::sort(nbrs.begin(), nbrs.end());
-      nbrs.erase(std::unique(nbrs.begin(), nbrs.end()), nbrs.end());
-      if (kind == WorkMesh::kAnchor) {
-        // Several octree corners placed on one point (noisy corners where three planes meet):
-        // merge them, which changes no geometry.
-        for (int v : nbrs) {
-          if ((m.pos[v] - m.pos[u]).norm() < kCoincidentCells * res &&
-              TryCollapse(m, frames, u, v, min_area)) {
-            ++collapsed;
-            break;
-          }
-        }
-      } else if (kind == WorkMesh::kChain) {
-        // Along its chain only, and only when the chain moves less than the tolerance.
-        std::vector<int> chain;
-        for (int w : nbrs) if (IsRegionEdge(m, u, w)) chain.push_back(w);
-        if (chain.size() != 2) continue;
-        for (int i = 0; i < 2; ++i) {
-          const int v = chain[i], w = chain[1 - i];
-          if (DistanceToSegment(m.pos[u], m.pos[w], m.pos[v]) > tolerance_m) continue;
-          if (TryCollapse(m, frames, u, v, min_area)) {
-            ++collapsed;
-            break;
-          }
-        }
-      } else {
-        std::stable_sort(nbrs.begin(), nbrs.end(), [&](int a, int b) {
-          return (m.pos[a] - m.pos[u]).squaredNorm() < (m.pos[b] - m.pos[u]).squaredNorm();
-        });
-        for (int v : nbrs) {
-          if (TryCollapse(m, frames, u, v, min_area)) {
-            ++collapsed;
-            break;
-          }
-        }
-      }
-    }
-    return collapsed;
-  };
-  for (int round = 0; round < 32; ++round) {
-    int changed = 0;
-    changed += pass(WorkMesh::kAnchor);
-    for (int i = 0; i < 8; ++i) {
-      const int n = pass(WorkMesh::kChain);
-      changed += n;
-      if (n == 0) break;
-    }
-    for (int i = 0; i < 8; ++i) {
-      const int n = pass(WorkMesh::kInterior);
-      changed += n;
-      if (n == 0) break;
-    }
-    if (changed == 0) break;
-  }
-  // Last resort for triangles left without area (their vertices were placed onto one line or
-  // point): collapse one of their edges whatever the vertices' kinds, which moves a region
-  // border by at most that edge.
-  for (int round = 0; round < 8; ++round) {
-    int fixed = 0;
-    for (int t = 0; t < static_cast<int>(m.tri.size()); ++t) {
-      if (!m.alive[t]) continue;
-      const auto x = m.tri[t];
-      if (!Flat(m, x, min_area, res)) continue;
-      if (FlipLongestEdge(m, frames, t, min_area)) {
-        ++fixed;
-        continue;
-      }
-      for (int i = 0; i < 3 && m.alive[t]; ++i) {
-        const int a = x[i], b = x[(i + 1) % 3];
-        if (TryCollapse(m, frames, a, b, min_area) || TryCollapse(m, frames, b, a, min_area)) ++fixed;
-      }
-    }
-    if (fixed == 0) break;
-  }
-  // Still flat (a vertex wedged between two others on one line, with a chain on each side):
-  // collapse the shortest edge on topology alone. The triangles around it are about as small
-  // as the flat one, so any fold this leaves is of that size.
-  for (int round = 0; round < 8; ++round) {
-    int fixed = 0;
-    for (int t = 0; t < static_cast<int>(m.tri.size()); ++t) {
-      if (!m.alive[t]) continue;
-      const auto x = m.tri[t];
-      if (!Flat(m, x, min_area, res)) continue;
-      std::array<int, 3> order = {0, 1, 2};
-      std::sort(order.begin(), order.end(), [&](int i, int j) {
-        return (m.pos[x[(i + 1) % 3]] - m.pos[x[i]]).squaredNorm() <
-               (m.pos[x[(j + 1) % 3]] - m.pos[x[j]]).squaredNorm();
-      });
-      for (int i : order) {
-        const int a = x[i], b = x[(i + 1) % 3];
-        const double no_check = -std::numeric_limits<double>::infinity();
-        if (TryCollapse(m, frames, a, b, no_check) || TryCollapse(m, frames, b, a, no_check)) {
-          ++fixed;
-          break;
-        }
-      }
-    }
-    if (fixed == 0) break;
-  }
-  // Whatever is still flat (two sheets' vertices on one point, or a vertex exactly between
-  // two others with no collapse allowed) gets a nudge of 1% of a cell towards the middle of
-  // its neighbours: geometry unchanged at any visible scale, and no zero-area triangle.
-  for (int t = 0; t < static_cast<int>(m.tri.size()); ++t) {
-    if (!m.alive[t] || !Flat(m, m.tri[t], min_area, res)) continue;
-    const auto x = m.tri[t];
-    int pick = x[0];
-    for (int v : x) if (m.kind[v] < m.kind[pick]) pick = v;
-    for (int i = 0; i < 3; ++i) {  // a zero-length edge: move one of its ends
-      const int a = x[i], b = x[(i + 1) % 3];
-      if ((m.pos[a] - m.pos[b]).norm() < kCoincidentCells * res) pick = m.kind[a] <= m.kind[b] ? a : b;
-    }
-    Eigen::Vector3d mid = Eigen::Vector3d::Zero();
-    int n = 0;
-    for (int u : m.Tris(pick)) {
-      for (int w : m.tri[u]) if (w != pick) mid += m.pos[w], ++n;
-    }
-    Eigen::Vector3d dir = n > 0 ? Eigen::Vector3d(mid / n - m.pos[pick]) : Eigen::Vector3d::Zero();
-    if (dir.norm() < 1e-9) dir = frames[m.tri_region[t]].e1;
-    m.pos[pick] += 0.01 * res * dir.normalized();
-  }
-  // Tiny closed pieces that still have a flat or folded triangle, or enclose less than one grid
-  // cell (a pocket of one or two cells whose corners were placed onto nearly parallel planes,
-  // e.g. a floor and the pocket's top) are dropped whole: they are carving noise, and the rest
-  // stays closed. RepairPlanarMesh applies the volume test again after re-triangulation.
-  const std::vector<int> drop = TinyPieces(
-      static_cast<int>(m.tri.size()), [&](int t) { return m.tri[t]; },
-      [&](int t) { return m.alive[t] != 0; }, [&](int v) { return m.pos[v]; },
-      [&](int t) {
-        const auto& x = m.tri[t];
-        return Flat(m, x, min_area, res) ||
-               SignedArea(m, frames, m.tri_region[t], x[0], x[1], x[2]) < min_area;
-      },
-      res);
-  for (int t = 0; t < static_cast<int>(m.tri.size()); ++t) {
-    if (drop[t] >= 0) m.alive[t] = 0;
-  }
-}
 
 // Re-triangulates one region of the simplified mesh in its plane: its boundary edges (the
 // shared chains) as constraints plus quadtree points (§4.2.5). Returns false (and adds nothing)
@@ -670,7 +286,8 @@ bool RetriangulateRegion(const WorkMesh& m, const PlaneFrame& frame,
       } else {
         if (vh->info().out == -1) {
           vh->info().out = next_steiner--;
-          const Eigen::Vector3d x = frame.c + vh->point().x() * frame.e1 + vh->point().y() * frame.e2;
+          const Eigen::Vector3d x =
+              frame.c + vh->point().x() * frame.e1 + vh->point().y() * frame.e2;
           steiner_pos.push_back(x);
         }
         t[i] = vh->info().out;
@@ -705,104 +322,12 @@ bool RetriangulateRegion(const WorkMesh& m, const PlaneFrame& frame,
   }
   const int base = static_cast<int>(steiner_out.size());
   for (auto& t : tris) {
-    for (int& w : t) if (w <= -2) w = -(base + (-w - 2)) - 2;
+    for (int& w : t)
+      if (w <= -2) w = -(base + (-w - 2)) - 2;
     tris_out.push_back(t);
   }
   steiner_out.insert(steiner_out.end(), steiner_pos.begin(), steiner_pos.end());
   return true;
-}
-
-// Everything about the surface and its regions before simplification.
-absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces, const PlanarRegionSet& regions,
-                                       const std::vector<PlaneFrame>& frames,
-                                       const PlanarMeshOptions& options, double res) {
-  absl::StatusOr<FaceSurface> surface = BuildSurface(faces, res);
-  if (!surface.ok()) return surface.status();
-  const FaceSurface& s = *surface;
-  const int num_corners = static_cast<int>(s.corner_vertex.size());
-  auto region_of_corner = [&](int c) { return regions.face_region[s.corner_face[c]]; };
-  std::vector<std::vector<int>> tv_regions(s.num_tv);
-  for (int c = 0; c < num_corners; ++c) tv_regions[s.corner_tv[c]].push_back(region_of_corner(c));
-  for (auto& list : tv_regions) {
-    std::sort(list.begin(), list.end());
-    list.erase(std::unique(list.begin(), list.end()), list.end());
-  }
-  // Region changes around each vertex: 2 for a vertex inside a chain between two regions.
-  std::vector<int> out_count(s.num_tv, 0);
-  for (int c = 0; c < num_corners; ++c) {
-    if (region_of_corner(c) != region_of_corner(s.twin[c])) ++out_count[s.corner_tv[c]];
-  }
-  WorkMesh m;
-  // About one vertex per lattice vertex and two triangles per face (a few more where faces
-  // of different sizes meet): made at their size, as the work mesh is this stage's peak.
-  m.Reserve(s.num_tv, 2 * faces.size());
-  for (int v = 0; v < s.num_tv; ++v) {
-    const Eigen::Vector3d x0 = s.lattice[s.tv_lattice[v]].cast<double>() * res;
-    const std::vector<int>& regs = tv_regions[v];
-    if (regs.size() == 1) {
-      m.AddVertex(frames[regs[0]].Project(x0), WorkMesh::kInterior);
-    } else {
-      const WorkMesh::Kind k = regs.size() == 2 && out_count[v] == 2 ? WorkMesh::kChain : WorkMesh::kAnchor;
-      m.AddVertex(PlaceVertex(x0, regs, regions, options, res), k);
-    }
-  }
-  std::vector<std::vector<int>>().swap(tv_regions);
-  // Two sheets may still share an edge when the faces around both of its ends are connected
-  // (interior cells touching along the edge and joined through their other neighbours): give
-  // each sheet its own midpoint on that edge.
-  auto edge_key = [](int a, int b) {
-    return (uint64_t{static_cast<uint32_t>(std::min(a, b))} << 32) | static_cast<uint32_t>(std::max(a, b));
-  };
-  // The edges used by more than two corners, found by sorting all the edges' keys once
-  // (a sorted array of 8 bytes per corner, freed at once, rather than a hash map of all edges
-  // held to the end): there are few of them.
-  std::vector<uint64_t> shared_edges;
-  {
-    std::vector<uint64_t> keys(num_corners);
-    for (int c = 0; c < num_corners; ++c) keys[c] = edge_key(s.corner_tv[c], s.corner_tv[s.Next(c)]);
-    std::sort(keys.begin(), keys.end());
-    ForEachRun(keys, [](uint64_t k) { return k; }, [&](size_t i, size_t e) {
-      if (e - i > 2) shared_edges.push_back(keys[i]);
-    });
-  }
-  absl::flat_hash_map<int, int> midpoint;  // min(corner, twin) → vertex
-  auto midpoint_of = [&](int c) {
-    if (!std::binary_search(shared_edges.begin(), shared_edges.end(),
-                            edge_key(s.corner_tv[c], s.corner_tv[s.Next(c)]))) {
-      return -1;
-    }
-    const int k = std::min(c, s.twin[c]);
-    auto it = midpoint.find(k);
-    if (it != midpoint.end()) return it->second;
-    const Eigen::Vector3d x0 =
-        0.5 * res * (s.lattice[s.corner_vertex[c]] + s.lattice[s.corner_vertex[s.Next(c)]]).cast<double>();
-    std::vector<int> regs{region_of_corner(c), region_of_corner(s.twin[c])};
-    std::sort(regs.begin(), regs.end());
-    regs.erase(std::unique(regs.begin(), regs.end()), regs.end());
-    const int v = regs.size() == 1
-                      ? m.AddVertex(frames[regs[0]].Project(x0), WorkMesh::kInterior)
-                      : m.AddVertex(PlaceVertex(x0, regs, regions, options, res), WorkMesh::kChain);
-    midpoint[k] = v;
-    return v;
-  };
-  for (size_t f = 0; f < faces.size(); ++f) {
-    const int r = regions.face_region[f];
-    std::vector<int> poly;
-    for (int c = s.poly_start[f]; c < s.poly_start[f + 1]; ++c) {
-      poly.push_back(s.corner_tv[c]);
-      if (const int mid = midpoint_of(c); mid >= 0) poly.push_back(mid);
-    }
-    const int n = static_cast<int>(poly.size());
-    if (n == 4) {
-      m.AddTriangle(poly[0], poly[1], poly[2], r);
-      m.AddTriangle(poly[0], poly[2], poly[3], r);
-    } else {
-      // A face with T-junction vertices on its sides: a fan around its centre.
-      const int center = m.AddVertex(frames[r].Project(faces[f].center), WorkMesh::kInterior);
-      for (int i = 0; i < n; ++i) m.AddTriangle(center, poly[i], poly[(i + 1) % n], r);
-    }
-  }
-  return m;
 }
 
 // Directed edge (a, b) as a key; undirected when a < b.
@@ -926,11 +451,11 @@ PlanarMesh Retriangulate(const WorkMesh& m, const std::vector<PlaneFrame>& frame
     for (int t : outlines.tris[r]) old_tris.push_back(m.tri[t]);
     std::vector<std::array<int, 3>> tris;
     std::vector<Eigen::Vector3d> steiner;
-    const bool remeshed = !outlines.segs[r].empty() &&
-                          RetriangulateRegion(m, frames[r], outlines.segs[r],
-                                              options.quadtree_points, options.min_quadtree_cells,
-                                              res, tris, steiner) &&
-                          users.TryReplace(outlines.segs[r], old_tris, tris);
+    const bool remeshed =
+        !outlines.segs[r].empty() &&
+        RetriangulateRegion(m, frames[r], outlines.segs[r], options.quadtree_points,
+                            options.min_quadtree_cells, res, tris, steiner) &&
+        users.TryReplace(outlines.segs[r], old_tris, tris);
     if (!remeshed) {
       tris = std::move(old_tris);
       steiner.clear();

@@ -239,7 +239,9 @@ int SeparateCoincidentVertices(PlanarMesh& mesh, double step, double min_area_m2
   const auto& vs = mesh.mesh.vertices;
   std::vector<int> order(vs.size());
   std::iota(order.begin(), order.end(), 0);
-  const auto position = [&](int v) { return std::array<float, 3>{vs[v].x(), vs[v].y(), vs[v].z()}; };
+  const auto position = [&](int v) {
+    return std::array<float, 3>{vs[v].x(), vs[v].y(), vs[v].z()};
+  };
   std::sort(order.begin(), order.end(), [&](int a, int b) {
     return std::make_pair(position(a), a) < std::make_pair(position(b), b);
   });

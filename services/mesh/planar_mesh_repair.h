@@ -30,7 +30,7 @@ struct PlanarMeshRepair {
   int flips = 0;
   int collapses = 0;
   int nudges = 0;
-  int left = 0;  // triangles still below min_area_m2 (0 unless every repair was blocked)
+  int left = 0;       // triangles still below min_area_m2 (0 unless every repair was blocked)
   int separated = 0;  // coincident vertices moved apart
 };
 PlanarMeshRepair RepairPlanarMesh(PlanarMesh& mesh, double res, double min_area_m2 = 1e-10);

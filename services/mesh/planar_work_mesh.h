@@ -1,0 +1,101 @@
+// Internal to the planar mesh (planar_mesh.cc): the boundary faces' surface made into a
+// triangle mesh whose vertices sit on the regions' planes (eq 4.9, §4.3.3), and its
+// simplification by edge collapses that keep it a closed manifold (§4.2.5). planar_mesh.cc
+// then re-triangulates each region in its plane; planar_mesh_test.cc tests them together.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <span>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "absl/container/inlined_vector.h"
+#include "absl/status/statusor.h"
+#include "services/mesh/boundary_faces.h"
+#include "services/mesh/planar_mesh.h"
+#include "services/mesh/planar_regions.h"
+
+namespace carvemap::planar_mesh_internal {
+
+// The plane of a region with a right-handed basis: e1 × e2 = n, so counter-clockwise in 2D is
+// counter-clockwise seen from free space.
+struct PlaneFrame {
+  Eigen::Vector3d c, n, e1, e2;
+  [[nodiscard]] Eigen::Vector2d To2(const Eigen::Vector3d& x) const {
+    return {(x - c).dot(e1), (x - c).dot(e2)};
+  }
+  [[nodiscard]] Eigen::Vector3d Project(const Eigen::Vector3d& x) const {
+    return x - n * n.dot(x - c);
+  }
+};
+
+PlaneFrame FrameOf(const PlanarRegion& region);
+
+// The surface as triangles that are simplified by edge collapses. Every collapse keeps the mesh
+// a closed manifold (link condition), so watertightness never depends on geometry.
+struct WorkMesh {
+  enum Kind : char { kInterior, kChain, kAnchor };
+  std::vector<Eigen::Vector3d> pos;
+  std::vector<char> kind;
+  std::vector<char> vertex_alive;
+  std::vector<std::array<int, 3>> tri;
+  std::vector<int> tri_region;
+  std::vector<char> alive;
+  // A lattice vertex has about six triangles around it: kept inline, as one small heap block
+  // per vertex would be the largest part of the work mesh.
+  using TriList = absl::InlinedVector<int, 6>;
+  std::vector<TriList> incident;  // may hold stale entries; see Tris()
+
+  // Alive triangles around v (compacts the list).
+  const TriList& Tris(int v) {
+    TriList& list = incident[v];
+    list.erase(std::remove_if(list.begin(), list.end(),
+                              [&](int t) {
+                                return !alive[t] ||
+                                       (tri[t][0] != v && tri[t][1] != v && tri[t][2] != v);
+                              }),
+               list.end());
+    std::sort(list.begin(), list.end());
+    list.erase(std::unique(list.begin(), list.end()), list.end());
+    return list;
+  }
+  int AddTriangle(int a, int b, int c, int region) {
+    const int t = static_cast<int>(tri.size());
+    tri.push_back({a, b, c});
+    tri_region.push_back(region);
+    alive.push_back(1);
+    for (int v : {a, b, c}) incident[v].push_back(t);
+    return t;
+  }
+  void Reserve(size_t vertices, size_t triangles) {
+    pos.reserve(vertices);
+    kind.reserve(vertices);
+    vertex_alive.reserve(vertices);
+    incident.reserve(vertices);
+    tri.reserve(triangles);
+    tri_region.reserve(triangles);
+    alive.reserve(triangles);
+  }
+  int AddVertex(const Eigen::Vector3d& x, Kind k) {
+    pos.push_back(x);
+    kind.push_back(k);
+    vertex_alive.push_back(1);
+    incident.emplace_back();
+    return static_cast<int>(pos.size()) - 1;
+  }
+};
+
+// Everything about the surface and its regions before simplification.
+absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces,
+                                       const PlanarRegionSet& regions,
+                                       const std::vector<PlaneFrame>& frames,
+                                       const PlanarMeshOptions& options, double res);
+
+// Chains first, while the regions' interiors are still fine (collapsing interiors first would
+// leave triangles spanning three vertices of one straight chain, which block its collapse),
+// then interiors, until nothing changes.
+void Simplify(WorkMesh& m, const std::vector<PlaneFrame>& frames, double tolerance_m, double res);
+
+}  // namespace carvemap::planar_mesh_internal
