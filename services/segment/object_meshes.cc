@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
+#include <span>
 #include <tuple>
 
 #include "absl/container/flat_hash_map.h"
@@ -66,13 +68,18 @@ class FootprintGrid {
   absl::flat_hash_map<std::tuple<int, int64_t, int64_t>, std::vector<int>> cells_;
 };
 
+// Objects as grouping makes them, before their meshes: each one's box, volume, level and room,
+// and the pieces it is made of, in ascending order.
+struct Groups {
+  std::vector<SegmentedObject> objects;  // meshes empty
+  std::vector<std::vector<int>> pieces;
+};
+
 // Pieces on one level stacked over each other (footprints overlapping by stack_overlap of the
-// smaller, vertical gap at most stack_gap_m) become one object, transitively.
-std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
-                                          const PlanVolume& plan,
-                                          const ObjectSplitOptions& options,
-                                          ObjectSplitReport& rep) {
-  if (options.stack_gap_m < 0) return pieces;
+// smaller, vertical gap at most stack_gap_m) become one object, transitively. `pieces` carry
+// no meshes: only what the grouping reads.
+Groups GroupStacked(std::vector<SegmentedObject> pieces, const PlanVolume& plan,
+                    const ObjectSplitOptions& options, ObjectSplitReport& rep) {
   const int n = static_cast<int>(pieces.size());
   UnionFind<int> groups(n);
   // How much j's footprint shares with i's when they are stacked; 0 when not.
@@ -86,7 +93,7 @@ std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
   // Only footprints that overlap stack, so only pieces sharing a grid cell need the test.
   std::vector<bool> small(n);
   FootprintGrid footprints;
-  for (int i = 0; i < n; ++i) {
+  for (int i = 0; i < n && options.stack_gap_m >= 0; ++i) {
     small[i] = Speck(pieces[i], options);
     if (!small[i]) footprints.Add(i, pieces[i]);
   }
@@ -110,35 +117,32 @@ std::vector<SegmentedObject> GroupStacked(std::vector<SegmentedObject> pieces,
     }
     if (best >= 0) groups.Union(i, best);
   }
-  std::vector<SegmentedObject> grouped;
+  Groups grouped;
   std::vector<int> group_of(n, -1);
   std::vector<bool> grew;  // per group: its box changed, so its level and room may have
   for (int i = 0; i < n; ++i) {
     const int root = groups.Find(i);
     if (group_of[root] < 0) {
-      group_of[root] = static_cast<int>(grouped.size());
-      grouped.push_back(std::move(pieces[i]));
+      group_of[root] = static_cast<int>(grouped.objects.size());
+      grouped.objects.push_back(std::move(pieces[i]));
+      grouped.pieces.push_back({i});
       grew.push_back(false);
       continue;
     }
-    grew[group_of[root]] = true;
-    SegmentedObject& g = grouped[group_of[root]];
-    const SegmentedObject& p = pieces[i];
-    const int offset = static_cast<int>(g.mesh.vertices.size());
-    g.mesh.vertices.insert(g.mesh.vertices.end(), p.mesh.vertices.begin(), p.mesh.vertices.end());
-    for (const Eigen::Vector3i& t : p.mesh.triangles) {
-      g.mesh.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
-    }
-    g.box.extend(p.box);
-    g.volume_m3 += p.volume_m3;
+    const int g = group_of[root];
+    grew[g] = true;
+    grouped.objects[g].box.extend(pieces[i].box);
+    grouped.objects[g].volume_m3 += pieces[i].volume_m3;
+    grouped.pieces[g].push_back(i);
     ++rep.grouped;
   }
   // A piece kept alone keeps the level and room SplitObjects found for it.
-  for (size_t g = 0; g < grouped.size(); ++g) {
+  for (size_t g = 0; g < grouped.objects.size(); ++g) {
     if (!grew[g]) continue;
-    const PlanColumn col = LookupPlan(plan, grouped[g].box.center());
-    grouped[g].level = col.level;
-    grouped[g].room = col.room;
+    SegmentedObject& o = grouped.objects[g];
+    const PlanColumn col = LookupPlan(plan, o.box.center());
+    o.level = col.level;
+    o.room = col.room;
   }
   return grouped;
 }
@@ -152,54 +156,59 @@ std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
   ObjectSplitReport local_report;
   ObjectSplitReport& rep = report ? *report : local_report;
   rep = ObjectSplitReport{};
-  const int nv = static_cast<int>(object_mesh.vertices.size());
+  const auto& tris = object_mesh.triangles;
+  const auto& verts = object_mesh.vertices;
+  const int nv = static_cast<int>(verts.size());
+  const int nt = static_cast<int>(tris.size());
   UnionFind<int> joined(nv);
-  for (const Eigen::Vector3i& t : object_mesh.triangles) {
+  for (const Eigen::Vector3i& t : tris) {
     for (int e = 1; e < 3; ++e) joined.Union(t[0], t[e]);
   }
-  // Component of each triangle, numbered by first appearance.
-  std::vector<int> comp_of_root(nv, -1);
-  std::vector<std::vector<int>> comp_triangles;
-  for (int i = 0; i < static_cast<int>(object_mesh.triangles.size()); ++i) {
-    const int root = joined.Find(object_mesh.triangles[i][0]);
-    if (comp_of_root[root] < 0) {
-      comp_of_root[root] = static_cast<int>(comp_triangles.size());
-      comp_triangles.emplace_back();
-    }
-    comp_triangles[comp_of_root[root]].push_back(i);
-  }
-  rep.components = comp_triangles.size();
-
-  std::vector<SegmentedObject> objects;
-  std::vector<int> remap(nv, -1);
-  for (const std::vector<int>& tris : comp_triangles) {
-    SegmentedObject obj;
-    for (int ti : tris) {
-      const Eigen::Vector3i& t = object_mesh.triangles[ti];
-      Eigen::Vector3i u;
-      for (int c = 0; c < 3; ++c) {
-        int& r = remap[t[c]];
-        if (r < 0) {
-          r = static_cast<int>(obj.mesh.vertices.size());
-          obj.mesh.vertices.push_back(object_mesh.vertices[t[c]]);
-          obj.box.extend(object_mesh.vertices[t[c]].cast<double>());
-        }
-        u[c] = r;
+  // Components numbered by first appearance; each one's triangles in ascending order:
+  // order[start[c], start[c + 1]).
+  std::vector<int> start, order(nt);
+  {
+    std::vector<int> comp_of_root(nv, -1), comp_of(nt);
+    for (int i = 0; i < nt; ++i) {
+      int& c = comp_of_root[joined.Find(tris[i][0])];
+      if (c < 0) {
+        c = static_cast<int>(start.size());
+        start.push_back(0);
       }
-      // Flip: the input faces the free space, an object's mesh faces out of the object.
-      obj.mesh.triangles.emplace_back(u[0], u[2], u[1]);
+      comp_of[i] = c;
+      ++start[c];
     }
-    for (int ti : tris) {
-      for (int c = 0; c < 3; ++c) remap[object_mesh.triangles[ti][c]] = -1;
+    start.push_back(0);
+    std::exclusive_scan(start.begin(), start.end(), start.begin(), 0);
+    std::vector<int> next(start.begin(), start.end() - 1);
+    for (int i = 0; i < nt; ++i) order[next[comp_of[i]]++] = i;
+  }
+  const int num_comps = static_cast<int>(start.size()) - 1;
+  rep.components = num_comps;
+  const auto comp_triangles = [&](int c) {
+    return std::span<const int>(order).subspan(start[c], start[c + 1] - start[c]);
+  };
+  // Flip: the input faces the free space, an object's mesh faces out of the object.
+  const auto flipped = [](const Eigen::Vector3i& t) { return Eigen::Vector3i(t[0], t[2], t[1]); };
+
+  // Each piece's box, volume, level and room first; meshes only for the objects kept (the
+  // specks, cavities and films dropped are most of the pieces of a building's re-carve).
+  std::vector<SegmentedObject> pieces;
+  std::vector<int> piece_comp;
+  for (int c = 0; c < num_comps; ++c) {
+    SegmentedObject obj;
+    for (int ti : comp_triangles(c)) {
+      for (int k = 0; k < 3; ++k) obj.box.extend(verts[tris[ti][k]].cast<double>());
     }
     // Divergence theorem, about the box centre to keep the sums small.
     const Eigen::Vector3d o = obj.box.center();
     double six_v = 0;
-    for (const Eigen::Vector3i& t : obj.mesh.triangles) {
-      const Eigen::Vector3d a = obj.mesh.vertices[t[0]].cast<double>() - o;
-      const Eigen::Vector3d b = obj.mesh.vertices[t[1]].cast<double>() - o;
-      const Eigen::Vector3d c = obj.mesh.vertices[t[2]].cast<double>() - o;
-      six_v += a.dot(b.cross(c));
+    for (int ti : comp_triangles(c)) {
+      const Eigen::Vector3i t = flipped(tris[ti]);
+      const Eigen::Vector3d a = verts[t[0]].cast<double>() - o;
+      const Eigen::Vector3d b = verts[t[1]].cast<double>() - o;
+      const Eigen::Vector3d d = verts[t[2]].cast<double>() - o;
+      six_v += a.dot(b.cross(d));
     }
     obj.volume_m3 = six_v / 6.0;
     if (obj.volume_m3 < 0) {
@@ -221,17 +230,48 @@ std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
         continue;
       }
     }
-    objects.push_back(std::move(obj));
+    pieces.push_back(std::move(obj));
+    piece_comp.push_back(c);
   }
-  objects = GroupStacked(std::move(objects), plan, options, rep);
-  const size_t before = objects.size();
-  std::erase_if(objects, [&](const SegmentedObject& o) { return TooSmall(o, options); });
-  rep.dropped_small = before - objects.size();
-  std::sort(objects.begin(), objects.end(), [](const SegmentedObject& a, const SegmentedObject& b) {
+  Groups groups = GroupStacked(std::move(pieces), plan, options, rep);
+  std::vector<int> kept;
+  for (int g = 0; g < static_cast<int>(groups.objects.size()); ++g) {
+    if (!TooSmall(groups.objects[g], options)) kept.push_back(g);
+  }
+  rep.dropped_small = groups.objects.size() - kept.size();
+  std::sort(kept.begin(), kept.end(), [&](int i, int j) {
+    const SegmentedObject &a = groups.objects[i], &b = groups.objects[j];
     return std::make_tuple(a.level, a.box.min().x(), a.box.min().y(), a.box.min().z()) <
            std::make_tuple(b.level, b.box.min().x(), b.box.min().y(), b.box.min().z());
   });
-  for (size_t i = 0; i < objects.size(); ++i) objects[i].id = static_cast<int>(i);
+  // The meshes: each piece's vertices in the order its triangles first use them, the pieces
+  // of an object one after the other (each a closed surface of its own).
+  std::vector<SegmentedObject> objects;
+  objects.reserve(kept.size());
+  std::vector<int> remap(nv, -1);
+  for (int g : kept) {
+    SegmentedObject obj = std::move(groups.objects[g]);
+    obj.id = static_cast<int>(objects.size());
+    for (int p : groups.pieces[g]) {
+      const std::span<const int> piece = comp_triangles(piece_comp[p]);
+      for (int ti : piece) {
+        Eigen::Vector3i u;
+        for (int k = 0; k < 3; ++k) {
+          int& r = remap[tris[ti][k]];
+          if (r < 0) {
+            r = static_cast<int>(obj.mesh.vertices.size());
+            obj.mesh.vertices.push_back(verts[tris[ti][k]]);
+          }
+          u[k] = r;
+        }
+        obj.mesh.triangles.push_back(flipped(u));
+      }
+      for (int ti : piece) {
+        for (int k = 0; k < 3; ++k) remap[tris[ti][k]] = -1;
+      }
+    }
+    objects.push_back(std::move(obj));
+  }
   return objects;
 }
 
