@@ -41,7 +41,8 @@ class FootprintGrid {
   static constexpr double kCellM = 0.5;
 
   void Add(int index, const SegmentedObject& piece) {
-    ForCells(piece.box, [&](int64_t x, int64_t y) { cells_[{piece.level, x, y}].push_back(index); });
+    ForCells(piece.box,
+             [&](int64_t x, int64_t y) { cells_[{piece.level, x, y}].push_back(index); });
   }
 
   // Members sharing a cell with `box` on `level`, in increasing order, each once.
@@ -90,7 +91,8 @@ Groups GroupStacked(std::vector<SegmentedObject> pieces, const PlanVolume& plan,
     const double overlap = FootprintOverlap(a, b);
     return gap <= options.stack_gap_m && overlap >= options.stack_overlap ? overlap : 0.0;
   };
-  // Only footprints that overlap stack, so only pieces sharing a grid cell need the test.
+  // Only footprints that overlap stack, so only pieces sharing a grid cell need the test. With
+  // stack_gap_m < 0 the grid stays empty: every piece is an object of its own.
   std::vector<bool> small(n);
   FootprintGrid footprints;
   for (int i = 0; i < n && options.stack_gap_m >= 0; ++i) {

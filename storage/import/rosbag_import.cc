@@ -211,6 +211,17 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
               file, ": topic ", c.topic, " carries ", c.type,
               "; sensor_msgs/LaserScan or sensor_msgs/PointCloud2 can be imported"));
         }
+        if (c.topic != options.topic && !IsTf(c)) return absl::OkStatus();
+        // A type of the same name but another definition would be misread.
+        const char* md5 = c.type == kLaserScanType     ? kLaserScanMd5
+                          : c.type == kPointCloud2Type ? kPointCloud2Md5
+                          : c.type == kTfMessageType   ? kTfMessageMd5
+                                                       : nullptr;
+        if (md5 && c.md5sum != md5 && c.md5sum != "*") {
+          return absl::InvalidArgumentError(absl::StrCat(
+              file, ": topic ", c.topic, " says ", c.type, " with definition MD5 ", c.md5sum,
+              ", not the ", md5, " this reader knows"));
+        }
         if (IsTf(c)) {
           if (c.type != kTfMessageType) return absl::OkStatus();
           absl::StatusOr<std::vector<RosTransform>> tfs = DecodeTfMessage(m.data);
@@ -223,7 +234,6 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
           }
           return absl::OkStatus();
         }
-        if (c.topic != options.topic) return absl::OkStatus();
         laser = c.type == kLaserScanType;
         rep.message_type = c.type;
         RosHeader header;
@@ -277,17 +287,6 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
     return absl::NotFoundError(absl::StrCat(
         file, ": no messages on topic ", options.topic,
         "; the bag's topics: ", topics.empty() ? "none" : absl::StrJoin(topics, ", ")));
-  }
-  for (const BagConnection& c : connections) {
-    const char* md5 = c.type == kLaserScanType     ? kLaserScanMd5
-                      : c.type == kPointCloud2Type ? kPointCloud2Md5
-                      : c.type == kTfMessageType   ? kTfMessageMd5
-                                                   : nullptr;
-    if (md5 && (c.topic == options.topic || IsTf(c)) && c.md5sum != md5 && c.md5sum != "*") {
-      return absl::InvalidArgumentError(absl::StrCat(
-          file, ": topic ", c.topic, " says ", c.type, " with definition MD5 ", c.md5sum,
-          ", not the ", md5, " this reader knows"));
-    }
   }
   st->tf.Finish();
   // The system frame: the highest frame above the sensor's joined to it by /tf_static only.

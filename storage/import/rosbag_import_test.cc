@@ -156,6 +156,19 @@ TEST(RosbagImportTest, RefusesBagsItWouldMisread) {
   }
 }
 
+// A message type of the same name with another definition (its MD5) would be misread.
+TEST(RosbagImportTest, RefusesAnotherDefinitionOfTheType) {
+  BagWriter w;
+  w.Connection(2, "/scan", kLaserScanType, "00000000000000000000000000000000");
+  w.Message(2, 10, testing::SerializeLaserScan(Scan(10)));
+  w.Write("old_scan.bag");
+  absl::StatusOr<RosbagImport> bag = RosbagImport::Open("old_scan.bag", Topic());
+  EXPECT_NE(bag.status().message().find("old_scan.bag: topic /scan says sensor_msgs/LaserScan "
+                                        "with definition MD5 00000000000000000000000000000000"),
+            std::string::npos)
+      << bag.status();
+}
+
 TEST(RosbagImportTest, AScannerStandingStillNeedsOnlyTfStatic) {
   BagWriter w;
   w.Connection(0, "/tf_static", kTfMessageType, kTfMessageMd5);

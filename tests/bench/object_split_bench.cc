@@ -5,6 +5,7 @@
 // and for identical output (the fingerprint covers the meshes' vertices and triangles too).
 //
 //   object_split_bench [--side N] [--levels L] [--pieces P] [--specks S]
+#include <algorithm>
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
@@ -91,7 +92,8 @@ int Main(int argc, char** argv) {
       AppendInwardBox(mesh, lo, lo + size);
       const float gap = 0.05f + 0.35f * u(rng);
       const Eigen::Vector3f leg_lo(lo.x(), lo.y(), static_cast<float>(r.floor_z) + 0.02f);
-      const Eigen::Vector3f leg_hi(lo.x() + 0.1f, lo.y() + 0.1f, std::max(lo.z() - gap, leg_lo.z() + 0.1f));
+      const Eigen::Vector3f leg_hi(lo.x() + 0.1f, lo.y() + 0.1f,
+                                   std::max(lo.z() - gap, leg_lo.z() + 0.1f));
       AppendInwardBox(mesh, leg_lo, leg_hi);
     }
     for (int s = 0; s < specks; ++s) {
