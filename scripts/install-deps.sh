@@ -5,6 +5,7 @@ set -euo pipefail
 
 PACKAGES=(
   build-essential cmake ninja-build pkg-config
+  ccache  # cmake/ccache.cmake: a rebuild, or a fresh clone's build, reuses what was compiled
   liboctomap-dev octomap-tools libeigen3-dev libcgal-dev
   libspectra-dev  # services/floorplan/eigencrust.cc: generalized sparse eigensolver (§3.2.2)
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
