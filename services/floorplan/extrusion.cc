@@ -10,6 +10,7 @@
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
 #include "services/floorplan/room_polygons.h"
+#include "services/geometry/union_find.h"
 
 namespace carvemap {
 namespace {
@@ -72,13 +73,7 @@ absl::StatusOr<TriangleMesh> ExtrudeFloorPlan(const FloorPlan& plan) {
   // that share an edge at that vertex. A vertex where the plan's boundary touches itself has
   // several fans, and each gets its own column, so the solid is not pinched there.
   const size_t corners = plan.triangles.size() * 3;
-  std::vector<uint32_t> parent(corners);
-  for (uint32_t c = 0; c < corners; ++c) parent[c] = c;
-  auto find = [&](uint32_t c) {
-    while (parent[c] != c) c = parent[c] = parent[parent[c]];
-    return c;
-  };
-  auto unite = [&](uint32_t a, uint32_t b) { parent[find(a)] = find(b); };
+  UnionFind<uint32_t> fans(corners);
   absl::flat_hash_map<uint64_t, uint32_t> directed;  // directed edge → corner of its tail
   directed.reserve(corners);
   for (uint32_t t = 0; t < plan.triangles.size(); ++t) {
@@ -92,8 +87,8 @@ absl::StatusOr<TriangleMesh> ExtrudeFloorPlan(const FloorPlan& plan) {
       auto it = directed.find(EdgeKey(tri[(k + 1) % 3], tri[k]));
       if (it == directed.end()) continue;
       // Edge a→b here is b→a there: a's corners and b's corners are the same fans.
-      unite(3 * t + k, next_corner(it->second));
-      unite(next_corner(3 * t + k), it->second);
+      fans.Union(3 * t + k, next_corner(it->second));
+      fans.Union(next_corner(3 * t + k), it->second);
     }
   }
   // Per fan, the sorted distinct heights of its rooms, and their 3D vertices.
@@ -103,7 +98,7 @@ absl::StatusOr<TriangleMesh> ExtrudeFloorPlan(const FloorPlan& plan) {
   std::vector<Eigen::Vector2d> column_inward;  // Σ unit vectors to the fan's triangles' centroids
   std::vector<int> fans_at(plan.vertices.size(), 0);
   for (uint32_t c = 0; c < corners; ++c) {
-    const uint32_t root = find(c);
+    const uint32_t root = fans.Find(c);
     const auto& tri = plan.triangles[c / 3];
     if (column_of[root] < 0) {
       column_of[root] = static_cast<int>(column.size());
