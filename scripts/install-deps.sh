@@ -13,9 +13,10 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libpng-dev libembree-dev libtbb-dev libssl-dev
   zlib1g-dev  # storage/import/carmen_import.cc: gzipped CARMEN logs
-  libbz2-dev  # storage/import/rosbag_reader.cc: bz2 chunks of ROS bags
+  libbz2-dev  # storage/import/decompress.cc: bz2 chunks of ROS 1 bags
+  libzstd-dev liblz4-dev  # storage/import/decompress.cc: lz4 and zstd chunks of ROS bags and MCAP
   # tests/tools/make_rosbag.py: ROS 1 bags written by ROS's own Python library
-  python3-rosbag python3-sensor-msgs python3-tf2-msgs python3-geometry-msgs
+  python3-rosbag python3-roslz4 python3-sensor-msgs python3-tf2-msgs python3-geometry-msgs
   libgeographiclib-dev  # services/geomag/: the World Magnetic Model's declination (§2.3)
   openssl  # the CLI: tests/tools/make_test_pki.sh (TLS tests)
   prometheus-cpp-dev libcurl4-openssl-dev  # the coordinator's /metrics; `watch --metrics`

@@ -6,8 +6,10 @@
 #include <iostream>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
+#include <Eigen/Core>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -50,9 +52,8 @@ absl::Status Run(const std::string& out_path, const SensorInfo& sensor,
   if (!folder.empty() && !std::filesystem::is_directory(folder, ec)) {
     std::filesystem::create_directories(folder, ec);
     if (ec) {
-      return absl::UnavailableError(
-          absl::StrCat(out_path, ": cannot create its folder ", folder.string(), ": ",
-                       ec.message()));
+      return absl::UnavailableError(absl::StrCat(out_path, ": cannot create its folder ",
+                                                 folder.string(), ": ", ec.message()));
     }
   }
   if (auto summary = WriteImport(out_path, sensor, import); !summary.ok()) {
@@ -203,15 +204,19 @@ void RegisterImport(CLI::App& app, int& exit_code) {
   RosbagOptions& bag = flags->rosbag;
   CLI::App* bag_cmd = cmd->add_subcommand(
       "rosbag",
-      "ROS 1 bag (format 2.0; chunks uncompressed or bz2) ➜ scan.h5: one topic as one sensor.\n"
-      "sensor_msgs/LaserScan ➜ a `line` sensor (ranges outside [range_min, range_max] are no "
-      "return);\nsensor_msgs/PointCloud2 (float32 x, y, z) ➜ a `grid` sensor when organized "
-      "(height > 1), else\n`points` (non-finite points are no return). Frame times are the "
-      "header stamps. The sensor's\nmounting is the /tf_static chain from its frame up to "
-      "--base-frame (default: the highest frame\njoined to it by /tf_static only, e.g. "
-      "base_link); /path is that frame's pose in --fixed-frame,\nthe /tf chain interpolated at "
-      "each frame's stamp. Frames outside the /tf links' time spans\nare skipped and counted.");
-  bag_cmd->add_option("input", flags->input, "The bag (.bag)")->required();
+      "ROS bag ➜ scan.h5: one topic as one sensor. ROS 1 bags (format 2.0; chunks uncompressed,\n"
+      "bz2 or lz4) and ROS 2 bags (CDR messages; MCAP with chunks uncompressed, zstd or lz4, or\n"
+      "the sqlite3 .db3; a file, or the bag's directory with its metadata.yaml) are told apart\n"
+      "by their bytes. sensor_msgs/LaserScan ➜ a `line` sensor (ranges outside [range_min,\n"
+      "range_max] are no return); sensor_msgs/PointCloud2 (float32 x, y, z) ➜ a `grid` sensor\n"
+      "when organized (height > 1), else `points` (non-finite points, and points at the origin,\n"
+      "are no return). Frame times are the header stamps. The sensor's mounting is the\n"
+      "/tf_static chain from its frame up to --base-frame (default: the highest frame joined to\n"
+      "it by /tf_static only, e.g. base_link); /path is that frame's pose in --fixed-frame, the\n"
+      "/tf chain interpolated at each frame's stamp. Frames outside the /tf links' time spans\n"
+      "are skipped and counted.");
+  bag_cmd->add_option("input", flags->input, "The bag (.bag, .mcap, .db3 or a ROS 2 bag directory)")
+      ->required();
   bag_cmd->add_option("-o,--output", flags->output, "The scan.h5 to write")->required();
   bag_cmd->add_option("--topic", bag.topic, "The LaserScan or PointCloud2 topic, e.g. /scan")
       ->required();
@@ -235,9 +240,8 @@ void RegisterImport(CLI::App& app, int& exit_code) {
     absl::StatusOr<RosbagImport> bag = RosbagImport::Open(flags->input, flags->rosbag);
     absl::Status status = bag.status();
     if (bag.ok()) {
-      status = Run(flags->output, bag->sensor(), [&](const FrameSink& sink) {
-        return bag->Run(sink, &report);
-      });
+      status = Run(flags->output, bag->sensor(),
+                   [&](const FrameSink& sink) { return bag->Run(sink, &report); });
     }
     if (status.ok()) {
       std::cout << report.messages << " " << report.message_type << " messages in frame \""

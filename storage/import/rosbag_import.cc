@@ -11,6 +11,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "storage/import/ros2_bag_reader.h"
 #include "storage/import/rosbag_reader.h"
 
 namespace carvemap {
@@ -104,8 +105,7 @@ class TfTree {
 
   // `frame`'s pose in `ancestor` at time t along `chain` (from Chain); nullopt when t lies
   // outside a /tf link's samples.
-  [[nodiscard]] std::optional<Pose> PoseAt(const std::vector<std::string>& chain,
-                                           double t) const {
+  [[nodiscard]] std::optional<Pose> PoseAt(const std::vector<std::string>& chain, double t) const {
     Pose pose;
     for (size_t i = 0; i + 1 < chain.size(); ++i) {
       const Link& link = links_.at(chain[i]);
@@ -145,7 +145,26 @@ class TfTree {
   std::map<std::string, Link> links_;
 };
 
+// An error of message `m` of `file`, named by its place and topic.
+absl::Status InMessage(const std::string& file, const BagMessage& m, const absl::Status& s) {
+  return absl::Status(s.code(), absl::StrCat(file, ": message ", m.index, " (on ",
+                                             m.connection->topic, "): ", s.message()));
+}
+
 bool IsTf(const BagConnection& c) { return c.topic == "/tf" || c.topic == "/tf_static"; }
+
+// ROS 1 names a type "pkg/Type", ROS 2 "pkg/msg/Type".
+bool IsType(const BagConnection& c, absl::string_view ros1_name) {
+  if (c.type == ros1_name) return true;
+  const size_t slash = ros1_name.find('/');
+  return c.type == absl::StrCat(ros1_name.substr(0, slash), "/msg", ros1_name.substr(slash));
+}
+
+// A ROS 1 bag, or a ROS 2 bag in either storage.
+absl::Status ReadAnyBag(const std::string& file, const BagMessageFn& fn,
+                        std::vector<BagConnection>* connections = nullptr) {
+  return IsRos2Bag(file) ? ReadRos2Bag(file, fn, connections) : ReadBag(file, fn, connections);
+}
 
 std::string SensorName(const std::string& topic) {
   std::string name = topic;
@@ -194,60 +213,64 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
   st->file = file;
   st->options = options;
   RosbagReport& rep = st->report;
-  auto in_message = [&](const BagMessage& m, const absl::Status& s) {
-    return absl::Status(s.code(), absl::StrCat(file, ": message ", m.index, " (on ",
-                                               m.connection->topic, "): ", s.message()));
-  };
   bool laser = false;
   uint32_t rows = 0, cols = 0;
   double max_range = 0, last_stamp = -std::numeric_limits<double>::infinity();
   std::vector<BagConnection> connections;
-  absl::Status read = ReadBag(
+  absl::Status read = ReadAnyBag(
       file,
       [&](const BagMessage& m) -> absl::Status {
         const BagConnection& c = *m.connection;
-        if (c.topic == options.topic && c.type != kLaserScanType && c.type != kPointCloud2Type) {
-          return absl::InvalidArgumentError(absl::StrCat(
-              file, ": topic ", c.topic, " carries ", c.type,
-              "; sensor_msgs/LaserScan or sensor_msgs/PointCloud2 can be imported"));
+        if (c.topic == options.topic && !IsType(c, kLaserScanType) &&
+            !IsType(c, kPointCloud2Type)) {
+          return absl::InvalidArgumentError(
+              absl::StrCat(file, ": topic ", c.topic, " carries ", c.type,
+                           "; sensor_msgs/LaserScan or sensor_msgs/PointCloud2 can be imported"));
         }
         if (c.topic != options.topic && !IsTf(c)) return absl::OkStatus();
-        // A type of the same name but another definition would be misread.
+        if (c.encoding == RosEncoding::kUnknown) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              file, ": topic ", c.topic, " is encoded neither as ROS 1 messages nor as CDR"));
+        }
+        // A type of the same name but another definition would be misread (ROS 1 bags say
+        // which definition; ROS 2's types have not changed these fields).
         const char* md5 = c.type == kLaserScanType     ? kLaserScanMd5
                           : c.type == kPointCloud2Type ? kPointCloud2Md5
                           : c.type == kTfMessageType   ? kTfMessageMd5
                                                        : nullptr;
-        if (md5 && c.md5sum != md5 && c.md5sum != "*") {
-          return absl::InvalidArgumentError(absl::StrCat(
-              file, ": topic ", c.topic, " says ", c.type, " with definition MD5 ", c.md5sum,
-              ", not the ", md5, " this reader knows"));
+        if (md5 && !c.md5sum.empty() && c.md5sum != md5 && c.md5sum != "*") {
+          return absl::InvalidArgumentError(absl::StrCat(file, ": topic ", c.topic, " says ",
+                                                         c.type, " with definition MD5 ", c.md5sum,
+                                                         ", not the ", md5, " this reader knows"));
         }
         if (IsTf(c)) {
-          if (c.type != kTfMessageType) return absl::OkStatus();
-          absl::StatusOr<std::vector<RosTransform>> tfs = DecodeTfMessage(m.data);
-          if (!tfs.ok()) return in_message(m, tfs.status());
+          if (!IsType(c, kTfMessageType)) return absl::OkStatus();
+          absl::StatusOr<std::vector<RosTransform>> tfs = DecodeTfMessage(m.data, c.encoding);
+          if (!tfs.ok()) return InMessage(file, m, tfs.status());
           for (const RosTransform& t : *tfs) {
             if (absl::Status s = st->tf.Add(t, c.topic == "/tf_static"); !s.ok()) {
-              return in_message(m, s);
+              return InMessage(file, m, s);
             }
             ++rep.transforms;
           }
           return absl::OkStatus();
         }
-        laser = c.type == kLaserScanType;
+        laser = IsType(c, kLaserScanType);
         rep.message_type = c.type;
         RosHeader header;
         uint32_t r = 0, k = 0;
         if (laser) {
-          absl::StatusOr<RosLaserScan> s = DecodeLaserScan(m.data);
-          if (!s.ok()) return in_message(m, s.status());
+          absl::StatusOr<RosLaserScan> s = DecodeLaserScan(m.data, c.encoding);
+          if (!s.ok()) return InMessage(file, m, s.status());
           header = s->header;
           r = 1;
           k = static_cast<uint32_t>(s->ranges.size());
           if (std::isfinite(s->range_max)) max_range = std::max<double>(max_range, s->range_max);
         } else {
-          absl::StatusOr<RosPointCloud> s = DecodePointCloud2(m.data);
-          if (!s.ok()) return in_message(m, s.status());
+          // The points are read here only to find the farthest when no range is given.
+          absl::StatusOr<RosPointCloud> s =
+              DecodePointCloud2(m.data, c.encoding, options.max_range_m <= 0);
+          if (!s.ok()) return InMessage(file, m, s.status());
           header = s->header;
           r = s->height;
           k = s->width;
@@ -260,18 +283,21 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
           rows = r;
           cols = k;
         } else if (header.frame_id != rep.sensor_frame) {
-          return in_message(m, absl::InvalidArgumentError(absl::StrCat(
-                                   "frame \"", header.frame_id, "\" where the first message had \"",
-                                   rep.sensor_frame, "\"")));
+          return InMessage(file, m,
+                           absl::InvalidArgumentError(absl::StrCat(
+                               "frame \"", header.frame_id, "\" where the first message had \"",
+                               rep.sensor_frame, "\"")));
         } else if ((laser || rows > 1 || r > 1) && (r != rows || k != cols)) {
-          return in_message(m, absl::InvalidArgumentError(absl::StrCat(
-                                   r, " × ", k, " rays where the first message had ", rows, " × ",
-                                   cols, " (every frame of a line or grid sensor has the same)")));
+          return InMessage(file, m,
+                           absl::InvalidArgumentError(absl::StrCat(
+                               r, " × ", k, " rays where the first message had ", rows, " × ", cols,
+                               " (every frame of a line or grid sensor has the same)")));
         }
         if (!(header.stamp > last_stamp)) {
-          return in_message(m, absl::InvalidArgumentError(absl::StrCat(
-                                   "stamp ", header.stamp, " s is not after the previous ",
-                                   last_stamp, " s")));
+          return InMessage(
+              file, m,
+              absl::InvalidArgumentError(absl::StrCat(
+                  "stamp ", header.stamp, " s is not after the previous ", last_stamp, " s")));
         }
         last_stamp = header.stamp;
         ++rep.messages;
@@ -293,8 +319,7 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
   std::string base = options.base_frame;
   if (base.empty()) {
     base = rep.sensor_frame;
-    for (size_t up = 0; base != options.fixed_frame && st->tf.IsStatic(base) &&
-                        up < rep.transforms;
+    for (size_t up = 0; base != options.fixed_frame && st->tf.IsStatic(base) && up < rep.transforms;
          ++up) {
       base = st->tf.Parent(base);
     }
@@ -335,29 +360,24 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
   return RosbagImport(std::move(st));
 }
 
-absl::StatusOr<ImportedScan> RosbagImport::Run(const FrameSink& sink,
-                                               RosbagReport* report) const {
+absl::StatusOr<ImportedScan> RosbagImport::Run(const FrameSink& sink, RosbagReport* report) const {
   const State& st = *state_;
   RosbagReport rep = st.report;
   ImportedScan scan;
   scan.sensor = st.sensor;
   const double max_range = st.sensor.max_range_m;
-  absl::Status read = ReadBag(st.file, [&](const BagMessage& m) -> absl::Status {
+  absl::Status read = ReadAnyBag(st.file, [&](const BagMessage& m) -> absl::Status {
     if (m.connection->topic != st.options.topic) return absl::OkStatus();
     RosHeader header;
     std::vector<Eigen::Vector3f> pts;
-    const auto in_message = [&](const absl::Status& s) {
-      return absl::Status(s.code(), absl::StrCat(st.file, ": message ", m.index, " (on ",
-                                                 m.connection->topic, "): ", s.message()));
-    };
     if (st.sensor.kind == SensorKind::kLine) {
-      absl::StatusOr<RosLaserScan> s = DecodeLaserScan(m.data);
-      if (!s.ok()) return in_message(s.status());
+      absl::StatusOr<RosLaserScan> s = DecodeLaserScan(m.data, m.connection->encoding);
+      if (!s.ok()) return InMessage(st.file, m, s.status());
       header = s->header;
       pts = LaserPoints(*s, max_range);
     } else {
-      absl::StatusOr<RosPointCloud> s = DecodePointCloud2(m.data);
-      if (!s.ok()) return in_message(s.status());
+      absl::StatusOr<RosPointCloud> s = DecodePointCloud2(m.data, m.connection->encoding);
+      if (!s.ok()) return InMessage(st.file, m, s.status());
       header = s->header;
       pts = std::move(s->points);
       for (Eigen::Vector3f& p : pts) {
@@ -378,10 +398,10 @@ absl::StatusOr<ImportedScan> RosbagImport::Run(const FrameSink& sink,
   });
   if (!read.ok()) return read;
   if (scan.frame_count == 0) {
-    return absl::OutOfRangeError(absl::StrCat(
-        st.file, ": all ", rep.messages, " messages on ", st.options.topic,
-        " lie outside the time spans of the /tf links from \"", rep.base_frame, "\" to \"",
-        st.options.fixed_frame, "\""));
+    return absl::OutOfRangeError(
+        absl::StrCat(st.file, ": all ", rep.messages, " messages on ", st.options.topic,
+                     " lie outside the time spans of the /tf links from \"", rep.base_frame,
+                     "\" to \"", st.options.fixed_frame, "\""));
   }
   if (report) *report = rep;
   return scan;

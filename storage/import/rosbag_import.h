@@ -1,4 +1,6 @@
-// ROS 1 bags ➜ one sensor of scan.h5 (docs/DESIGN.md §3), read by rosbag_reader.h.
+// ROS bags ➜ one sensor of scan.h5 (docs/DESIGN.md §3): ROS 1 bags read by rosbag_reader.h,
+// ROS 2 bags (MCAP or sqlite3, CDR messages; sensor_msgs/msg/… of the same fields) by
+// ros2_bag_reader.h, told apart by their first bytes.
 //
 // The user names the scan topic and the fixed (world) frame. The topic's messages give the
 // sensor and its frames:
@@ -7,7 +9,8 @@
 //     finite is a no-return (NaN) ray. Every scan must have the same number of beams.
 //   - sensor_msgs/PointCloud2 with float32 x, y, z: organized (height > 1) a `grid` sensor of
 //     height × width, unorganized (height 1) a `points` sensor; a point with a non-finite
-//     coordinate is a no-return ray. Every organized cloud must have the same size.
+//     coordinate, or at the sensor's origin, is a no-return ray. Every organized cloud must
+//     have the same size.
 // A frame's time is its header stamp (the sensor's clock), strictly increasing.
 //
 // The frames come from tf2_msgs/TFMessage on /tf and /tf_static: each transform is its child

@@ -178,7 +178,8 @@ TEST(RosbagImportTest, AScannerStandingStillNeedsOnlyTfStatic) {
                 {Tf("map", "tripod", 0, {3, 4, 0}, 0.5), Tf("tripod", "lidar", 0, {0, 0, 1.5})}));
   for (double t : {1.0, 2.0}) {
     w.Message(5, t,
-              testing::SerializeCloud({0, t, "lidar"}, 1, 3, {{1, 0, 0}, {0, 2, 0}, {0, 0, 3}}));
+              testing::SerializeCloud({0, t, "lidar"}, 1, 4,
+                                      {{1, 0, 0}, {0, 2, 0}, {0, 0, 0}, {0, 0, 3}}));
   }
   w.Write("tripod.bag");
   absl::StatusOr<RosbagImport> bag = RosbagImport::Open("tripod.bag", Topic("/lidar/points"));
@@ -188,9 +189,11 @@ TEST(RosbagImportTest, AScannerStandingStillNeedsOnlyTfStatic) {
   EXPECT_DOUBLE_EQ(bag->sensor().max_range_m, 3.0);
   EXPECT_TRUE(bag->sensor().T_s2c.isApprox(Eigen::Vector3d(3, 4, 1.5)))
       << "every link static: the system frame is the fixed frame";
-  absl::StatusOr<ImportedScan> scan = bag->Run();
+  RosbagReport report;
+  absl::StatusOr<ImportedScan> scan = bag->Run({}, &report);
   ASSERT_TRUE(scan.ok()) << scan.status();
   EXPECT_EQ(scan->frame_count, 2u);
+  EXPECT_EQ(report.no_return_rays, 2u) << "the points at the sensor's origin";
   EXPECT_NEAR(scan->path[1].x, 0, 1e-12);
   EXPECT_NEAR(scan->path[1].qw, 1, 1e-12);
 }

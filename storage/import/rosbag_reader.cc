@@ -8,10 +8,9 @@
 #include <unordered_map>
 #include <utility>
 
-#include <bzlib.h>
-
 #include "absl/strings/str_cat.h"
 #include "storage/import/byte_reader.h"
+#include "storage/import/decompress.h"
 
 namespace carvemap {
 namespace {
@@ -26,14 +25,21 @@ constexpr uint8_t kOpMessage = 0x02, kOpChunk = 0x05, kOpConnection = 0x07;
 constexpr uint64_t kMaxChunkBytes = uint64_t{1} << 30;
 constexpr uint64_t kMaxChunkRatio = 200;
 
-// Sequential reads of ROS 1 serialized values from a byte span.
+// Sequential reads of serialized values from a byte span: ROS 1's serialization, or (cdr)
+// ROS 2's classic little-endian CDR, where a number sits at a multiple of its size from the
+// start of the payload, a string's length counts its closing NUL, and a header has no seq.
 class Cursor {
  public:
-  explicit Cursor(std::span<const uint8_t> d) : d_(d) {}
+  explicit Cursor(std::span<const uint8_t> d, bool cdr = false) : d_(d), cdr_(cdr) {}
   [[nodiscard]] size_t left() const { return d_.size() - pos_; }
 
   template <typename T>
   bool Read(T& v) {
+    if (cdr_) {
+      const size_t pad = (sizeof(T) - pos_ % sizeof(T)) % sizeof(T);
+      if (pad > left()) return false;
+      pos_ += pad;
+    }
     if (sizeof(T) > left()) return false;
     std::memcpy(&v, d_.data() + pos_, sizeof(T));
     pos_ += sizeof(T);
@@ -49,20 +55,48 @@ class Cursor {
     uint32_t n = 0;
     std::span<const uint8_t> b;
     if (!Read(n) || !Bytes(n, b)) return false;
+    if (cdr_) {
+      if (b.empty() || b.back() != 0) return false;
+      b = b.first(b.size() - 1);
+    }
     s.assign(reinterpret_cast<const char*>(b.data()), b.size());
     return true;
   }
+  // ROS 1: u32 seq, u32 sec, u32 nsec, frame_id; ROS 2: i32 sec, u32 nanosec, frame_id.
   bool Header(RosHeader& h) {
+    if (cdr_) {
+      int32_t sec = 0;
+      uint32_t nsec = 0;
+      if (!Read(sec) || !Read(nsec) || !String(h.frame_id)) return false;
+      h.stamp = sec + nsec * 1e-9;
+      return true;
+    }
     uint32_t sec = 0, nsec = 0;
     if (!Read(h.seq) || !Read(sec) || !Read(nsec) || !String(h.frame_id)) return false;
     h.stamp = sec + nsec * 1e-9;
     return true;
   }
+  [[nodiscard]] bool cdr() const { return cdr_; }
 
  private:
   std::span<const uint8_t> d_;
+  bool cdr_;
   size_t pos_ = 0;
 };
+
+// The cursor over a message's payload: a CDR message starts with its encapsulation (0x00 0x01
+// for little-endian classic CDR, then two option bytes).
+absl::StatusOr<Cursor> Payload(absl::string_view what, std::span<const uint8_t> data,
+                               RosEncoding encoding) {
+  if (encoding == RosEncoding::kRos1) return Cursor(data);
+  if (data.size() < 4 || data[0] != 0x00 || data[1] != 0x01) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        what,
+        ": not little-endian CDR (its encapsulation is not 00 01; only ROS 2's default "
+        "encoding is read)"));
+  }
+  return Cursor(data.subspan(4), true);
+}
 
 absl::Status Short(absl::string_view what, absl::string_view field) {
   return absl::InvalidArgumentError(
@@ -70,7 +104,8 @@ absl::Status Short(absl::string_view what, absl::string_view field) {
 }
 
 absl::Status CheckAllRead(absl::string_view what, const Cursor& c) {
-  if (c.left() == 0) return absl::OkStatus();
+  // A CDR payload may be padded to a multiple of 4 bytes.
+  if (c.left() == 0 || (c.cdr() && c.left() < 4)) return absl::OkStatus();
   return absl::InvalidArgumentError(
       absl::StrCat(what, ": ", c.left(), " bytes left over after the message (not a ", what, "?)"));
 }
@@ -162,8 +197,8 @@ class BagParser {
     return absl::InvalidArgumentError(absl::StrCat(path_, ": record at byte ", at, ": ", why));
   }
   absl::Status CutShort(uint64_t at) const {
-    return absl::DataLossError(absl::StrCat(
-        path_, ": record at byte ", at, " runs past the end of the file (a bag cut short?)"));
+    return absl::DataLossError(absl::StrCat(path_, ": record at byte ", at,
+                                            " runs past the end of the file (a bag cut short?)"));
   }
 
   // A chunk: its records, decompressed.
@@ -172,33 +207,23 @@ class BagParser {
     uint32_t size = 0;
     if (!FieldNumber(fields_, "size", size)) return Bad(at, "a chunk without its size");
     std::span<const uint8_t> records = data;
-    if (compression == "bz2") {
+    if (compression == "bz2" || compression == "lz4") {
       if (size > kMaxChunkBytes || size > kMaxChunkRatio * data.size() + 4096) {
-        return Bad(at, absl::StrCat("a bz2 chunk claims ", size, " bytes from ", data.size()));
+        return Bad(at, absl::StrCat("a ", compression, " chunk claims ", size, " bytes from ",
+                                    data.size()));
       }
       plain_.resize(size);
-      unsigned int out_len = size;
-      const int rc = BZ2_bzBuffToBuffDecompress(
-          reinterpret_cast<char*>(plain_.data()), &out_len,
-          const_cast<char*>(reinterpret_cast<const char*>(data.data())),
-          static_cast<unsigned int>(data.size()), 0, 0);
-      if (rc != BZ_OK || out_len != size) {
-        return Bad(at, absl::StrCat("its bz2 data does not decompress to its ", size,
-                                    " bytes (bzip2 error ", rc, ")"));
-      }
+      absl::Status s = compression == "bz2" ? import_internal::DecompressBz2(data, plain_)
+                                            : import_internal::DecompressLz4Frame(data, plain_);
+      if (!s.ok()) return Bad(at, s.message());
       records = plain_;
-    } else if (compression == "lz4") {
-      return Bad(at, "lz4 chunks are not read; `rosbag decompress` or `rosbag compress --bz2` "
-                     "rewrites the bag");
     } else if (compression != "none") {
       return Bad(at, absl::StrCat("unknown chunk compression \"", compression, "\""));
     } else if (size != data.size()) {
-      return Bad(at, absl::StrCat("an uncompressed chunk of ", data.size(), " bytes says ",
-                                  size));
+      return Bad(at, absl::StrCat("an uncompressed chunk of ", data.size(), " bytes says ", size));
     }
     // The inner records use the same layout; `at` stays the chunk's offset in errors.
     Cursor c(records);
-    Fields chunk_fields = std::move(fields_);
     while (c.left() > 0) {
       uint32_t header_len = 0, data_len = 0;
       std::span<const uint8_t> header, body;
@@ -212,7 +237,6 @@ class BagParser {
       if (op != kOpConnection && op != kOpMessage) continue;
       if (absl::Status s = Record(at, op, body); !s.ok()) return s;
     }
-    fields_ = std::move(chunk_fields);
     return absl::OkStatus();
   }
 
@@ -255,13 +279,15 @@ absl::Status ReadBag(const std::string& path, const BagMessageFn& fn,
   return BagParser(path, fn).Run(connections);
 }
 
-absl::StatusOr<RosLaserScan> DecodeLaserScan(std::span<const uint8_t> data) {
+absl::StatusOr<RosLaserScan> DecodeLaserScan(std::span<const uint8_t> data, RosEncoding encoding) {
   constexpr char kWhat[] = "LaserScan";
-  Cursor c(data);
+  absl::StatusOr<Cursor> payload = Payload(kWhat, data, encoding);
+  if (!payload.ok()) return payload.status();
+  Cursor& c = *payload;
   RosLaserScan s;
   if (!c.Header(s.header)) return Short(kWhat, "header");
-  for (float* f : {&s.angle_min, &s.angle_max, &s.angle_increment, &s.time_increment,
-                   &s.scan_time, &s.range_min, &s.range_max}) {
+  for (float* f : {&s.angle_min, &s.angle_max, &s.angle_increment, &s.time_increment, &s.scan_time,
+                   &s.range_min, &s.range_max}) {
     if (!c.Read(*f)) return Short(kWhat, "angles and ranges limits");
   }
   uint32_t n = 0;
@@ -274,10 +300,13 @@ absl::StatusOr<RosLaserScan> DecodeLaserScan(std::span<const uint8_t> data) {
   return s;
 }
 
-absl::StatusOr<RosPointCloud> DecodePointCloud2(std::span<const uint8_t> data) {
+absl::StatusOr<RosPointCloud> DecodePointCloud2(std::span<const uint8_t> data, RosEncoding encoding,
+                                                bool points) {
   constexpr char kWhat[] = "PointCloud2";
   constexpr uint8_t kFloat32 = 7;  // sensor_msgs/PointField.FLOAT32
-  Cursor c(data);
+  absl::StatusOr<Cursor> payload = Payload(kWhat, data, encoding);
+  if (!payload.ok()) return payload.status();
+  Cursor& c = *payload;
   RosPointCloud out;
   uint32_t num_fields = 0;
   if (!c.Header(out.header)) return Short(kWhat, "header");
@@ -295,9 +324,9 @@ absl::StatusOr<RosPointCloud> DecodePointCloud2(std::span<const uint8_t> data) {
     const int axis = name == "x" ? 0 : name == "y" ? 1 : name == "z" ? 2 : -1;
     if (axis < 0) continue;
     if (datatype != kFloat32 || count > 1) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          kWhat, ": field ", name, " is of datatype ", int(datatype), " × ", count,
-          "; only one float32 (datatype 7) is read"));
+      return absl::InvalidArgumentError(absl::StrCat(kWhat, ": field ", name, " is of datatype ",
+                                                     int(datatype), " × ", count,
+                                                     "; only one float32 (datatype 7) is read"));
     }
     xyz[axis] = offset;
   }
@@ -327,26 +356,31 @@ absl::StatusOr<RosPointCloud> DecodePointCloud2(std::span<const uint8_t> data) {
         kWhat, ": ", out.height, " rows of ", out.width, " points (point step ", point_step,
         ", row step ", row_step, ") need more than its ", bytes.size(), " bytes of data"));
   }
+  if (!points) return out;
   out.points.reserve(uint64_t{out.height} * out.width);
   for (uint32_t v = 0; v < out.height; ++v) {
     for (uint32_t u = 0; u < out.width; ++u) {
       const uint8_t* p = bytes.data() + uint64_t{v} * row_step + uint64_t{u} * point_step;
       Eigen::Vector3f q;
       for (int d = 0; d < 3; ++d) std::memcpy(&q[d], p + xyz[d], 4);
-      if (!q.allFinite()) q.setConstant(std::numeric_limits<float>::quiet_NaN());
+      if (!q.allFinite() || q.isZero(0)) q.setConstant(std::numeric_limits<float>::quiet_NaN());
       out.points.push_back(q);
     }
   }
   return out;
 }
 
-absl::StatusOr<std::vector<RosTransform>> DecodeTfMessage(std::span<const uint8_t> data) {
+absl::StatusOr<std::vector<RosTransform>> DecodeTfMessage(std::span<const uint8_t> data,
+                                                          RosEncoding encoding) {
   constexpr char kWhat[] = "TFMessage";
-  Cursor c(data);
+  absl::StatusOr<Cursor> payload = Payload(kWhat, data, encoding);
+  if (!payload.ok()) return payload.status();
+  Cursor& c = *payload;
   uint32_t n = 0;
   if (!c.Read(n)) return Short(kWhat, "transform count");
-  // Each transform takes at least 84 bytes: bound the count before reserving.
-  if (n > c.left() / 84) return Short(kWhat, "transforms");
+  // Each transform takes at least 76 bytes (ROS 1 with empty frame names; CDR takes more):
+  // bound the count before reserving.
+  if (n > c.left() / 76) return Short(kWhat, "transforms");
   std::vector<RosTransform> out(n);
   for (uint32_t i = 0; i < n; ++i) {
     RosTransform& t = out[i];
@@ -358,9 +392,9 @@ absl::StatusOr<std::vector<RosTransform>> DecodeTfMessage(std::span<const uint8_
     }
     const Eigen::Quaterniond r(q[3], q[0], q[1], q[2]);
     if (!t.translation.allFinite() || !r.coeffs().allFinite() || std::abs(r.norm() - 1) > 1e-3) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          kWhat, ": transform ", i, " (", t.header.frame_id, " ➜ ", t.child_frame_id,
-          ") is not finite or its rotation is not a unit quaternion"));
+      return absl::InvalidArgumentError(
+          absl::StrCat(kWhat, ": transform ", i, " (", t.header.frame_id, " ➜ ", t.child_frame_id,
+                       ") is not finite or its rotation is not a unit quaternion"));
     }
     t.rotation = r.normalized();
   }

@@ -1,13 +1,16 @@
-// ROS 1 bags (format 2.0) and the three message types carvemap imports from them.
+// ROS 1 bags (format 2.0) and the three message types carvemap imports from ROS bags, in
+// ROS 1's serialization and in ROS 2's CDR (ROS 2's containers: ros2_bag_reader.h).
 //
 // A bag is "#ROSBAG V2.0\n" then records: header length (u32), header (fields: u32 length,
 // "name=value"), data length (u32), data; all little-endian. The record's `op` field says its
 // kind: 0x03 bag header, 0x05 chunk (its data is more records, compressed as its
-// `compression` field says: none or bz2; lz4 is refused), 0x07 connection (topic, message
+// `compression` field says: none, bz2 or lz4 (LZ4 frames)), 0x07 connection (topic, message
 // type and MD5 of its definition), 0x02 message data (connection id, receive time, the
 // serialized message), 0x04 index and 0x06 chunk info (skipped: the file is read in order).
 // Messages are ROS 1 serialization: little-endian numbers, strings and arrays as a u32
-// count then their elements.
+// count then their elements. CDR (ROS 2) differs in three ways: a 4-byte encapsulation first,
+// each number aligned to its size from the payload's start, strings ending in a NUL that their
+// length counts; and a header has no seq.
 //
 // Our own reader: Debian's librosbag-dev is the C++ half of ROS (roscpp, boost), far more than
 // reading three message types needs. Tests read bags written by Debian's python3-rosbag.
@@ -27,9 +30,14 @@
 
 namespace carvemap {
 
+// How a connection's messages are serialized: ROS 1's own serialization, ROS 2's CDR, or
+// another encoding an MCAP file may hold (JSON, Protobuf, …), which is not read.
+enum class RosEncoding { kRos1, kCdr, kUnknown };
+
 struct BagConnection {
   uint32_t id = 0;
-  std::string topic, type, md5sum;
+  std::string topic, type, md5sum;  // md5sum: ROS 1 only
+  RosEncoding encoding = RosEncoding::kRos1;
 };
 
 // One message as the reader meets it; `data` is valid only during the call.
@@ -73,7 +81,8 @@ struct RosLaserScan {
 };
 
 // A cloud whose x, y and z are float32 fields, read into points: height × width of them,
-// row-major; a point with any non-finite coordinate is NaN in all three.
+// row-major. A point with any non-finite coordinate, or exactly at the sensor's origin (how
+// many drivers mark a beam without return, against REP 117's NaN), is NaN in all three.
 struct RosPointCloud {
   RosHeader header;
   uint32_t height = 0, width = 0;
@@ -90,8 +99,15 @@ struct RosTransform {
 // InvalidArgument saying what is wrong (an array running past the message's end, a cloud
 // without float32 x, y, z, a big-endian cloud, bytes left over); the caller names the file
 // and the message.
-absl::StatusOr<RosLaserScan> DecodeLaserScan(std::span<const uint8_t> data);
-absl::StatusOr<RosPointCloud> DecodePointCloud2(std::span<const uint8_t> data);
-absl::StatusOr<std::vector<RosTransform>> DecodeTfMessage(std::span<const uint8_t> data);
+// ROS 2's messages of the same names are read with `encoding` kCdr (sensor_msgs/msg/…,
+// tf2_msgs/msg/TFMessage: the same fields, a header without seq).
+absl::StatusOr<RosLaserScan> DecodeLaserScan(std::span<const uint8_t> data,
+                                             RosEncoding encoding = RosEncoding::kRos1);
+// With `points` false the cloud's layout is checked but its points are not read.
+absl::StatusOr<RosPointCloud> DecodePointCloud2(std::span<const uint8_t> data,
+                                                RosEncoding encoding = RosEncoding::kRos1,
+                                                bool points = true);
+absl::StatusOr<std::vector<RosTransform>> DecodeTfMessage(
+    std::span<const uint8_t> data, RosEncoding encoding = RosEncoding::kRos1);
 
 }  // namespace carvemap

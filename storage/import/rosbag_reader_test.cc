@@ -148,7 +148,7 @@ TEST(RosbagReaderTest, LaserScansMustBeWhole) {
 
 TEST(RosbagReaderTest, CloudsReadXyzWhereverTheFieldsSit) {
   const float nan = std::nanf("");
-  const std::vector<Eigen::Vector3f> pts = {{1, 2, 3}, {4, nan, 6}, {7, 8, 9}, {-1, -2, -3}};
+  const std::vector<Eigen::Vector3f> pts = {{1, 2, 3}, {4, nan, 6}, {0, 0, 0}, {-1, -2, -3}};
   absl::StatusOr<RosPointCloud> c =
       DecodePointCloud2(testing::SerializeCloud({1, 2.5, "cam"}, 2, 2, pts));
   ASSERT_TRUE(c.ok()) << c.status();
@@ -157,6 +157,7 @@ TEST(RosbagReaderTest, CloudsReadXyzWhereverTheFieldsSit) {
   ASSERT_EQ(c->points.size(), 4u);
   EXPECT_EQ(c->points[0], Eigen::Vector3f(1, 2, 3));
   EXPECT_TRUE(std::isnan(c->points[1].x())) << "a point with one NaN is a no-return";
+  EXPECT_TRUE(std::isnan(c->points[2].x())) << "a point at the origin is a no-return";
   EXPECT_EQ(c->points[3], Eigen::Vector3f(-1, -2, -3));
   EXPECT_NE(DecodePointCloud2(testing::SerializeCloud({1, 2.5, "cam"}, 2, 2, pts, true))
                 .status()
@@ -169,6 +170,14 @@ TEST(RosbagReaderTest, CloudsReadXyzWhereverTheFieldsSit) {
   EXPECT_NE(DecodePointCloud2(short_data).status().message().find("need more than"),
             std::string::npos)
       << DecodePointCloud2(short_data).status();
+  // Without its points a cloud is checked all the same.
+  absl::StatusOr<RosPointCloud> layout = DecodePointCloud2(
+      testing::SerializeCloud({1, 2.5, "cam"}, 2, 2, pts), RosEncoding::kRos1, false);
+  ASSERT_TRUE(layout.ok()) << layout.status();
+  EXPECT_EQ(layout->height, 2u);
+  EXPECT_EQ(layout->header.frame_id, "cam");
+  EXPECT_TRUE(layout->points.empty());
+  EXPECT_FALSE(DecodePointCloud2(short_data, RosEncoding::kRos1, false).ok());
 }
 
 TEST(RosbagReaderTest, TransformsNeedUnitQuaternions) {

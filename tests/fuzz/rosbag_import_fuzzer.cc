@@ -1,6 +1,7 @@
-// ROS 1 bags (storage/import/rosbag_import.h, rosbag_reader.h): any bytes give a scan or an
-// error naming the file; an accepted bag writes a scan.h5 that validates. The topic is /scan,
-// or /cloud when the bag has no /scan messages, as the seeds (written by python3-rosbag) carry.
+// ROS bags (storage/import/rosbag_import.h, rosbag_reader.h, ros2_bag_reader.h): any bytes
+// give a scan or an error naming the file; an accepted bag writes a scan.h5 that validates. The
+// topic is /scan, or /cloud when the bag has no /scan messages, as the seeds carry (ROS 1 bags
+// written by python3-rosbag; ROS 2 bags, MCAP and sqlite3, from tests/data/ros2/).
 #include <cstddef>
 #include <cstdint>
 

@@ -11,7 +11,9 @@ linearly and by SLERP is exact). /scan is a sensor_msgs/LaserScan at 10 Hz (181 
 (3 x 5 pixels, one of them NaN) at 5 Hz. Every range is ray-cast against the room, so every
 point that is not a no-return lies on one of its six faces.
 
-  make_rosbag.py OUT.bag [--compression none|bz2] [--cloud-unorganized] [--duration S]
+  make_rosbag.py OUT.bag [--compression none|bz2|lz4] [--cloud-unorganized] [--duration S]
+
+lz4 chunks come from ROS's roslz4 (Debian's python3-roslz4).
 """
 import argparse
 import math
@@ -183,7 +185,7 @@ def write(path, compression, unorganized, duration=DURATION):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out")
-    ap.add_argument("--compression", default="none", choices=["none", "bz2"])
+    ap.add_argument("--compression", default="none", choices=["none", "bz2", "lz4"])
     ap.add_argument("--cloud-unorganized", action="store_true")
     ap.add_argument("--duration", type=float, default=DURATION,
                     help="seconds of the path to record (it is the same path, cut short)")

@@ -4,11 +4,15 @@ checked against the geometry the bags were made from, read back with h5py alone.
 
 Every frame of the scan.h5: /path at its time is base_link's true pose; every ray is the
 true ray of its beam or pixel (a no-return exactly where the true range exceeds range_max or
-the pixel was NaN); the bz2 bag gives the same arrays as the uncompressed one. Bad input (a
+the pixel was NaN); the bz2 and lz4 bags give the same arrays as the uncompressed one. Bad input (a
 bag cut short, a missing topic, a fixed frame /tf does not reach) fails naming the file and
 leaves no scan.h5.
 
-  rosbag_import_test.py --carvemap BIN --work DIR
+With --ros2 DIR, the same robot recorded as ROS 2 bags (tests/data/ros2/: MCAP written by
+@mcap/core, plain, zstd and lz4; sqlite3 written by Python's sqlite3; a bag directory; CDR
+messages by @foxglove/cdr) is imported and checked against the same truth.
+
+  rosbag_import_test.py --carvemap BIN --work DIR [--ros2 DIR]
 """
 import argparse
 import importlib.util
@@ -121,11 +125,13 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--carvemap", required=True)
     ap.add_argument("--work", required=True)
+    ap.add_argument("--ros2", help="the ROS 2 bags of tests/data/ros2")
     a = ap.parse_args()
     shutil.rmtree(a.work, ignore_errors=True)
     os.makedirs(a.work)
     bags = {}
     for name, extra in (("plain", []), ("bz2", ["--compression", "bz2"]),
+                        ("lz4", ["--compression", "lz4"]),
                         ("unorganized", ["--cloud-unorganized"])):
         bags[name] = os.path.join(a.work, name + ".bag")
         run([sys.executable, os.path.join(HERE, "make_rosbag.py"), bags[name]] + extra)
@@ -145,6 +151,9 @@ def main():
     scan_bz2 = imported(bags["bz2"], "/scan", "scan_bz2.h5")
     check(np.array_equal(scan["points"], scan_bz2["points"], equal_nan=True)
           and np.array_equal(scan["path"], scan_bz2["path"]), "the bz2 bag gives the same scan")
+    scan_lz4 = imported(bags["lz4"], "/scan", "scan_lz4.h5")
+    check(np.array_equal(scan["points"], scan_lz4["points"], equal_nan=True)
+          and np.array_equal(scan["path"], scan_lz4["path"]), "the lz4 bag gives the same scan")
 
     cloud = imported(bags["plain"], "/cloud", "cloud.h5")
     check(cloud["kind"] == "grid" and (cloud["rows"], cloud["cols"]) == (3, 5),
@@ -161,6 +170,36 @@ def main():
     finite = short["points"][~np.isnan(short["points"]).any(axis=1)]
     check(len(finite) > 0 and np.linalg.norm(finite, axis=1).max() <= 3.0,
           "--max-range 3: no return beyond 3 m")
+
+    if a.ros2:
+        for name in ("robot.mcap", "robot_zstd.mcap", "robot_lz4.mcap", "robot.db3", "robot_db3"):
+            bag = os.path.join(a.ros2, name)
+            label = name.replace(".", "_")
+            s2 = imported(bag, "/scan", f"ros2_{label}_scan.h5")
+            check(s2["kind"] == "line", f"{name}: LaserScan gives a line sensor")
+            check_against_truth(s2, "scan", f"{name} /scan")
+            c2 = imported(bag, "/cloud", f"ros2_{label}_cloud.h5")
+            check(c2["kind"] == "grid" and (c2["rows"], c2["cols"]) == (3, 5),
+                  f"{name}: an organized cloud gives a 3 × 5 grid sensor")
+            check(np.allclose(c2["R"], bagmaker.camera_rotation()) and
+                  np.allclose(c2["T"], bagmaker.CAMERA_IN_BASE[0]), f"{name}: the camera's mounting")
+            check_against_truth(c2, "cloud", f"{name} /cloud")
+            check(np.array_equal(s2["path"]["t"], scan["path"]["t"]),
+                  f"{name}: the frames at the ROS 1 bag's stamps")
+        p2 = imported(os.path.join(a.ros2, "robot_unorganized.mcap"), "/cloud", "ros2_points.h5")
+        check(p2["kind"] == "points", "robot_unorganized.mcap: an unorganized cloud gives points")
+        check_against_truth(p2, "cloud", "robot_unorganized.mcap /cloud")
+        with open(os.path.join(a.ros2, "robot.mcap"), "rb") as f:
+            mcap = f.read()
+        cut2 = os.path.join(a.work, "cut.mcap")
+        with open(cut2, "wb") as f:
+            f.write(mcap[: len(mcap) // 2])
+        out = os.path.join(a.work, "bad_mcap", "scan.h5")
+        p = run([a.carvemap, "import", "rosbag", cut2, "--topic", "/scan", "-o", out],
+                expect_ok=False)
+        check(p.returncode != 0 and cut2 in p.stderr and "cut short" in p.stderr,
+              f"an MCAP file cut short fails naming it (stderr: {p.stderr.strip()})")
+        check(not os.path.exists(out), "an MCAP file cut short: no scan.h5 left")
 
     # Bad input: an error naming the file, and no scan.h5 left behind.
     with open(bags["plain"], "rb") as f:
