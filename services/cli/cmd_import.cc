@@ -1,4 +1,4 @@
-// `carvemap import graph|tum|ply|carmen|rosbag INPUT -o scan.h5`: turns other inputs into
+// `carvemap import graph|tum|ply|carmen|rosbag|las INPUT -o scan.h5`: turns other inputs into
 // scan.h5 (docs/DESIGN.md §3) through the importers in storage/import/, then re-opens and
 // validates what it wrote.
 #include <filesystem>
@@ -17,6 +17,7 @@
 #include "services/cli/commands.h"
 #include "storage/import/carmen_import.h"
 #include "storage/import/import_writer.h"
+#include "storage/import/las_import.h"
 #include "storage/import/octomap_graph_import.h"
 #include "storage/import/ply_import.h"
 #include "storage/import/rosbag_import.h"
@@ -69,6 +70,8 @@ struct ImportFlags {
   PlyImportOptions ply;
   CarmenOptions carmen;
   RosbagOptions rosbag;
+  LasImportOptions las;
+  std::vector<double> las_shift;  // empty: automatic
 };
 
 void RegisterImport(CLI::App& app, int& exit_code) {
@@ -255,6 +258,66 @@ void RegisterImport(CLI::App& app, int& exit_code) {
       std::cout << "\n";
     }
     exit_code = ReportStatus("import rosbag", status);
+  });
+
+  LasImportOptions& las = flags->las;
+  CLI::App* las_cmd = cmd->add_subcommand(
+      "las",
+      "LAS 1.0–1.4 (uncompressed; point formats with GPS time: 1, 3–10) + the scanner's "
+      "trajectory ➜\nscan.h5: one `points` sensor, as mobile mappers deliver. The trajectory is "
+      "a text file, a pose\nper line: time x y z qx qy qz qw (the scanner in the LAS frame, times "
+      "in the points' GPS time\nbase). Each point's origin is the trajectory at its time: points "
+      "within --frame-seconds of a\nframe's first point share that point's pose (an origin off by "
+      "at most speed × frame-seconds).\nPoints must be in time order. Coordinates are shifted to "
+      "near the origin (default: the\ntrajectory's first x, y rounded down to whole km); the "
+      "shift is printed: add it to the\noutputs' coordinates to return to the LAS frame.");
+  las_cmd->add_option("input", flags->input, "The LAS file (.las)")->required();
+  las_cmd->add_option("-o,--output", flags->output, "The scan.h5 to write")->required();
+  las_cmd->add_option("--trajectory", las.trajectory, "The trajectory text file")->required();
+  las_cmd
+      ->add_option("--frame-seconds", las.frame_seconds,
+                   "Points within this of a frame's first share its pose, s")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  las_cmd
+      ->add_option("--max-range", las.max_range_m,
+                   "Points farther from their origin are no return, m; 0: the farthest point")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  las_cmd
+      ->add_option("--range-sigma", las.range_sigma,
+                   "Range noise a + b·range, m: A B (LAS does not carry it)")
+      ->capture_default_str()
+      ->expected(2);
+  las_cmd->add_option("--shift", flags->las_shift, "The shift X Y Z, m (default: see above)")
+      ->expected(3);
+  las_cmd->add_flag("--skip-outside-trajectory", las.skip_outside_trajectory,
+                    "Drop points whose time lies outside the trajectory (else an error)");
+  las_cmd->callback([flags, &exit_code] {
+    if (flags->las_shift.size() == 3) {
+      flags->las.shift =
+          Eigen::Vector3d(flags->las_shift[0], flags->las_shift[1], flags->las_shift[2]);
+    }
+    LasReport report;
+    absl::StatusOr<LasImport> las = LasImport::Open(flags->input, flags->las);
+    absl::Status status = las.status();
+    if (las.ok()) {
+      status = Run(flags->output, las->sensor(),
+                   [&](const FrameSink& sink) { return las->Run(sink, &report); });
+    }
+    if (status.ok()) {
+      std::cout << std::fixed << std::setprecision(3) << report.points << " points of LAS 1."
+                << int(report.version_minor) << " format " << int(report.point_format)
+                << "; coordinates shifted by (" << report.shift.x() << ", " << report.shift.y()
+                << ", " << report.shift.z() << ") m: add it to the outputs' to return to the LAS "
+                << "frame";
+      if (report.skipped_outside_trajectory > 0) {
+        std::cout << "; skipped " << report.skipped_outside_trajectory
+                  << " points outside the trajectory";
+      }
+      std::cout << "\n";
+    }
+    exit_code = ReportStatus("import las", status);
   });
 }
 
