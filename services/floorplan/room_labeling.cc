@@ -31,7 +31,7 @@ struct Mesh {
   std::vector<Vector2d> pts;
   std::vector<std::array<int, 3>> fv;
   std::vector<std::array<int, 3>> fn;
-  std::vector<int> vface;  // one incident face per vertex
+  std::vector<int> vface;                       // one incident face per vertex
   std::vector<std::pair<int, int>> hull_edges;  // (face, index of the opposite vertex)
 
   int IndexIn(int f, int v) const { return fv[f][0] == v ? 0 : (fv[f][1] == v ? 1 : 2); }
@@ -180,9 +180,9 @@ Start HullEntry(const Mesh& m, const Vector2d& a, const Vector2d& b) {
 // sight crosses ~800 sliver triangles, and a pose sees ~1000 samples.
 // Occlusion: when a face's far vertex V is met, every live target in the window whose segment
 // passes within r of V before reaching its sample is truncated there (it stops carving); (s, V)
-// itself is carved by V's own ray when s sees V (the per-segment walk carves it explicitly). Window splits use exact orientation predicates; target
-// membership uses pseudo-angles (only membership of near-collinear targets can differ).
-// Returns the number of truncated segments.
+// itself is carved by V's own ray when s sees V (the per-segment walk carves it explicitly). Window
+// splits use exact orientation predicates; target membership uses pseudo-angles (only membership of
+// near-collinear targets can differ). Returns the number of truncated segments.
 struct FanScratch {
   std::vector<std::pair<double, int>> targets;  // (angle from s, vertex), ascending
   std::vector<double> angle;                    // targets' angles
@@ -248,14 +248,20 @@ size_t CarveFan(const Mesh& m, const Vector2d& s, int f0, const std::vector<int>
   auto lower = [&](int ia, int ib, double x) {  // first index in [ia, ib) with angle ≥ x
     while (ia < ib) {
       const int mid = (ia + ib) / 2;
-      if (ang_u(mid) < x) ia = mid + 1; else ib = mid;
+      if (ang_u(mid) < x)
+        ia = mid + 1;
+      else
+        ib = mid;
     }
     return ia;
   };
   auto upper = [&](int ia, int ib, double x) {  // first index in [ia, ib) with angle > x
     while (ia < ib) {
       const int mid = (ia + ib) / 2;
-      if (ang_u(mid) <= x) ia = mid + 1; else ib = mid;
+      if (ang_u(mid) <= x)
+        ia = mid + 1;
+      else
+        ib = mid;
     }
     return ia;
   };
@@ -392,7 +398,9 @@ std::vector<int> FindSeeds(const Mesh& m, const std::vector<Circle>& circles,
   }
   if (faces.empty()) return {};
   rmin = std::max(rmin, 1e-9);
-  auto level_of = [&](double r) { return std::clamp(static_cast<int>(std::floor(std::log2(r / rmin))), 0, 60); };
+  auto level_of = [&](double r) {
+    return std::clamp(static_cast<int>(std::floor(std::log2(r / rmin))), 0, 60);
+  };
   auto cell_size = [&](int level) { return std::ldexp(rmin, level + 1); };
   auto key = [](int level, int64_t ix, int64_t iy) {
     return (static_cast<uint64_t>(level) << 58) ^ (static_cast<uint64_t>(ix & 0x1FFFFFFF) << 29) ^
@@ -532,12 +540,12 @@ struct RoomBorder {
 absl::flat_hash_map<uint64_t, RoomBorder> RoomBorders(const Mesh& m,
                                                       const std::vector<Circle>& circles,
                                                       const std::vector<int>& label,
-                                                      double wall_edge_m,
-                                                      double max_door_width_m, double context) {
+                                                      double wall_edge_m, double max_door_width_m,
+                                                      double context) {
   struct SharedEdge {
     uint64_t pair;
-    int u, v;        // its ends
-    int side[2];     // the faces of the lower and the higher label
+    int u, v;     // its ends
+    int side[2];  // the faces of the lower and the higher label
     double length;
   };
   const int nf = static_cast<int>(m.fv.size());
@@ -636,61 +644,16 @@ absl::flat_hash_map<uint64_t, RoomBorder> RoomBorders(const Mesh& m,
   return borders;
 }
 
-}  // namespace
+// The distinct positions of the samples, sorted, so that vertex ids (and everything after) do
+// not depend on the input order. A duplicated position is one vertex with the union of the
+// samples' poses and the median floor / ceiling (the medians keep floor < ceiling).
+struct SampleVertices {
+  std::vector<Vector2d> pts;
+  std::vector<std::vector<uint32_t>> poses;  // per vertex, the poses that see it
+  std::vector<double> floor_z, ceiling_z;
+};
 
-absl::Status RoomLabelingOptions::Validate() const {
-  if (!std::isfinite(occlusion_diameter_m) || occlusion_diameter_m < 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "room labeling: occlusion_diameter_m must be finite and ≥ 0, got ", occlusion_diameter_m));
-  }
-  if (!std::isfinite(max_door_width_m) || max_door_width_m <= 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "room labeling: max_door_width_m must be finite and > 0, got ", max_door_width_m));
-  }
-  if (!std::isfinite(door_narrowing) || door_narrowing < 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "room labeling: door_narrowing must be finite and ≥ 0, got ", door_narrowing));
-  }
-  if (!std::isfinite(door_context) || door_context <= 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "room labeling: door_context must be finite and > 0, got ", door_context));
-  }
-  if (!std::isfinite(thin_wall_spacings) || thin_wall_spacings < 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "room labeling: thin_wall_spacings must be finite and ≥ 0, got ", thin_wall_spacings));
-  }
-  if (!std::isfinite(seed_min_overlap) || seed_min_overlap < 0 || seed_min_overlap > 2) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "room labeling: seed_min_overlap must be in [0, 2], got ", seed_min_overlap));
-  }
-  if (!std::isfinite(min_room_area_m2) || min_room_area_m2 < 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "room labeling: min_room_area_m2 must be finite and ≥ 0, got ", min_room_area_m2));
-  }
-  if (max_rounds < 1) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("room labeling: max_rounds must be ≥ 1, got ", max_rounds));
-  }
-  return absl::OkStatus();
-}
-
-absl::StatusOr<FloorPlan> LabelRooms(const WallSampleSet& samples,
-                                     const RoomLabelingOptions& options,
-                                     RoomLabelingReport* report) {
-  return LabelRoomsOfInterior(samples, nullptr, options, report);
-}
-
-absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
-                                               const InteriorTest& interior_test,
-                                               const RoomLabelingOptions& options,
-                                               RoomLabelingReport* report) {
-  if (absl::Status s = options.Validate(); !s.ok()) return s;
-  if (absl::Status s = samples.Validate(); !s.ok()) return s;
-  RoomLabelingReport rep;
-
-  // Distinct positions, sorted, so that vertex ids (and everything after) do not depend on the
-  // input order. A duplicated position is one vertex with the union of the samples' poses and
-  // the median floor / ceiling (the medians keep floor < ceiling).
+SampleVertices DistinctSamples(const WallSampleSet& samples) {
   std::vector<uint32_t> order(samples.samples.size());
   std::iota(order.begin(), order.end(), 0u);
   auto pos_less = [&](uint32_t a, uint32_t b) {
@@ -698,14 +661,13 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
     return std::tie(p.x(), p.y()) < std::tie(q.x(), q.y());
   };
   std::sort(order.begin(), order.end(), pos_less);
-  Mesh m;
-  std::vector<std::vector<uint32_t>> vposes;
-  std::vector<double> vfloor, vceil;
+  SampleVertices v;
   for (size_t i = 0; i < order.size();) {
     size_t j = i;
     std::vector<double> fl, ce;
     std::vector<uint32_t> poses;
-    while (j < order.size() && samples.samples[order[j]].position == samples.samples[order[i]].position) {
+    while (j < order.size() &&
+           samples.samples[order[j]].position == samples.samples[order[i]].position) {
       const WallSample& s = samples.samples[order[j]];
       fl.push_back(s.floor_z);
       ce.push_back(s.ceiling_z);
@@ -719,28 +681,19 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
     };
     std::sort(poses.begin(), poses.end());
     poses.erase(std::unique(poses.begin(), poses.end()), poses.end());
-    m.pts.push_back(samples.samples[order[i]].position);
-    vfloor.push_back(median(fl));
-    vceil.push_back(median(ce));
-    vposes.push_back(std::move(poses));
+    v.pts.push_back(samples.samples[order[i]].position);
+    v.floor_z.push_back(median(fl));
+    v.ceiling_z.push_back(median(ce));
+    v.poses.push_back(std::move(poses));
     i = j;
   }
-  rep.samples = m.pts.size();
-  if (m.pts.size() < 3) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "room labeling: need at least 3 distinct wall samples, got ", m.pts.size()));
-  }
+  return v;
+}
 
-  absl::StatusOr<DelaunayMesh> dt = DelaunayMesh::Build(m.pts, "room labeling");
-  if (!dt.ok()) return dt.status();
-  if (dt->dimension() < 2) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "room labeling: the ", m.pts.size(), " distinct wall samples are collinear"));
-  }
-
-  // Flat face arrays, with one face per vertex and the hull edges.
-  m.fv = dt->triangles();
-  m.fn = dt->neighbours();
+// The triangulation's finite faces as flat arrays, with one face per vertex and the hull edges.
+void FlatFaces(const DelaunayMesh& dt, Mesh& m) {
+  m.fv = dt.triangles();
+  m.fn = dt.neighbours();
   const int nf = static_cast<int>(m.fv.size());
   m.vface.assign(m.pts.size(), -1);
   for (int f = 0; f < nf; ++f) {
@@ -750,17 +703,22 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
       if (m.fn[f][i] < 0) m.hull_edges.emplace_back(f, i);
     }
   }
-  rep.triangles = static_cast<size_t>(nf);
+}
 
-  // §3.3.1 carving.
-  std::vector<char> interior(nf, 0), entered(nf, 0);
-  const double occ_r =
-      0.5 * (options.occlusion_diameter_m > 0 ? options.occlusion_diameter_m : samples.spacing_m);
+// §3.3.1: the interior (triangles crossed by the lines of sight from the poses to the samples
+// they saw, each cut short at the first sample in its way, and by the path from pose to pose),
+// or, with `interior_test`, the triangles it accepts; and (§3.3.2) the triangles the path
+// entered. Both are per face of `m`.
+void CarveInterior(const Mesh& m, const DelaunayMesh& dt, const WallSampleSet& samples,
+                   const std::vector<std::vector<uint32_t>>& vertex_poses,
+                   const InteriorTest& interior_test, double occ_r, std::vector<char>& interior,
+                   std::vector<char>& entered, RoomLabelingReport& rep) {
+  const int nf = static_cast<int>(m.fv.size());
   const size_t np = samples.poses.size();
   std::vector<Start> pose_at(np);
   {
     int hint = -1;
-    for (size_t i = 0; i < np; ++i) pose_at[i] = dt->Locate(samples.poses[i], &hint);
+    for (size_t i = 0; i < np; ++i) pose_at[i] = dt.Locate(samples.poses[i], &hint);
   }
   // §3.3.2: a room is entered if the path crosses one of its triangles or a pose lies in one.
   for (const Start& s : pose_at) {
@@ -813,7 +771,7 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
   if (!interior_test) {
     std::vector<std::vector<int>> seen_from(np);
     for (size_t vid = 0; vid < m.pts.size(); ++vid) {
-      for (uint32_t pi : vposes[vid]) seen_from[pi].push_back(static_cast<int>(vid));
+      for (uint32_t pi : vertex_poses[vid]) seen_from[pi].push_back(static_cast<int>(vid));
     }
     FanScratch scratch;
     for (size_t pi = 0; pi < np; ++pi) {
@@ -862,14 +820,11 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
       interior[f] = interior_test(m.pts[m.fv[f][0]], m.pts[m.fv[f][1]], m.pts[m.fv[f][2]]) ? 1 : 0;
     }
   }
-  for (char c : interior) rep.interior_triangles += c ? 1 : 0;
-  if (rep.interior_triangles == 0) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        "room labeling: no interior triangle: ", rep.sight_segments, " sight segments from ", np,
-        " poses carved none of the ", nf, " triangles"));
-  }
+}
 
-  // Circumcircles (§3.3.2).
+// The faces' circumcircles and centroids (§3.3.2).
+std::vector<Circle> Circumcircles(const Mesh& m) {
+  const int nf = static_cast<int>(m.fv.size());
   std::vector<Circle> circles(nf);
   const std::vector<Vector2d> centres = floorplan_internal::Circumcentres(m.pts, m.fv);
   for (int f = 0; f < nf; ++f) {
@@ -881,19 +836,26 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
     k.gx = (a.x() + b.x() + c.x()) / 3;
     k.gy = (a.y() + b.y() + c.y()) / 3;
   }
+  return circles;
+}
 
-  // §3.3.2 refinement. Each round partitions, then (1) drops, for every pair of rooms sharing a
-  // border that is no door (RoomBorders: longer than max_door_width_m, or not narrowing the free
-  // space), the seed with the smaller circle — all such seeds at once: "no door between them" is
-  // transitive ("same room"), and the largest seed of each group of rooms so joined is never
-  // dropped, so no room is lost and hallways merge in few rounds; (2) only when no seed was
-  // dropped, removes the rooms the path never entered and recomputes the seeds. Merging first
-  // keeps a room the path entered only partly (an L-shaped room with two seeds) from losing its
-  // unvisited half.
-  const double wall_edge_m = options.thin_wall_spacings * samples.spacing_m;
-  std::vector<int> seeds = FindSeeds(m, circles, interior, options.seed_min_overlap);
+// §3.3.2 refinement, into `seeds` and `label` (per face, the room's index in `seeds`, −1 outside).
+// Each round partitions, then (1) drops, for every pair of rooms sharing a border that is no door
+// (RoomBorders: longer than max_door_width_m, or not narrowing the free space), the seed with the
+// smaller circle — all such seeds at once: "no door between them" is transitive ("same room"),
+// and the largest seed of each group of rooms so joined is never dropped, so no room is lost and
+// hallways merge in few rounds; (2) only when no seed was dropped, removes the rooms the path
+// never entered and recomputes the seeds. Merging first keeps a room the path entered only
+// partly (an L-shaped room with two seeds) from losing its unvisited half.
+absl::Status RefineRooms(const Mesh& m, const std::vector<Circle>& circles,
+                         const std::vector<char>& entered, size_t poses, double wall_edge_m,
+                         const RoomLabelingOptions& options, std::vector<char>& interior,
+                         std::vector<int>& seeds, std::vector<int>& label,
+                         RoomLabelingReport& rep) {
+  const int nf = static_cast<int>(m.fv.size());
+  const size_t np = poses;
+  seeds = FindSeeds(m, circles, interior, options.seed_min_overlap);
   rep.initial_seeds = seeds.size();
-  std::vector<int> label;
   std::vector<int> part_seeds;  // the seeds of `label` (the last partition)
   rep.converged = false;
   while (rep.rounds < options.max_rounds) {
@@ -903,9 +865,8 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
     const size_t k = seeds.size();
     std::vector<char> drop(k, 0), wide(k, 0);  // wide: dropped for max_door_width_m
     bool dropped = false;
-    for (const auto& [pair, border] :
-         RoomBorders(m, circles, label, wall_edge_m, options.max_door_width_m,
-                     options.door_context)) {
+    for (const auto& [pair, border] : RoomBorders(m, circles, label, wall_edge_m,
+                                                  options.max_door_width_m, options.door_context)) {
       const bool too_wide = border.length > options.max_door_width_m;
       const bool no_narrowing =
           options.door_narrowing > 0 && border.narrowing > options.door_narrowing;
@@ -938,9 +899,9 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
       for (size_t i = 0; i < k; ++i) removed += room_entered[i] ? 0 : 1;
       if (removed > 0) {
         if (removed == k) {
-          return absl::FailedPreconditionError(absl::StrCat(
-              "room labeling: the path (", np, " poses) enters none of the ", k,
-              " rooms, so all would be removed"));
+          return absl::FailedPreconditionError(absl::StrCat("room labeling: the path (", np,
+                                                            " poses) enters none of the ", k,
+                                                            " rooms, so all would be removed"));
         }
         rep.removed_rooms += removed;
         for (int f = 0; f < nf; ++f) {
@@ -956,76 +917,84 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
     rep.converged = true;
     break;
   }
-
   seeds = std::move(part_seeds);
-  // Extension: a room under min_room_area_m2 is no room (a sliver between a wall and furniture
-  // that the path happens to cross, a pocket cut off by thin walls): once the rooms have
-  // converged, it joins the room it shares the most edge length with (thin walls included),
-  // smallest first. One with no neighbour stays.
-  if (options.min_room_area_m2 > 0) {
-    const size_t k0 = seeds.size();
-    std::vector<std::vector<int>> faces_of(k0);
-    std::vector<double> room_area(k0, 0);
-    for (int f = 0; f < nf; ++f) {
-      if (label[f] < 0) continue;
-      faces_of[label[f]].push_back(f);
-      room_area[label[f]] += FaceArea(m, f);
-    }
-    std::vector<int> order(k0);
-    std::iota(order.begin(), order.end(), 0);
-    std::stable_sort(order.begin(), order.end(),
-                     [&](int a, int b) { return room_area[a] < room_area[b]; });
-    absl::flat_hash_map<int, double> shared_with;
-    bool merged = false;
-    for (int l : order) {
-      if (room_area[l] >= options.min_room_area_m2) break;
-      shared_with.clear();
-      for (int f : faces_of[l]) {
-        for (int i = 0; i < 3; ++i) {
-          const int n = m.fn[f][i];
-          if (n < 0 || label[n] < 0 || label[n] == l) continue;
-          shared_with[label[n]] +=
-              (m.pts[m.fv[f][(i + 1) % 3]] - m.pts[m.fv[f][(i + 2) % 3]]).norm();
-        }
-      }
-      int into = -1;
-      double best = 0;
-      for (const auto& [t, len] : shared_with) {
-        if (len > best || (len == best && t < into)) {
-          best = len;
-          into = t;
-        }
-      }
-      if (into < 0) continue;
-      for (int f : faces_of[l]) label[f] = into;
-      faces_of[into].insert(faces_of[into].end(), faces_of[l].begin(), faces_of[l].end());
-      faces_of[l].clear();
-      room_area[into] += room_area[l];
-      room_area[l] = 0;
-      ++rep.small_merged_rooms;
-      merged = true;
-    }
-    if (merged) {  // compact the labels
-      std::vector<int> new_label(k0, -1);
-      std::vector<int> kept;
-      for (size_t l = 0; l < k0; ++l) {
-        if (faces_of[l].empty()) continue;
-        new_label[l] = static_cast<int>(kept.size());
-        kept.push_back(seeds[l]);
-      }
-      for (int f = 0; f < nf; ++f) {
-        if (label[f] >= 0) label[f] = new_label[label[f]];
-      }
-      seeds = std::move(kept);
-    }
-  }
+  return absl::OkStatus();
+}
 
-  // Output: every vertex; interior triangles in face order (CCW, as CGAL keeps them); rooms
-  // largest area first, ties by the seed's circle.
+// Extension: a room under min_room_area_m2 is no room (a sliver between a wall and furniture
+// that the path happens to cross, a pocket cut off by thin walls): once the rooms have
+// converged, it joins the room it shares the most edge length with (thin walls included),
+// smallest first. One with no neighbour stays.
+void MergeSmallRooms(const Mesh& m, const RoomLabelingOptions& options, std::vector<int>& seeds,
+                     std::vector<int>& label, RoomLabelingReport& rep) {
+  const int nf = static_cast<int>(m.fv.size());
+  if (options.min_room_area_m2 <= 0) return;
+  const size_t k0 = seeds.size();
+  std::vector<std::vector<int>> faces_of(k0);
+  std::vector<double> room_area(k0, 0);
+  for (int f = 0; f < nf; ++f) {
+    if (label[f] < 0) continue;
+    faces_of[label[f]].push_back(f);
+    room_area[label[f]] += FaceArea(m, f);
+  }
+  std::vector<int> order(k0);
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return room_area[a] < room_area[b]; });
+  absl::flat_hash_map<int, double> shared_with;
+  bool merged = false;
+  for (int l : order) {
+    if (room_area[l] >= options.min_room_area_m2) break;
+    shared_with.clear();
+    for (int f : faces_of[l]) {
+      for (int i = 0; i < 3; ++i) {
+        const int n = m.fn[f][i];
+        if (n < 0 || label[n] < 0 || label[n] == l) continue;
+        shared_with[label[n]] += (m.pts[m.fv[f][(i + 1) % 3]] - m.pts[m.fv[f][(i + 2) % 3]]).norm();
+      }
+    }
+    int into = -1;
+    double best = 0;
+    for (const auto& [t, len] : shared_with) {
+      if (len > best || (len == best && t < into)) {
+        best = len;
+        into = t;
+      }
+    }
+    if (into < 0) continue;
+    for (int f : faces_of[l]) label[f] = into;
+    faces_of[into].insert(faces_of[into].end(), faces_of[l].begin(), faces_of[l].end());
+    faces_of[l].clear();
+    room_area[into] += room_area[l];
+    room_area[l] = 0;
+    ++rep.small_merged_rooms;
+    merged = true;
+  }
+  if (merged) {  // compact the labels
+    std::vector<int> new_label(k0, -1);
+    std::vector<int> kept;
+    for (size_t l = 0; l < k0; ++l) {
+      if (faces_of[l].empty()) continue;
+      new_label[l] = static_cast<int>(kept.size());
+      kept.push_back(seeds[l]);
+    }
+    for (int f = 0; f < nf; ++f) {
+      if (label[f] >= 0) label[f] = new_label[label[f]];
+    }
+    seeds = std::move(kept);
+  }
+}
+
+// The plan: every vertex; interior triangles in face order (CCW, as CGAL keeps them); rooms
+// largest area first, ties by the seed's circle.
+FloorPlan PlanOf(const Mesh& m, std::vector<double> floor_z, std::vector<double> ceiling_z,
+                 const std::vector<Circle>& circles, const std::vector<int>& seeds,
+                 const std::vector<int>& label) {
+  const int nf = static_cast<int>(m.fv.size());
   FloorPlan plan;
   plan.vertices = m.pts;
-  plan.vertex_floor_z = std::move(vfloor);
-  plan.vertex_ceiling_z = std::move(vceil);
+  plan.vertex_floor_z = std::move(floor_z);
+  plan.vertex_ceiling_z = std::move(ceiling_z);
   const size_t k = seeds.size();
   std::vector<double> area(k, 0);
   std::vector<int> out_index(nf, -1);
@@ -1057,6 +1026,100 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
   for (int f = 0; f < nf; ++f) {
     if (label[f] >= 0) plan.triangle_room.push_back(room_of_label[label[f]]);
   }
+  return plan;
+}
+
+}  // namespace
+
+absl::Status RoomLabelingOptions::Validate() const {
+  if (!std::isfinite(occlusion_diameter_m) || occlusion_diameter_m < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: occlusion_diameter_m must be finite and ≥ 0, got ", occlusion_diameter_m));
+  }
+  if (!std::isfinite(max_door_width_m) || max_door_width_m <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: max_door_width_m must be finite and > 0, got ", max_door_width_m));
+  }
+  if (!std::isfinite(door_narrowing) || door_narrowing < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("room labeling: door_narrowing must be finite and ≥ 0, got ", door_narrowing));
+  }
+  if (!std::isfinite(door_context) || door_context <= 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("room labeling: door_context must be finite and > 0, got ", door_context));
+  }
+  if (!std::isfinite(thin_wall_spacings) || thin_wall_spacings < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: thin_wall_spacings must be finite and ≥ 0, got ", thin_wall_spacings));
+  }
+  if (!std::isfinite(seed_min_overlap) || seed_min_overlap < 0 || seed_min_overlap > 2) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("room labeling: seed_min_overlap must be in [0, 2], got ", seed_min_overlap));
+  }
+  if (!std::isfinite(min_room_area_m2) || min_room_area_m2 < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: min_room_area_m2 must be finite and ≥ 0, got ", min_room_area_m2));
+  }
+  if (max_rounds < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("room labeling: max_rounds must be ≥ 1, got ", max_rounds));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<FloorPlan> LabelRooms(const WallSampleSet& samples,
+                                     const RoomLabelingOptions& options,
+                                     RoomLabelingReport* report) {
+  return LabelRoomsOfInterior(samples, nullptr, options, report);
+}
+
+absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
+                                               const InteriorTest& interior_test,
+                                               const RoomLabelingOptions& options,
+                                               RoomLabelingReport* report) {
+  if (absl::Status s = options.Validate(); !s.ok()) return s;
+  if (absl::Status s = samples.Validate(); !s.ok()) return s;
+  RoomLabelingReport rep;
+  SampleVertices vertices = DistinctSamples(samples);
+  Mesh m;
+  m.pts = std::move(vertices.pts);
+  rep.samples = m.pts.size();
+  if (m.pts.size() < 3) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("room labeling: need at least 3 distinct wall samples, got ", m.pts.size()));
+  }
+  absl::StatusOr<DelaunayMesh> dt = DelaunayMesh::Build(m.pts, "room labeling");
+  if (!dt.ok()) return dt.status();
+  if (dt->dimension() < 2) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("room labeling: the ", m.pts.size(), " distinct wall samples are collinear"));
+  }
+  FlatFaces(*dt, m);
+  const int nf = static_cast<int>(m.fv.size());
+  rep.triangles = static_cast<size_t>(nf);
+
+  std::vector<char> interior(nf, 0), entered(nf, 0);
+  const double occ_r =
+      0.5 * (options.occlusion_diameter_m > 0 ? options.occlusion_diameter_m : samples.spacing_m);
+  CarveInterior(m, *dt, samples, vertices.poses, interior_test, occ_r, interior, entered, rep);
+  for (char c : interior) rep.interior_triangles += c ? 1 : 0;
+  if (rep.interior_triangles == 0) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "room labeling: no interior triangle: ", rep.sight_segments, " sight segments from ",
+        samples.poses.size(), " poses carved none of the ", nf, " triangles"));
+  }
+
+  const std::vector<Circle> circles = Circumcircles(m);
+  const double wall_edge_m = options.thin_wall_spacings * samples.spacing_m;
+  std::vector<int> seeds, label;
+  if (absl::Status s = RefineRooms(m, circles, entered, samples.poses.size(), wall_edge_m, options,
+                                   interior, seeds, label, rep);
+      !s.ok()) {
+    return s;
+  }
+  MergeSmallRooms(m, options, seeds, label, rep);
+  FloorPlan plan =
+      PlanOf(m, std::move(vertices.floor_z), std::move(vertices.ceiling_z), circles, seeds, label);
   if (report != nullptr) *report = rep;
   return plan;
 }
