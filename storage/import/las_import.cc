@@ -116,7 +116,11 @@ absl::StatusOr<double> Walk(const LasImport::State& st, LasReport& rep, const Fr
     for (size_t i = 0; i < batch.size(); ++i) {
       const LasPoint& p = batch[i];
       const uint64_t index = first + i;
-      if (!std::isfinite(p.t) || p.t < last_t) {
+      if (!std::isfinite(p.t)) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(st.file, ": point ", index, " has a GPS time that is not a number"));
+      }
+      if (p.t < last_t) {
         return absl::InvalidArgumentError(
             absl::StrCat(st.file, ": point ", index, " at GPS time ", p.t, " s comes before point ",
                          index - 1, " at ", last_t, " s: the points are not in time order"));
