@@ -1,5 +1,6 @@
 // Internal to the importers: sequential reads of fixed-size numbers from a binary file, with
-// the byte offset and the remaining size known, so parsers can bound counts before allocating.
+// the byte offset and the remaining size known, so parsers can bound counts before allocating;
+// and the same over bytes already in memory (records, chunks, messages).
 #pragma once
 
 #include <bit>
@@ -7,6 +8,7 @@
 #include <cstdio>
 #include <cstring>
 #include <memory>
+#include <span>
 #include <string>
 #include <type_traits>
 
@@ -77,6 +79,53 @@ class ByteReader {
   std::unique_ptr<std::FILE, Closer> file_;
   uint64_t size_ = 0, offset_ = 0;
   bool big_endian_ = false;
+};
+
+// Little-endian reads from a byte span (the formats read this way are little-endian; the
+// importers assert the host is). Each read fails, moving nothing, when too few bytes are left.
+class SpanReader {
+ public:
+  explicit SpanReader(std::span<const uint8_t> d) : d_(d) {}
+  [[nodiscard]] size_t left() const { return d_.size() - pos_; }
+
+  template <typename T>
+  bool Read(T& v) {
+    static_assert(std::is_arithmetic_v<T>, "Read() takes numbers");
+    if (sizeof(T) > left()) return false;
+    std::memcpy(&v, d_.data() + pos_, sizeof(T));
+    pos_ += sizeof(T);
+    return true;
+  }
+  bool Bytes(uint64_t n, std::span<const uint8_t>& out) {
+    if (n > left()) return false;
+    out = d_.subspan(pos_, n);
+    pos_ += n;
+    return true;
+  }
+  // A u32 length, then that many bytes.
+  bool String(std::string& s) {
+    uint32_t n = 0;
+    std::span<const uint8_t> b;
+    if (!Read(n) || !Bytes(n, b)) return false;
+    s.assign(reinterpret_cast<const char*>(b.data()), b.size());
+    return true;
+  }
+  // Moves to the next multiple of `n` bytes from the span's start.
+  bool Align(size_t n) {
+    const size_t pad = (n - pos_ % n) % n;
+    if (pad > left()) return false;
+    pos_ += pad;
+    return true;
+  }
+  std::span<const uint8_t> Rest() {
+    std::span<const uint8_t> r = d_.subspan(pos_);
+    pos_ = d_.size();
+    return r;
+  }
+
+ private:
+  std::span<const uint8_t> d_;
+  size_t pos_ = 0;
 };
 
 }  // namespace carvemap::import_internal

@@ -53,40 +53,7 @@ uint32_t Crc32(uint32_t crc, std::span<const uint8_t> bytes) {
 }
 
 // Little-endian fields of an MCAP record's content.
-class Fields {
- public:
-  explicit Fields(std::span<const uint8_t> d) : d_(d) {}
-  [[nodiscard]] size_t left() const { return d_.size() - pos_; }
-  template <typename T>
-  bool Read(T& v) {
-    if (sizeof(T) > left()) return false;
-    std::memcpy(&v, d_.data() + pos_, sizeof(T));
-    pos_ += sizeof(T);
-    return true;
-  }
-  bool Bytes(uint64_t n, std::span<const uint8_t>& out) {
-    if (n > left()) return false;
-    out = d_.subspan(pos_, n);
-    pos_ += n;
-    return true;
-  }
-  bool String(std::string& s) {
-    uint32_t n = 0;
-    std::span<const uint8_t> b;
-    if (!Read(n) || !Bytes(n, b)) return false;
-    s.assign(reinterpret_cast<const char*>(b.data()), b.size());
-    return true;
-  }
-  std::span<const uint8_t> Rest() {
-    std::span<const uint8_t> r = d_.subspan(pos_);
-    pos_ = d_.size();
-    return r;
-  }
-
- private:
-  std::span<const uint8_t> d_;
-  size_t pos_ = 0;
-};
+using Fields = import_internal::SpanReader;
 
 class McapParser {
  public:

@@ -30,31 +30,18 @@ constexpr uint64_t kMaxChunkRatio = 200;
 // start of the payload, a string's length counts its closing NUL, and a header has no seq.
 class Cursor {
  public:
-  explicit Cursor(std::span<const uint8_t> d, bool cdr = false) : d_(d), cdr_(cdr) {}
-  [[nodiscard]] size_t left() const { return d_.size() - pos_; }
+  explicit Cursor(std::span<const uint8_t> d, bool cdr = false) : r_(d), cdr_(cdr) {}
+  [[nodiscard]] size_t left() const { return r_.left(); }
 
   template <typename T>
   bool Read(T& v) {
-    if (cdr_) {
-      const size_t pad = (sizeof(T) - pos_ % sizeof(T)) % sizeof(T);
-      if (pad > left()) return false;
-      pos_ += pad;
-    }
-    if (sizeof(T) > left()) return false;
-    std::memcpy(&v, d_.data() + pos_, sizeof(T));
-    pos_ += sizeof(T);
-    return true;
+    return (!cdr_ || r_.Align(sizeof(T))) && r_.Read(v);
   }
-  bool Bytes(uint64_t n, std::span<const uint8_t>& out) {
-    if (n > left()) return false;
-    out = d_.subspan(pos_, n);
-    pos_ += n;
-    return true;
-  }
+  bool Bytes(uint64_t n, std::span<const uint8_t>& out) { return r_.Bytes(n, out); }
   bool String(std::string& s) {
     uint32_t n = 0;
     std::span<const uint8_t> b;
-    if (!Read(n) || !Bytes(n, b)) return false;
+    if (!Read(n) || !r_.Bytes(n, b)) return false;
     if (cdr_) {
       if (b.empty() || b.back() != 0) return false;
       b = b.first(b.size() - 1);
@@ -79,9 +66,8 @@ class Cursor {
   [[nodiscard]] bool cdr() const { return cdr_; }
 
  private:
-  std::span<const uint8_t> d_;
+  import_internal::SpanReader r_;
   bool cdr_;
-  size_t pos_ = 0;
 };
 
 // The cursor over a message's payload: a CDR message starts with its encapsulation (0x00 0x01
