@@ -1,10 +1,13 @@
-// `carvemap import graph|tum|ply|carmen|rosbag|las INPUT -o scan.h5`: turns other inputs into
+// `carvemap import graph|tum|ply|carmen|rosbag|las|e57 INPUT -o scan.h5`: turns other inputs into
 // scan.h5 (docs/DESIGN.md §3) through the importers in storage/import/, then re-opens and
 // validates what it wrote.
+#include <array>
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -16,6 +19,7 @@
 #include "absl/strings/str_cat.h"
 #include "services/cli/commands.h"
 #include "storage/import/carmen_import.h"
+#include "storage/import/e57_import.h"
 #include "storage/import/import_writer.h"
 #include "storage/import/las_import.h"
 #include "storage/import/octomap_graph_import.h"
@@ -45,9 +49,8 @@ absl::Status ValidateAndSummarize(const std::string& out_path) {
   return absl::OkStatus();
 }
 
-absl::Status Run(const std::string& out_path, const SensorInfo& sensor,
-                 absl::FunctionRef<absl::StatusOr<ImportedScan>(const FrameSink&)> import) {
-  // As `simulate -o DIR`: the folder the scan goes into is made if missing.
+// As `simulate -o DIR`: the folder the scan goes into is made if missing.
+absl::Status MakeFolderOf(const std::string& out_path) {
   const std::filesystem::path folder = std::filesystem::path(out_path).parent_path();
   std::error_code ec;
   if (!folder.empty() && !std::filesystem::is_directory(folder, ec)) {
@@ -57,10 +60,52 @@ absl::Status Run(const std::string& out_path, const SensorInfo& sensor,
                                                  folder.string(), ": ", ec.message()));
     }
   }
+  return absl::OkStatus();
+}
+
+absl::Status Run(const std::string& out_path, const SensorInfo& sensor,
+                 absl::FunctionRef<absl::StatusOr<ImportedScan>(const FrameSink&)> import) {
+  if (absl::Status s = MakeFolderOf(out_path); !s.ok()) return s;
   if (auto summary = WriteImport(out_path, sensor, import); !summary.ok()) {
     return summary.status();
   }
   return ValidateAndSummarize(out_path);
+}
+
+absl::Status Run(
+    const std::string& out_path, std::span<const SensorInfo> sensors,
+    absl::FunctionRef<absl::StatusOr<std::vector<PathRecord>>(const SensorFrameSink&)> import) {
+  if (absl::Status s = MakeFolderOf(out_path); !s.ok()) return s;
+  if (auto summary = WriteImportSensors(out_path, sensors, import); !summary.ok()) {
+    return summary.status();
+  }
+  return ValidateAndSummarize(out_path);
+}
+
+// --max-range, --range-sigma and --shift, as the point-cloud importers (LAS, E57) share them
+// (storage/import/scan_import.h ValidateCloudOptions, CloudShift).
+void AddCloudOptions(CLI::App* cmd, const std::string& format, double& max_range_m,
+                     std::array<double, 2>& range_sigma, std::vector<double>& shift) {
+  cmd->add_option("--max-range", max_range_m,
+                  "Returns farther from their origin are no return, m; 0: the farthest return")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--range-sigma", range_sigma,
+                  "Range noise a + b·range, m: A B (" + format + " does not carry it)")
+      ->capture_default_str()
+      ->expected(2);
+  cmd->add_option("--shift", shift, "The shift X Y Z, m (default: see above)")->expected(3);
+}
+
+std::optional<Eigen::Vector3d> ShiftFlag(const std::vector<double>& xyz) {
+  if (xyz.size() != 3) return std::nullopt;
+  return Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
+}
+
+void PrintShift(const Eigen::Vector3d& shift, const std::string& format) {
+  std::cout << "; coordinates shifted by (" << shift.x() << ", " << shift.y() << ", "
+            << shift.z() << ") m: add it to the outputs' to return to the " << format
+            << " frame";
 }
 
 struct ImportFlags {
@@ -72,13 +117,16 @@ struct ImportFlags {
   RosbagOptions rosbag;
   LasImportOptions las;
   std::vector<double> las_shift;  // empty: automatic
+  E57ImportOptions e57;
+  std::vector<double> e57_shift;  // empty: automatic
 };
 
 void RegisterImport(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "import",
-      "Turn an OctoMap scan graph, TUM depth images, a PLY with sensor origins, a "
-      "CARMEN laser log or a ROS 1 bag into scan.h5 (validated after writing)");
+      "Turn an OctoMap scan graph, TUM depth images, a PLY with sensor origins, a CARMEN "
+      "laser log,\na ROS 1 or ROS 2 bag, a LAS point cloud with its trajectory or an E57 survey "
+      "into scan.h5\n(validated after writing)");
   cmd->require_subcommand(1);
   auto flags = std::make_shared<ImportFlags>();
 
@@ -279,25 +327,11 @@ void RegisterImport(CLI::App& app, int& exit_code) {
                    "Points within this of a frame's first share its pose, s")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
-  las_cmd
-      ->add_option("--max-range", las.max_range_m,
-                   "Points farther from their origin are no return, m; 0: the farthest point")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
-  las_cmd
-      ->add_option("--range-sigma", las.range_sigma,
-                   "Range noise a + b·range, m: A B (LAS does not carry it)")
-      ->capture_default_str()
-      ->expected(2);
-  las_cmd->add_option("--shift", flags->las_shift, "The shift X Y Z, m (default: see above)")
-      ->expected(3);
+  AddCloudOptions(las_cmd, "LAS", las.max_range_m, las.range_sigma, flags->las_shift);
   las_cmd->add_flag("--skip-outside-trajectory", las.skip_outside_trajectory,
                     "Drop points whose time lies outside the trajectory (else an error)");
   las_cmd->callback([flags, &exit_code] {
-    if (flags->las_shift.size() == 3) {
-      flags->las.shift =
-          Eigen::Vector3d(flags->las_shift[0], flags->las_shift[1], flags->las_shift[2]);
-    }
+    flags->las.shift = ShiftFlag(flags->las_shift);
     LasReport report;
     absl::StatusOr<LasImport> las = LasImport::Open(flags->input, flags->las);
     absl::Status status = las.status();
@@ -307,10 +341,8 @@ void RegisterImport(CLI::App& app, int& exit_code) {
     }
     if (status.ok()) {
       std::cout << std::fixed << std::setprecision(3) << report.points << " points of LAS 1."
-                << int(report.version_minor) << " format " << int(report.point_format)
-                << "; coordinates shifted by (" << report.shift.x() << ", " << report.shift.y()
-                << ", " << report.shift.z() << ") m: add it to the outputs' to return to the LAS "
-                << "frame";
+                << int(report.version_minor) << " format " << int(report.point_format);
+      PrintShift(report.shift, "LAS");
       if (report.skipped_outside_trajectory > 0) {
         std::cout << "; skipped " << report.skipped_outside_trajectory
                   << " points outside the trajectory";
@@ -318,6 +350,42 @@ void RegisterImport(CLI::App& app, int& exit_code) {
       std::cout << "\n";
     }
     exit_code = ReportStatus("import las", status);
+  });
+
+  E57ImportOptions& e57 = flags->e57;
+  CLI::App* e57_cmd = cmd->add_subcommand(
+      "e57",
+      "E57 (ASTM E2807), as survey scanners export ➜ scan.h5: each scan of the file is one "
+      "frame from\nits setup's pose. Structured scans (rowIndex, columnIndex) are frames of a "
+      "`grid` sensor per\ngrid size (\"grid_<rows>x<cols>\"), so wedges join neighbouring "
+      "pixels; pixels without a\nreturn are rays with no return. Unstructured scans are frames "
+      "of one `points` sensor. The\npath has one pose per scan, at t = the scan's index (s). "
+      "Coordinates are shifted to near the\norigin (default: the first scan's x, y rounded "
+      "down to whole km); the shift is printed: add\nit to the outputs' coordinates to return "
+      "to the E57 frame.");
+  e57_cmd->add_option("input", flags->input, "The E57 file (.e57)")->required();
+  e57_cmd->add_option("-o,--output", flags->output, "The scan.h5 to write")->required();
+  AddCloudOptions(e57_cmd, "E57", e57.max_range_m, e57.range_sigma, flags->e57_shift);
+  e57_cmd->callback([flags, &exit_code] {
+    flags->e57.shift = ShiftFlag(flags->e57_shift);
+    E57Report report;
+    absl::StatusOr<E57Import> e57 = E57Import::Open(flags->input, flags->e57);
+    absl::Status status = e57.status();
+    if (e57.ok()) {
+      status = Run(flags->output, e57->sensors(),
+                   [&](const SensorFrameSink& sink) { return e57->Run(sink, &report); });
+    }
+    if (status.ok()) {
+      std::cout << std::fixed << std::setprecision(3) << report.scans << " scans ("
+                << report.structured_scans << " structured), " << report.records << " records; "
+                << report.no_return << " of " << report.rays << " rays with no return";
+      if (report.later_returns > 0) {
+        std::cout << "; " << report.later_returns << " second or later returns left out";
+      }
+      PrintShift(report.shift, "E57");
+      std::cout << "\n";
+    }
+    exit_code = ReportStatus("import e57", status);
   });
 }
 

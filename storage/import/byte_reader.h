@@ -51,6 +51,13 @@ class ByteReader {
     if (c != EOF) ++offset_;
     return c;
   }
+  // Moves to byte `at`; false past the end.
+  bool Seek(uint64_t at) {
+    if (at > size_) return false;
+    if (std::fseek(file_.get(), static_cast<long>(at), SEEK_SET) != 0) return false;
+    offset_ = at;
+    return true;
+  }
   // Skips `n` bytes; false if fewer remain.
   bool Skip(uint64_t n) {
     if (n > remaining()) return false;

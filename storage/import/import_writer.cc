@@ -41,4 +41,38 @@ absl::StatusOr<ImportSummary> WriteImport(
   return summary;
 }
 
+absl::StatusOr<ImportSummary> WriteImportSensors(
+    const std::string& out_path, std::span<const SensorInfo> sensors,
+    absl::FunctionRef<absl::StatusOr<std::vector<PathRecord>>(const SensorFrameSink&)> import) {
+  auto writer = ScanWriter::Create(out_path);
+  if (!writer.ok()) return writer.status();
+  ScanWriter& w = **writer;
+  std::vector<int> index;
+  for (const SensorInfo& sensor : sensors) {
+    auto i = w.AddSensor(sensor);
+    if (!i.ok()) return i.status();
+    index.push_back(*i);
+  }
+  ImportSummary summary;
+  const SensorFrameSink sink = [&](int sensor, double t,
+                                   std::span<const Eigen::Vector3f> points) -> absl::Status {
+    if (sensor < 0 || static_cast<size_t>(sensor) >= index.size()) {
+      return absl::InternalError(absl::StrCat(out_path, ": a frame of undeclared sensor ", sensor));
+    }
+    ++summary.frames;
+    summary.points += points.size();
+    return w.AppendFrame(index[static_cast<size_t>(sensor)], t, points);
+  };
+  auto path = import(sink);
+  if (!path.ok()) return path.status();
+  if (absl::Status s = w.AppendPath(*path); !s.ok()) return s;
+  if (absl::Status s = w.Close(); !s.ok()) return s;
+  summary.poses = path->size();
+  if (!path->empty()) {
+    summary.t_begin = path->front().t;
+    summary.t_end = path->back().t;
+  }
+  return summary;
+}
+
 }  // namespace carvemap

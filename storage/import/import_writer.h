@@ -3,7 +3,10 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "absl/functional/function_ref.h"
 #include "absl/status/statusor.h"
@@ -23,5 +26,16 @@ struct ImportSummary {
 absl::StatusOr<ImportSummary> WriteImport(
     const std::string& out_path, const SensorInfo& sensor,
     absl::FunctionRef<absl::StatusOr<ImportedScan>(const FrameSink&)> import);
+
+// Receives the frames of an importer with several sensors: `sensor` indexes the sensors
+// declared to WriteImportSensors; each sensor's frames come in ascending time.
+using SensorFrameSink =
+    std::function<absl::Status(int sensor, double t, std::span<const Eigen::Vector3f>)>;
+
+// As WriteImport, for several sensors: declares `sensors` in order, then runs `import`, which
+// sends every frame to the sink and returns /path.
+absl::StatusOr<ImportSummary> WriteImportSensors(
+    const std::string& out_path, std::span<const SensorInfo> sensors,
+    absl::FunctionRef<absl::StatusOr<std::vector<PathRecord>>(const SensorFrameSink&)> import);
 
 }  // namespace carvemap

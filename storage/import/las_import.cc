@@ -24,17 +24,7 @@ absl::Status LasImportOptions::Validate() const {
     return absl::InvalidArgumentError(
         absl::StrCat("import las: --frame-seconds ", frame_seconds, " (need > 0)"));
   }
-  if (!(max_range_m >= 0) || !std::isfinite(max_range_m)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("import las: --max-range ", max_range_m, " (need ≥ 0; 0: from the data)"));
-  }
-  if (!(range_sigma[0] >= 0) || !(range_sigma[1] >= 0)) {
-    return absl::InvalidArgumentError("import las: --range-sigma needs A ≥ 0 and B ≥ 0");
-  }
-  if (shift && !shift->allFinite()) {
-    return absl::InvalidArgumentError("import las: --shift needs three finite numbers");
-  }
-  return absl::OkStatus();
+  return ValidateCloudOptions("import las", max_range_m, range_sigma, shift);
 }
 
 absl::StatusOr<std::vector<TimedPose>> ReadTrajectoryText(const std::string& path) {
@@ -191,9 +181,7 @@ absl::StatusOr<LasImport> LasImport::Open(const std::string& file,
   rep.point_format = h.point_format;
   rep.points = h.point_count;
   const Eigen::Vector3d first = trajectory->front().pose.translation;
-  rep.shift = options.shift ? *options.shift
-                            : Eigen::Vector3d(std::floor(first.x() / 1000) * 1000,
-                                              std::floor(first.y() / 1000) * 1000, 0);
+  rep.shift = CloudShift(options.shift, first);
   st->trajectory = *std::move(trajectory);
   for (TimedPose& p : st->trajectory) p.pose.translation -= rep.shift;
 

@@ -31,4 +31,28 @@ absl::StatusOr<Eigen::Vector4d> CheckedUnitQuaternion(double qw, double qx, doub
   return q / norm;
 }
 
+absl::Status ValidateCloudOptions(std::string_view command, double max_range_m,
+                                  const std::array<double, 2>& range_sigma,
+                                  const std::optional<Eigen::Vector3d>& shift) {
+  const absl::string_view c(command.data(), command.size());
+  if (!(max_range_m >= 0) || !std::isfinite(max_range_m)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(c, ": --max-range ", max_range_m, " (need ≥ 0; 0: from the data)"));
+  }
+  if (!(range_sigma[0] >= 0) || !(range_sigma[1] >= 0)) {
+    return absl::InvalidArgumentError(absl::StrCat(c, ": --range-sigma needs A ≥ 0 and B ≥ 0"));
+  }
+  if (shift && !shift->allFinite()) {
+    return absl::InvalidArgumentError(absl::StrCat(c, ": --shift needs three finite numbers"));
+  }
+  return absl::OkStatus();
+}
+
+Eigen::Vector3d CloudShift(const std::optional<Eigen::Vector3d>& given,
+                           const Eigen::Vector3d& first_position) {
+  if (given) return *given;
+  return Eigen::Vector3d(std::floor(first_position.x() / 1000) * 1000,
+                         std::floor(first_position.y() / 1000) * 1000, 0);
+}
+
 }  // namespace carvemap

@@ -2,10 +2,13 @@
 // parses its input into an ImportedScan; import_writer.h writes one through ScanWriter.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -46,5 +49,18 @@ absl::Status EmitFrame(const FrameSink& sink, double t, std::span<const Eigen::V
 // them); returns it normalised, as (w, x, y, z), so /path holds exact unit quaternions.
 absl::StatusOr<Eigen::Vector4d> CheckedUnitQuaternion(double qw, double qx, double qy, double qz,
                                                       double tolerance = 1e-3);
+
+// The options the importers of georeferenced point clouds (LAS, E57) share: returns farther
+// than `max_range_m` are no returns (0: from the data), the range noise a + b·range, and the
+// shift to near the origin. `command` ("import las") begins each error.
+absl::Status ValidateCloudOptions(std::string_view command, double max_range_m,
+                                  const std::array<double, 2>& range_sigma,
+                                  const std::optional<Eigen::Vector3d>& shift);
+
+// Carving works near the origin (float32 rays, the octree's key range): a georeferenced survey
+// is shifted by `given`, or by default by its first position rounded down to whole kilometres
+// in x and y (0 in z), which keeps the outputs' coordinates readable against the source's.
+Eigen::Vector3d CloudShift(const std::optional<Eigen::Vector3d>& given,
+                           const Eigen::Vector3d& first_position);
 
 }  // namespace carvemap

@@ -36,6 +36,7 @@ case "${1:-}" in
       tile_reader*) set -- -dict="$here/dict/tile.dict" "$@" ;;
       tum_import|png) set -- -dict="$here/dict/tum.dict" "$@" ;;
       carmen_import) set -- -dict="$here/dict/carmen.dict" "$@" ;;
+      e57_import) set -- -dict="$here/dict/e57.dict" "$@" ;;
     esac
     rm -rf "$work"
     mkdir -p "$work" "$artifacts"

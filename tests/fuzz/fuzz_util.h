@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <span>
 #include <string>
 #include <string_view>
 
@@ -75,8 +76,7 @@ inline void Trace(const absl::Status& status) {
 // Aborts (a finding) with `what` when `ok` is false.
 inline void Require(bool ok, std::string_view what) {
   if (ok) return;
-  std::fprintf(stderr, "fuzz invariant broken: %.*s\n", static_cast<int>(what.size()),
-               what.data());
+  std::fprintf(stderr, "fuzz invariant broken: %.*s\n", static_cast<int>(what.size()), what.data());
   std::abort();
 }
 
@@ -89,14 +89,11 @@ inline void RequireNamesFile(const absl::Status& status, const std::string& path
           "error does not name the file: " + status.ToString());
 }
 
-// An importer's promise: what it accepts is a valid scan. Runs `import` again through
-// WriteImport into a scan.h5 in the scratch directory and checks that the write succeeds and
-// that ScanReader opens and fully validates the file and streams every frame back.
-template <typename ImportFn>
-void RequireImportWritesValidScan(const SensorInfo& sensor, uint64_t frames, ImportFn import) {
-  KeepHdf5FreeLists();
-  const std::string out = (ScratchDir() / "imported.h5").string();
-  absl::StatusOr<ImportSummary> summary = WriteImport(out, sensor, import);
+// An importer's promise: what it accepts is a valid scan. The import was run again into `out`
+// (a scan.h5 in the scratch directory): the write succeeded, and ScanReader opens and fully
+// validates the file and streams every frame back.
+inline void RequireWrittenScanValid(const std::string& out,
+                                    const absl::StatusOr<ImportSummary>& summary, uint64_t frames) {
   Require(summary.ok(), "accepted input did not write: " + summary.status().ToString());
   Require(summary->frames == frames, "second import gave another frame count");
   absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(out);
@@ -113,6 +110,23 @@ void RequireImportWritesValidScan(const SensorInfo& sensor, uint64_t frames, Imp
     ++n;
   }
   Require(n == frames, "imported scan streams another number of frames");
+}
+
+// Runs `import` again through WriteImport, and checks what it wrote (above).
+template <typename ImportFn>
+void RequireImportWritesValidScan(const SensorInfo& sensor, uint64_t frames, ImportFn import) {
+  KeepHdf5FreeLists();
+  const std::string out = (ScratchDir() / "imported.h5").string();
+  RequireWrittenScanValid(out, WriteImport(out, sensor, import), frames);
+}
+
+// The same for an importer of several sensors (WriteImportSensors).
+template <typename ImportFn>
+void RequireSensorsImportWritesValidScan(std::span<const SensorInfo> sensors, uint64_t frames,
+                                         ImportFn import) {
+  KeepHdf5FreeLists();
+  const std::string out = (ScratchDir() / "imported.h5").string();
+  RequireWrittenScanValid(out, WriteImportSensors(out, sensors, import), frames);
 }
 
 }  // namespace carvemap::fuzz
