@@ -103,9 +103,8 @@ std::optional<Eigen::Vector3d> ShiftFlag(const std::vector<double>& xyz) {
 }
 
 void PrintShift(const Eigen::Vector3d& shift, const std::string& format) {
-  std::cout << "; coordinates shifted by (" << shift.x() << ", " << shift.y() << ", "
-            << shift.z() << ") m: add it to the outputs' to return to the " << format
-            << " frame";
+  std::cout << "; coordinates shifted by (" << shift.x() << ", " << shift.y() << ", " << shift.z()
+            << ") m: add it to the outputs' to return to the " << format << " frame";
 }
 
 struct ImportFlags {

@@ -24,9 +24,8 @@ absl::StatusOr<Eigen::Vector4d> CheckedUnitQuaternion(double qw, double qx, doub
   if (!q.allFinite()) return absl::InvalidArgumentError("non-finite quaternion");
   const double norm = q.norm();
   if (std::abs(norm - 1.0) > tolerance) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("quaternion (w x y z) = (", qw, " ", qx, " ", qy, " ", qz, ") has norm ",
-                     norm, ", not 1"));
+    return absl::InvalidArgumentError(absl::StrCat("quaternion (w x y z) = (", qw, " ", qx, " ", qy,
+                                                   " ", qz, ") has norm ", norm, ", not 1"));
   }
   return q / norm;
 }

@@ -33,11 +33,11 @@ using FrameSink = std::function<absl::Status(double t, std::span<const Eigen::Ve
 // What an importer produced. `frames` holds the frames only when no FrameSink was given
 // (tests); with a sink they went there and only the counts are kept.
 struct ImportedScan {
-  SensorInfo sensor;               // the one sensor of the import
-  std::vector<PathRecord> path;    // strictly ascending t, unit quaternions
+  SensorInfo sensor;             // the one sensor of the import
+  std::vector<PathRecord> path;  // strictly ascending t, unit quaternions
   std::vector<ImportedFrame> frames;
-  uint64_t frame_count = 0;        // frames produced (kept or streamed)
-  uint64_t point_count = 0;        // rays in those frames, NaN rows included
+  uint64_t frame_count = 0;  // frames produced (kept or streamed)
+  uint64_t point_count = 0;  // rays in those frames, NaN rows included
 };
 
 // Helper for importers: delivers a frame to `sink`, or keeps it in `scan.frames` when `sink`
