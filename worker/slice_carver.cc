@@ -344,20 +344,19 @@ absl::Status SliceCarver::Impl::Flush() {
 absl::Status SliceCarver::Impl::CarveCompleteBatches(bool all) {
   while (!open.empty()) {
     const int64_t b = open.front().index;
-    // Complete when no sensor can still emit a wedge with a ray of batch b: every sensor has
-    // fed a frame of a later batch (a line sensor's wedges to its next frame are out then), or
-    // has no frame left to read.
+    // Complete when no sensor can still emit a wedge with a ray of batch b. No own frame joins
+    // b any more once a later batch has begun, or b holds batch_rays own rays (the next own
+    // frame begins a new one), or no frame is left to read. Then only a line sensor whose
+    // last frame fed is in b can add to it: that frame still joins its next one, or, the last,
+    // still has its single-ray wedges to come (WedgeBuilder::Finish). A grid's or a points
+    // sensor's wedges lie within one frame, so a batch of a few large frames is carved as soon
+    // as its last frame is in, before the next one is read.
     bool complete = all;
     if (!complete) {
-      complete = true;
+      complete = b < batch || batch_own_rays >= options.batch_rays ||
+                 std::all_of(finished.begin(), finished.end(), [](bool f) { return f; });
       for (size_t s = 0; s < sensors.size() && complete; ++s) {
-        if (!finished[s]) {
-          complete = last_batch_fed[s] > b;
-        } else {
-          // All its frames are in; a line sensor's last frame still has its single-ray wedges
-          // to come (WedgeBuilder::Finish).
-          complete = sensors[s].kind != SensorKind::kLine || last_batch_fed[s] != b;
-        }
+        complete = sensors[s].kind != SensorKind::kLine || last_batch_fed[s] != b;
       }
     }
     if (!complete) break;

@@ -389,5 +389,57 @@ TEST_F(SliceCarverTest, RegionsCarveOnlyThere) {
   }
 }
 
+// A grid's wedges lie within one frame, so a batch of large grid frames is carved as soon as
+// its last frame is in, before the next frame is read: a worker holds one such batch, not two.
+TEST(SliceCarverGrid, ABatchOfGridFramesIsCarvedBeforeTheNextFrame) {
+  SensorInfo grid;
+  grid.name = "grid";
+  grid.kind = SensorKind::kGrid;
+  grid.rows = 20;
+  grid.cols = 30;
+  grid.range_sigma = {0.005, 0};
+  grid.max_range_m = 10;
+  const uint64_t rays = uint64_t{grid.rows} * grid.cols;
+  constexpr uint64_t kFrames = 4;
+  ScanSlice slice;
+  slice.own = {{0, kFrames}};
+  slice.read = {{0, kFrames}};
+  slice.own_rays = kFrames * rays;
+  SliceCarveOptions o;
+  o.grid.chunk_depth = 5;
+  o.batch_rays = rays;  // a frame fills a batch
+  absl::StatusOr<std::unique_ptr<SliceCarver>> carver = SliceCarver::Create(
+      {grid}, slice, o,
+      [](const ChunkKey&, uint64_t, std::span<const TileLeaf>) { return absl::OkStatus(); });
+  ASSERT_TRUE(carver.ok()) << carver.status();
+  uint64_t carved = 0;
+  (*carver)->SetProgress([&carved](uint64_t r) { carved = r; });
+  const std::vector<TimedPose> path = {TimedPose{0, Pose{}}, TimedPose{10, Pose{}}};
+  for (uint64_t f = 0; f < kFrames; ++f) {
+    // A wall 3 m ahead, seen through ±20° × ±30°, the scanner turning a little each frame.
+    ScanFrame frame;
+    frame.sensor = 0;
+    frame.row = f;
+    frame.t = double(f);
+    for (uint32_t r = 0; r < grid.rows; ++r) {
+      for (uint32_t c = 0; c < grid.cols; ++c) {
+        const double el = (-20.0 + 2.0 * r) * M_PI / 180;
+        const double az = (-30.0 + 2.0 * c + f) * M_PI / 180;
+        const Eigen::Vector3d d(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az),
+                                std::sin(el));
+        frame.points_sensor.push_back((d * (3.0 / d.x())).cast<float>());
+      }
+    }
+    absl::StatusOr<FrameContext> ctx = FrameContextAt(path, {}, frame.t, o.wedges.noise);
+    ASSERT_TRUE(ctx.ok()) << ctx.status();
+    ASSERT_TRUE((*carver)->AddFrame(frame, *ctx).ok());
+    EXPECT_EQ(carved, (f + 1) * rays) << "frame " << f;
+  }
+  absl::StatusOr<SliceCarveStats> st = (*carver)->Finish();
+  ASSERT_TRUE(st.ok()) << st.status();
+  EXPECT_EQ(st->batches, kFrames);
+  EXPECT_EQ(st->rays, kFrames * rays);
+}
+
 }  // namespace
 }  // namespace carvemap
