@@ -254,22 +254,26 @@ void RegisterImport(CLI::App& app, int& exit_code) {
   RosbagOptions& bag = flags->rosbag;
   CLI::App* bag_cmd = cmd->add_subcommand(
       "rosbag",
-      "ROS bag ➜ scan.h5: one topic as one sensor. ROS 1 bags (format 2.0; chunks uncompressed,\n"
-      "bz2 or lz4) and ROS 2 bags (CDR messages; MCAP with chunks uncompressed, zstd or lz4, or\n"
-      "the sqlite3 .db3; a file, or the bag's directory with its metadata.yaml) are told apart\n"
-      "by their bytes. sensor_msgs/LaserScan ➜ a `line` sensor (ranges outside [range_min,\n"
-      "range_max] are no return); sensor_msgs/PointCloud2 (float32 x, y, z) ➜ a `grid` sensor\n"
-      "when organized (height > 1), else `points` (non-finite points, and points at the origin,\n"
-      "are no return). Frame times are the header stamps. The sensor's mounting is the\n"
-      "/tf_static chain from its frame up to --base-frame (default: the highest frame joined to\n"
-      "it by /tf_static only, e.g. base_link); /path is that frame's pose in --fixed-frame, the\n"
-      "/tf chain interpolated at each frame's stamp. Frames outside the /tf links' time spans\n"
-      "are skipped and counted.");
+      "ROS bag ➜ scan.h5: each topic given (--topic, repeated or comma-separated) as one\n"
+      "sensor. ROS 1 bags (format 2.0; chunks uncompressed, bz2 or lz4) and ROS 2 bags (CDR\n"
+      "messages; MCAP with chunks uncompressed, zstd or lz4, or the sqlite3 .db3; a file, or the\n"
+      "bag's directory with its metadata.yaml) are told apart by their bytes.\n"
+      "sensor_msgs/LaserScan ➜ a `line` sensor (ranges outside [range_min, range_max] are no\n"
+      "return); sensor_msgs/PointCloud2 (float32 x, y, z) ➜ a `grid` sensor when organized\n"
+      "(height > 1), else `points` (non-finite points, and points at the origin, are no return).\n"
+      "Frame times are the header stamps. A sensor's mounting is the /tf_static chain from its\n"
+      "frame up to --base-frame (default: the highest frame joined to it by /tf_static only,\n"
+      "e.g. base_link; the same for every topic); /path is that frame's pose in --fixed-frame,\n"
+      "the /tf chain interpolated at each frame's stamp. Frames outside the /tf links' time\n"
+      "spans are skipped and counted.");
   bag_cmd->add_option("input", flags->input, "The bag (.bag, .mcap, .db3 or a ROS 2 bag directory)")
       ->required();
   bag_cmd->add_option("-o,--output", flags->output, "The scan.h5 to write")->required();
-  bag_cmd->add_option("--topic", bag.topic, "The LaserScan or PointCloud2 topic, e.g. /scan")
-      ->required();
+  bag_cmd
+      ->add_option("--topic", bag.topics,
+                   "A LaserScan or PointCloud2 topic, e.g. /scan; repeat for several sensors")
+      ->required()
+      ->delimiter(',');
   bag_cmd->add_option("--fixed-frame", bag.fixed_frame, "The world frame of /tf")
       ->capture_default_str();
   bag_cmd->add_option("--base-frame", bag.base_frame,
@@ -290,19 +294,21 @@ void RegisterImport(CLI::App& app, int& exit_code) {
     absl::StatusOr<RosbagImport> bag = RosbagImport::Open(flags->input, flags->rosbag);
     absl::Status status = bag.status();
     if (bag.ok()) {
-      status = Run(flags->output, bag->sensor(),
-                   [&](const FrameSink& sink) { return bag->Run(sink, &report); });
+      status = Run(flags->output, bag->sensors(),
+                   [&](const SensorFrameSink& sink) { return bag->Run(sink, &report); });
     }
     if (status.ok()) {
-      std::cout << report.messages << " " << report.message_type << " messages in frame \""
-                << report.sensor_frame << "\", mounted on \"" << report.base_frame << "\"; "
-                << report.transforms << " transforms; " << report.no_return_rays
-                << " no-return rays";
-      if (report.skipped_outside_tf > 0) {
-        std::cout << "; skipped " << report.skipped_outside_tf
-                  << " frames outside the /tf links' time spans";
+      for (const RosbagTopicReport& t : report.topics) {
+        std::cout << t.topic << ": " << t.messages << " " << t.message_type
+                  << " messages in frame \"" << t.sensor_frame << "\", mounted on \""
+                  << report.base_frame << "\"; " << t.no_return_rays << " no-return rays";
+        if (t.skipped_outside_tf > 0) {
+          std::cout << "; skipped " << t.skipped_outside_tf
+                    << " frames outside the /tf links' time spans";
+        }
+        std::cout << "\n";
       }
-      std::cout << "\n";
+      std::cout << report.transforms << " transforms\n";
     }
     exit_code = ReportStatus("import rosbag", status);
   });

@@ -17,7 +17,14 @@
 namespace carvemap {
 
 absl::Status RosbagOptions::Validate() const {
-  if (topic.empty()) return absl::InvalidArgumentError("rosbag import: no topic given");
+  if (topics.empty()) return absl::InvalidArgumentError("rosbag import: no topic given");
+  for (size_t i = 0; i < topics.size(); ++i) {
+    if (topics[i].empty()) return absl::InvalidArgumentError("rosbag import: an empty topic");
+    if (std::find(topics.begin(), topics.begin() + i, topics[i]) != topics.begin() + i) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("rosbag import: topic ", topics[i], " given twice"));
+    }
+  }
   if (fixed_frame.empty()) return absl::InvalidArgumentError("rosbag import: no fixed frame");
   if (!(max_range_m >= 0) || !std::isfinite(max_range_m)) {
     return absl::InvalidArgumentError("rosbag import: max_range_m must be finite and >= 0");
@@ -188,12 +195,41 @@ std::vector<Eigen::Vector3f> LaserPoints(const RosLaserScan& s, double max_range
   return pts;
 }
 
+// What the first read learns of one topic.
+struct TopicScan {
+  bool laser = false;
+  uint32_t rows = 0, cols = 0;
+  double max_range = 0;  // the LaserScans' largest range_max, or the farthest point
+  double last_stamp = -std::numeric_limits<double>::infinity();
+  std::vector<std::string> mount;  // the sensor's frame up to the system frame
+};
+
+// A topic's sensor in scan.h5, from what the first read learnt and its static mounting.
+SensorInfo TopicSensor(const std::string& topic, const TopicScan& ts, const Pose& extrinsics,
+                       const RosbagOptions& options) {
+  SensorInfo s;
+  s.name = SensorName(topic);
+  s.kind = ts.laser ? SensorKind::kLine : ts.rows > 1 ? SensorKind::kGrid : SensorKind::kPoints;
+  if (s.kind == SensorKind::kGrid) {
+    s.rows = ts.rows;
+    s.cols = ts.cols;
+  }
+  s.R_s2c = extrinsics.q.toRotationMatrix();
+  s.T_s2c = extrinsics.p;
+  s.sigma_t_s = options.sigma_t_s;
+  s.range_sigma = options.range_sigma;
+  s.max_range_m = options.max_range_m > 0 ? options.max_range_m
+                  : ts.max_range > 0      ? std::ceil(ts.max_range * 100) / 100
+                                          : 1.0;
+  return s;
+}
+
 }  // namespace
 
 struct RosbagImport::State {
   std::string file;
   RosbagOptions options;
-  SensorInfo sensor;
+  std::vector<SensorInfo> sensors;  // by topic
   TfTree tf;
   std::vector<std::string> chain;  // the system frame up to the fixed frame
   RosbagReport report;             // what the first read found
@@ -204,7 +240,7 @@ RosbagImport::RosbagImport(RosbagImport&&) noexcept = default;
 RosbagImport& RosbagImport::operator=(RosbagImport&&) noexcept = default;
 RosbagImport::~RosbagImport() = default;
 
-const SensorInfo& RosbagImport::sensor() const { return state_->sensor; }
+const std::vector<SensorInfo>& RosbagImport::sensors() const { return state_->sensors; }
 
 absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
                                                 const RosbagOptions& options) {
@@ -213,21 +249,25 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
   st->file = file;
   st->options = options;
   RosbagReport& rep = st->report;
-  bool laser = false;
-  uint32_t rows = 0, cols = 0;
-  double max_range = 0, last_stamp = -std::numeric_limits<double>::infinity();
+  const std::vector<std::string>& topics = options.topics;
+  std::vector<TopicScan> scans(topics.size());
+  for (const std::string& t : topics) rep.topics.push_back(RosbagTopicReport{t});
+  const auto topic_index = [&topics](const std::string& t) {
+    return static_cast<int>(std::find(topics.begin(), topics.end(), t) - topics.begin());
+  };
   std::vector<BagConnection> connections;
   absl::Status read = ReadAnyBag(
       file,
       [&](const BagMessage& m) -> absl::Status {
         const BagConnection& c = *m.connection;
-        if (c.topic == options.topic && !IsType(c, kLaserScanType) &&
-            !IsType(c, kPointCloud2Type)) {
+        const int k = topic_index(c.topic);
+        const bool wanted = static_cast<size_t>(k) < topics.size();
+        if (wanted && !IsType(c, kLaserScanType) && !IsType(c, kPointCloud2Type)) {
           return absl::InvalidArgumentError(
               absl::StrCat(file, ": topic ", c.topic, " carries ", c.type,
                            "; sensor_msgs/LaserScan or sensor_msgs/PointCloud2 can be imported"));
         }
-        if (c.topic != options.topic && !IsTf(c)) return absl::OkStatus();
+        if (!wanted && !IsTf(c)) return absl::OkStatus();
         if (c.encoding == RosEncoding::kUnknown) {
           return absl::InvalidArgumentError(absl::StrCat(
               file, ": topic ", c.topic, " is encoded neither as ROS 1 messages nor as CDR"));
@@ -255,17 +295,20 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
           }
           return absl::OkStatus();
         }
-        laser = IsType(c, kLaserScanType);
-        rep.message_type = c.type;
+        TopicScan& ts = scans[static_cast<size_t>(k)];
+        RosbagTopicReport& tr = rep.topics[static_cast<size_t>(k)];
+        const bool laser = IsType(c, kLaserScanType);
+        tr.message_type = c.type;
         RosHeader header;
-        uint32_t r = 0, k = 0;
+        uint32_t r = 0, n = 0;
         if (laser) {
           absl::StatusOr<RosLaserScan> s = DecodeLaserScan(m.data, c.encoding);
           if (!s.ok()) return InMessage(file, m, s.status());
           header = s->header;
           r = 1;
-          k = static_cast<uint32_t>(s->ranges.size());
-          if (std::isfinite(s->range_max)) max_range = std::max<double>(max_range, s->range_max);
+          n = static_cast<uint32_t>(s->ranges.size());
+          if (std::isfinite(s->range_max))
+            ts.max_range = std::max<double>(ts.max_range, s->range_max);
         } else {
           // The points are read here only to find the farthest when no range is given.
           absl::StatusOr<RosPointCloud> s =
@@ -273,138 +316,166 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
           if (!s.ok()) return InMessage(file, m, s.status());
           header = s->header;
           r = s->height;
-          k = s->width;
+          n = s->width;
           for (const Eigen::Vector3f& p : s->points) {
-            if (p.allFinite()) max_range = std::max<double>(max_range, p.norm());
+            if (!p.allFinite()) continue;
+            const double range = p.cast<double>().norm();
+            // No scanner reaches 100 km: such a point is garbage, and would make every ray of
+            // the sensor that long.
+            if (!(range < 1e5)) {
+              return InMessage(file, m,
+                               absl::InvalidArgumentError(absl::StrCat(
+                                   "a point lies ", range,
+                                   " m from the sensor; give "
+                                   "--max-range to take farther points as no return")));
+            }
+            ts.max_range = std::max(ts.max_range, range);
           }
         }
-        if (rep.messages == 0) {
-          rep.sensor_frame = header.frame_id;
-          rows = r;
-          cols = k;
-        } else if (header.frame_id != rep.sensor_frame) {
+        if (tr.messages == 0) {
+          tr.sensor_frame = header.frame_id;
+          ts.laser = laser;
+          ts.rows = r;
+          ts.cols = n;
+        } else if (header.frame_id != tr.sensor_frame) {
           return InMessage(file, m,
                            absl::InvalidArgumentError(absl::StrCat(
                                "frame \"", header.frame_id, "\" where the first message had \"",
-                               rep.sensor_frame, "\"")));
-        } else if ((laser || rows > 1 || r > 1) && (r != rows || k != cols)) {
+                               tr.sensor_frame, "\"")));
+        } else if ((laser || ts.rows > 1 || r > 1) && (r != ts.rows || n != ts.cols)) {
           return InMessage(file, m,
                            absl::InvalidArgumentError(absl::StrCat(
-                               r, " × ", k, " rays where the first message had ", rows, " × ", cols,
-                               " (every frame of a line or grid sensor has the same)")));
+                               r, " × ", n, " rays where the first message had ", ts.rows, " × ",
+                               ts.cols, " (every frame of a line or grid sensor has the same)")));
         }
-        if (!(header.stamp > last_stamp)) {
+        if (!(header.stamp > ts.last_stamp)) {
           return InMessage(
               file, m,
               absl::InvalidArgumentError(absl::StrCat(
-                  "stamp ", header.stamp, " s is not after the previous ", last_stamp, " s")));
+                  "stamp ", header.stamp, " s is not after the previous ", ts.last_stamp, " s")));
         }
-        last_stamp = header.stamp;
-        ++rep.messages;
+        ts.last_stamp = header.stamp;
+        ++tr.messages;
         return absl::OkStatus();
       },
       &connections);
   if (!read.ok()) return read;
-  if (rep.messages == 0) {
-    std::vector<std::string> topics;
+  for (const RosbagTopicReport& tr : rep.topics) {
+    if (tr.messages > 0) continue;
+    std::vector<std::string> listed;
     for (const BagConnection& c : connections) {
-      topics.push_back(absl::StrCat(c.topic, " (", c.type, ")"));
+      listed.push_back(absl::StrCat(c.topic, " (", c.type, ")"));
     }
     return absl::NotFoundError(absl::StrCat(
-        file, ": no messages on topic ", options.topic,
-        "; the bag's topics: ", topics.empty() ? "none" : absl::StrJoin(topics, ", ")));
+        file, ": no messages on topic ", tr.topic,
+        "; the bag's topics: ", listed.empty() ? "none" : absl::StrJoin(listed, ", ")));
   }
   st->tf.Finish();
-  // The system frame: the highest frame above the sensor's joined to it by /tf_static only.
+  // The system frame: the highest frame above a sensor's joined to it by /tf_static only, the
+  // same for every topic (one body carries them all).
   std::string base = options.base_frame;
   if (base.empty()) {
-    base = rep.sensor_frame;
-    for (size_t up = 0; base != options.fixed_frame && st->tf.IsStatic(base) && up < rep.transforms;
-         ++up) {
-      base = st->tf.Parent(base);
+    for (const RosbagTopicReport& tr : rep.topics) {
+      std::string up = tr.sensor_frame;
+      for (size_t n = 0; up != options.fixed_frame && st->tf.IsStatic(up) && n < rep.transforms;
+           ++n) {
+        up = st->tf.Parent(up);
+      }
+      if (base.empty()) {
+        base = up;
+      } else if (up != base) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(file, ": topic ", rep.topics.front().topic, " hangs from \"", base,
+                         "\" and topic ", tr.topic, " from \"", up,
+                         "\" by /tf_static: name the system frame that carries "
+                         "them all (--base-frame)"));
+      }
     }
   }
   rep.base_frame = base;
-  absl::StatusOr<std::vector<std::string>> mount = st->tf.Chain(rep.sensor_frame, base);
-  if (!mount.ok()) {
-    return absl::Status(mount.status().code(), absl::StrCat(file, ": ", mount.status().message()));
-  }
-  for (size_t i = 0; i + 1 < mount->size(); ++i) {
-    if (!st->tf.IsStatic((*mount)[i])) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          file, ": the system frame \"", base, "\" is not joined to the sensor's frame \"",
-          rep.sensor_frame, "\" by /tf_static only (\"", (*mount)[i], "\" moves in /tf)"));
+  for (size_t k = 0; k < topics.size(); ++k) {
+    const std::string& frame = rep.topics[k].sensor_frame;
+    absl::StatusOr<std::vector<std::string>> mount = st->tf.Chain(frame, base);
+    if (!mount.ok()) {
+      return absl::Status(mount.status().code(),
+                          absl::StrCat(file, ": ", mount.status().message()));
     }
+    for (size_t i = 0; i + 1 < mount->size(); ++i) {
+      if (!st->tf.IsStatic((*mount)[i])) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            file, ": the system frame \"", base, "\" is not joined to the sensor's frame \"", frame,
+            "\" by /tf_static only (\"", (*mount)[i], "\" moves in /tf)"));
+      }
+    }
+    st->sensors.push_back(TopicSensor(topics[k], scans[k], *st->tf.PoseAt(*mount, 0.0), options));
   }
   absl::StatusOr<std::vector<std::string>> path = st->tf.Chain(base, options.fixed_frame);
   if (!path.ok()) {
     return absl::Status(path.status().code(), absl::StrCat(file, ": ", path.status().message()));
   }
   st->chain = *std::move(path);
-  const Pose extrinsics = *st->tf.PoseAt(*mount, 0.0);
-
-  SensorInfo& s = st->sensor;
-  s.name = SensorName(options.topic);
-  s.kind = laser ? SensorKind::kLine : rows > 1 ? SensorKind::kGrid : SensorKind::kPoints;
-  if (s.kind == SensorKind::kGrid) {
-    s.rows = rows;
-    s.cols = cols;
-  }
-  s.R_s2c = extrinsics.q.toRotationMatrix();
-  s.T_s2c = extrinsics.p;
-  s.sigma_t_s = options.sigma_t_s;
-  s.range_sigma = options.range_sigma;
-  s.max_range_m = options.max_range_m > 0 ? options.max_range_m
-                  : max_range > 0         ? std::ceil(max_range * 100) / 100
-                                          : 1.0;
   return RosbagImport(std::move(st));
 }
 
-absl::StatusOr<ImportedScan> RosbagImport::Run(const FrameSink& sink, RosbagReport* report) const {
+absl::StatusOr<std::vector<PathRecord>> RosbagImport::Run(const SensorFrameSink& sink,
+                                                          RosbagReport* report) const {
   const State& st = *state_;
+  const std::vector<std::string>& topics = st.options.topics;
   RosbagReport rep = st.report;
-  ImportedScan scan;
-  scan.sensor = st.sensor;
-  const double max_range = st.sensor.max_range_m;
+  std::vector<PathRecord> path;
+  std::vector<uint64_t> frames(topics.size(), 0);
   absl::Status read = ReadAnyBag(st.file, [&](const BagMessage& m) -> absl::Status {
-    if (m.connection->topic != st.options.topic) return absl::OkStatus();
+    const auto k = static_cast<size_t>(
+        std::find(topics.begin(), topics.end(), m.connection->topic) - topics.begin());
+    if (k == topics.size()) return absl::OkStatus();
+    const SensorInfo& sensor = st.sensors[k];
+    RosbagTopicReport& tr = rep.topics[k];
     RosHeader header;
     std::vector<Eigen::Vector3f> pts;
-    if (st.sensor.kind == SensorKind::kLine) {
+    if (sensor.kind == SensorKind::kLine) {
       absl::StatusOr<RosLaserScan> s = DecodeLaserScan(m.data, m.connection->encoding);
       if (!s.ok()) return InMessage(st.file, m, s.status());
       header = s->header;
-      pts = LaserPoints(*s, max_range);
+      pts = LaserPoints(*s, sensor.max_range_m);
     } else {
       absl::StatusOr<RosPointCloud> s = DecodePointCloud2(m.data, m.connection->encoding);
       if (!s.ok()) return InMessage(st.file, m, s.status());
       header = s->header;
       pts = std::move(s->points);
       for (Eigen::Vector3f& p : pts) {
-        if (p.allFinite() && p.norm() > max_range) {
+        if (p.allFinite() && p.norm() > sensor.max_range_m) {
           p.setConstant(std::numeric_limits<float>::quiet_NaN());
         }
       }
     }
     const std::optional<Pose> pose = st.tf.PoseAt(st.chain, header.stamp);
     if (!pose) {
-      ++rep.skipped_outside_tf;
+      ++tr.skipped_outside_tf;
       return absl::OkStatus();
     }
-    for (const Eigen::Vector3f& p : pts) rep.no_return_rays += !p.allFinite();
-    scan.path.push_back({header.stamp, pose->p.x(), pose->p.y(), pose->p.z(), pose->q.w(),
-                         pose->q.x(), pose->q.y(), pose->q.z()});
-    return EmitFrame(sink, header.stamp, pts, scan);
+    for (const Eigen::Vector3f& p : pts) tr.no_return_rays += !p.allFinite();
+    path.push_back({header.stamp, pose->p.x(), pose->p.y(), pose->p.z(), pose->q.w(), pose->q.x(),
+                    pose->q.y(), pose->q.z()});
+    ++frames[k];
+    return sink ? sink(static_cast<int>(k), header.stamp, pts) : absl::OkStatus();
   });
   if (!read.ok()) return read;
-  if (scan.frame_count == 0) {
+  for (size_t k = 0; k < topics.size(); ++k) {
+    if (frames[k] > 0) continue;
     return absl::OutOfRangeError(
-        absl::StrCat(st.file, ": all ", rep.messages, " messages on ", st.options.topic,
+        absl::StrCat(st.file, ": all ", rep.topics[k].messages, " messages on ", topics[k],
                      " lie outside the time spans of the /tf links from \"", rep.base_frame,
                      "\" to \"", st.options.fixed_frame, "\""));
   }
+  // One row per distinct frame time: topics interleave in the bag by arrival, not by stamp,
+  // and frames of two topics at one stamp share the system's pose there.
+  std::stable_sort(path.begin(), path.end(),
+                   [](const PathRecord& a, const PathRecord& b) { return a.t < b.t; });
+  path.erase(std::unique(path.begin(), path.end(),
+                         [](const PathRecord& a, const PathRecord& b) { return a.t == b.t; }),
+             path.end());
   if (report) *report = rep;
-  return scan;
+  return path;
 }
 
 }  // namespace carvemap

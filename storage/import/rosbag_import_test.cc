@@ -1,8 +1,10 @@
 #include "storage/import/rosbag_import.h"
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -59,26 +61,51 @@ BagWriter Robot(const std::vector<double>& stamps) {
 
 RosbagOptions Topic(const std::string& topic = "/scan") {
   RosbagOptions o;
-  o.topic = topic;
+  o.topics = {topic};
   return o;
+}
+
+// What Run gives: /path, and the frames in the order they came, each with its sensor.
+struct Imported {
+  std::vector<PathRecord> path;
+  std::vector<ImportedFrame> frames;
+  std::vector<int> sensor_of;
+};
+
+absl::StatusOr<Imported> RunAll(const RosbagImport& bag, RosbagReport* report = nullptr) {
+  Imported out;
+  absl::StatusOr<std::vector<PathRecord>> path = bag.Run(
+      [&out](int sensor, double t, std::span<const Eigen::Vector3f> p) {
+        out.frames.push_back(ImportedFrame{t, {p.begin(), p.end()}});
+        out.sensor_of.push_back(sensor);
+        return absl::OkStatus();
+      },
+      report);
+  if (!path.ok()) return path.status();
+  out.path = *std::move(path);
+  return out;
 }
 
 TEST(RosbagImportTest, PathFromTfAtTheStampsMountingFromTfStatic) {
   Robot({9.5, 10.25, 11.0, 11.75, 12.5}).Write("robot.bag");
   absl::StatusOr<RosbagImport> bag = RosbagImport::Open("robot.bag", Topic());
   ASSERT_TRUE(bag.ok()) << bag.status();
-  const SensorInfo& s = bag->sensor();
+  ASSERT_EQ(bag->sensors().size(), 1u);
+  const SensorInfo& s = bag->sensors()[0];
   EXPECT_EQ(s.name, "scan");
   EXPECT_EQ(s.kind, SensorKind::kLine);
   EXPECT_TRUE(s.T_s2c.isApprox(Eigen::Vector3d(0.2, 0, 0.3)));
   EXPECT_DOUBLE_EQ(s.max_range_m, 8.0);
   RosbagReport report;
-  absl::StatusOr<ImportedScan> scan = bag->Run(nullptr, &report);
+  absl::StatusOr<Imported> scan = RunAll(*bag, &report);
   ASSERT_TRUE(scan.ok()) << scan.status();
   EXPECT_EQ(report.base_frame, "base_link");
-  EXPECT_EQ(report.messages, 5u);
-  EXPECT_EQ(report.skipped_outside_tf, 2u) << "9.5 s and 12.5 s lie outside /tf's [10, 12] s";
-  EXPECT_EQ(report.no_return_rays, 3u);
+  ASSERT_EQ(report.topics.size(), 1u);
+  EXPECT_EQ(report.topics[0].topic, "/scan");
+  EXPECT_EQ(report.topics[0].messages, 5u);
+  EXPECT_EQ(report.topics[0].skipped_outside_tf, 2u)
+      << "9.5 s and 12.5 s lie outside /tf's [10, 12] s";
+  EXPECT_EQ(report.topics[0].no_return_rays, 3u);
   ASSERT_EQ(scan->path.size(), 3u);
   // At 10.25 s, between the samples at 10 and 10.5: x = 0.25, yaw 0.025 (SLERP of a turn
   // about z is linear in its angle).
@@ -98,8 +125,8 @@ TEST(RosbagImportTest, ANamedBaseFrameCarriesThePath) {
   o.base_frame = "laser";
   absl::StatusOr<RosbagImport> bag = RosbagImport::Open("robot.bag", o);
   ASSERT_TRUE(bag.ok()) << bag.status();
-  EXPECT_TRUE(bag->sensor().T_s2c.isZero());
-  absl::StatusOr<ImportedScan> scan = bag->Run();
+  EXPECT_TRUE(bag->sensors()[0].T_s2c.isZero());
+  absl::StatusOr<Imported> scan = RunAll(*bag);
   ASSERT_TRUE(scan.ok()) << scan.status();
   // The laser at 0.2 m ahead of base_link, turned by 0.05 rad.
   EXPECT_NEAR(scan->path[0].x, 0.5 + 0.2 * std::cos(0.05), 1e-12);
@@ -115,7 +142,7 @@ TEST(RosbagImportTest, AllFramesOutsideTheTfSpanIsAnError) {
   Robot({8.0, 9.0}).Write("early.bag");
   absl::StatusOr<RosbagImport> bag = RosbagImport::Open("early.bag", Topic());
   ASSERT_TRUE(bag.ok()) << bag.status();
-  absl::StatusOr<ImportedScan> scan = bag->Run();
+  absl::StatusOr<Imported> scan = RunAll(*bag);
   EXPECT_EQ(scan.status().code(), absl::StatusCode::kOutOfRange);
   EXPECT_NE(scan.status().message().find("early.bag: all 2 messages on /scan lie outside"),
             std::string::npos)
@@ -184,16 +211,17 @@ TEST(RosbagImportTest, AScannerStandingStillNeedsOnlyTfStatic) {
   w.Write("tripod.bag");
   absl::StatusOr<RosbagImport> bag = RosbagImport::Open("tripod.bag", Topic("/lidar/points"));
   ASSERT_TRUE(bag.ok()) << bag.status();
-  EXPECT_EQ(bag->sensor().name, "lidar_points");
-  EXPECT_EQ(bag->sensor().kind, SensorKind::kPoints);
-  EXPECT_DOUBLE_EQ(bag->sensor().max_range_m, 3.0);
-  EXPECT_TRUE(bag->sensor().T_s2c.isApprox(Eigen::Vector3d(3, 4, 1.5)))
+  const SensorInfo& lidar = bag->sensors()[0];
+  EXPECT_EQ(lidar.name, "lidar_points");
+  EXPECT_EQ(lidar.kind, SensorKind::kPoints);
+  EXPECT_DOUBLE_EQ(lidar.max_range_m, 3.0);
+  EXPECT_TRUE(lidar.T_s2c.isApprox(Eigen::Vector3d(3, 4, 1.5)))
       << "every link static: the system frame is the fixed frame";
   RosbagReport report;
-  absl::StatusOr<ImportedScan> scan = bag->Run({}, &report);
+  absl::StatusOr<Imported> scan = RunAll(*bag, &report);
   ASSERT_TRUE(scan.ok()) << scan.status();
-  EXPECT_EQ(scan->frame_count, 2u);
-  EXPECT_EQ(report.no_return_rays, 2u) << "the points at the sensor's origin";
+  EXPECT_EQ(scan->frames.size(), 2u);
+  EXPECT_EQ(report.topics[0].no_return_rays, 2u) << "the points at the sensor's origin";
   EXPECT_NEAR(scan->path[1].x, 0, 1e-12);
   EXPECT_NEAR(scan->path[1].qw, 1, 1e-12);
 }
@@ -209,6 +237,64 @@ TEST(RosbagImportTest, NoChainToTheFixedFrameNamesTheBrokenLink) {
           "robot.bag: no /tf chain from frame \"base_link\" to \"earth\": \"map\" has no parent"),
       std::string::npos)
       << bag.status();
+}
+
+// Two sensors on one body: a laser and a downward cloud, each mounted by /tf_static on
+// base_link, their frames interleaved in the bag; one /path for both.
+TEST(RosbagImportTest, SeveralTopicsAreSeveralSensorsOnOnePath) {
+  BagWriter w = Robot({10.25, 11.0, 11.75});
+  w.Connection(3, "/cloud", kPointCloud2Type, kPointCloud2Md5);
+  w.Message(0, 10, testing::SerializeTf({Tf("base_link", "camera", 0, {0, 0, 1})}));
+  for (double t : {10.5, 11.0, 11.5}) {  // 11.0: the laser's stamp too
+    w.Message(3, t + 0.02,
+              testing::SerializeCloud({0, t, "camera"}, 2, 2,
+                                      {{1, 0, 0}, {1, 1, 0}, {1, 0, 1}, {1, 1, 1}}));
+  }
+  w.Write("two.bag");
+  RosbagOptions o;
+  o.topics = {"/cloud", "/scan"};
+  absl::StatusOr<RosbagImport> bag = RosbagImport::Open("two.bag", o);
+  ASSERT_TRUE(bag.ok()) << bag.status();
+  ASSERT_EQ(bag->sensors().size(), 2u);
+  EXPECT_EQ(bag->sensors()[0].name, "cloud");
+  EXPECT_EQ(bag->sensors()[0].kind, SensorKind::kGrid);
+  EXPECT_TRUE(bag->sensors()[0].T_s2c.isApprox(Eigen::Vector3d(0, 0, 1)));
+  EXPECT_EQ(bag->sensors()[1].name, "scan");
+  EXPECT_TRUE(bag->sensors()[1].T_s2c.isApprox(Eigen::Vector3d(0.2, 0, 0.3)));
+  RosbagReport report;
+  absl::StatusOr<Imported> scan = RunAll(*bag, &report);
+  ASSERT_TRUE(scan.ok()) << scan.status();
+  EXPECT_EQ(report.base_frame, "base_link");
+  ASSERT_EQ(report.topics.size(), 2u);
+  EXPECT_EQ(report.topics[0].messages, 3u);
+  EXPECT_EQ(report.topics[1].messages, 3u);
+  ASSERT_EQ(scan->frames.size(), 6u);
+  EXPECT_EQ(std::count(scan->sensor_of.begin(), scan->sensor_of.end(), 0), 3);
+  // One row per distinct stamp, ascending: 10.25, 10.5, 11.0 (both), 11.5, 11.75.
+  ASSERT_EQ(scan->path.size(), 5u);
+  const double want[] = {10.25, 10.5, 11.0, 11.5, 11.75};
+  for (size_t i = 0; i < 5; ++i) {
+    EXPECT_DOUBLE_EQ(scan->path[i].t, want[i]);
+    EXPECT_NEAR(scan->path[i].x, want[i] - 10, 1e-12) << "base_link's pose at the stamp";
+  }
+
+  // Sensors hanging from different bodies need the user to name the one carrying both.
+  BagWriter apart = Robot({10.5});
+  apart.Connection(3, "/cloud", kPointCloud2Type, kPointCloud2Md5);
+  apart.Message(
+      0, 10,
+      testing::SerializeTf({Tf("map", "pole", 0, {5, 0, 0}), Tf("pole", "camera", 0, {0, 0, 2})}));
+  apart.Message(3, 10.5, testing::SerializeCloud({0, 10.5, "camera"}, 1, 1, {{1, 0, 0}}));
+  apart.Write("apart.bag");
+  o.topics = {"/scan", "/cloud"};
+  absl::StatusOr<RosbagImport> refused = RosbagImport::Open("apart.bag", o);
+  EXPECT_NE(refused.status().message().find("apart.bag: topic /scan hangs from \"base_link\" "
+                                            "and topic /cloud from \"map\""),
+            std::string::npos)
+      << refused.status();
+  o.topics = {"/scan", "/scan"};
+  EXPECT_NE(RosbagImport::Open("two.bag", o).status().message().find("/scan given twice"),
+            std::string::npos);
 }
 
 }  // namespace

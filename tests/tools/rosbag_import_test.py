@@ -49,9 +49,11 @@ def run(args, expect_ok=True):
     return p
 
 
-def load(path):
+def load(path, name=None):
+    """The scan's one sensor, or sensor `name` of several, with the scan's /path."""
     with h5py.File(path, "r") as f:
-        (name,) = list(f["sensors"].keys())
+        if name is None:
+            (name,) = list(f["sensors"].keys())
         s = f["sensors"][name]
         kind = s.attrs["kind"]
         kind = kind.decode() if isinstance(kind, bytes) else str(kind)
@@ -93,13 +95,14 @@ def truth_rays(kind, t):
 
 def check_against_truth(scan, kind, label):
     path, frames, pts = scan["path"], scan["frames"], scan["points"]
-    check(len(frames) > 0 and len(path) == len(frames), f"{label}: one /path row per frame")
+    rows = {row["t"]: row for row in path}
+    check(len(frames) > 0 and all(fr["t"] in rows for fr in frames),
+          f"{label}: a /path row at every frame's time")
     worst_pose = worst_ray = 0.0
     wrong_no_return = 0
     for i, fr in enumerate(frames):
         t = fr["t"] - bagmaker.T0
-        row = path[i]
-        check(row["t"] == fr["t"], f"{label}: /path row {i} at its frame's time")
+        row = rows[fr["t"]]
         p, yaw = bagmaker.base_pose(t)
         rq = quat_to_matrix((row["qw"], row["qx"], row["qy"], row["qz"]))
         worst_pose = max(worst_pose, np.linalg.norm(np.array([row["x"], row["y"], row["z"]]) - p),
@@ -141,7 +144,7 @@ def main():
         out = os.path.join(a.work, out)
         run([a.carvemap, "import", "rosbag", bag, "--topic", topic, "-o", out, *extra])
         run(reader + [out])
-        return load(out)
+        return load(out) if "," not in topic else out
 
     scan = imported(bags["plain"], "/scan", "scan.h5")
     check(scan["kind"] == "line", "LaserScan gives a line sensor")
@@ -161,6 +164,18 @@ def main():
     check(np.allclose(cloud["R"], bagmaker.camera_rotation()) and
           np.allclose(cloud["T"], bagmaker.CAMERA_IN_BASE[0]), "the camera's mounting")
     check_against_truth(cloud, "cloud", "/cloud organized")
+    # Both topics at once: two sensors on one /path, each as its topic alone gave it.
+    both = imported(bags["plain"], "/scan,/cloud", "both.h5")
+    for name, alone, kind in (("scan", scan, "scan"), ("cloud", cloud, "cloud")):
+        got = load(both, name)
+        check(np.array_equal(got["points"], alone["points"], equal_nan=True)
+              and np.array_equal(got["frames"]["t"], alone["frames"]["t"]),
+              f"--topic /scan,/cloud: sensor {name} as its topic alone gave it")
+        check_against_truth(got, kind, f"/scan,/cloud: {name}")
+    with h5py.File(both, "r") as f:
+        merged = np.union1d(scan["path"]["t"], cloud["path"]["t"])
+        check(np.array_equal(f["path"]["t"], merged),
+              "--topic /scan,/cloud: /path at every frame time of both topics, once")
     points = imported(bags["unorganized"], "/cloud", "points.h5")
     check(points["kind"] == "points", "an unorganized cloud gives a points sensor")
     check_against_truth(points, "cloud", "/cloud unorganized")
