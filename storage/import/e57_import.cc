@@ -17,7 +17,8 @@ namespace {
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 // A frame's ray count is a u32 in /frames (docs/DESIGN.md §3).
 constexpr uint64_t kMaxFrameRays = std::numeric_limits<uint32_t>::max();
-constexpr double kFarthest = 1e5;  // m
+constexpr double kFarthest = 1e5;              // m
+constexpr double kMaxIndex = 1099511627776.0;  // 2⁴⁰
 
 // How one scan's records become rays: which prototype fields hold what.
 struct ScanPlan {
@@ -103,8 +104,17 @@ absl::Status ForEachRecord(const E57Reader& reader, size_t i, const ScanPlan& pl
                                                            " lies ", r.p.norm(),
                                                            " m from the scanner"));
           }
-          if (slot[1] >= 0) r.row = static_cast<int64_t>(c[slot[1]][j]);
-          if (slot[2] >= 0) r.col = static_cast<int64_t>(c[slot[2]][j]);
+          for (int k = 1; k <= 2; ++k) {
+            if (slot[k] < 0) continue;
+            // A grid index beyond ±2⁴⁰ is damage, and kept small it cannot overflow below.
+            const double v = c[slot[k]][j];
+            if (!(std::abs(v) <= kMaxIndex)) {
+              return absl::InvalidArgumentError(
+                  absl::StrCat(ScanName(reader, i), ": record ", next, ": ",
+                               k == 1 ? "rowIndex " : "columnIndex ", v, " is out of range"));
+            }
+            (k == 1 ? r.row : r.col) = static_cast<int64_t>(v);
+          }
           r.later_return = slot[3] >= 0 && c[slot[3]][j] > 0;
           if (absl::Status s = f(r); !s.ok()) return s;
         }

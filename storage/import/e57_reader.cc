@@ -257,8 +257,9 @@ absl::StatusOr<E57Scan> ParseScan(const XmlContext& cx, pugi::xml_node node) {
     for (int i = 0; i < 4; ++i) {
       auto x = Number(cx, b.child(names[i]), 0.0);
       if (!x.ok()) return x.status();
-      if (*x != std::floor(*x) || std::abs(*x) > 9e15) {
-        return cx.Error(absl::StrCat("indexBounds/", names[i], " is not an integer"));
+      // No grid has 2⁴⁰ rows; farther bounds are damage (and would overflow as pixel counts).
+      if (*x != std::floor(*x) || std::abs(*x) > 1099511627776.0) {
+        return cx.Error(absl::StrCat("indexBounds/", names[i], " is not an integer within ±2⁴⁰"));
       }
       *v[i] = static_cast<int64_t>(*x);
     }
