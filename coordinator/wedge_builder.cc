@@ -213,9 +213,11 @@ absl::Status WedgeBuilder::EmitWedge(const RayModel& a, const RayModel& b, const
 
 absl::Status WedgeBuilder::EmitSingles(const SensorState& s, uint64_t frame,
                                        std::span<const RayModel> rays, std::span<const float> range,
-                                       std::span<const uint8_t> covered) {
+                                       std::span<const uint8_t> covered, size_t begin,
+                                       size_t end) {
   wedge_.num_rays = 1;
-  for (size_t i = 0; i < rays.size(); ++i) {
+  end = std::min(end, rays.size());
+  for (size_t i = begin; i < end; ++i) {
     if (std::isnan(range[i]) || covered[i]) continue;
     wedge_.rays.fill(rays[i]);
     ++stats_.single_ray_wedges;
@@ -295,8 +297,14 @@ absl::Status WedgeBuilder::AddGridFrame(SensorState& s, const ScanFrame& frame) 
       }
       cur_covered_[i00] = cur_covered_[i01] = cur_covered_[i10] = cur_covered_[i11] = 1;
     }
+    // Row y has met both its neighbouring rows: what it has left carves alone, now, so that
+    // the wedges come in row order and a large frame can be carved in bands of rows.
+    if (auto st = EmitSingles(s, f, cur_rays_, cur_range_, cur_covered_, y * cols, (y + 1) * cols);
+        !st.ok()) {
+      return st;
+    }
   }
-  return EmitSingles(s, f, cur_rays_, cur_range_, cur_covered_);
+  return EmitSingles(s, f, cur_rays_, cur_range_, cur_covered_, (rows - 1) * cols, rows * cols);
 }
 
 absl::Status WedgeBuilder::AddFrame(const ScanFrame& frame, const FrameContext& context) {

@@ -8,6 +8,8 @@
 // no depth discontinuity between them, no occlusion edge, and (line) no wide gap between frames
 // (WedgeBuilderOptions). Every return that ends up in no wedge is still carved, as a
 // single-ray wedge (num_rays = 1, the ray copied into all four slots so the bytes are defined).
+// A grid frame's wedges come in row order: the wedges joining rows y and y + 1, then row y's
+// single-ray wedges, so the lowest row a wedge touches never decreases within a frame.
 //
 // Streaming: memory holds only the previous frame of each line sensor, whatever the scan size.
 #pragma once
@@ -157,8 +159,10 @@ class WedgeBuilder {
                                 const RayModel& d, bool line) const;
   absl::Status EmitWedge(const RayModel& a, const RayModel& b, const RayModel& c,
                          const RayModel& d, const std::array<RayId, 4>& ids);
+  // The single-ray wedges of rays [begin, end) not in any wedge.
   absl::Status EmitSingles(const SensorState& s, uint64_t frame, std::span<const RayModel> rays,
-                           std::span<const float> range, std::span<const uint8_t> covered);
+                           std::span<const float> range, std::span<const uint8_t> covered,
+                           size_t begin = 0, size_t end = SIZE_MAX);
   absl::Status AddLineFrame(SensorState& s, const ScanFrame& frame);
   absl::Status AddGridFrame(SensorState& s, const ScanFrame& frame);
 

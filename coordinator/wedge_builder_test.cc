@@ -433,7 +433,8 @@ TEST(WedgeBuilderTest, GridNeighbours) {
   }
 
   // Pixels (0,1) and (1,0) without returns: wedges (0,0), (0,1), (1,0) go, and pixels (0,0)
-  // and (2,0), which only those wedges held, are carved alone.
+  // and (2,0), which only those wedges held, are carved alone, each after the wedges of its
+  // row: wedge (0,2), pixel (0,0), wedges (1,1) and (1,2), pixel (2,0).
   out.wedges.clear();
   ScanFrame f = GridFrame(3, 4);
   f.row = 1;
@@ -441,7 +442,9 @@ TEST(WedgeBuilderTest, GridNeighbours) {
   ASSERT_TRUE(b->AddFrame(f, FrameContext{}).ok());
   EXPECT_EQ(out.Count(4), 3);
   ASSERT_EQ(out.Count(1), 2);
-  EXPECT_NEAR((out.wedges[3].rays[0].point_mean - Vector3f(kWallX, 0, 0)).norm(), 0, 1e-6);
+  EXPECT_EQ(out.wedges[1].num_rays, 1);
+  EXPECT_NEAR((out.wedges[1].rays[0].point_mean - Vector3f(kWallX, 0, 0)).norm(), 0, 1e-6);
+  EXPECT_EQ(out.wedges[4].num_rays, 1);
   EXPECT_NEAR((out.wedges[4].rays[0].point_mean - Vector3f(kWallX, 0, -0.2f)).norm(), 0, 1e-6);
 
   // A frame of the wrong size.

@@ -96,6 +96,13 @@ struct SliceCarver::Impl {
   // sensor's last frame has wedges pending until Finish even then).
   static constexpr int64_t kAfter = std::numeric_limits<int64_t>::max();
   std::vector<std::vector<int64_t>> frame_batch;
+  // Per sensor, by own row: the rays of each band of a frame larger than batch_rays (0: the
+  // frame is one batch's). Only grid and points frames are cut (their wedges lie within the
+  // frame), a grid's at whole pixel rows; band k is batch frame_batch + k.
+  std::vector<std::vector<uint64_t>> frame_band;
+  // While a banded frame's wedges come: the lowest batch they can still reach (the wedge
+  // builder's row order), below which its bands are complete.
+  int64_t emitting_from = kAfter;
   std::vector<int64_t> last_batch_fed;
   std::vector<bool> finished;
   std::vector<uint64_t> next_row;
@@ -121,8 +128,10 @@ struct SliceCarver::Impl {
     const ScanReader::RowRange& own = slice.own[sensor];
     return row >= own.begin && row < own.end;
   }
-  [[nodiscard]] int64_t BatchOf(uint32_t sensor, uint64_t row) const {
-    return frame_batch[sensor][row - slice.own[sensor].begin];
+  [[nodiscard]] int64_t BatchOf(uint32_t sensor, uint64_t row, uint32_t index) const {
+    const uint64_t own = row - slice.own[sensor].begin;
+    const uint64_t band = frame_band[sensor][own];
+    return frame_batch[sensor][own] + (band == 0 ? 0 : int64_t(index / band));
   }
   absl::StatusOr<Batch*> OpenBatch(int64_t b) {
     // A batch is carved only once no sensor can add to it (CarveCompleteBatches).
@@ -174,10 +183,15 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
   int nb = 0;
   for (int r = 0; r < wedge.num_rays; ++r) {
     if (!Owned(ids[r].sensor, ids[r].frame)) continue;
-    const int64_t b = BatchOf(ids[r].sensor, ids[r].frame);
+    const int64_t b = BatchOf(ids[r].sensor, ids[r].frame, ids[r].index);
     if (std::find(batches, batches + nb, b) == batches + nb) batches[nb++] = b;
   }
   if (nb == 0) return absl::OkStatus();  // context alone: another slice's
+  if (const int64_t lowest = *std::min_element(batches, batches + nb); lowest > emitting_from) {
+    // A banded frame has moved past its earlier bands: carve them now.
+    emitting_from = lowest;
+    if (absl::Status s = CarveCompleteBatches(false); !s.ok()) return s;
+  }
   if (absl::Status s = ValidateWedge(wedge); !s.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("slice carve: sensor ",
                                                    sensors[ids[0].sensor].name, " frame ",
@@ -208,7 +222,7 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
         id = uint32_t(batch.rays.size());
         batch.rays.push_back(wedge.rays[r]);
         const bool votes = Owned(ids[r].sensor, ids[r].frame) &&
-                           BatchOf(ids[r].sensor, ids[r].frame) == batches[i];
+                           BatchOf(ids[r].sensor, ids[r].frame, ids[r].index) == batches[i];
         batch.votes.push_back(votes ? 1 : 0);
         batch.far_ends.push_back(i == 0 ? ExtendedPointMean(wedge.rays[r], kWedgeHullSigmas)
                                         : far_ends[r]);
@@ -353,8 +367,8 @@ absl::Status SliceCarver::Impl::CarveCompleteBatches(bool all) {
     // as its last frame is in, before the next one is read.
     bool complete = all;
     if (!complete) {
-      complete = b < batch || batch_own_rays >= options.batch_rays ||
-                 std::all_of(finished.begin(), finished.end(), [](bool f) { return f; });
+      complete = b < emitting_from && (b < batch || batch_own_rays >= options.batch_rays ||
+                 std::all_of(finished.begin(), finished.end(), [](bool f) { return f; }));
       for (size_t s = 0; s < sensors.size() && complete; ++s) {
         complete = sensors[s].kind != SensorKind::kLine || last_batch_fed[s] != b;
       }
@@ -389,6 +403,7 @@ absl::StatusOr<std::unique_ptr<SliceCarver>> SliceCarver::Create(std::vector<Sen
   impl->stats.bounds.setEmpty();
   const size_t n = sensors.size();
   impl->frame_batch.resize(n);
+  impl->frame_band.resize(n);
   impl->last_batch_fed.assign(n, -1);
   impl->finished.assign(n, false);
   impl->next_row.resize(n);
@@ -401,6 +416,7 @@ absl::StatusOr<std::unique_ptr<SliceCarver>> SliceCarver::Create(std::vector<Sen
                                                      "read rows"));
     }
     impl->frame_batch[s].assign(own.end - own.begin, -1);
+    impl->frame_band[s].assign(own.end - own.begin, 0);
     impl->finished[s] = read.begin == read.end;
     impl->next_row[s] = read.begin;
   }
@@ -429,15 +445,34 @@ absl::Status SliceCarver::AddFrame(const ScanFrame& frame, const FrameContext& c
   ++m.next_row[s];
   if (m.Owned(s, frame.row)) {
     // A new batch once the current one holds batch_rays own rays: at a frame, so the batches
-    // follow from the slice's frames alone.
-    if (m.batch_own_rays >= m.options.batch_rays) {
+    // follow from the slice's frames alone. A grid or points frame larger than batch_rays
+    // (a terrestrial scanner's setup) is cut into bands of batch_rays, a grid's at whole
+    // pixel rows, each its own batch, carved as the wedge builder moves past it.
+    const uint64_t n = frame.points_sensor.size();
+    const SensorInfo& info = m.sensors[s];
+    uint64_t band = 0;
+    if (info.kind != SensorKind::kLine && n > m.options.batch_rays) {
+      band = info.kind == SensorKind::kGrid
+                 ? std::max<uint64_t>(1, m.options.batch_rays / info.cols) * info.cols
+                 : m.options.batch_rays;
+    }
+    if (m.batch_own_rays >= m.options.batch_rays || (band > 0 && m.batch_own_rays > 0)) {
       ++m.batch;
       m.batch_own_rays = 0;
     }
-    m.frame_batch[s][frame.row - m.slice.own[s].begin] = m.batch;
-    m.batch_own_rays += frame.points_sensor.size();
-    if (m.own_rays_of_batch.size() <= size_t(m.batch)) m.own_rays_of_batch.resize(m.batch + 1, 0);
-    m.own_rays_of_batch[m.batch] += frame.points_sensor.size();
+    const uint64_t own = frame.row - m.slice.own[s].begin;
+    m.frame_batch[s][own] = m.batch;
+    m.frame_band[s][own] = band;
+    const uint64_t bands = band == 0 ? 1 : (n + band - 1) / band;
+    if (band > 0) m.emitting_from = m.batch;
+    m.own_rays_of_batch.resize(std::max<size_t>(m.own_rays_of_batch.size(), m.batch + bands), 0);
+    for (uint64_t k = 0; k < bands; ++k) {
+      const uint64_t rays = band == 0 ? n : std::min(band, n - k * band);
+      m.own_rays_of_batch[m.batch + k] += rays;
+      if (k + 1 < bands) continue;
+      m.batch += int64_t(k);
+      m.batch_own_rays += rays;
+    }
     m.last_batch_fed[s] = m.batch;
     ++m.stats.frames;
     m.stats.rays += frame.points_sensor.size();
@@ -446,6 +481,7 @@ absl::Status SliceCarver::AddFrame(const ScanFrame& frame, const FrameContext& c
     m.last_batch_fed[s] = Impl::kAfter;
   }
   if (absl::Status st = m.builder->AddFrame(frame, context); !st.ok()) return st;
+  m.emitting_from = Impl::kAfter;
   if (m.next_row[s] == m.slice.read[s].end) m.finished[s] = true;
   return m.CarveCompleteBatches(false);
 }

@@ -6,7 +6,11 @@
 //
 // Memory is bounded whatever the slice's length: frames are carved in batches of about
 // batch_rays own rays (a ray votes in the batch of its frame; the wedges joining two batches
-// go to both, each voting its own rays), and the chunks' sums go out as sections
+// go to both, each voting its own rays); a grid or points frame larger than batch_rays (a
+// terrestrial scanner's setup) is cut into bands of about batch_rays, a grid's at whole pixel
+// rows, each its own batch, carved as the wedge builder's row order moves past it. What still
+// grows with such a frame is the frame itself and the wedge builder's noise model of each of
+// its rays (~100 B a pixel). The chunks' sums go out as sections
 // (PartialSumsWriter) whenever their hash maps exceed memory_budget_bytes (checked after each
 // chunk is carved), and at the end.
 //

@@ -389,9 +389,18 @@ TEST_F(SliceCarverTest, RegionsCarveOnlyThere) {
   }
 }
 
-// A grid's wedges lie within one frame, so a batch of large grid frames is carved as soon as
-// its last frame is in, before the next frame is read: a worker holds one such batch, not two.
-TEST(SliceCarverGrid, ABatchOfGridFramesIsCarvedBeforeTheNextFrame) {
+// Grid frames carved through a SliceCarver with `batch_rays`: a wall 3 m ahead seen through
+// ±20° × ±30° (20 × 30 pixels), the scanner turning a little each frame. Returns every leaf's
+// sums over all sections (keyed by chunk and leaf), and the own rays carved as progress had
+// them after each frame was added, and the values progress took during each AddFrame.
+struct GridCarve {
+  std::map<std::tuple<int, int, int, uint64_t>, LeafStats> leaves;
+  std::vector<uint64_t> carved_after_frame;
+  std::vector<std::vector<uint64_t>> progress_in_frame;
+  SliceCarveStats stats;
+};
+
+GridCarve CarveGridFrames(uint64_t batch_rays, uint64_t frames) {
   SensorInfo grid;
   grid.name = "grid";
   grid.kind = SensorKind::kGrid;
@@ -400,23 +409,35 @@ TEST(SliceCarverGrid, ABatchOfGridFramesIsCarvedBeforeTheNextFrame) {
   grid.range_sigma = {0.005, 0};
   grid.max_range_m = 10;
   const uint64_t rays = uint64_t{grid.rows} * grid.cols;
-  constexpr uint64_t kFrames = 4;
   ScanSlice slice;
-  slice.own = {{0, kFrames}};
-  slice.read = {{0, kFrames}};
-  slice.own_rays = kFrames * rays;
+  slice.own = {{0, frames}};
+  slice.read = {{0, frames}};
+  slice.own_rays = frames * rays;
   SliceCarveOptions o;
   o.grid.chunk_depth = 5;
-  o.batch_rays = rays;  // a frame fills a batch
+  o.batch_rays = batch_rays;
+  GridCarve out;
   absl::StatusOr<std::unique_ptr<SliceCarver>> carver = SliceCarver::Create(
       {grid}, slice, o,
-      [](const ChunkKey&, uint64_t, std::span<const TileLeaf>) { return absl::OkStatus(); });
-  ASSERT_TRUE(carver.ok()) << carver.status();
+      [&out](const ChunkKey& c, uint64_t, std::span<const TileLeaf> leaves) {
+        for (const TileLeaf& l : leaves) {
+          LeafStats& sum = out.leaves[{c.x(), c.y(), c.z(), MortonCode(l.node.local)}];
+          sum.sum_w += l.stats.sum_w;
+          sum.sum_wp += l.stats.sum_wp;
+          sum.sum_wp2 += l.stats.sum_wp2;
+          sum.count += l.stats.count;
+        }
+        return absl::OkStatus();
+      });
+  EXPECT_TRUE(carver.ok()) << carver.status();
+  if (!carver.ok()) return out;
   uint64_t carved = 0;
-  (*carver)->SetProgress([&carved](uint64_t r) { carved = r; });
+  (*carver)->SetProgress([&](uint64_t r) {
+    carved = r;
+    if (!out.progress_in_frame.empty()) out.progress_in_frame.back().push_back(r);
+  });
   const std::vector<TimedPose> path = {TimedPose{0, Pose{}}, TimedPose{10, Pose{}}};
-  for (uint64_t f = 0; f < kFrames; ++f) {
-    // A wall 3 m ahead, seen through ±20° × ±30°, the scanner turning a little each frame.
+  for (uint64_t f = 0; f < frames; ++f) {
     ScanFrame frame;
     frame.sensor = 0;
     frame.row = f;
@@ -431,14 +452,54 @@ TEST(SliceCarverGrid, ABatchOfGridFramesIsCarvedBeforeTheNextFrame) {
       }
     }
     absl::StatusOr<FrameContext> ctx = FrameContextAt(path, {}, frame.t, o.wedges.noise);
-    ASSERT_TRUE(ctx.ok()) << ctx.status();
-    ASSERT_TRUE((*carver)->AddFrame(frame, *ctx).ok());
-    EXPECT_EQ(carved, (f + 1) * rays) << "frame " << f;
+    EXPECT_TRUE(ctx.ok()) << ctx.status();
+    out.progress_in_frame.emplace_back();
+    EXPECT_TRUE((*carver)->AddFrame(frame, *ctx).ok());
+    out.carved_after_frame.push_back(carved);
   }
   absl::StatusOr<SliceCarveStats> st = (*carver)->Finish();
-  ASSERT_TRUE(st.ok()) << st.status();
-  EXPECT_EQ(st->batches, kFrames);
-  EXPECT_EQ(st->rays, kFrames * rays);
+  EXPECT_TRUE(st.ok()) << st.status();
+  if (st.ok()) out.stats = *st;
+  return out;
+}
+
+// A grid's wedges lie within one frame, so a batch of large grid frames is carved as soon as
+// its last frame is in, before the next frame is read: a worker holds one such batch, not two.
+TEST(SliceCarverGrid, ABatchOfGridFramesIsCarvedBeforeTheNextFrame) {
+  const GridCarve g = CarveGridFrames(/*batch_rays=*/600, 4);
+  for (uint64_t f = 0; f < 4; ++f) EXPECT_EQ(g.carved_after_frame[f], (f + 1) * 600) << f;
+  EXPECT_EQ(g.stats.batches, 4u);
+  EXPECT_EQ(g.stats.rays, 4u * 600);
+}
+
+// A grid frame larger than batch_rays is carved in bands of whole pixel rows while its wedges
+// come (200 rays: bands of 6 rows, 180 rays), so memory holds a band's batch, not the frame's;
+// the sums are the one-batch carve's up to the order of the additions.
+TEST(SliceCarverGrid, AFrameLargerThanABatchIsCarvedInBandsOfRows) {
+  const GridCarve banded = CarveGridFrames(/*batch_rays=*/200, 3);
+  const GridCarve whole = CarveGridFrames(/*batch_rays=*/uint64_t{1} << 40, 3);
+  EXPECT_EQ(banded.stats.batches, 3u * 4);  // 180 + 180 + 180 + 60 rays a frame
+  for (uint64_t f = 0; f < 3; ++f) {
+    // All but the last band, which a next frame smaller than a batch could still join; after
+    // the slice's last frame, all.
+    EXPECT_EQ(banded.carved_after_frame[f], f < 2 ? f * 600 + 540 : 1800) << f;
+    // Bands carved while the frame's wedges were still coming.
+    const std::vector<uint64_t>& p = banded.progress_in_frame[f];
+    EXPECT_TRUE(std::any_of(p.begin(), p.end(),
+                            [f](uint64_t r) { return r > f * 600 && r < (f + 1) * 600 - 60; }))
+        << "frame " << f;
+  }
+  EXPECT_EQ(banded.stats.rays, 3u * 600);
+  EXPECT_EQ(banded.stats.leaf_updates, whole.stats.leaf_updates) << "each ray votes once";
+  ASSERT_EQ(banded.leaves.size(), whole.leaves.size());
+  for (const auto& [key, w] : whole.leaves) {
+    const auto it = banded.leaves.find(key);
+    ASSERT_NE(it, banded.leaves.end());
+    const LeafStats& b = it->second;
+    EXPECT_EQ(b.count, w.count);
+    EXPECT_NEAR(b.sum_w, w.sum_w, 1e-4 * std::abs(w.sum_w) + 1e-9);
+    EXPECT_NEAR(b.sum_wp, w.sum_wp, 1e-4 * std::abs(w.sum_wp) + 1e-9);
+  }
 }
 
 }  // namespace
