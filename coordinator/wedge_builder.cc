@@ -213,8 +213,7 @@ absl::Status WedgeBuilder::EmitWedge(const RayModel& a, const RayModel& b, const
 
 absl::Status WedgeBuilder::EmitSingles(const SensorState& s, uint64_t frame,
                                        std::span<const RayModel> rays, std::span<const float> range,
-                                       std::span<const uint8_t> covered, size_t begin,
-                                       size_t end) {
+                                       std::span<const uint8_t> covered, size_t begin, size_t end) {
   wedge_.num_rays = 1;
   end = std::min(end, rays.size());
   for (size_t i = begin; i < end; ++i) {

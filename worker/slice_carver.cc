@@ -367,8 +367,9 @@ absl::Status SliceCarver::Impl::CarveCompleteBatches(bool all) {
     // as its last frame is in, before the next one is read.
     bool complete = all;
     if (!complete) {
-      complete = b < emitting_from && (b < batch || batch_own_rays >= options.batch_rays ||
-                 std::all_of(finished.begin(), finished.end(), [](bool f) { return f; }));
+      complete = b < emitting_from &&
+                 (b < batch || batch_own_rays >= options.batch_rays ||
+                  std::all_of(finished.begin(), finished.end(), [](bool f) { return f; }));
       for (size_t s = 0; s < sensors.size() && complete; ++s) {
         complete = sensors[s].kind != SensorKind::kLine || last_batch_fed[s] != b;
       }

@@ -418,8 +418,7 @@ GridCarve CarveGridFrames(uint64_t batch_rays, uint64_t frames) {
   o.batch_rays = batch_rays;
   GridCarve out;
   absl::StatusOr<std::unique_ptr<SliceCarver>> carver = SliceCarver::Create(
-      {grid}, slice, o,
-      [&out](const ChunkKey& c, uint64_t, std::span<const TileLeaf> leaves) {
+      {grid}, slice, o, [&out](const ChunkKey& c, uint64_t, std::span<const TileLeaf> leaves) {
         for (const TileLeaf& l : leaves) {
           LeafStats& sum = out.leaves[{c.x(), c.y(), c.z(), MortonCode(l.node.local)}];
           sum.sum_w += l.stats.sum_w;
