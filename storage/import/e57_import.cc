@@ -32,10 +32,6 @@ struct ScanPlan {
   uint32_t rows = 0, cols = 0;
 };
 
-std::string ScanName(const E57Reader& reader, size_t i) {
-  return absl::StrCat(reader.path(), ": data3D ", i, " (\"", reader.scans()[i].name, "\")");
-}
-
 absl::StatusOr<ScanPlan> PlanScan(const E57Reader& reader, size_t i) {
   const E57Scan& scan = reader.scans()[i];
   ScanPlan plan;
@@ -47,7 +43,7 @@ absl::StatusOr<ScanPlan> PlanScan(const E57Reader& reader, size_t i) {
     for (int k = 0; k < 3; ++k) plan.coord[k] = scan.FieldIndex(spherical[k]);
     if (std::find(plan.coord, plan.coord + 3, -1) != plan.coord + 3) {
       return absl::InvalidArgumentError(
-          absl::StrCat(ScanName(reader, i),
+          absl::StrCat(reader.Where(i),
                        ": its points have neither cartesianX/Y/Z nor sphericalRange/"
                        "Azimuth/Elevation"));
     }
@@ -100,9 +96,8 @@ absl::Status ForEachRecord(const E57Reader& reader, size_t i, const ScanPlan& pl
           // No scanner reaches 100 km: farther, the record is damaged (and float32 would lose
           // the point).
           if (r.valid && !(r.p.norm() < kFarthest)) {
-            return absl::InvalidArgumentError(absl::StrCat(ScanName(reader, i), ": record ", next,
-                                                           " lies ", r.p.norm(),
-                                                           " m from the scanner"));
+            return absl::InvalidArgumentError(absl::StrCat(
+                reader.Where(i), ": record ", next, " lies ", r.p.norm(), " m from the scanner"));
           }
           for (int k = 1; k <= 2; ++k) {
             if (slot[k] < 0) continue;
@@ -110,7 +105,7 @@ absl::Status ForEachRecord(const E57Reader& reader, size_t i, const ScanPlan& pl
             const double v = c[slot[k]][j];
             if (!(std::abs(v) <= kMaxIndex)) {
               return absl::InvalidArgumentError(
-                  absl::StrCat(ScanName(reader, i), ": record ", next, ": ",
+                  absl::StrCat(reader.Where(i), ": record ", next, ": ",
                                k == 1 ? "rowIndex " : "columnIndex ", v, " is out of range"));
             }
             (k == 1 ? r.row : r.col) = static_cast<int64_t>(v);
@@ -151,7 +146,7 @@ absl::Status SurveyScan(const E57Reader& reader, size_t i, ScanPlan& plan, doubl
   const double cols = static_cast<double>(col_hi) - static_cast<double>(col_lo) + 1;
   if (rows * cols > static_cast<double>(kMaxFrameRays)) {
     return absl::InvalidArgumentError(
-        absl::StrCat(ScanName(reader, i), ": a grid of ", rows, " × ", cols,
+        absl::StrCat(reader.Where(i), ": a grid of ", rows, " × ", cols,
                      " pixels is more than one frame holds (2³² − 1 rays)"));
   }
   // Scanners record most pixels, even those with no return; a grid far larger than its records
@@ -159,7 +154,7 @@ absl::Status SurveyScan(const E57Reader& reader, size_t i, ScanPlan& plan, doubl
   const double pixel_limit = std::max(16.0 * static_cast<double>(scan.record_count), 1048576.0);
   if (rows * cols > pixel_limit) {
     return absl::InvalidArgumentError(absl::StrCat(
-        ScanName(reader, i), ": rows ", row_lo, "–", row_hi, " and columns ", col_lo, "–", col_hi,
+        reader.Where(i), ": rows ", row_lo, "–", row_hi, " and columns ", col_lo, "–", col_hi,
         " make ", rows * cols, " pixels for ", scan.record_count,
         " records (more than 16 pixels a record): are its indices or indexBounds damaged?"));
   }
@@ -178,7 +173,6 @@ absl::Status E57ImportOptions::Validate() const {
 
 struct E57Import::State {
   E57Reader reader;
-  E57ImportOptions options;
   std::vector<ScanPlan> plans;
   std::vector<SensorInfo> sensors;
   Eigen::Vector3d shift = Eigen::Vector3d::Zero();
@@ -198,7 +192,7 @@ absl::StatusOr<E57Import> E57Import::Open(const std::string& file,
   if (reader->scans().empty()) {
     return absl::InvalidArgumentError(absl::StrCat(file, ": no scans (data3D is empty)"));
   }
-  auto st = std::make_unique<State>(State{std::move(*reader), options, {}, {}, {}});
+  auto st = std::make_unique<State>(State{std::move(*reader), {}, {}, {}});
   const E57Reader& r = st->reader;
   double farthest = 0;
   for (size_t i = 0; i < r.scans().size(); ++i) {
@@ -243,7 +237,7 @@ absl::StatusOr<E57Import> E57Import::Open(const std::string& file,
     const double from_origin = (r.scans()[i].translation - st->shift).norm();
     if (!(from_origin < kFarthest)) {
       return absl::InvalidArgumentError(absl::StrCat(
-          ScanName(r, i), ": its pose lies ", from_origin, " m from the shifted origin (",
+          r.Where(i), ": its pose lies ", from_origin, " m from the shifted origin (",
           st->shift.x(), ", ", st->shift.y(), ", ", st->shift.z(), "); give --shift near it"));
     }
   }
@@ -263,10 +257,9 @@ absl::StatusOr<std::vector<PathRecord>> E57Import::Run(const SensorFrameSink& si
     const E57Scan& scan = reader.scans()[i];
     const ScanPlan& plan = st.plans[i];
     const SensorInfo& sensor = st.sensors[static_cast<size_t>(plan.sensor)];
-    const float nan = kNaN;
     frame.clear();
     if (plan.structured) {
-      frame.assign(static_cast<size_t>(plan.rows) * plan.cols, Eigen::Vector3f::Constant(nan));
+      frame.assign(static_cast<size_t>(plan.rows) * plan.cols, Eigen::Vector3f::Constant(kNaN));
       seen.assign(frame.size(), false);
     }
     absl::Status s = ForEachRecord(reader, i, plan, [&](const Record& r) -> absl::Status {
@@ -277,11 +270,11 @@ absl::StatusOr<std::vector<PathRecord>> E57Import::Run(const SensorFrameSink& si
       }
       const bool in_range = r.valid && r.p.norm() <= sensor.max_range_m;
       const Eigen::Vector3f p =
-          in_range ? Eigen::Vector3f(r.p.cast<float>()) : Eigen::Vector3f::Constant(nan);
+          in_range ? Eigen::Vector3f(r.p.cast<float>()) : Eigen::Vector3f::Constant(kNaN);
       if (!plan.structured) {
         if (frame.size() == kMaxFrameRays) {
-          return absl::InvalidArgumentError(absl::StrCat(
-              ScanName(reader, i), ": more records than one frame holds (2³² − 1 rays)"));
+          return absl::InvalidArgumentError(
+              absl::StrCat(reader.Where(i), ": more records than one frame holds (2³² − 1 rays)"));
         }
         frame.push_back(p);
         return absl::OkStatus();
@@ -289,13 +282,13 @@ absl::StatusOr<std::vector<PathRecord>> E57Import::Run(const SensorFrameSink& si
       const int64_t row = r.row - plan.row_min, col = r.col - plan.col_min;
       if (row < 0 || col < 0 || row >= int64_t{plan.rows} || col >= int64_t{plan.cols}) {
         return absl::InvalidArgumentError(absl::StrCat(
-            ScanName(reader, i), ": record ", r.index, ": row ", r.row, ", column ", r.col,
+            reader.Where(i), ": record ", r.index, ": row ", r.row, ", column ", r.col,
             " lie outside indexBounds (rows ", plan.row_min, "–", plan.row_min + plan.rows - 1,
             ", columns ", plan.col_min, "–", plan.col_min + plan.cols - 1, ")"));
       }
       const size_t pixel = static_cast<size_t>(row) * plan.cols + static_cast<size_t>(col);
       if (seen[pixel]) {
-        return absl::InvalidArgumentError(absl::StrCat(ScanName(reader, i), ": record ", r.index,
+        return absl::InvalidArgumentError(absl::StrCat(reader.Where(i), ": record ", r.index,
                                                        ": row ", r.row, ", column ", r.col,
                                                        " has a record already"));
       }

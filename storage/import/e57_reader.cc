@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <utility>
 
 #include <pugixml.hpp>
@@ -37,6 +38,15 @@ bool ToLogical(uint64_t physical, uint64_t& logical) {
   return true;
 }
 
+uint64_t ToPhysical(uint64_t logical) {
+  return logical / kLogicalPage * kPhysicalPage + logical % kLogicalPage;
+}
+
+// How errors name a scan: "data3D 2 (\"Scan B\")".
+std::string ScanLabel(size_t index, absl::string_view name) {
+  return absl::StrCat("data3D ", index, " (\"", name, "\")");
+}
+
 std::string Bytes(uint64_t first, uint64_t count) {
   return absl::StrCat("bytes ", first, "–", first + count - 1);
 }
@@ -49,6 +59,8 @@ class PagedFile {
     if (!bytes.ok()) return bytes.status();
     return PagedFile(path, std::move(*bytes));
   }
+  PagedFile(std::string path, import_internal::ByteReader file)
+      : path_(std::move(path)), file_(std::move(file)) {}
 
   [[nodiscard]] uint64_t size() const { return file_.size(); }
   [[nodiscard]] uint64_t logical_size() const { return size() / kPhysicalPage * kLogicalPage; }
@@ -69,9 +81,6 @@ class PagedFile {
   }
 
  private:
-  PagedFile(std::string path, import_internal::ByteReader file)
-      : path_(std::move(path)), file_(std::move(file)) {}
-
   absl::Status Load(uint64_t page) {
     if (page == page_) return absl::OkStatus();
     const uint64_t at = page * kPhysicalPage;
@@ -285,8 +294,7 @@ absl::StatusOr<std::vector<E57Scan>> ParseXml(const std::string& path, std::stri
   int index = 0;
   for (pugi::xml_node child : root.child("data3D").children()) {
     if (child.type() != pugi::node_element) continue;
-    const XmlContext cx{
-        path, absl::StrCat("data3D ", index, " (\"", child.child("name").text().get(), "\")")};
+    const XmlContext cx{path, ScanLabel(index, child.child("name").text().get())};
     auto scan = ParseScan(cx, child);
     if (!scan.ok()) return scan.status();
     scans.push_back(std::move(*scan));
@@ -355,20 +363,20 @@ E57Reader::~E57Reader() = default;
 const std::string& E57Reader::path() const { return state_->path; }
 const E57Header& E57Reader::header() const { return state_->header; }
 const std::vector<E57Scan>& E57Reader::scans() const { return state_->scans; }
+std::string E57Reader::Where(size_t scan) const {
+  return absl::StrCat(state_->path, ": ", ScanLabel(scan, state_->scans.at(scan).name));
+}
 
 absl::StatusOr<E57Reader> E57Reader::Open(const std::string& path) {
-  auto file = PagedFile::Open(path);
-  if (!file.ok()) return file.status();
-  {
-    // The signature first, so that any other file is named as such before its checksums.
-    auto raw = import_internal::ByteReader::Open(path);
-    if (!raw.ok()) return raw.status();
-    char signature[8] = {};
-    if (!raw->ReadBytes(signature, 8) || std::memcmp(signature, "ASTM-E57", 8) != 0) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(path, ": not an E57 file (it does not begin with \"ASTM-E57\")"));
-    }
+  auto raw = import_internal::ByteReader::Open(path);
+  if (!raw.ok()) return raw.status();
+  // The signature first, so that any other file is named as such before its checksums.
+  char signature[8] = {};
+  if (!raw->ReadBytes(signature, 8) || std::memcmp(signature, "ASTM-E57", 8) != 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": not an E57 file (it does not begin with \"ASTM-E57\")"));
   }
+  std::optional<PagedFile> file(std::in_place, path, *std::move(raw));
   uint8_t bytes[kHeaderBytes];
   if (absl::Status s = file->Read(0, bytes, kHeaderBytes); !s.ok()) return s;
   auto state = std::make_unique<State>();
@@ -412,8 +420,8 @@ absl::StatusOr<E57Reader> E57Reader::Open(const std::string& path) {
     uint64_t at = 0;
     if (!ToLogical(s.section_offset, at) || at + kSectionHeaderBytes > file->logical_size()) {
       return absl::InvalidArgumentError(
-          absl::StrCat(path, ": data3D ", i, " (\"", s.name, "\"): points fileOffset ",
-                       s.section_offset, " lies outside the file (", file->size(), " bytes)"));
+          absl::StrCat(path, ": ", ScanLabel(i, s.name), ": points fileOffset ", s.section_offset,
+                       " lies outside the file (", file->size(), " bytes)"));
     }
   }
   state->scans = std::move(*scans);
@@ -424,8 +432,7 @@ absl::Status E57Reader::ReadRecords(int scan_index, std::span<const int> fields,
                                     const RecordBatch& on_batch, size_t batch) const {
   const E57Scan& scan = state_->scans.at(static_cast<size_t>(scan_index));
   const std::string& path = state_->path;
-  const std::string where =
-      absl::StrCat(path, ": data3D ", scan_index, " (\"", scan.name, "\") points");
+  const std::string where = absl::StrCat(Where(static_cast<size_t>(scan_index)), " points");
   for (int f : fields) {
     if (f < 0 || static_cast<size_t>(f) >= scan.prototype.size()) {
       return absl::InvalidArgumentError(absl::StrCat(where, ": no field ", f));
@@ -468,8 +475,9 @@ absl::Status E57Reader::ReadRecords(int scan_index, std::span<const int> fields,
         absl::StrCat(where, ": recordCount ", scan.record_count, " of ", record_bits,
                      " bits each does not fit its section of ", section_length, " bytes"));
   }
-  std::vector<bool> wanted(streams.size(), false);
-  for (int f : fields) wanted[static_cast<size_t>(f)] = true;
+  // Each stream's column in the batch, or -1 for a field not asked for.
+  std::vector<int> column_of(streams.size(), -1);
+  for (size_t k = 0; k < fields.size(); ++k) column_of[static_cast<size_t>(fields[k])] = int(k);
   std::vector<std::vector<double>> columns(fields.size());
   std::vector<uint8_t> packet;
   uint64_t done = 0;
@@ -484,12 +492,11 @@ absl::Status E57Reader::ReadRecords(int scan_index, std::span<const int> fields,
       for (size_t i = 0; i < streams.size(); ++i) {
         Stream& s = streams[i];
         const E57Field& f = scan.prototype[i];
-        if (!wanted[i]) {
+        if (column_of[i] < 0) {
           s.bit += static_cast<uint64_t>(s.bits) * n;
           continue;
         }
-        std::vector<double>& out = columns[static_cast<size_t>(
-            std::find(fields.begin(), fields.end(), int(i)) - fields.begin())];
+        std::vector<double>& out = columns[static_cast<size_t>(column_of[i])];
         if (f.kind == E57Field::Kind::kFloat) {
           for (size_t j = 0; j < n; ++j) {
             const uint64_t v = s.Next();
@@ -523,7 +530,7 @@ absl::Status E57Reader::ReadRecords(int scan_index, std::span<const int> fields,
   };
 
   while (done < scan.record_count) {
-    const uint64_t physical = pos / kLogicalPage * kPhysicalPage + pos % kLogicalPage;
+    const uint64_t physical = ToPhysical(pos);
     uint8_t ph[4];
     if (pos + 4 > section_end) {
       return absl::InvalidArgumentError(absl::StrCat(where, ": the section ends after ", done,

@@ -89,6 +89,8 @@ class E57Reader {
   [[nodiscard]] const std::string& path() const;
   [[nodiscard]] const E57Header& header() const;
   [[nodiscard]] const std::vector<E57Scan>& scans() const;
+  // How errors name scan `scan`: "FILE: data3D 2 (\"Scan B\")".
+  [[nodiscard]] std::string Where(size_t scan) const;
 
   // Called with the next `n` records of a scan: columns[k][i] is field fields[k] of record i.
   using RecordBatch =
