@@ -201,8 +201,12 @@ struct TopicScan {
   uint32_t rows = 0, cols = 0;
   double max_range = 0;  // the LaserScans' largest range_max, or the farthest point
   double last_stamp = -std::numeric_limits<double>::infinity();
-  std::vector<std::string> mount;  // the sensor's frame up to the system frame
 };
+
+// The index of `topic` in `topics`, or topics.size() when it is not one of them.
+size_t TopicIndex(const std::vector<std::string>& topics, const std::string& topic) {
+  return static_cast<size_t>(std::find(topics.begin(), topics.end(), topic) - topics.begin());
+}
 
 // A topic's sensor in scan.h5, from what the first read learnt and its static mounting.
 SensorInfo TopicSensor(const std::string& topic, const TopicScan& ts, const Pose& extrinsics,
@@ -252,16 +256,13 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
   const std::vector<std::string>& topics = options.topics;
   std::vector<TopicScan> scans(topics.size());
   for (const std::string& t : topics) rep.topics.push_back(RosbagTopicReport{t});
-  const auto topic_index = [&topics](const std::string& t) {
-    return static_cast<int>(std::find(topics.begin(), topics.end(), t) - topics.begin());
-  };
   std::vector<BagConnection> connections;
   absl::Status read = ReadAnyBag(
       file,
       [&](const BagMessage& m) -> absl::Status {
         const BagConnection& c = *m.connection;
-        const int k = topic_index(c.topic);
-        const bool wanted = static_cast<size_t>(k) < topics.size();
+        const size_t k = TopicIndex(topics, c.topic);
+        const bool wanted = k < topics.size();
         if (wanted && !IsType(c, kLaserScanType) && !IsType(c, kPointCloud2Type)) {
           return absl::InvalidArgumentError(
               absl::StrCat(file, ": topic ", c.topic, " carries ", c.type,
@@ -295,8 +296,8 @@ absl::StatusOr<RosbagImport> RosbagImport::Open(const std::string& file,
           }
           return absl::OkStatus();
         }
-        TopicScan& ts = scans[static_cast<size_t>(k)];
-        RosbagTopicReport& tr = rep.topics[static_cast<size_t>(k)];
+        TopicScan& ts = scans[k];
+        RosbagTopicReport& tr = rep.topics[k];
         const bool laser = IsType(c, kLaserScanType);
         tr.message_type = c.type;
         RosHeader header;
@@ -425,8 +426,7 @@ absl::StatusOr<std::vector<PathRecord>> RosbagImport::Run(const SensorFrameSink&
   std::vector<PathRecord> path;
   std::vector<uint64_t> frames(topics.size(), 0);
   absl::Status read = ReadAnyBag(st.file, [&](const BagMessage& m) -> absl::Status {
-    const auto k = static_cast<size_t>(
-        std::find(topics.begin(), topics.end(), m.connection->topic) - topics.begin());
+    const size_t k = TopicIndex(topics, m.connection->topic);
     if (k == topics.size()) return absl::OkStatus();
     const SensorInfo& sensor = st.sensors[k];
     RosbagTopicReport& tr = rep.topics[k];
