@@ -446,9 +446,7 @@ absl::Status SliceCarver::AddFrame(const ScanFrame& frame, const FrameContext& c
   ++m.next_row[s];
   if (m.Owned(s, frame.row)) {
     // A new batch once the current one holds batch_rays own rays: at a frame, so the batches
-    // follow from the slice's frames alone. A grid or points frame larger than batch_rays
-    // (a terrestrial scanner's setup) is cut into bands of batch_rays, a grid's at whole
-    // pixel rows, each its own batch, carved as the wedge builder moves past it.
+    // follow from the slice's frames alone; a large grid or points frame in bands (frame_band).
     const uint64_t n = frame.points_sensor.size();
     const SensorInfo& info = m.sensors[s];
     uint64_t band = 0;
@@ -467,13 +465,11 @@ absl::Status SliceCarver::AddFrame(const ScanFrame& frame, const FrameContext& c
     const uint64_t bands = band == 0 ? 1 : (n + band - 1) / band;
     if (band > 0) m.emitting_from = m.batch;
     m.own_rays_of_batch.resize(std::max<size_t>(m.own_rays_of_batch.size(), m.batch + bands), 0);
-    for (uint64_t k = 0; k < bands; ++k) {
-      const uint64_t rays = band == 0 ? n : std::min(band, n - k * band);
-      m.own_rays_of_batch[m.batch + k] += rays;
-      if (k + 1 < bands) continue;
-      m.batch += int64_t(k);
-      m.batch_own_rays += rays;
-    }
+    for (uint64_t k = 0; k + 1 < bands; ++k) m.own_rays_of_batch[m.batch + k] += band;
+    m.batch += int64_t(bands - 1);
+    const uint64_t last = n - (bands - 1) * band;  // the last band's rays, or the whole frame's
+    m.own_rays_of_batch[m.batch] += last;
+    m.batch_own_rays += last;
     m.last_batch_fed[s] = m.batch;
     ++m.stats.frames;
     m.stats.rays += frame.points_sensor.size();
