@@ -1,5 +1,9 @@
 #include "storage/import/import_writer.h"
 
+#include <span>
+#include <utility>
+#include <vector>
+
 #include "absl/strings/str_cat.h"
 #include "storage/scan_writer.h"
 
@@ -8,37 +12,25 @@ namespace carvemap {
 absl::StatusOr<ImportSummary> WriteImport(
     const std::string& out_path, const SensorInfo& sensor,
     absl::FunctionRef<absl::StatusOr<ImportedScan>(const FrameSink&)> import) {
-  auto writer = ScanWriter::Create(out_path);
-  if (!writer.ok()) return writer.status();
-  auto index = (*writer)->AddSensor(sensor);
-  if (!index.ok()) return index.status();
-  ScanWriter& w = **writer;
-  const int sensor_index = *index;
-  const FrameSink sink = [&w, sensor_index](double t, std::span<const Eigen::Vector3f> points) {
-    return w.AppendFrame(sensor_index, t, points);
-  };
-  auto scan = import(sink);
-  if (!scan.ok()) return scan.status();
-  if (scan->sensor.name != sensor.name || scan->sensor.kind != sensor.kind ||
-      scan->sensor.rows != sensor.rows || scan->sensor.cols != sensor.cols) {
-    return absl::InternalError(
-        absl::StrCat(out_path, ": importer's sensor differs from the one declared"));
-  }
-  for (const ImportedFrame& f : scan->frames) {
-    if (absl::Status s = w.AppendFrame(sensor_index, f.t, f.points_sensor); !s.ok()) return s;
-  }
-  if (absl::Status s = w.AppendPath(scan->path); !s.ok()) return s;
-  if (absl::Status s = w.Close(); !s.ok()) return s;
-
-  ImportSummary summary;
-  summary.frames = scan->frame_count;
-  summary.points = scan->point_count;
-  summary.poses = scan->path.size();
-  if (!scan->path.empty()) {
-    summary.t_begin = scan->path.front().t;
-    summary.t_end = scan->path.back().t;
-  }
-  return summary;
+  // The one sensor's import as an import of several: its frames go to sensor 0.
+  return WriteImportSensors(
+      out_path, {&sensor, 1},
+      [&](const SensorFrameSink& sensors_sink) -> absl::StatusOr<std::vector<PathRecord>> {
+        const FrameSink sink = [&](double t, std::span<const Eigen::Vector3f> points) {
+          return sensors_sink(0, t, points);
+        };
+        auto scan = import(sink);
+        if (!scan.ok()) return scan.status();
+        if (scan->sensor.name != sensor.name || scan->sensor.kind != sensor.kind ||
+            scan->sensor.rows != sensor.rows || scan->sensor.cols != sensor.cols) {
+          return absl::InternalError(
+              absl::StrCat(out_path, ": importer's sensor differs from the one declared"));
+        }
+        for (const ImportedFrame& f : scan->frames) {
+          if (absl::Status s = sink(f.t, f.points_sensor); !s.ok()) return s;
+        }
+        return std::move(scan->path);
+      });
 }
 
 absl::StatusOr<ImportSummary> WriteImportSensors(
