@@ -45,14 +45,13 @@ absl::Status CheckPlanarMemory(std::string_view what, std::span<const BoundaryFa
     if (elsewhere > 0) absl::StrAppend(&where, ", outside the levels: ", Faces(elsewhere));
     absl::StrAppend(&where, ")");
   }
-  return absl::ResourceExhaustedError(absl::StrCat(
-      std::string(what), ": ", Faces(faces.size()), " boundary faces", where, " need about ",
-      Bytes(need), " on top of the ", Bytes(held_bytes),
-      " the merge holds, over its memory budget of ", Bytes(budget_bytes),
-      ". The planar regions and mesh are made for every level at once, not "
-      "level by level: give the merge more memory (--memory-mb of `carvemap merge` or "
-      "`carvemap merger`, --merge-memory-mb of `carvemap run`; by default 90 % of the "
-      "process's cgroup memory limit) or carve at a coarser --resolution"));
+  return absl::ResourceExhaustedError(
+      absl::StrCat(std::string(what), ": ", Faces(faces.size()), " boundary faces", where,
+                   " need about ", Bytes(need), " on top of the ", Bytes(held_bytes),
+                   " the merge holds, over its memory budget of ", Bytes(budget_bytes),
+                   ". Give the merge more memory (--memory-mb of `carvemap merge` or "
+                   "`carvemap merger`, --merge-memory-mb of `carvemap run`; by default 90 % of the "
+                   "process's cgroup memory limit) or carve at a coarser --resolution"));
 }
 
 }  // namespace carvemap

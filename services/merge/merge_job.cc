@@ -19,6 +19,7 @@
 #include "services/floorplan/floorplan_pipeline.h"
 #include "services/floorplan/octree_wall_samples.h"
 #include "services/floorplan/scan_cloud_stream.h"
+#include "services/levels/level_regions.h"
 #include "services/levels/level_split.h"
 #include "services/merge/dense_mesh.h"
 #include "services/merge/memory_budget.h"
@@ -115,10 +116,9 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string
 // stand and job.json says why under "warnings".
 absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
                             const std::vector<BoundaryFace>& faces,
-                            const PlanarRegionSet& regions, const std::vector<Level>& levels,
-                            const fs::path& out, nlohmann::json& job, nlohmann::json& counts,
-                            nlohmann::json& timings, std::vector<std::string>& outputs,
-                            std::vector<std::string>& warnings,
+                            const std::vector<Level>& levels, const fs::path& out,
+                            nlohmann::json& job, nlohmann::json& counts, nlohmann::json& timings,
+                            std::vector<std::string>& outputs, std::vector<std::string>& warnings,
                             const MergeProgressCallback& progress,
                             std::vector<std::pair<Level, FloorPlan>>& plans) {
   if (options.scan_path.empty()) {
@@ -140,16 +140,37 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
     return q->stats.interior() ? OctreeLabel::kInterior : OctreeLabel::kExterior;
   };
   nlohmann::json rooms = nlohmann::json::array();
-  size_t total_samples = 0, total_rooms = 0;
-  double seconds_samples = 0, seconds_plan = 0;
+  size_t total_samples = 0, total_rooms = 0, total_regions = 0;
+  double seconds_regions = 0, seconds_samples = 0, seconds_plan = 0;
   for (size_t k = 0; k < levels.size(); ++k) {
     if (absl::Status s = ReportMergeProgress(progress, "floorplan", k, levels.size()); !s.ok()) {
       return s;
     }
+    // §4.2.4's regions of this level's faces alone (level_regions.h): the memory of the fit
+    // follows the level, not the building.
     Clock::time_point t0 = Clock::now();
+    PlanarRegionSet regions;
+    const std::vector<BoundaryFace> band = LevelBandFaces(faces, levels[k]);
+    if (absl::Status s = CheckPlanarMemory(
+            options,
+            absl::StrCat("level ", k, "'s planar regions (its faces from ",
+                         absl::SixDigits(levels[k].split_z_low - kLevelBandMarginM), " to ",
+                         absl::SixDigits(levels[k].split_z_high + kLevelBandMarginM), " m)"),
+            band, {});
+        !s.ok()) {
+      return s;
+    }
+    if (absl::StatusOr<PlanarRegionSet> fit = FitPlanarRegions(band, tiles.grid(), {}); fit.ok()) {
+      regions = *std::move(fit);
+    } else {
+      return fit.status();
+    }
+    seconds_regions += SecondsSince(t0);
+    total_regions += regions.regions.size();
+    t0 = Clock::now();
     OctreeWallSampleReport sample_report;
     absl::StatusOr<WallSampleSet> samples =
-        OctreeWallSamples(faces, regions, tiles.grid(), levels[k], *path, label_at,
+        OctreeWallSamples(band, regions, tiles.grid(), levels[k], *path, label_at,
                           OctreeWallSampleOptions{}, &sample_report);
     if (!samples.ok()) {
       if (absl::IsInvalidArgument(samples.status()) || absl::IsFailedPrecondition(samples.status())) {
@@ -189,7 +210,8 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
     plans.emplace_back(levels[k], plan->plan);
     total_rooms += plan->plan.rooms.size();
     nlohmann::json& lc = counts["floorplan_levels"][level_name];
-    lc = {{"wall_regions", sample_report.wall_regions},
+    lc = {{"planar_regions", regions.regions.size()},
+          {"wall_regions", sample_report.wall_regions},
           {"wall_samples", samples->samples.size()},
           {"samples_with_poses", sample_report.samples_with_poses},
           {"filled_behind_occlusion", sample_report.filled_behind_occlusion},
@@ -203,6 +225,8 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
   job["rooms"] = rooms;
   counts["wall_samples"] = total_samples;
   counts["rooms"] = total_rooms;
+  counts["floorplan_planar_regions"] = total_regions;
+  timings["merge.floorplan_regions"] = seconds_regions;
   timings["merge.wall_samples"] = seconds_samples;
   timings["merge.floorplan"] = seconds_plan;
   return absl::OkStatus();
@@ -699,26 +723,26 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   counts["boundary_faces"] = faces->size();
   counts["boundary_area_m2"] = face_area;
   timings["merge.boundary_faces"] = SecondsSince(t0);
-  // The levels come from these regions, so the faces cannot be told apart by level yet.
+  // planar regions (stage 2, §4.2.4) for the levels, fitted a slab of heights at a time
+  // (level_regions.h); each level's own are fitted with its floor plan.
   if (absl::Status s =
-          CheckPlanarMemory(options, "the whole building's planar regions", *faces, {});
+          CheckPlanarMemory(options, "the levels' planar regions (a slab of heights)",
+                            std::span(*faces).first(std::min(faces->size(), kLevelSlabFaces)), {});
       !s.ok()) {
     return InStage("planar_regions", s);
   }
-
-  // planar regions (stage 2, §4.2.4)
   t0 = Clock::now();
   if (absl::Status s = ReportMergeProgress(progress, "planar_regions", 0, 1); !s.ok()) return s;
-  absl::StatusOr<PlanarRegionSet> regions = FitPlanarRegions(*faces, grid, PlanarRegionOptions{});
-  if (!regions.ok()) return InStage("planar_regions", regions.status());
-  counts["planar_regions"] = regions->regions.size();
+  absl::StatusOr<std::vector<PlanarRegion>> level_regions = LevelRegions(*faces, grid);
+  if (!level_regions.ok()) return InStage("planar_regions", level_regions.status());
+  counts["level_planar_regions"] = level_regions->size();
   timings["merge.planar_regions"] = SecondsSince(t0);
 
   // levels (stage 3, §5.2) ➜ levels.json. The point-height fallback of §2.5 needs the scan,
   // which the merge does not read; without horizontal regions there is one level_0.
   t0 = Clock::now();
   if (absl::Status s = ReportMergeProgress(progress, "levels", 0, 1); !s.ok()) return s;
-  absl::StatusOr<LevelSplit> levels = SplitLevels(regions->regions, nullptr);
+  absl::StatusOr<LevelSplit> levels = SplitLevels(*level_regions, nullptr);
   if (!levels.ok()) return InStage("levels", levels.status());
   FirstOutputsOptions first = options.FirstOutputs();
   for (const Level& level : levels->levels) {
@@ -742,17 +766,19 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   // floor plans (stages 4–5, §5.3, §3.3) ➜ level_<k>/floorplan.geojson, floorplan.svg,
   // extruded.ply; job.json "rooms"
   std::vector<std::pair<Level, FloorPlan>> plans;
-  if (absl::Status s = FloorPlanStage(options, tiles, *faces, *regions, levels->levels, out, job,
-                                      counts, timings, outputs, warnings, progress, plans);
+  if (absl::Status s = FloorPlanStage(options, tiles, *faces, levels->levels, out, job, counts,
+                                      timings, outputs, warnings, progress, plans);
       !s.ok()) {
     return InStage("floorplan", s);
   }
 
-  // The building's faces and regions grow with its size and, once the floor plans are made,
-  // serve only the planar mesh of a job without plans (which fits its own regions).
+  // The building's faces grow with its size and, once the floor plans are made, serve only the
+  // planar mesh of a job without plans (which fits its own regions).
   const size_t num_boundary_faces = faces->size();
-  const size_t num_planar_regions = regions->regions.size();
-  regions = PlanarRegionSet{};
+  const size_t num_planar_regions =
+      level_regions->size() + counts.value("floorplan_planar_regions", size_t{0});
+  counts["planar_regions"] = num_planar_regions;
+  level_regions = std::vector<PlanarRegion>{};
   if (!plans.empty()) faces = std::vector<BoundaryFace>{};
 
   // dense mesh (§4.3.3) ➜ mesh/dense.ply; scoped: the mesh can be large and is not kept.

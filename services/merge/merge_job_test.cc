@@ -76,8 +76,8 @@ TEST(RunMerge, MemoryBudgetTooSmallFailsBeforeThePlanarRegions) {
   });
   ASSERT_EQ(s.status().code(), absl::StatusCode::kResourceExhausted) << s.status();
   const std::string m(s.status().message());
-  EXPECT_NE(m.find("merge planar_regions: the whole building's planar regions: 3776 boundary "
-                   "faces need about 1 MiB"),
+  EXPECT_NE(m.find("merge planar_regions: the levels' planar regions (a slab of heights): "
+                   "3776 boundary faces need about"),
             std::string::npos)
       << m;
   EXPECT_NE(m.find("over its memory budget of 1 MiB"), std::string::npos) << m;
@@ -104,6 +104,7 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
   const double res = 0.125;
   // 6 walls of the box: 2(32·24 + 32·20 + 24·20) faces.
   EXPECT_EQ(s->num_boundary_faces, 2u * (32 * 24 + 32 * 20 + 24 * 20));
+  // The levels' six; no scan, so no floor plan and no level's own regions.
   EXPECT_EQ(s->num_planar_regions, 6u);
   EXPECT_EQ(s->num_levels, 1u);
   // Tiles without a scan: no path for the floor plans' lines of sight, so no plan to segment
@@ -150,6 +151,7 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
     EXPECT_TRUE(fs::exists(options.output_dir + "/" + o)) << o;
   }
   EXPECT_EQ(job["counts"]["planar_regions"], 6);
+  EXPECT_EQ(job["counts"]["level_planar_regions"], 6);
   EXPECT_EQ(job["counts"]["building_watertight"], true);
   EXPECT_EQ(job["levels_source"], "regions");
   const nlohmann::json topdown = ReadJson(options.output_dir + "/level_0/topdown.json");
@@ -176,8 +178,9 @@ TEST(RunMerge, BuildingMeshRegionsTakeInOneLeafBumps) {
   absl::StatusOr<MergeSummary> s = RunMerge(options);
   ASSERT_TRUE(s.ok()) << s.status();
   const nlohmann::json job = ReadJson(options.output_dir + "/job.json");
-  // Default growth: the bumps' sides are at 90° to the floor and stay out of it.
-  EXPECT_GT(job["counts"]["planar_regions"].get<size_t>(), 6 + bumps);
+  // Default growth (the levels' regions): the bumps' sides are at 90° to the floor and stay out
+  // of it.
+  EXPECT_GT(job["counts"]["level_planar_regions"].get<size_t>(), 6 + bumps);
   EXPECT_EQ(s->num_levels, 1u);
   EXPECT_EQ(job["counts"]["building_planar_regions"], 6);
   EXPECT_EQ(job["counts"]["building_watertight"], true);
