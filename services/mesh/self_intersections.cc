@@ -1,6 +1,7 @@
 #include "services/mesh/self_intersections.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <functional>
@@ -14,6 +15,8 @@
 
 #include <boost/function_output_iterator.hpp>
 
+#include "absl/container/flat_hash_map.h"
+
 namespace carvemap {
 
 SelfIntersections CountSelfIntersections(const TriangleMesh& mesh, int threads,
@@ -22,39 +25,36 @@ SelfIntersections CountSelfIntersections(const TriangleMesh& mesh, int threads,
   using K = CGAL::Exact_predicates_inexact_constructions_kernel;
   using Mesh = CGAL::Surface_mesh<K::Point_3>;
   SelfIntersections out;
-  Mesh sm;
-  sm.reserve(Mesh::size_type(mesh.vertices.size()), Mesh::size_type(mesh.triangles.size() * 3 / 2),
-             Mesh::size_type(mesh.triangles.size()));
-  std::vector<Mesh::Vertex_index> vertex;
-  vertex.reserve(mesh.vertices.size());
-  for (const Eigen::Vector3f& v : mesh.vertices) {
-    vertex.push_back(sm.add_vertex(K::Point_3(v.x(), v.y(), v.z())));
-  }
-  const int64_t n = int64_t(vertex.size());
-  // Per face of `sm` (in the order added): its extent along x.
-  std::vector<std::pair<float, float>> x_range;
-  x_range.reserve(mesh.triangles.size());
-  for (const Eigen::Vector3i& t : mesh.triangles) {
+  const int64_t n = int64_t(mesh.vertices.size());
+  // Per triangle: its extent along x; lo = +∞ for a triangle with a bad or repeated index.
+  std::vector<std::pair<float, float>> x_range(mesh.triangles.size());
+  for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+    const Eigen::Vector3i& t = mesh.triangles[f];
     const bool valid = (t.array() >= 0).all() && (t.array().cast<int64_t>() < n).all() &&
                        t[0] != t[1] && t[1] != t[2] && t[0] != t[2];
-    if (!valid || sm.add_face(vertex[t[0]], vertex[t[1]], vertex[t[2]]) == Mesh::null_face()) {
-      ++out.unchecked;  // Surface_mesh refuses what would not be an oriented 2-manifold
+    if (!valid) {
+      ++out.unchecked;
+      x_range[f] = {INFINITY, -INFINITY};
       continue;
     }
     const float x0 = mesh.vertices[t[0]].x(), x1 = mesh.vertices[t[1]].x(),
                 x2 = mesh.vertices[t[2]].x();
-    x_range.emplace_back(std::min({x0, x1, x2}), std::max({x0, x1, x2}));
+    x_range[f] = {std::min({x0, x1, x2}), std::max({x0, x1, x2})};
   }
-  std::vector<Mesh::Vertex_index>().swap(vertex);
-  // One call over all faces would hold CGAL's boxes for all of them at once (the merge's peak
-  // on a dense mesh of millions of triangles), so the faces are tested in slabs along x,
-  // each with every face whose extent reaches into it. Two faces that cross have overlapping
-  // boxes, so both reach the slab holding x* = the larger of their minimum x; a pair is counted
-  // only in that slab, hence once. Adjacency stays the whole mesh's (one Surface_mesh).
+  // One Surface_mesh of the whole mesh (~70 bytes per triangle) and one call over all its
+  // faces (CGAL's boxes, ~110 bytes per triangle) were the merge's peak on a dense mesh of
+  // millions of triangles. So the triangles are tested in slabs along x, each slab a
+  // Surface_mesh of every triangle whose extent reaches into it. Two triangles that cross have
+  // overlapping boxes, so both reach the slab holding x* = the larger of their minimum x; a
+  // pair is counted only in that slab, hence once. Triangles that share a vertex share it in
+  // every slab that holds both, so adjacency is the whole mesh's.
   std::vector<float> starts;  // slab s covers [starts[s], starts[s + 1]); the first from −∞
   {
-    std::vector<float> lows(x_range.size());
-    for (size_t f = 0; f < x_range.size(); ++f) lows[f] = x_range[f].first;
+    std::vector<float> lows;
+    lows.reserve(x_range.size());
+    for (const auto& [lo, hi] : x_range) {
+      if (lo <= hi) lows.push_back(lo);
+    }
     std::sort(lows.begin(), lows.end());
     for (size_t i = triangles_per_slab; i < lows.size(); i += triangles_per_slab) {
       if (starts.empty() || lows[i] > starts.back()) starts.push_back(lows[i]);
@@ -63,30 +63,56 @@ SelfIntersections CountSelfIntersections(const TriangleMesh& mesh, int threads,
   auto slab_of = [&starts](float x) {
     return size_t(std::upper_bound(starts.begin(), starts.end(), x) - starts.begin());
   };
-  // Slabs are independent (CGAL only reads the mesh), so `threads` take them in turn, each
-  // with its own count: the sum does not depend on which thread counted which slab.
+  // Slabs are independent, so `threads` take them in turn, each with its own counts: the sums
+  // do not depend on which thread counted which slab.
   const size_t num_slabs = starts.size() + 1;
   std::atomic<size_t> next_slab{0};
-  std::vector<uint64_t> counted(size_t(std::max(threads, 1)), 0);
-  auto work = [&](uint64_t& pairs) {
+  std::vector<SelfIntersections> counted(size_t(std::max(threads, 1)));
+  auto work = [&](SelfIntersections& c) {
+    Mesh sm;
+    absl::flat_hash_map<int, Mesh::Vertex_index> local;
+    std::vector<uint32_t> triangle_of;  // per face of `sm`: its triangle in `mesh`
     std::vector<Mesh::Face_index> slab_faces;
     for (size_t slab = next_slab++; slab < num_slabs; slab = next_slab++) {
       const float lo = slab == 0 ? -INFINITY : starts[slab - 1];
       const float hi = slab == starts.size() ? INFINITY : starts[slab];
+      sm.clear();
+      local.clear();
+      triangle_of.clear();
       slab_faces.clear();
       for (size_t f = 0; f < x_range.size(); ++f) {
-        if (x_range[f].second >= lo && x_range[f].first < hi) {
-          slab_faces.push_back(Mesh::Face_index(Mesh::size_type(f)));
+        if (!(x_range[f].first <= x_range[f].second) || x_range[f].second < lo ||
+            x_range[f].first >= hi) {
+          continue;
         }
+        std::array<Mesh::Vertex_index, 3> v;
+        for (int k = 0; k < 3; ++k) {
+          const int i = mesh.triangles[f][k];
+          auto [it, added] = local.try_emplace(i);
+          if (added) {
+            const Eigen::Vector3f& p = mesh.vertices[size_t(i)];
+            it->second = sm.add_vertex(K::Point_3(p.x(), p.y(), p.z()));
+          }
+          v[k] = it->second;
+        }
+        const Mesh::Face_index face = sm.add_face(v[0], v[1], v[2]);
+        if (face == Mesh::null_face()) {
+          // Surface_mesh refuses what would not be an oriented 2-manifold: counted once, in
+          // the slab of the triangle's minimum x.
+          if (slab_of(x_range[f].first) == slab) ++c.unchecked;
+          continue;
+        }
+        triangle_of.push_back(uint32_t(f));
+        slab_faces.push_back(face);
       }
       // Counted as they come: the pairs themselves are not kept.
       CGAL::Polygon_mesh_processing::self_intersections(
           slab_faces, sm,
           boost::make_function_output_iterator(
               [&](const std::pair<Mesh::Face_index, Mesh::Face_index>& p) {
-                const float x = std::max(x_range[size_t(p.first)].first,
-                                         x_range[size_t(p.second)].first);
-                if (slab_of(x) == slab) ++pairs;
+                const float x = std::max(x_range[triangle_of[size_t(p.first)]].first,
+                                         x_range[triangle_of[size_t(p.second)]].first);
+                if (slab_of(x) == slab) ++c.pairs;
               }));
     }
   };
@@ -96,9 +122,10 @@ SelfIntersections CountSelfIntersections(const TriangleMesh& mesh, int threads,
   }
   work(counted[0]);
   for (std::thread& th : pool) th.join();
-  uint64_t pairs = 0;
-  for (uint64_t c : counted) pairs += c;
-  out.pairs = pairs;
+  for (const SelfIntersections& c : counted) {
+    out.pairs += c.pairs;
+    out.unchecked += c.unchecked;
+  }
   return out;
 }
 

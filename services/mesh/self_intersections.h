@@ -17,19 +17,21 @@ struct SelfIntersections {
   // first). A degenerate triangle counts as meeting its neighbours.
   uint64_t pairs = 0;
   // Triangles that were not tested: a repeated or bad vertex index, or one an oriented
-  // 2-manifold cannot hold beside the others (a third triangle on an edge, an edge traversed
-  // twice in one direction). CheckMesh reports why; 0 for a watertight mesh.
+  // 2-manifold cannot hold beside the triangles before it in its slab (a third triangle on an
+  // edge, an edge traversed twice in one direction). CheckMesh reports why; 0 for a watertight
+  // mesh.
   uint64_t unchecked = 0;
 };
 
 // Triangles per slab: CGAL's boxes for one slab take ~110 bytes per triangle, ~30 MB.
 inline constexpr size_t kSelfIntersectionTrianglesPerSlab = size_t{1} << 18;
 
-// CGAL's Polygon_mesh_processing::self_intersections on the mesh as a Surface_mesh, with exact
-// predicates (EPICK): boxes of the triangles intersected first, then each candidate pair
-// tested exactly. Run on slabs along x of about `triangles_per_slab` triangles each, so that
-// CGAL's boxes exist for one slab at a time, on `threads` threads; the count depends on
-// neither. Memory: ~70 bytes per triangle (the Surface_mesh) plus one slab's boxes per thread.
+// CGAL's Polygon_mesh_processing::self_intersections with exact predicates (EPICK): boxes of
+// the triangles intersected first, then each candidate pair tested exactly. Run on slabs along
+// x of about `triangles_per_slab` triangles each, each slab a Surface_mesh of the triangles
+// that reach into it, on `threads` threads; the pairs counted depend on neither. Memory:
+// 8 bytes per triangle plus, per thread, one slab's Surface_mesh and boxes (~180 bytes per
+// triangle of the slab).
 [[nodiscard]] SelfIntersections CountSelfIntersections(
     const TriangleMesh& mesh, int threads = 1,
     size_t triangles_per_slab = kSelfIntersectionTrianglesPerSlab);

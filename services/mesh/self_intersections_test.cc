@@ -84,6 +84,12 @@ TEST(SelfIntersections, TrianglesAManifoldCannotHoldAreCountedNotTested) {
   const SelfIntersections s = CountSelfIntersections(m);
   EXPECT_EQ(s.unchecked, 3u);
   EXPECT_EQ(s.pairs, 0u);
+  // The repeated triangle is refused in every slab that holds it and counted in one.
+  for (size_t per_slab : {1, 2, 5}) {
+    const SelfIntersections slabs = CountSelfIntersections(m, 1, per_slab);
+    EXPECT_EQ(slabs.unchecked, 3u) << per_slab;
+    EXPECT_EQ(slabs.pairs, 0u) << per_slab;
+  }
 }
 
 }  // namespace
