@@ -39,20 +39,24 @@ absl::StatusOr<ChunkNeighbourhood> FetchNeighbourhood(
 absl::StatusOr<DenseMeshResult> BuildDenseMesh(TileSet& tiles, const ChunkProgressFn& progress,
                                                int threads) {
   const std::vector<ChunkKey> chunks = DenseMeshChunks(tiles.chunks());
-  std::vector<ChunkMesh> meshes;
+  // The chunks come in ChunkKeyLess order, so they are welded as they come.
+  ChunkMeshWelder welder(tiles.grid().leaves_per_side());
   DenseMeshResult result;
   absl::Status s = ForEachChunk<ChunkMesh>(
       tiles, chunks, /*low_only=*/true, threads,
       [](const ChunkNeighbourhood& hood) { return DualContourChunk(hood); },
-      [&](ChunkMesh&& mesh) {
+      [&](ChunkMesh&& mesh) -> absl::Status {
         result.polygons += mesh.polygons;
         result.centre_vertices += mesh.centre_vertices;
-        if (!mesh.triangles.empty()) meshes.push_back(std::move(mesh));
+        if (mesh.triangles.empty()) return absl::OkStatus();
+        return welder.Add(std::move(mesh));
       },
       progress, "dense_mesh");
   if (!s.ok()) return s;
   result.chunks = chunks.size();
-  result.mesh = WeldChunkMeshes(std::move(meshes), &result.vertex_observed);
+  absl::StatusOr<TriangleMesh> mesh = welder.Finish(&result.vertex_observed);
+  if (!mesh.ok()) return mesh.status();
+  result.mesh = *std::move(mesh);
   return result;
 }
 

@@ -8,8 +8,8 @@
 // the same whatever their number.
 //
 // Memory: the cache budget plus a batch of four neighbourhoods per thread (at most 27 decoded
-// tiles each, held while their chunk is processed) plus the output (the per-chunk meshes until
-// welded).
+// tiles each, held while their chunk is processed) plus the output (the dense mesh welded as
+// the chunks come, ChunkMeshWelder, with the chunk meshes of the last two x-columns).
 #pragma once
 
 #include <array>

@@ -1,11 +1,14 @@
 #include "services/mesh/dual_contouring.h"
 
 #include <algorithm>
+#include <iterator>
+#include <limits>
 #include <utility>
 
 #include <Eigen/Geometry>
 
 #include "absl/container/flat_hash_map.h"
+#include "absl/strings/str_cat.h"
 
 namespace carvemap {
 namespace {
@@ -355,6 +358,99 @@ TriangleMesh WeldChunkMeshes(std::vector<ChunkMesh> chunks,
     c.triangles = {};
   }
   return mesh;
+}
+
+ChunkMeshWelder::ChunkMeshWelder(int chunk_cells)
+    : chunk_cells_(chunk_cells), front_(std::numeric_limits<int64_t>::min()) {}
+
+absl::Status ChunkMeshWelder::Add(ChunkMesh chunk) {
+  if (last_ && ChunkKeyLess()(chunk.chunk, *last_)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "dense mesh weld: chunk (", chunk.chunk.x(), ", ", chunk.chunk.y(), ", ", chunk.chunk.z(),
+        ") comes after (", last_->x(), ", ", last_->y(), ", ", last_->z(), ")"));
+  }
+  if (!last_ || chunk.chunk.x() != last_->x()) {
+    // No chunk from this column on has a key below its first cell minus the margin.
+    if (absl::Status s = Advance(int64_t{chunk.chunk.x()} * chunk_cells_ - kMargin); !s.ok()) {
+      return s;
+    }
+  }
+  last_ = chunk.chunk;
+  PendingChunk pc;
+  pc.min_key_x = std::numeric_limits<int32_t>::max();
+  pc.max_key_x = std::numeric_limits<int32_t>::min();
+  for (size_t i = 0; i < chunk.vertex_keys.size(); ++i) {
+    const MeshVertexKey& key = chunk.vertex_keys[i];
+    if (key.v[0] < front_) {
+      return absl::InternalError(absl::StrCat(
+          "dense mesh weld: chunk (", chunk.chunk.x(), ", ", chunk.chunk.y(), ", ", chunk.chunk.z(),
+          ") has a vertex at x cell ", key.v[0], ", below the welded front at ", front_));
+    }
+    pc.min_key_x = std::min(pc.min_key_x, key.v[0]);
+    pc.max_key_x = std::max(pc.max_key_x, key.v[0]);
+    pending_.push_back(
+        PendingVertex{key, chunk.vertex_positions[i].cast<float>(),
+                      i < chunk.vertex_observed.size() ? chunk.vertex_observed[i] : uint8_t{0}});
+  }
+  pc.keys = std::move(chunk.vertex_keys);
+  pc.triangles = std::move(chunk.triangles);
+  chunks_.push_back(std::move(pc));
+  return absl::OkStatus();
+}
+
+absl::Status ChunkMeshWelder::Advance(int64_t front) {
+  // The pending vertices below the front, sorted by key; stable, so of a key given by several
+  // chunks the first chunk's copy is kept (they agree anyway), as WeldChunkMeshes does.
+  auto below =
+      std::stable_partition(pending_.begin(), pending_.end(),
+                            [front](const PendingVertex& v) { return v.key.v[0] < front; });
+  std::vector<PendingVertex> ready(std::make_move_iterator(pending_.begin()),
+                                   std::make_move_iterator(below));
+  pending_.erase(pending_.begin(), below);
+  std::stable_sort(ready.begin(), ready.end(),
+                   [](const PendingVertex& a, const PendingVertex& b) { return a.key < b.key; });
+  for (size_t i = 0; i < ready.size(); ++i) {
+    if (i > 0 && ready[i].key == ready[i - 1].key) continue;
+    welded_.emplace_back(ready[i].key, static_cast<int>(mesh_.vertices.size()));
+    mesh_.vertices.push_back(ready[i].position);
+    observed_.push_back(ready[i].observed);
+  }
+  front_ = front;
+  // The chunks whose keys are all welded, in order.
+  while (!chunks_.empty() && chunks_.front().max_key_x < front_) {
+    const PendingChunk& c = chunks_.front();
+    std::vector<int> index(c.keys.size());
+    for (size_t i = 0; i < c.keys.size(); ++i) {
+      auto it = std::lower_bound(welded_.begin(), welded_.end(), c.keys[i],
+                                 [](const std::pair<MeshVertexKey, int>& e,
+                                    const MeshVertexKey& k) { return e.first < k; });
+      if (it == welded_.end() || !(it->first == c.keys[i])) {
+        return absl::InternalError("dense mesh weld: a chunk's vertex was not welded");
+      }
+      index[i] = it->second;
+    }
+    for (const Eigen::Vector3i& t : c.triangles) {
+      mesh_.triangles.emplace_back(index[t[0]], index[t[1]], index[t[2]]);
+    }
+    chunks_.pop_front();
+  }
+  // Welded keys no pending chunk can name any more.
+  int64_t needed = front_;
+  for (const PendingChunk& c : chunks_) needed = std::min<int64_t>(needed, c.min_key_x);
+  auto keep = std::lower_bound(
+      welded_.begin(), welded_.end(), needed,
+      [](const std::pair<MeshVertexKey, int>& e, int64_t x) { return e.first.v[0] < x; });
+  welded_.erase(welded_.begin(), keep);
+  return absl::OkStatus();
+}
+
+absl::StatusOr<TriangleMesh> ChunkMeshWelder::Finish(std::vector<uint8_t>* vertex_observed) {
+  if (absl::Status s = Advance(std::numeric_limits<int64_t>::max()); !s.ok()) return s;
+  if (!chunks_.empty()) return absl::InternalError("dense mesh weld: chunks left unwelded");
+  if (vertex_observed != nullptr) *vertex_observed = std::move(observed_);
+  TriangleMesh out = std::move(mesh_);
+  *this = ChunkMeshWelder(chunk_cells_);
+  return out;
 }
 
 std::vector<ChunkKey> DenseMeshChunks(std::span<const ChunkKey> tile_chunks) {

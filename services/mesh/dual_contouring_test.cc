@@ -201,5 +201,56 @@ TEST(DualContouring, RandomOctreesAreWatertight) {
   }
 }
 
+TEST(DualContouring, WelderAsTheChunksComeIsWeldChunkMeshes) {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 6; ++trial) {
+    OctreeGrid grid;
+    grid.chunk_depth = 3;
+    Tiles tiles;
+    // Four columns along x (from −2), two by two across, some chunks missing.
+    for (int x = -2; x < 2; ++x) {
+      for (int j = 0; j < 4; ++j) {
+        if ((x + j + trial) % 5 == 0) continue;
+        testing::GrowRandomTile(rng, grid, ChunkKey(x, j & 1, j >> 1), 0.05, 0.3, 0.2, tiles);
+      }
+    }
+    const Meshed m = MeshAll(tiles, grid);
+    std::vector<uint8_t> observed;
+    const TriangleMesh whole = WeldChunkMeshes(m.chunks, &observed);
+    ChunkMeshWelder welder(grid.leaves_per_side());
+    for (const ChunkMesh& c : m.chunks) {
+      if (c.triangles.empty()) continue;
+      ASSERT_TRUE(welder.Add(c).ok()) << "trial " << trial;
+    }
+    std::vector<uint8_t> welded_observed;
+    absl::StatusOr<TriangleMesh> welded = welder.Finish(&welded_observed);
+    ASSERT_TRUE(welded.ok()) << welded.status();
+    EXPECT_EQ(welded->vertices, whole.vertices) << "trial " << trial;
+    EXPECT_EQ(welded->triangles, whole.triangles) << "trial " << trial;
+    EXPECT_EQ(welded_observed, observed) << "trial " << trial;
+    EXPECT_GT(whole.triangles.size(), 100u);
+  }
+}
+
+TEST(DualContouring, WelderRefusesChunksOutOfOrderOrBelowItsFront) {
+  ChunkMesh a;
+  a.chunk = ChunkKey(1, 0, 0);
+  a.vertex_keys = {MeshVertexKey{{8, 0, 0, 0}}};
+  a.vertex_positions = {Eigen::Vector3d::Zero()};
+  ChunkMesh b = a;
+  b.chunk = ChunkKey(0, 5, 0);
+  ChunkMeshWelder out_of_order(8);
+  ASSERT_TRUE(out_of_order.Add(a).ok());
+  EXPECT_EQ(out_of_order.Add(b).code(), absl::StatusCode::kInvalidArgument);
+  // Column 3 welds every key below 3 · 8 − kMargin; a chunk there with a key at x = 0 is not
+  // one dual contouring makes.
+  ChunkMesh c = a;
+  c.chunk = ChunkKey(3, 0, 0);
+  c.vertex_keys = {MeshVertexKey{{0, 0, 0, 0}}};
+  ChunkMeshWelder below(8);
+  ASSERT_TRUE(below.Add(a).ok());
+  EXPECT_EQ(below.Add(c).code(), absl::StatusCode::kInternal);
+}
+
 }  // namespace
 }  // namespace carvemap
