@@ -1,11 +1,15 @@
 #include "storage/ply_io.h"
 
 #include <bit>
+#include <cerrno>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <ostream>
 #include <sstream>
+#include <system_error>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "storage/atomic_file.h"
@@ -43,6 +47,91 @@ absl::Status WritePly(const std::string& path, const TriangleMesh& mesh,
       out.write(reinterpret_cast<const char*>(&three), 1);
       out.write(reinterpret_cast<const char*>(mesh.triangles[i].data()), 3 * sizeof(int));
       if (face_values) out.write(reinterpret_cast<const char*>(&(*face_values)[i]), sizeof(int));
+    }
+  });
+}
+
+PlyStreamWriter::PlyStreamWriter(std::string path) : path_(std::move(path)) {}
+
+absl::StatusOr<std::unique_ptr<PlyStreamWriter>> PlyStreamWriter::Create(const std::string& path) {
+  std::unique_ptr<PlyStreamWriter> w(new PlyStreamWriter(path));
+  w->vertex_out_.open(path + ".vertices.partial", std::ios::binary | std::ios::trunc);
+  w->face_out_.open(path + ".faces.partial", std::ios::binary | std::ios::trunc);
+  if (!w->vertex_out_ || !w->face_out_) {
+    return absl::PermissionDeniedError(absl::StrCat(path, ": cannot open for writing"));
+  }
+  return w;
+}
+
+PlyStreamWriter::~PlyStreamWriter() {
+  vertex_out_.close();
+  face_out_.close();
+  std::error_code ec;
+  std::filesystem::remove(path_ + ".vertices.partial", ec);
+  std::filesystem::remove(path_ + ".faces.partial", ec);
+}
+
+namespace {
+absl::Status WriteFailed(const std::string& path) {
+  const int err = errno;
+  return absl::DataLossError(absl::StrCat(
+      path, ": write failed: ", err != 0 ? std::strerror(err) : "unknown error (disk full?)"));
+}
+}  // namespace
+
+absl::Status PlyStreamWriter::AddVertices(std::span<const Eigen::Vector3f> vertices) {
+  static_assert(std::endian::native == std::endian::little, "PLY writer assumes little-endian");
+  errno = 0;
+  for (const Eigen::Vector3f& v : vertices) {
+    vertex_out_.write(reinterpret_cast<const char*>(v.data()), 3 * sizeof(float));
+  }
+  if (!vertex_out_) return WriteFailed(path_);
+  vertices_ += vertices.size();
+  if (vertices_ > uint64_t(std::numeric_limits<int>::max())) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path_, ": ", vertices_, " vertices do not fit PLY's int indices"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status PlyStreamWriter::AddTriangles(std::span<const Eigen::Vector3i> triangles) {
+  errno = 0;
+  const unsigned char three = 3;
+  for (const Eigen::Vector3i& t : triangles) {
+    face_out_.write(reinterpret_cast<const char*>(&three), 1);
+    face_out_.write(reinterpret_cast<const char*>(t.data()), 3 * sizeof(int));
+  }
+  if (!face_out_) return WriteFailed(path_);
+  triangles_ += triangles.size();
+  return absl::OkStatus();
+}
+
+absl::Status PlyStreamWriter::Finish() {
+  if (finished_) return absl::FailedPreconditionError(absl::StrCat(path_, ": already finished"));
+  finished_ = true;
+  errno = 0;
+  vertex_out_.close();
+  face_out_.close();
+  if (!vertex_out_ || !face_out_) return WriteFailed(path_);
+  // The parts copied under the header a buffer at a time.
+  return WriteFileAtomically(path_, [&](std::ostream& out) {
+    out << "ply\nformat binary_little_endian 1.0\ncomment carvemap\n"
+        << "element vertex " << vertices_ << "\n"
+        << "property float x\nproperty float y\nproperty float z\n"
+        << "element face " << triangles_ << "\n"
+        << "property list uchar int vertex_indices\n"
+        << "end_header\n";
+    std::vector<char> buffer(size_t{1} << 20);
+    for (const char* part : {".vertices.partial", ".faces.partial"}) {
+      std::ifstream in(path_ + part, std::ios::binary);
+      if (!in) {
+        out.setstate(std::ios::badbit);
+        return;
+      }
+      while (in) {
+        in.read(buffer.data(), std::streamsize(buffer.size()));
+        out.write(buffer.data(), in.gcount());
+      }
     }
   });
 }

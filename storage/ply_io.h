@@ -2,6 +2,9 @@
 // `face` list uchar int vertex_indices, optionally one extra int property per face.
 #pragma once
 
+#include <cstdint>
+#include <fstream>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string>
@@ -40,6 +43,35 @@ struct PlyPart {
 // are hundreds of MB, and objects.ply and combined.ply are each all of them.
 absl::Status WritePlyParts(const std::string& path, std::span<const PlyPart> parts,
                            const std::string& face_property);
+
+// WritePly for a mesh that comes a piece at a time, in its final order (vertices, and
+// triangles with their final indices), and is never held whole: the pieces go to two files
+// beside `path` ("<path>.vertices.partial", "<path>.faces.partial"), joined under the header
+// into `path` by Finish (through "<path>.partial" and a rename). The bytes are WritePly's of
+// the whole mesh. The temporaries are removed by Finish or by the destructor; a writer not
+// finished leaves nothing under `path`. Errors name the file: PermissionDenied when a file
+// cannot be opened, DataLoss when a write fails (with the system's reason).
+class PlyStreamWriter {
+ public:
+  [[nodiscard]] static absl::StatusOr<std::unique_ptr<PlyStreamWriter>> Create(
+      const std::string& path);
+  ~PlyStreamWriter();
+  PlyStreamWriter(const PlyStreamWriter&) = delete;
+  PlyStreamWriter& operator=(const PlyStreamWriter&) = delete;
+
+  [[nodiscard]] absl::Status AddVertices(std::span<const Eigen::Vector3f> vertices);
+  [[nodiscard]] absl::Status AddTriangles(std::span<const Eigen::Vector3i> triangles);
+  [[nodiscard]] absl::Status Finish();
+  [[nodiscard]] uint64_t vertices() const { return vertices_; }
+  [[nodiscard]] uint64_t triangles() const { return triangles_; }
+
+ private:
+  explicit PlyStreamWriter(std::string path);
+  std::string path_;
+  std::ofstream vertex_out_, face_out_;
+  uint64_t vertices_ = 0, triangles_ = 0;
+  bool finished_ = false;
+};
 
 // A mesh read back from PLY, with its integer face properties by name.
 struct PlyMesh {

@@ -84,6 +84,50 @@ TEST(PlyIoTest, PartsAreTheirConcatenation) {
   EXPECT_EQ(ReadAll(dir + "/empty_parts.ply"), ReadAll(dir + "/empty_whole.ply"));
 }
 
+TEST(PlyIoTest, StreamWriterWritesWritePlysBytes) {
+  TriangleMesh mesh;
+  for (int i = 0; i < 1000; ++i) mesh.vertices.emplace_back(0.5f * i, -0.25f * i, 1.0f + i);
+  for (int i = 0; i + 2 < 1000; i += 3) mesh.triangles.emplace_back(i, i + 2, i + 1);
+  const std::string dir = testing::TempDir();
+  ASSERT_TRUE(WritePly(dir + "/whole_stream.ply", mesh).ok());
+  absl::StatusOr<std::unique_ptr<PlyStreamWriter>> w =
+      PlyStreamWriter::Create(dir + "/streamed.ply");
+  ASSERT_TRUE(w.ok()) << w.status();
+  // Pieces of uneven sizes, vertices and triangles interleaved.
+  const std::span<const Eigen::Vector3f> v(mesh.vertices);
+  const std::span<const Eigen::Vector3i> t(mesh.triangles);
+  ASSERT_TRUE((*w)->AddVertices(v.first(10)).ok());
+  ASSERT_TRUE((*w)->AddTriangles(t.first(3)).ok());
+  ASSERT_TRUE((*w)->AddVertices(v.subspan(10)).ok());
+  ASSERT_TRUE((*w)->AddTriangles(t.subspan(3, 0)).ok());
+  ASSERT_TRUE((*w)->AddTriangles(t.subspan(3)).ok());
+  EXPECT_FALSE(std::filesystem::exists(dir + "/streamed.ply"));  // nothing final before Finish
+  ASSERT_TRUE((*w)->Finish().ok());
+  EXPECT_EQ((*w)->vertices(), 1000u);
+  EXPECT_EQ((*w)->triangles(), 333u);
+  w->reset();
+  EXPECT_EQ(ReadAll(dir + "/streamed.ply"), ReadAll(dir + "/whole_stream.ply"));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/streamed.ply.vertices.partial"));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/streamed.ply.faces.partial"));
+}
+
+TEST(PlyIoTest, StreamWriterNotFinishedLeavesNothing) {
+  const std::string dir = testing::TempDir();
+  {
+    absl::StatusOr<std::unique_ptr<PlyStreamWriter>> w =
+        PlyStreamWriter::Create(dir + "/abandoned.ply");
+    ASSERT_TRUE(w.ok());
+    const std::vector<Eigen::Vector3f> v = {{1, 2, 3}};
+    ASSERT_TRUE((*w)->AddVertices(v).ok());
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir + "/abandoned.ply"));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/abandoned.ply.vertices.partial"));
+  absl::StatusOr<std::unique_ptr<PlyStreamWriter>> bad =
+      PlyStreamWriter::Create("/nonexistent-dir/x.ply");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(std::string(bad.status().message()).find("/nonexistent-dir/x.ply"), std::string::npos);
+}
+
 TEST(PlyIoTest, UnwritableDirectoryIsAClearError) {
   TriangleMesh mesh;
   absl::Status s = WritePly("/nonexistent-dir/x.ply", mesh);

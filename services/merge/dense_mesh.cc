@@ -2,9 +2,14 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <limits>
 #include <memory>
 #include <vector>
 
+#include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
 #include "services/merge/for_each_chunk.h"
 #include "services/mesh/dual_contouring.h"
@@ -57,6 +62,118 @@ absl::StatusOr<DenseMeshResult> BuildDenseMesh(TileSet& tiles, const ChunkProgre
   absl::StatusOr<TriangleMesh> mesh = welder.Finish(&result.vertex_observed);
   if (!mesh.ok()) return mesh.status();
   result.mesh = *std::move(mesh);
+  return result;
+}
+
+void ColumnSelfIntersections::AddVertices(std::span<const Eigen::Vector3f> v) {
+  vertices_.insert(vertices_.end(), v.begin(), v.end());
+}
+
+void ColumnSelfIntersections::AddTriangles(const ChunkKey& chunk,
+                                           std::span<const Eigen::Vector3i> triangles) {
+  if (triangles.empty()) return;
+  if (columns_.empty() || columns_.back().x != chunk.x()) {
+    // The columns before this one are complete: count those whose next column is.
+    while (columns_.size() >= next_ + 2) CountNext();
+    columns_.push_back(Column{chunk.x(), {}, std::numeric_limits<int>::max()});
+  }
+  Column& c = columns_.back();
+  for (const Eigen::Vector3i& t : triangles) c.min_index = std::min(c.min_index, t.minCoeff());
+  c.triangles.insert(c.triangles.end(), triangles.begin(), triangles.end());
+}
+
+SelfIntersections ColumnSelfIntersections::Finish() {
+  while (next_ < columns_.size()) CountNext();
+  return total_;
+}
+
+// Counts columns_[next_]'s window with the columns beside it (columns_[next_ − 1], kept from
+// the last count, and columns_[next_ + 1], complete or the last), then drops what no later
+// window needs.
+void ColumnSelfIntersections::CountNext() {
+  const auto t0 = std::chrono::steady_clock::now();
+  const size_t i = next_;
+  const bool first = !counted_any_, last = i + 1 >= columns_.size();
+  const double lo =
+      first ? -std::numeric_limits<double>::infinity() : columns_[i].x * column_width_m_;
+  const double hi =
+      last ? std::numeric_limits<double>::infinity() : columns_[i + 1].x * column_width_m_;
+  TriangleMesh window;
+  absl::flat_hash_map<int, int> local;
+  for (size_t k = (i > 0 ? i - 1 : 0); k <= std::min(i + 1, columns_.size() - 1); ++k) {
+    for (const Eigen::Vector3i& t : columns_[k].triangles) {
+      float x0 = INFINITY, x1 = -INFINITY;
+      for (int j = 0; j < 3; ++j) {
+        const float x = vertices_[size_t(t[j]) - base_].x();
+        x0 = std::min(x0, x);
+        x1 = std::max(x1, x);
+      }
+      if (double(x1) < lo || double(x0) >= hi) continue;
+      Eigen::Vector3i lt;
+      for (int j = 0; j < 3; ++j) {
+        auto [it, added] = local.try_emplace(t[j], int(window.vertices.size()));
+        if (added) window.vertices.push_back(vertices_[size_t(t[j]) - base_]);
+        lt[j] = it->second;
+      }
+      window.triangles.push_back(lt);
+    }
+  }
+  const SelfIntersections s =
+      CountSelfIntersections(window, threads_, kSelfIntersectionTrianglesPerSlab, lo, hi);
+  seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  total_.pairs += s.pairs;
+  total_.unchecked += s.unchecked;
+  counted_any_ = true;
+  if (i > 0) {
+    columns_.pop_front();  // the column before: no later window reaches it
+  } else {
+    next_ = 1;
+  }
+  // Vertices below every remaining column's triangles are not needed again (a later column's
+  // keys, hence indices, are larger).
+  int needed = std::numeric_limits<int>::max();
+  for (const Column& c : columns_) needed = std::min(needed, c.min_index);
+  if (needed == std::numeric_limits<int>::max()) needed = int(base_ + vertices_.size());
+  if (size_t(needed) > base_) {
+    const size_t drop = std::min(size_t(needed) - base_, vertices_.size());
+    vertices_.erase(vertices_.begin(), vertices_.begin() + std::ptrdiff_t(drop));
+    base_ += drop;
+  }
+}
+
+absl::StatusOr<DenseMeshStreamResult> StreamDenseMesh(TileSet& tiles, const DenseMeshSink& sink,
+                                                      const ChunkProgressFn& progress,
+                                                      int threads) {
+  const std::vector<ChunkKey> chunks = DenseMeshChunks(tiles.chunks());
+  DenseMeshStreamResult result;
+  ColumnSelfIntersections checks(kChunkSizeM, threads);
+  ChunkMeshWelder::Sink weld_sink;
+  weld_sink.vertices = [&](std::span<const Eigen::Vector3f> v, std::span<const uint8_t>) {
+    result.vertices += v.size();
+    checks.AddVertices(v);
+    return sink.vertices(v);
+  };
+  weld_sink.triangles = [&](const ChunkKey& chunk, std::span<const Eigen::Vector3i> t) {
+    result.triangles += t.size();
+    checks.AddTriangles(chunk, t);
+    return sink.triangles(t);
+  };
+  ChunkMeshWelder welder(tiles.grid().leaves_per_side(), std::move(weld_sink));
+  absl::Status s = ForEachChunk<ChunkMesh>(
+      tiles, chunks, /*low_only=*/true, threads,
+      [](const ChunkNeighbourhood& hood) { return DualContourChunk(hood); },
+      [&](ChunkMesh&& mesh) -> absl::Status {
+        result.polygons += mesh.polygons;
+        result.centre_vertices += mesh.centre_vertices;
+        if (mesh.triangles.empty()) return absl::OkStatus();
+        return welder.Add(std::move(mesh));
+      },
+      progress, "dense_mesh");
+  if (!s.ok()) return s;
+  result.chunks = chunks.size();
+  if (absl::StatusOr<TriangleMesh> rest = welder.Finish(); !rest.ok()) return rest.status();
+  result.self_intersections = checks.Finish();
+  result.self_intersection_seconds = checks.seconds();
   return result;
 }
 

@@ -14,13 +14,18 @@
 
 #include <array>
 #include <cstdint>
-#include <memory>
+#include <deque>
 #include <functional>
+#include <memory>
+#include <span>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "absl/status/statusor.h"
 #include "services/merge/tile_set.h"
 #include "services/mesh/boundary_faces.h"
+#include "services/mesh/self_intersections.h"
 #include "storage/ply_io.h"
 
 namespace carvemap {
@@ -51,6 +56,68 @@ struct DenseMeshResult {
 // or Cancelled.
 [[nodiscard]] absl::StatusOr<DenseMeshResult> BuildDenseMesh(
     TileSet& tiles, const ChunkProgressFn& progress = nullptr, int threads = 1);
+
+// Where StreamDenseMesh puts the mesh: vertices in their final order (each call continues the
+// last's indices), triangles in their final order, indexing the vertices given so far. An
+// error stops the stream and is returned.
+struct DenseMeshSink {
+  std::function<absl::Status(std::span<const Eigen::Vector3f>)> vertices;
+  std::function<absl::Status(std::span<const Eigen::Vector3i>)> triangles;
+};
+
+struct DenseMeshStreamResult {
+  uint64_t chunks = 0, polygons = 0, centre_vertices = 0;
+  uint64_t vertices = 0, triangles = 0;
+  SelfIntersections self_intersections;  // CountSelfIntersections' counts of the whole mesh
+  double self_intersection_seconds = 0;  // of the stream's time, spent counting them
+};
+
+// The self-intersections of a mesh that comes chunk column by chunk column (ChunkKeyLess
+// order: x first), counted a window at a time: once the column after a column is complete,
+// the pairs whose x* lies from that column's first x to the next column's
+// (CountSelfIntersections' windows) are counted among the triangles of it and of the columns
+// beside it that reach into that range. A triangle must lie within one column's width of its
+// chunk's cells (a dense mesh's lie within a cell or two), so that no other column reaches
+// it. Memory: three columns' triangles and their vertices.
+class ColumnSelfIntersections {
+ public:
+  ColumnSelfIntersections(double column_width_m, int threads)
+      : column_width_m_(column_width_m), threads_(threads) {}
+  // Vertices in index order, each before a triangle names it.
+  void AddVertices(std::span<const Eigen::Vector3f> v);
+  // A chunk's triangles (global vertex indices), chunks in ChunkKeyLess order.
+  void AddTriangles(const ChunkKey& chunk, std::span<const Eigen::Vector3i> triangles);
+  // Counts the columns left; the whole mesh's counts.
+  SelfIntersections Finish();
+  [[nodiscard]] double seconds() const { return seconds_; }
+
+ private:
+  struct Column {
+    int x = 0;
+    std::vector<Eigen::Vector3i> triangles;  // global vertex indices
+    int min_index = 0;
+  };
+  void CountNext();
+
+  double column_width_m_;
+  int threads_;
+  std::deque<Eigen::Vector3f> vertices_;  // global indices from base_
+  size_t base_ = 0;
+  std::deque<Column> columns_;
+  size_t next_ = 0;  // the column to count next: 0 before the first count, then 1
+  bool counted_any_ = false;
+  SelfIntersections total_;
+  double seconds_ = 0;
+};
+
+// BuildDenseMesh's mesh, given to `sink` as it is welded instead of held: memory for a few
+// x-columns of chunks, whatever the building's size. Its self-intersections are counted on the
+// way, a window at a time: each chunk column's range along x with the triangles of the
+// columns beside it that reach into it (CountSelfIntersections' windows), on `threads`
+// threads. Errors: BuildDenseMesh's and the sink's.
+[[nodiscard]] absl::StatusOr<DenseMeshStreamResult> StreamDenseMesh(
+    TileSet& tiles, const DenseMeshSink& sink, const ChunkProgressFn& progress = nullptr,
+    int threads = 1);
 
 // All boundary faces of `tiles` (services/mesh/boundary_faces.h): the chunks' faces in
 // ChunkKeyLess order of their interior leaf's chunk, each chunk's in its deterministic order.

@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "services/merge/merge_test_util.h"
+#include "services/mesh/cube_mesh_testing.h"
 #include "services/mesh/mesh_checks.h"
 #include "tests/support/carved_preset.h"
 #include "tests/support/truth_distance.h"
@@ -105,6 +106,71 @@ TEST(DenseMesh, TinyCacheGivesTheSameMeshAsALargeOne) {
   }
   const double res = (*big)->grid().resolution_m();
   EXPECT_NEAR(area, FinestBoundaryFaces(tiles, k) * res * res, 1e-9);
+}
+
+TEST(DenseMesh, StreamedIsTheBuiltMeshAndItsSelfIntersections) {
+  const std::string dir = FreshDir();
+  WriteRandomTiles(dir, 4, 17);
+  auto set = TileSet::Open(dir, 0, 1);
+  ASSERT_TRUE(set.ok());
+  auto built = BuildDenseMesh(**set);
+  ASSERT_TRUE(built.ok()) << built.status();
+  ASSERT_GT(built->mesh.triangles.size(), 1000u);
+  const SelfIntersections whole = CountSelfIntersections(built->mesh);
+  for (int threads : {1, 2}) {
+    TriangleMesh streamed;
+    DenseMeshSink sink;
+    sink.vertices = [&](std::span<const Eigen::Vector3f> v) {
+      streamed.vertices.insert(streamed.vertices.end(), v.begin(), v.end());
+      return absl::OkStatus();
+    };
+    sink.triangles = [&](std::span<const Eigen::Vector3i> t) {
+      for (const Eigen::Vector3i& x : t) {
+        EXPECT_LT(x.maxCoeff(), int(streamed.vertices.size()));  // named after its vertices
+      }
+      streamed.triangles.insert(streamed.triangles.end(), t.begin(), t.end());
+      return absl::OkStatus();
+    };
+    auto r = StreamDenseMesh(**set, sink, nullptr, threads);
+    ASSERT_TRUE(r.ok()) << r.status();
+    EXPECT_EQ(streamed.vertices, built->mesh.vertices);
+    EXPECT_EQ(streamed.triangles, built->mesh.triangles);
+    EXPECT_EQ(r->vertices, built->mesh.vertices.size());
+    EXPECT_EQ(r->triangles, built->mesh.triangles.size());
+    EXPECT_EQ(r->chunks, built->chunks);
+    EXPECT_EQ(r->self_intersections.pairs, whole.pairs);
+    EXPECT_EQ(r->self_intersections.unchecked, whole.unchecked);
+  }
+  // A sink's error stops the stream.
+  DenseMeshSink failing;
+  failing.vertices = [](std::span<const Eigen::Vector3f>) {
+    return absl::DataLossError("disk full");
+  };
+  failing.triangles = [](std::span<const Eigen::Vector3i>) { return absl::OkStatus(); };
+  EXPECT_EQ(StreamDenseMesh(**set, failing).status().code(), absl::StatusCode::kDataLoss);
+}
+
+TEST(DenseMesh, ColumnWindowsCountTheWholeMeshsSelfIntersections) {
+  // Cubes overlapping their neighbours along x, in columns 2 m wide (a cube's triangles go to
+  // the column of its lowest x), with an empty column at x = 6–8 m.
+  TriangleMesh m;
+  std::vector<int> column;  // per cube
+  for (int i = 0; i < 16; ++i) {
+    const float x = 0.7f * i + (i >= 9 ? 2.5f : 0.f);
+    testing::AddCube(m, Eigen::Vector3f(x, 0.1f * (i % 3), 0.05f * (i % 2)), 1);
+    column.push_back(int(std::floor(x / 2)));
+  }
+  const SelfIntersections whole = CountSelfIntersections(m);
+  ASSERT_GT(whole.pairs, 10u);
+  ColumnSelfIntersections windows(2.0, 1);
+  windows.AddVertices(m.vertices);
+  for (size_t c = 0; c < column.size(); ++c) {
+    windows.AddTriangles(ChunkKey(column[c], 0, 0),
+                         std::span<const Eigen::Vector3i>(m.triangles).subspan(12 * c, 12));
+  }
+  const SelfIntersections counted = windows.Finish();
+  EXPECT_EQ(counted.pairs, whole.pairs);
+  EXPECT_EQ(counted.unchecked, whole.unchecked);
 }
 
 TEST(DenseMesh, ThreadsGiveTheSameMeshAndFacesAsOne) {

@@ -53,11 +53,11 @@ double SecondsSince(Clock::time_point t0) {
 // merge.self_intersections, with a warning when any (`warnings` null: the caller warns once
 // for many meshes): a watertight mesh that crosses itself is not a valid solid. Returns the
 // pairs found. `threads` for a large mesh (the dense one).
-uint64_t CountSelfIntersectionsInto(const TriangleMesh& mesh, const std::string& name,
-                                    nlohmann::json& counts, nlohmann::json& timings,
-                                    std::vector<std::string>* warnings, int threads = 1) {
-  const Clock::time_point t0 = Clock::now();
-  const SelfIntersections s = CountSelfIntersections(mesh, threads);
+// job.json's counts of a mesh's self-intersections (`name`_self_intersections, summed over the
+// meshes of that name), the time they took, and a warning when there are any.
+void RecordSelfIntersections(const SelfIntersections& s, const std::string& name, double seconds,
+                             nlohmann::json& counts, nlohmann::json& timings,
+                             std::vector<std::string>* warnings) {
   const std::string key = name + "_self_intersections";
   counts[key] = counts.value(key, uint64_t{0}) + s.pairs;
   if (s.unchecked > 0) {
@@ -68,8 +68,15 @@ uint64_t CountSelfIntersectionsInto(const TriangleMesh& mesh, const std::string&
     warnings->push_back(absl::StrCat(
         name, ": ", s.pairs, " pairs of triangles cross each other (self-intersections)"));
   }
-  timings["merge.self_intersections"] =
-      timings.value("merge.self_intersections", 0.0) + SecondsSince(t0);
+  timings["merge.self_intersections"] = timings.value("merge.self_intersections", 0.0) + seconds;
+}
+
+uint64_t CountSelfIntersectionsInto(const TriangleMesh& mesh, const std::string& name,
+                                    nlohmann::json& counts, nlohmann::json& timings,
+                                    std::vector<std::string>* warnings, int threads = 1) {
+  const Clock::time_point t0 = Clock::now();
+  const SelfIntersections s = CountSelfIntersections(mesh, threads);
+  RecordSelfIntersections(s, name, SecondsSince(t0), counts, timings, warnings);
   return s.pairs;
 }
 
@@ -781,21 +788,26 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   level_regions = std::vector<PlanarRegion>{};
   if (!plans.empty()) faces = std::vector<BoundaryFace>{};
 
-  // dense mesh (§4.3.3) ➜ mesh/dense.ply; scoped: the mesh can be large and is not kept.
+  // dense mesh (§4.3.3) ➜ mesh/dense.ply, written as it is welded and checked for
+  // self-intersections on the way: it grows with the building and is not held.
   t0 = Clock::now();
   uint64_t dense_triangles = 0;
   {
-    absl::StatusOr<DenseMeshResult> dense =
-        BuildDenseMesh(tiles, StageProgress(progress, "dense_mesh"), MergeThreads(options));
+    absl::StatusOr<std::unique_ptr<PlyStreamWriter>> ply =
+        PlyStreamWriter::Create((out / "mesh" / "dense.ply").string());
+    if (!ply.ok()) return InStage("dense_mesh", ply.status());
+    DenseMeshSink sink;
+    sink.vertices = [&ply](std::span<const Eigen::Vector3f> v) { return (*ply)->AddVertices(v); };
+    sink.triangles = [&ply](std::span<const Eigen::Vector3i> t) { return (*ply)->AddTriangles(t); };
+    absl::StatusOr<DenseMeshStreamResult> dense =
+        StreamDenseMesh(tiles, sink, StageProgress(progress, "dense_mesh"), MergeThreads(options));
     if (!dense.ok()) return InStage("dense_mesh", dense.status());
-    if (absl::Status s = WritePly((out / "mesh" / "dense.ply").string(), dense->mesh); !s.ok()) {
-      return InStage("dense_mesh", s);
-    }
-    dense_triangles = dense->mesh.triangles.size();
-    counts["dense_vertices"] = dense->mesh.vertices.size();
+    if (absl::Status s = (*ply)->Finish(); !s.ok()) return InStage("dense_mesh", s);
+    dense_triangles = dense->triangles;
+    counts["dense_vertices"] = dense->vertices;
     counts["dense_triangles"] = dense_triangles;
-    CountSelfIntersectionsInto(dense->mesh, "dense", counts, timings, &warnings,
-                               MergeThreads(options));
+    RecordSelfIntersections(dense->self_intersections, "dense", dense->self_intersection_seconds,
+                            counts, timings, &warnings);
   }
   outputs.push_back("mesh/dense.ply");
   timings["merge.dense_mesh"] = SecondsSince(t0);

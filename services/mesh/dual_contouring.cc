@@ -360,8 +360,10 @@ TriangleMesh WeldChunkMeshes(std::vector<ChunkMesh> chunks,
   return mesh;
 }
 
-ChunkMeshWelder::ChunkMeshWelder(int chunk_cells)
-    : chunk_cells_(chunk_cells), front_(std::numeric_limits<int64_t>::min()) {}
+ChunkMeshWelder::ChunkMeshWelder(int chunk_cells, Sink sink)
+    : chunk_cells_(chunk_cells),
+      sink_(std::move(sink)),
+      front_(std::numeric_limits<int64_t>::min()) {}
 
 absl::Status ChunkMeshWelder::Add(ChunkMesh chunk) {
   if (last_ && ChunkKeyLess()(chunk.chunk, *last_)) {
@@ -377,6 +379,7 @@ absl::Status ChunkMeshWelder::Add(ChunkMesh chunk) {
   }
   last_ = chunk.chunk;
   PendingChunk pc;
+  pc.chunk = chunk.chunk;
   pc.min_key_x = std::numeric_limits<int32_t>::max();
   pc.max_key_x = std::numeric_limits<int32_t>::min();
   for (size_t i = 0; i < chunk.vertex_keys.size(); ++i) {
@@ -409,11 +412,17 @@ absl::Status ChunkMeshWelder::Advance(int64_t front) {
   pending_.erase(pending_.begin(), below);
   std::stable_sort(ready.begin(), ready.end(),
                    [](const PendingVertex& a, const PendingVertex& b) { return a.key < b.key; });
+  const bool to_sink = sink_.vertices && sink_.triangles;
+  std::vector<Eigen::Vector3f> positions;
+  std::vector<uint8_t> observed;
   for (size_t i = 0; i < ready.size(); ++i) {
     if (i > 0 && ready[i].key == ready[i - 1].key) continue;
-    welded_.emplace_back(ready[i].key, static_cast<int>(mesh_.vertices.size()));
-    mesh_.vertices.push_back(ready[i].position);
-    observed_.push_back(ready[i].observed);
+    welded_.emplace_back(ready[i].key, num_vertices_++);
+    (to_sink ? positions : mesh_.vertices).push_back(ready[i].position);
+    (to_sink ? observed : observed_).push_back(ready[i].observed);
+  }
+  if (to_sink && !positions.empty()) {
+    if (absl::Status s = sink_.vertices(positions, observed); !s.ok()) return s;
   }
   front_ = front;
   // The chunks whose keys are all welded, in order.
@@ -429,8 +438,12 @@ absl::Status ChunkMeshWelder::Advance(int64_t front) {
       }
       index[i] = it->second;
     }
-    for (const Eigen::Vector3i& t : c.triangles) {
-      mesh_.triangles.emplace_back(index[t[0]], index[t[1]], index[t[2]]);
+    std::vector<Eigen::Vector3i> triangles;
+    std::vector<Eigen::Vector3i>& out = to_sink ? triangles : mesh_.triangles;
+    for (const Eigen::Vector3i& t : c.triangles)
+      out.emplace_back(index[t[0]], index[t[1]], index[t[2]]);
+    if (to_sink) {
+      if (absl::Status s = sink_.triangles(c.chunk, triangles); !s.ok()) return s;
     }
     chunks_.pop_front();
   }
@@ -449,7 +462,7 @@ absl::StatusOr<TriangleMesh> ChunkMeshWelder::Finish(std::vector<uint8_t>* verte
   if (!chunks_.empty()) return absl::InternalError("dense mesh weld: chunks left unwelded");
   if (vertex_observed != nullptr) *vertex_observed = std::move(observed_);
   TriangleMesh out = std::move(mesh_);
-  *this = ChunkMeshWelder(chunk_cells_);
+  *this = ChunkMeshWelder(chunk_cells_, std::move(sink_));
   return out;
 }
 

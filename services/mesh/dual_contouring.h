@@ -33,6 +33,7 @@
 #include <array>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <optional>
 #include <span>
 #include <vector>
@@ -85,17 +86,29 @@ struct ChunkMesh {
                                            std::vector<uint8_t>* vertex_observed = nullptr);
 
 // WeldChunkMeshes for chunks that come one at a time in ChunkKeyLess order (x first), with
-// memory for the welded mesh and a few x-columns of chunks rather than for every chunk mesh and
-// a sorted copy of all their keys (about three times the welded mesh on a large building). The
-// result is the same: vertices in key order, triangles in chunk order. A chunk owns the grid
+// memory for the welded mesh (none with a Sink) and a few x-columns of chunks rather than for
+// every chunk mesh and a sorted copy of all their keys (about three times the welded mesh on a
+// large building). The result is the same: vertices in key order, triangles in chunk order. A chunk owns the grid
 // corners in its cell range, so its vertex keys lie within a few cells below it along x: once
 // the chunks reach column X, every key more than kMargin cells below X's first cell is final,
 // and is welded (sorted, given its index); a chunk's triangles are welded once all their keys
 // are.
 class ChunkMeshWelder {
  public:
-  // `chunk_cells`: finest cells along a chunk's side (OctreeGrid's 1 << chunk_depth).
-  explicit ChunkMeshWelder(int chunk_cells);
+  // Where the welded mesh goes when it is not to be held: vertices in their final order (each
+  // call's continue the last's indices), then each chunk's triangles, in chunk order, indexing
+  // the vertices given so far. A sink's error stops the weld and is returned.
+  struct Sink {
+    std::function<absl::Status(std::span<const Eigen::Vector3f> vertices,
+                               std::span<const uint8_t> observed)>
+        vertices;
+    std::function<absl::Status(const ChunkKey& chunk, std::span<const Eigen::Vector3i> triangles)>
+        triangles;
+  };
+
+  // `chunk_cells`: finest cells along a chunk's side (OctreeGrid's 1 << chunk_depth). With a
+  // sink (both functions set), the mesh goes to it and Finish returns an empty one.
+  explicit ChunkMeshWelder(int chunk_cells, Sink sink = {});
 
   // Takes the next chunk. InvalidArgument when it comes before the previous one in
   // ChunkKeyLess order; Internal when one of its keys lies below the welded front (a key that
@@ -118,6 +131,7 @@ class ChunkMeshWelder {
     uint8_t observed = 0;
   };
   struct PendingChunk {
+    ChunkKey chunk;
     int32_t min_key_x = 0, max_key_x = 0;
     std::vector<MeshVertexKey> keys;
     std::vector<Eigen::Vector3i> triangles;  // indices into keys
@@ -127,6 +141,8 @@ class ChunkMeshWelder {
   absl::Status Advance(int64_t front);
 
   int chunk_cells_;
+  Sink sink_;
+  int num_vertices_ = 0;
   int64_t front_;  // every key with x below it is welded
   std::optional<ChunkKey> last_;
   std::vector<PendingVertex> pending_;  // in the order the chunks gave them

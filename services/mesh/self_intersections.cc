@@ -20,7 +20,11 @@
 namespace carvemap {
 
 SelfIntersections CountSelfIntersections(const TriangleMesh& mesh, int threads,
-                                         size_t triangles_per_slab) {
+                                         size_t triangles_per_slab, double count_x_lo,
+                                         double count_x_hi) {
+  auto counted_here = [count_x_lo, count_x_hi](float x) {
+    return double(x) >= count_x_lo && double(x) < count_x_hi;
+  };
   triangles_per_slab = std::max<size_t>(triangles_per_slab, 1);
   using K = CGAL::Exact_predicates_inexact_constructions_kernel;
   using Mesh = CGAL::Surface_mesh<K::Point_3>;
@@ -99,7 +103,9 @@ SelfIntersections CountSelfIntersections(const TriangleMesh& mesh, int threads,
         if (face == Mesh::null_face()) {
           // Surface_mesh refuses what would not be an oriented 2-manifold: counted once, in
           // the slab of the triangle's minimum x.
-          if (slab_of(x_range[f].first) == slab) ++c.unchecked;
+          if (slab_of(x_range[f].first) == slab && counted_here(x_range[f].first)) {
+            ++c.unchecked;
+          }
           continue;
         }
         triangle_of.push_back(uint32_t(f));
@@ -112,7 +118,7 @@ SelfIntersections CountSelfIntersections(const TriangleMesh& mesh, int threads,
               [&](const std::pair<Mesh::Face_index, Mesh::Face_index>& p) {
                 const float x = std::max(x_range[triangle_of[size_t(p.first)]].first,
                                          x_range[triangle_of[size_t(p.second)]].first);
-                if (slab_of(x) == slab) ++c.pairs;
+                if (slab_of(x) == slab && counted_here(x)) ++c.pairs;
               }));
     }
   };

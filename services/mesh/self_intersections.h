@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 
 #include "storage/ply_io.h"
 
@@ -32,8 +33,16 @@ inline constexpr size_t kSelfIntersectionTrianglesPerSlab = size_t{1} << 18;
 // that reach into it, on `threads` threads; the pairs counted depend on neither. Memory:
 // 8 bytes per triangle plus, per thread, one slab's Surface_mesh and boxes (~180 bytes per
 // triangle of the slab).
+//
+// A part of a larger mesh (a window of it along x) is counted with [count_x_lo, count_x_hi):
+// only the pairs whose x* (the larger of the two triangles' minimum x) lies in it, and the
+// triangles a manifold cannot hold whose minimum x lies in it; windows that tile x, each with
+// every triangle that reaches into its range, sum to the whole mesh's counts. Triangles with a
+// bad or repeated index are counted in every window.
 [[nodiscard]] SelfIntersections CountSelfIntersections(
     const TriangleMesh& mesh, int threads = 1,
-    size_t triangles_per_slab = kSelfIntersectionTrianglesPerSlab);
+    size_t triangles_per_slab = kSelfIntersectionTrianglesPerSlab,
+    double count_x_lo = -std::numeric_limits<double>::infinity(),
+    double count_x_hi = std::numeric_limits<double>::infinity());
 
 }  // namespace carvemap

@@ -1,24 +1,16 @@
 #include "services/mesh/self_intersections.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include <gtest/gtest.h>
+
+#include "services/mesh/cube_mesh_testing.h"
 
 namespace carvemap {
 namespace {
 
-// A cube of side `s` at `origin` as 12 outward-facing triangles, appended to `m`.
-void AddCube(TriangleMesh& m, const Eigen::Vector3f& origin, float s) {
-  TriangleMesh c;
-  for (int i = 0; i < 8; ++i) {
-    c.vertices.push_back(origin + s * Eigen::Vector3f(i & 1, (i >> 1) & 1, (i >> 2) & 1));
-  }
-  const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
-                           {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-  for (const auto& q : quads) {
-    c.triangles.emplace_back(q[0], q[1], q[2]);
-    c.triangles.emplace_back(q[0], q[2], q[3]);
-  }
-  m.Append(c);
-}
+using testing::AddCube;
 
 TEST(SelfIntersections, AClosedCubeHasNone) {
   TriangleMesh m;
@@ -73,6 +65,33 @@ TEST(SelfIntersections, TheCountDoesNotDependOnTheSlabsNorTheThreads) {
       EXPECT_EQ(s.unchecked, 0u);
     }
   }
+}
+
+TEST(SelfIntersections, WindowsAlongXSumToTheWholeCount) {
+  TriangleMesh m;
+  for (int i = 0; i < 12; ++i) {
+    AddCube(m, Eigen::Vector3f(0.7f * i + (i % 4 == 3 ? 0.4f : 0.f), 0.1f * (i % 3), 0), 1);
+  }
+  const SelfIntersections whole = CountSelfIntersections(m);
+  // Windows of 1.5 m, each given only the triangles reaching into it, as the dense mesh's
+  // stream counts them.
+  uint64_t sum = 0;
+  for (double lo = -1.5; lo < 10; lo += 1.5) {
+    TriangleMesh part;
+    part.vertices = m.vertices;
+    for (const Eigen::Vector3i& t : m.triangles) {
+      float x0 = INFINITY, x1 = -INFINITY;
+      for (int k = 0; k < 3; ++k) {
+        x0 = std::min(x0, m.vertices[t[k]].x());
+        x1 = std::max(x1, m.vertices[t[k]].x());
+      }
+      if (x1 >= lo && x0 < lo + 1.5) part.triangles.push_back(t);
+    }
+    const double first = lo == -1.5 ? -INFINITY : lo;
+    sum += CountSelfIntersections(part, 1, 7, first, lo + 1.5).pairs;
+  }
+  EXPECT_GT(whole.pairs, 0u);
+  EXPECT_EQ(sum, whole.pairs);
 }
 
 TEST(SelfIntersections, TrianglesAManifoldCannotHoldAreCountedNotTested) {
