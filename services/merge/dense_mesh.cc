@@ -41,23 +41,38 @@ absl::StatusOr<ChunkNeighbourhood> FetchNeighbourhood(
   return hood;
 }
 
+namespace {
+
+// Dual contouring of `chunks` (ChunkKeyLess order), each chunk's mesh handed to `welder` as it
+// comes; the chunks' polygon counts added to `polygons` and `centre_vertices`.
+absl::Status ContourAndWeld(TileSet& tiles, std::span<const ChunkKey> chunks,
+                            ChunkMeshWelder& welder, const ChunkProgressFn& progress, int threads,
+                            uint64_t& polygons, uint64_t& centre_vertices) {
+  return ForEachChunk<ChunkMesh>(
+      tiles, chunks, /*low_only=*/true, threads,
+      [](const ChunkNeighbourhood& hood) { return DualContourChunk(hood); },
+      [&](ChunkMesh&& mesh) -> absl::Status {
+        polygons += mesh.polygons;
+        centre_vertices += mesh.centre_vertices;
+        if (mesh.triangles.empty()) return absl::OkStatus();
+        return welder.Add(std::move(mesh));
+      },
+      progress, "dense_mesh");
+}
+
+}  // namespace
+
 absl::StatusOr<DenseMeshResult> BuildDenseMesh(TileSet& tiles, const ChunkProgressFn& progress,
                                                int threads) {
   const std::vector<ChunkKey> chunks = DenseMeshChunks(tiles.chunks());
   // The chunks come in ChunkKeyLess order, so they are welded as they come.
   ChunkMeshWelder welder(tiles.grid().leaves_per_side());
   DenseMeshResult result;
-  absl::Status s = ForEachChunk<ChunkMesh>(
-      tiles, chunks, /*low_only=*/true, threads,
-      [](const ChunkNeighbourhood& hood) { return DualContourChunk(hood); },
-      [&](ChunkMesh&& mesh) -> absl::Status {
-        result.polygons += mesh.polygons;
-        result.centre_vertices += mesh.centre_vertices;
-        if (mesh.triangles.empty()) return absl::OkStatus();
-        return welder.Add(std::move(mesh));
-      },
-      progress, "dense_mesh");
-  if (!s.ok()) return s;
+  if (absl::Status s = ContourAndWeld(tiles, chunks, welder, progress, threads, result.polygons,
+                                      result.centre_vertices);
+      !s.ok()) {
+    return s;
+  }
   result.chunks = chunks.size();
   absl::StatusOr<TriangleMesh> mesh = welder.Finish(&result.vertex_observed);
   if (!mesh.ok()) return mesh.status();
@@ -159,17 +174,11 @@ absl::StatusOr<DenseMeshStreamResult> StreamDenseMesh(TileSet& tiles, const Dens
     return sink.triangles(t);
   };
   ChunkMeshWelder welder(tiles.grid().leaves_per_side(), std::move(weld_sink));
-  absl::Status s = ForEachChunk<ChunkMesh>(
-      tiles, chunks, /*low_only=*/true, threads,
-      [](const ChunkNeighbourhood& hood) { return DualContourChunk(hood); },
-      [&](ChunkMesh&& mesh) -> absl::Status {
-        result.polygons += mesh.polygons;
-        result.centre_vertices += mesh.centre_vertices;
-        if (mesh.triangles.empty()) return absl::OkStatus();
-        return welder.Add(std::move(mesh));
-      },
-      progress, "dense_mesh");
-  if (!s.ok()) return s;
+  if (absl::Status s = ContourAndWeld(tiles, chunks, welder, progress, threads, result.polygons,
+                                      result.centre_vertices);
+      !s.ok()) {
+    return s;
+  }
   result.chunks = chunks.size();
   if (absl::StatusOr<TriangleMesh> rest = welder.Finish(); !rest.ok()) return rest.status();
   result.self_intersections = checks.Finish();
