@@ -26,6 +26,7 @@
 #include "services/merge/segment_tiles.h"
 #include "services/merge/tile_set.h"
 #include "services/merge/trimmed_points.h"
+#include "services/mesh/level_cut.h"
 #include "services/mesh/mesh_checks.h"
 #include "services/mesh/planar_mesh.h"
 #include "services/mesh/planar_regions.h"
@@ -250,33 +251,91 @@ PlanarRegionOptions MeshRegionOptions() {
   return o;
 }
 
-// The planar mesh (§4.3.3, eq 4.9, §4.2.5) of `faces` ➜ mesh/building.ply with face property
-// `region`. A mesh that cannot be built is not fatal: nullopt, and job.json says why.
-absl::StatusOr<std::optional<TriangleMesh>> PlanarBuildingMesh(
-    const std::vector<BoundaryFace>& faces, const PlanarRegionSet& regions,
-    const OctreeGrid& grid, const fs::path& out, nlohmann::json& counts, nlohmann::json& timings,
-    std::vector<std::string>& outputs, std::vector<std::string>& warnings) {
-  absl::StatusOr<PlanarMesh> planar = BuildPlanarMesh(faces, regions, grid);
-  if (!planar.ok()) {
-    if (absl::IsCancelled(planar.status())) return planar.status();
-    warnings.push_back(std::string(planar.status().message()));
-    return std::optional<TriangleMesh>();
-  }
-  const MeshCheck check = CheckMesh(planar->mesh);
+// A planar mesh (§4.3.3, eq 4.9, §4.2.5) ➜ mesh/building.ply with face property `region`, and
+// its counts in job.json.
+absl::StatusOr<TriangleMesh> WriteBuildingMesh(PlanarMesh planar, const fs::path& out,
+                                               nlohmann::json& counts, nlohmann::json& timings,
+                                               std::vector<std::string>& outputs,
+                                               std::vector<std::string>& warnings) {
+  const MeshCheck check = CheckMesh(planar.mesh);
   if (!check.watertight()) {
     warnings.push_back("planar_mesh: not watertight (" + check.ToString() + ")");
   }
-  if (absl::Status s = WritePly((out / "mesh" / "building.ply").string(), planar->mesh,
-                                &planar->triangle_region, "region");
+  if (absl::Status s = WritePly((out / "mesh" / "building.ply").string(), planar.mesh,
+                                &planar.triangle_region, "region");
       !s.ok()) {
     return s;
   }
   outputs.push_back("mesh/building.ply");
-  counts["building_vertices"] = planar->mesh.vertices.size();
-  counts["building_triangles"] = planar->mesh.triangles.size();
+  counts["building_vertices"] = planar.mesh.vertices.size();
+  counts["building_triangles"] = planar.mesh.triangles.size();
   counts["building_watertight"] = check.watertight();
-  CountSelfIntersectionsInto(planar->mesh, "building", counts, timings, &warnings);
-  return std::optional<TriangleMesh>(std::move(planar->mesh));
+  CountSelfIntersectionsInto(planar.mesh, "building", counts, timings, &warnings);
+  return std::move(planar.mesh);
+}
+
+// The building's planar mesh made a level at a time (level_cut.h): each level's part of
+// `faces`, closed by caps where free space crosses the split heights, gets its own regions and
+// mesh, so that the memory of both follows the largest level. The parts' meshes are closed
+// shells, joined into one mesh (region ids offset). nullopt when a level's mesh cannot be
+// built (job.json says why).
+absl::StatusOr<std::optional<PlanarMesh>> PlanarMeshByLevel(
+    const MergeOptions& options, const std::vector<BoundaryFace>& faces, TileSet& tiles,
+    std::span<const Level> levels, nlohmann::json& counts, nlohmann::json& timings,
+    std::vector<std::string>& warnings, const MergeProgressCallback& progress) {
+  const OctreeGrid& grid = tiles.grid();
+  Eigen::Vector2d xy_min = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector2d xy_max = -xy_min;
+  for (const BoundaryFace& f : faces) {
+    xy_min = xy_min.cwiseMin(f.center.head<2>() - Eigen::Vector2d::Constant(f.size_m / 2));
+    xy_max = xy_max.cwiseMax(f.center.head<2>() + Eigen::Vector2d::Constant(f.size_m / 2));
+  }
+  const InteriorAtFn interior_at = [&tiles](const Eigen::Vector3d& x) -> absl::StatusOr<bool> {
+    absl::StatusOr<LeafQuery> q = tiles.Query(x);
+    if (!q.ok()) return q.status();
+    return q->stored && q->stats.observed() && q->stats.interior();
+  };
+  const size_t parts = std::max<size_t>(levels.size(), 1);
+  PlanarMesh joined;
+  size_t regions_before = 0, caps = 0;
+  double cut_seconds = 0;
+  for (size_t k = 0; k < parts; ++k) {
+    if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", k, parts); !s.ok()) return s;
+    const double lo = k == 0 ? -std::numeric_limits<double>::infinity() : levels[k].split_z_low;
+    const double hi =
+        k + 1 >= parts ? std::numeric_limits<double>::infinity() : levels[k + 1].split_z_low;
+    const Clock::time_point t0 = Clock::now();
+    absl::StatusOr<LevelPart> part = CutLevelPart(faces, grid, lo, hi, xy_min, xy_max, interior_at);
+    if (!part.ok()) return part.status();
+    cut_seconds += SecondsSince(t0);
+    caps += part->caps;
+    if (absl::Status s = CheckPlanarMemory(
+            options, absl::StrCat("level ", k, "'s part of the building's planar mesh"),
+            part->faces, {});
+        !s.ok()) {
+      return s;
+    }
+    // These regions only shape the planar mesh, so they are grown for it (mesh_growth:
+    // fewer, bigger regions, §4.3.3); the floor plans were made from the job's own regions.
+    absl::StatusOr<PlanarRegionSet> regions =
+        FitPlanarRegions(part->faces, grid, MeshRegionOptions());
+    if (!regions.ok()) return regions.status();
+    absl::StatusOr<PlanarMesh> planar = BuildPlanarMesh(part->faces, *regions, grid);
+    if (!planar.ok()) {
+      if (absl::IsCancelled(planar.status())) return planar.status();
+      warnings.push_back(absl::StrCat("planar_mesh level ", k, ": ", planar.status().message()));
+      return std::optional<PlanarMesh>();
+    }
+    for (int& r : planar->triangle_region) r += static_cast<int>(regions_before);
+    regions_before += regions->regions.size();
+    joined.mesh.Append(planar->mesh);
+    joined.triangle_region.insert(joined.triangle_region.end(), planar->triangle_region.begin(),
+                                  planar->triangle_region.end());
+  }
+  counts["building_planar_regions"] = regions_before;
+  counts["building_level_caps"] = caps;
+  timings["merge.planar_mesh_level_cut"] = cut_seconds;
+  return std::optional<PlanarMesh>(std::move(joined));
 }
 
 // §5.6's object split as this job asks for it; the re-carving region reaches as far up as the
@@ -410,21 +469,20 @@ absl::StatusOr<TriangleMesh> BuildingStage(const MergeOptions& options, const Oc
   absl::StatusOr<std::vector<BoundaryFace>> bfaces = CollectBoundaryFaces(
       **btiles, StageProgress(progress, "building_faces"), MergeThreads(options));
   if (!bfaces.ok()) return bfaces.status();
-  (*btiles)->ReleaseCache();  // read again only by the dense fallback below
-  if (absl::Status s = CheckPlanarMemory(options, "the building's planar mesh", *bfaces, levels);
-      !s.ok()) {
-    return s;
+  // The cache is filled again only by the caps' queries along the split heights and by the
+  // dense fallback below.
+  (*btiles)->ReleaseCache();
+  absl::StatusOr<std::optional<PlanarMesh>> by_level =
+      PlanarMeshByLevel(options, *bfaces, **btiles, levels, counts, timings, warnings, progress);
+  if (!by_level.ok()) return by_level.status();
+  bfaces = std::vector<BoundaryFace>{};
+  std::optional<TriangleMesh> building;
+  if (*by_level) {
+    absl::StatusOr<TriangleMesh> written =
+        WriteBuildingMesh(**std::move(by_level), out, counts, timings, outputs, warnings);
+    if (!written.ok()) return written.status();
+    building = *std::move(written);
   }
-  if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
-  // These regions only shape the planar mesh, so they are grown for it (mesh_growth:
-  // fewer, bigger regions, §4.3.3); the floor plans were made from the job's own regions.
-  absl::StatusOr<PlanarRegionSet> bregions = FitPlanarRegions(*bfaces, grid, MeshRegionOptions());
-  if (!bregions.ok()) return bregions.status();
-  counts["building_planar_regions"] = bregions->regions.size();
-  absl::StatusOr<std::optional<TriangleMesh>> planar =
-      PlanarBuildingMesh(*bfaces, *bregions, grid, out, counts, timings, outputs, warnings);
-  if (!planar.ok()) return planar.status();
-  std::optional<TriangleMesh> building = *std::move(planar);
   if (!building) {
     // The planar mesher failed (its reason is in the warnings): the building volume's dense
     // mesh stands in, watertight by construction, so combined.ply stays whole.
@@ -834,22 +892,19 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
                              ? "trimmed_points: no scan given, so no points.ply"
                              : "trimmed_points: no floor plan to trim by, so no points.ply");
     }
-    if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", 0, 1); !s.ok()) return s;
-    if (absl::Status s = CheckPlanarMemory(options, "the planar mesh", *faces, levels->levels);
-        !s.ok()) {
-      return InStage("planar_mesh", s);
-    }
     // The regions above made the levels (and would have made the floor plans); the planar
-    // mesh gets its own, grown for it (mesh_growth, §4.3.3).
-    absl::StatusOr<PlanarRegionSet> mesh_regions =
-        FitPlanarRegions(*faces, grid, MeshRegionOptions());
-    if (!mesh_regions.ok()) return InStage("planar_mesh", mesh_regions.status());
-    counts["building_planar_regions"] = mesh_regions->regions.size();
-    absl::StatusOr<std::optional<TriangleMesh>> building =
-        PlanarBuildingMesh(*faces, *mesh_regions, grid, out, counts, timings, outputs,
-                           warnings);
-    if (!building.ok()) return InStage("planar_mesh", building.status());
-    if (*building) building_triangles = (*building)->triangles.size();
+    // mesh gets its own, grown for it (mesh_growth, §4.3.3), a level at a time.
+    absl::StatusOr<std::optional<PlanarMesh>> by_level = PlanarMeshByLevel(
+        options, *faces, tiles, levels->levels, counts, timings, warnings, progress);
+    if (!by_level.ok()) return InStage("planar_mesh", by_level.status());
+    std::optional<TriangleMesh> building;
+    if (*by_level) {
+      absl::StatusOr<TriangleMesh> written =
+          WriteBuildingMesh(**std::move(by_level), out, counts, timings, outputs, warnings);
+      if (!written.ok()) return InStage("planar_mesh", written.status());
+      building = *std::move(written);
+    }
+    if (building) building_triangles = building->triangles.size();
     timings["merge.planar_mesh"] = SecondsSince(t0);
   } else {
     absl::StatusOr<SegmentStageResult> seg =
