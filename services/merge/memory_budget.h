@@ -1,7 +1,7 @@
 // The merge's memory budget (MergeOptions::memory_budget_bytes): the memory of the planar
 // regions (§4.2.4) and of the planar mesh (§4.3.3) grows with the boundary faces they are made
-// of: a batch of horizontal planes for the levels, one level's faces for its floor plan, the
-// whole building's for mesh/building.ply. Before each, the merge checks that what it holds plus
+// of: a slab of heights for the levels, one level's faces for its floor plan, one level's part
+// of the building for mesh/building.ply. Before each, the merge checks that what it holds plus
 // kPlanarBytesPerFace per face fits the budget, and fails with a message that says where the
 // faces are and what to change, instead of being killed for memory partway.
 #pragma once

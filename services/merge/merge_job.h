@@ -59,10 +59,10 @@ struct MergeOptions : MergeParams {
   int threads = 0;
   // The most memory the merge process may hold, bytes; 0 = no bound. The memory of the planar
   // regions (a slab of heights for the levels, a level for its floor plan) and of the
-  // building's planar mesh (the whole building) grows with their boundary faces: before each,
-  // RunMerge estimates it (kPlanarBytesPerFace, services/merge/memory_budget.h) and fails with
-  // ResourceExhausted, naming the level or the faces per level, the estimate and this budget,
-  // rather than be killed for memory later.
+  // building's planar mesh (a level's part of the building) grows with their boundary faces:
+  // before each, RunMerge estimates it (kPlanarBytesPerFace, services/merge/memory_budget.h)
+  // and fails with ResourceExhausted, naming the level, the estimate and this budget, rather
+  // than be killed for memory later.
   uint64_t memory_budget_bytes = 0;
   double topdown_max_height_m = 3.0;  // FirstOutputsOptions::topdown_max_height_m
   // False skips the meshing stages (faces, regions, levels, dense and planar meshes), leaving
