@@ -60,6 +60,11 @@ absl::Status CommitPartial(const std::string& path) {
   return absl::Status(s.code(), absl::StrCat(path, ": commit failed: ", s.message()));
 }
 
+absl::Status StreamWriteError(const std::string& path, int err) {
+  return absl::DataLossError(absl::StrCat(
+      path, ": write failed: ", err != 0 ? std::strerror(err) : "unknown error (disk full?)"));
+}
+
 absl::Status WriteFileAtomically(const std::string& path,
                                  const std::function<void(std::ostream&)>& write) {
   const std::string tmp = PartialPath(path);
@@ -70,14 +75,11 @@ absl::Status WriteFileAtomically(const std::string& path,
     write(out);
     out.flush();
     if (!out) {
-      // The stream keeps no error code; errno still holds the failed write(2)'s (ENOSPC,
-      // EDQUOT, EIO...), which is the reason a user can act on.
       const int err = errno;
       out.close();
       std::error_code ec;
       std::filesystem::remove(tmp, ec);
-      return absl::DataLossError(absl::StrCat(
-          path, ": write failed: ", err != 0 ? std::strerror(err) : "unknown error (disk full?)"));
+      return StreamWriteError(path, err);
     }
   }
   return CommitPartial(path);

@@ -31,6 +31,11 @@ absl::Status RenameDurably(const std::string& from, const std::string& to);
 // RenameDurably(PartialPath(path), path). On failure removes the partial file.
 absl::Status CommitPartial(const std::string& path);
 
+// The error for a failed stream write to `path`: a stream keeps no error code, but errno,
+// cleared before the writes, still holds the failed write(2)'s (ENOSPC, EDQUOT, EIO...), the
+// reason a user can act on. DataLoss.
+[[nodiscard]] absl::Status StreamWriteError(const std::string& path, int err);
+
 // Writes through PartialPath(path) with `write`, then commits. Errors name `path`; on any
 // failure no file is left at either name.
 absl::Status WriteFileAtomically(const std::string& path,

@@ -71,21 +71,13 @@ PlyStreamWriter::~PlyStreamWriter() {
   std::filesystem::remove(path_ + ".faces.partial", ec);
 }
 
-namespace {
-absl::Status WriteFailed(const std::string& path) {
-  const int err = errno;
-  return absl::DataLossError(absl::StrCat(
-      path, ": write failed: ", err != 0 ? std::strerror(err) : "unknown error (disk full?)"));
-}
-}  // namespace
-
 absl::Status PlyStreamWriter::AddVertices(std::span<const Eigen::Vector3f> vertices) {
   static_assert(std::endian::native == std::endian::little, "PLY writer assumes little-endian");
   errno = 0;
   for (const Eigen::Vector3f& v : vertices) {
     vertex_out_.write(reinterpret_cast<const char*>(v.data()), 3 * sizeof(float));
   }
-  if (!vertex_out_) return WriteFailed(path_);
+  if (!vertex_out_) return StreamWriteError(path_, errno);
   vertices_ += vertices.size();
   if (vertices_ > uint64_t(std::numeric_limits<int>::max())) {
     return absl::InvalidArgumentError(
@@ -101,7 +93,7 @@ absl::Status PlyStreamWriter::AddTriangles(std::span<const Eigen::Vector3i> tria
     face_out_.write(reinterpret_cast<const char*>(&three), 1);
     face_out_.write(reinterpret_cast<const char*>(t.data()), 3 * sizeof(int));
   }
-  if (!face_out_) return WriteFailed(path_);
+  if (!face_out_) return StreamWriteError(path_, errno);
   triangles_ += triangles.size();
   return absl::OkStatus();
 }
@@ -112,7 +104,7 @@ absl::Status PlyStreamWriter::Finish() {
   errno = 0;
   vertex_out_.close();
   face_out_.close();
-  if (!vertex_out_ || !face_out_) return WriteFailed(path_);
+  if (!vertex_out_ || !face_out_) return StreamWriteError(path_, errno);
   // The parts copied under the header a buffer at a time.
   return WriteFileAtomically(path_, [&](std::ostream& out) {
     out << "ply\nformat binary_little_endian 1.0\ncomment carvemap\n"
