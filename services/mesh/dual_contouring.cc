@@ -297,69 +297,6 @@ absl::StatusOr<ChunkMesh> DualContourChunk(const ChunkNeighbourhood& hood) {
   return out;
 }
 
-TriangleMesh WeldChunkMeshes(std::vector<ChunkMesh> chunks,
-                             std::vector<uint8_t>* vertex_observed) {
-  // Keys with where they come from, sorted, rather than copies of the vertices, and each
-  // chunk's arrays freed once used: the objects' mesh of a large building has ~10 M chunk
-  // vertices and ~20 M triangles, held here next to the welded mesh.
-  struct Entry {
-    MeshVertexKey key;
-    uint32_t chunk, index;
-  };
-  size_t total_vertices = 0, total_triangles = 0;
-  for (const ChunkMesh& c : chunks) {
-    total_vertices += c.vertex_keys.size();
-    total_triangles += c.triangles.size();
-  }
-  std::vector<Entry> all;
-  all.reserve(total_vertices);
-  for (size_t c = 0; c < chunks.size(); ++c) {
-    for (size_t i = 0; i < chunks[c].vertex_keys.size(); ++i) {
-      all.push_back(Entry{chunks[c].vertex_keys[i], uint32_t(c), uint32_t(i)});
-    }
-  }
-  // Stable, so a key's position is the first chunk's (all chunks agree anyway).
-  std::stable_sort(all.begin(), all.end(),
-                   [](const Entry& a, const Entry& b) { return a.key < b.key; });
-  all.erase(std::unique(all.begin(), all.end(),
-                        [](const Entry& a, const Entry& b) { return a.key == b.key; }),
-            all.end());
-  all.shrink_to_fit();
-  TriangleMesh mesh;
-  mesh.vertices.reserve(all.size());
-  for (const Entry& e : all) {
-    mesh.vertices.push_back(chunks[e.chunk].vertex_positions[e.index].cast<float>());
-  }
-  if (vertex_observed != nullptr) {
-    vertex_observed->clear();
-    vertex_observed->reserve(all.size());
-    for (const Entry& e : all) {
-      const std::vector<uint8_t>& observed = chunks[e.chunk].vertex_observed;
-      vertex_observed->push_back(e.index < observed.size() ? observed[e.index] : uint8_t{0});
-    }
-  }
-  for (ChunkMesh& c : chunks) {
-    c.vertex_positions = {};
-    c.vertex_observed = {};
-  }
-  auto global = [&](const MeshVertexKey& key) {
-    auto it = std::lower_bound(all.begin(), all.end(), key,
-                               [](const Entry& a, const MeshVertexKey& k) { return a.key < k; });
-    return static_cast<int>(it - all.begin());
-  };
-  mesh.triangles.reserve(total_triangles);
-  for (ChunkMesh& c : chunks) {
-    std::vector<int> map(c.vertex_keys.size());
-    for (size_t i = 0; i < map.size(); ++i) map[i] = global(c.vertex_keys[i]);
-    for (const Eigen::Vector3i& t : c.triangles) {
-      mesh.triangles.emplace_back(map[t[0]], map[t[1]], map[t[2]]);
-    }
-    c.vertex_keys = {};
-    c.triangles = {};
-  }
-  return mesh;
-}
-
 ChunkMeshWelder::ChunkMeshWelder(int chunk_cells, Sink sink)
     : chunk_cells_(chunk_cells),
       sink_(std::move(sink)),
@@ -403,7 +340,7 @@ absl::Status ChunkMeshWelder::Add(ChunkMesh chunk) {
 
 absl::Status ChunkMeshWelder::Advance(int64_t front) {
   // The pending vertices below the front, sorted by key; stable, so of a key given by several
-  // chunks the first chunk's copy is kept (they agree anyway), as WeldChunkMeshes does.
+  // chunks the first chunk's copy is kept (they agree anyway).
   auto below =
       std::stable_partition(pending_.begin(), pending_.end(),
                             [front](const PendingVertex& v) { return v.key.v[0] < front; });

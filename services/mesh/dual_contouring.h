@@ -27,7 +27,7 @@
 //
 // Out of core: a chunk meshes the grid corners it owns (the corners whose floor-chunk is the
 // chunk) from its tile and the seven lower neighbours' (slots with dx, dy, dz ≤ 0); vertices
-// are keyed by global finest-cell coordinates, so WeldChunkMeshes joins the chunks exactly.
+// are keyed by global finest-cell coordinates, so ChunkMeshWelder joins the chunks exactly.
 #pragma once
 
 #include <array>
@@ -77,18 +77,12 @@ struct ChunkMesh {
 // dx, dy, dz ≤ 0 (others may be null). Errors: those of NeighbourhoodIndex::Build.
 [[nodiscard]] absl::StatusOr<ChunkMesh> DualContourChunk(const ChunkNeighbourhood& hood);
 
-// Joins chunk meshes by vertex key: vertices sorted by key, triangles in the given chunk
-// order. The result is watertight when the chunks cover every chunk that owns a corner of an
-// interior cell (DenseMeshChunks).
-// `vertex_observed`, when given, receives ChunkMesh::vertex_observed per welded vertex.
-// The chunks are taken (moved in), and each one's arrays are freed as soon as they are used.
-[[nodiscard]] TriangleMesh WeldChunkMeshes(std::vector<ChunkMesh> chunks,
-                                           std::vector<uint8_t>* vertex_observed = nullptr);
-
-// WeldChunkMeshes for chunks that come one at a time in ChunkKeyLess order (x first), with
-// memory for the welded mesh (none with a Sink) and a few x-columns of chunks rather than for
-// every chunk mesh and a sorted copy of all their keys (about three times the welded mesh on a
-// large building). The result is the same: vertices in key order, triangles in chunk order. A chunk owns the grid
+// Joins chunk meshes by vertex key as they come, one at a time in ChunkKeyLess order (x
+// first): vertices sorted by key (of a key several chunks give, the first chunk's copy),
+// triangles in chunk order. The result is watertight when the chunks cover every chunk that
+// owns a corner of an interior cell (DenseMeshChunks). Memory: the welded mesh (none with a
+// Sink) and a few x-columns of chunks, not every chunk mesh and a sorted copy of all their
+// keys (about three times the welded mesh on a large building). A chunk owns the grid
 // corners in its cell range, so its vertex keys lie within a few cells below it along x: once
 // the chunks reach column X, every key more than kMargin cells below X's first cell is final,
 // and is welded (sorted, given its index); a chunk's triangles are welded once all their keys

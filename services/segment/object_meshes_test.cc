@@ -177,7 +177,11 @@ TEST(SegmentThenMesh, BoxOnTheFloorComesOutAsOneObject) {
     ASSERT_TRUE(m.ok()) << m.status();
     meshes.push_back(std::move(*m));
   }
-  const TriangleMesh dense = WeldChunkMeshes(meshes);
+  ChunkMeshWelder welder(grid.leaves_per_side());
+  for (ChunkMesh& m : meshes) ASSERT_TRUE(welder.Add(std::move(m)).ok());
+  absl::StatusOr<TriangleMesh> welded = welder.Finish();
+  ASSERT_TRUE(welded.ok()) << welded.status();
+  const TriangleMesh& dense = *welded;
   ObjectSplitReport report;
   const std::vector<SegmentedObject> objects =
       SplitObjects(dense, volume, ObjectSplitOptions{}, &report);
