@@ -14,6 +14,9 @@
 // Walls: each level's wall samples come from the regions of the faces in its height range and
 // a margin (LevelBandFaces), fitted for that level alone.
 //
+// Both read the faces sorted by height (SortFacesByHeight), so that a slab or a level is a
+// range of them and nothing is copied beside the building's faces.
+//
 // Plain functions over plain data: no files, no logging. Thread-compatible.
 #pragma once
 
@@ -21,6 +24,7 @@
 #include <span>
 #include <vector>
 
+#include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "services/geometry/octree_keys.h"
 #include "services/levels/level_split.h"
@@ -37,14 +41,19 @@ inline constexpr size_t kLevelSlabFaces = size_t{1} << 20;
 // carved steps, so that a region whose centroid lies in the core is fitted whole.
 inline constexpr double kLevelSlabMarginM = 0.5;
 
-// The planar regions of `faces` that the levels read, fitted slab by slab: the cores are
-// consecutive ranges of the faces' centre heights (whole lattice planes, at most `slab_faces`
-// faces each unless one plane has more); each slab adds the faces within `margin_m` above and
-// below its core. A region is kept when its centroid's height lies in its slab's core. Each
-// keeps its normal, centroid, area and eigenvalues; its `faces` list is left empty. The order:
+// Sorts `faces` in place by centre height, then x, y, axis, sign and size: a total order, so
+// that the result does not depend on the order the faces were collected in. Errors:
+// InvalidArgument for a face whose centre is not finite (the faces are then left unsorted).
+[[nodiscard]] absl::Status SortFacesByHeight(std::vector<BoundaryFace>& faces);
+
+// The planar regions of `faces` (sorted by height) that the levels read, fitted slab by slab: the
+// cores are consecutive ranges of the faces' centre heights (whole lattice planes, at most
+// `slab_faces` faces each unless one plane has more); each slab adds the faces within `margin_m`
+// above and below its core. A region is kept when its centroid's height lies in its slab's core.
+// Each keeps its normal, centroid, area and eigenvalues; its `faces` list is left empty. The order:
 // slabs from the bottom up, each slab's regions in FitPlanarRegions' order; ids are positions.
 // Errors: FitPlanarRegions', and InvalidArgument for slab_faces = 0, a negative or non-finite
-// margin, or a face whose height is not finite.
+// margin, a face whose height is not finite, or faces not sorted by height.
 [[nodiscard]] absl::StatusOr<std::vector<PlanarRegion>> LevelRegions(
     std::span<const BoundaryFace> faces, const OctreeGrid& grid,
     const PlanarRegionOptions& options = {}, size_t slab_faces = kLevelSlabFaces,
@@ -56,10 +65,10 @@ inline constexpr double kLevelSlabMarginM = 0.5;
 // fitted at once.
 inline constexpr double kLevelBandMarginM = 0.5;
 
-// The faces of `faces` whose centre's height lies in [level.split_z_low − margin_m,
-// level.split_z_high + margin_m), in their order.
-[[nodiscard]] std::vector<BoundaryFace> LevelBandFaces(std::span<const BoundaryFace> faces,
-                                                       const Level& level,
-                                                       double margin_m = kLevelBandMarginM);
+// The range of `faces` (sorted by height) whose centre's height lies in
+// [level.split_z_low − margin_m, level.split_z_high + margin_m).
+[[nodiscard]] std::span<const BoundaryFace> LevelBandFaces(std::span<const BoundaryFace> faces,
+                                                           const Level& level,
+                                                           double margin_m = kLevelBandMarginM);
 
 }  // namespace carvemap

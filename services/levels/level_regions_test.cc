@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <span>
 #include <tuple>
 #include <vector>
 
@@ -37,6 +38,12 @@ double TwoLevelRooms(const Vector3d& p) {
 std::vector<BoundaryFace> Faces(double jitter_cells) {
   return VoxelFaces(kRes, Vector3i(-1, -1, -1), Vector3i(65, 49, 90), TwoLevelRooms, jitter_cells,
                     7);
+}
+
+std::vector<BoundaryFace> SortedFaces(double jitter_cells) {
+  std::vector<BoundaryFace> faces = Faces(jitter_cells);
+  EXPECT_TRUE(SortFacesByHeight(faces).ok());
+  return faces;
 }
 
 // A region as the levels read it: normal, height, area, and their order-free key.
@@ -74,7 +81,9 @@ void ExpectSameRegions(const std::vector<PlanarRegion>& a, const std::vector<Pla
 TEST(LevelRegions, SlabBySlabGivesTheHorizontalRegionsOfTheWholeFit) {
   for (double jitter : {0.0, 0.3}) {
     SCOPED_TRACE(jitter);
+    // The whole fit in the faces' own order; the slabs in height order.
     const std::vector<BoundaryFace> faces = Faces(jitter);
+    const std::vector<BoundaryFace> sorted = SortedFaces(jitter);
     absl::StatusOr<PlanarRegionSet> whole_set = FitPlanarRegions(faces, Grid(), {});
     ASSERT_TRUE(whole_set.ok()) << whole_set.status();
     const std::vector<PlanarRegion> whole = NearHorizontal(whole_set->regions);
@@ -85,7 +94,7 @@ TEST(LevelRegions, SlabBySlabGivesTheHorizontalRegionsOfTheWholeFit) {
     // of a few heights.
     for (size_t slab : {size_t{1} << 20, size_t{1}, size_t{5000}}) {
       SCOPED_TRACE(slab);
-      absl::StatusOr<std::vector<PlanarRegion>> by_slab = LevelRegions(faces, Grid(), {}, slab);
+      absl::StatusOr<std::vector<PlanarRegion>> by_slab = LevelRegions(sorted, Grid(), {}, slab);
       ASSERT_TRUE(by_slab.ok()) << by_slab.status();
       ExpectSameRegions(whole, NearHorizontal(*by_slab));
       for (size_t i = 0; i < by_slab->size(); ++i) {
@@ -110,10 +119,9 @@ TEST(LevelRegions, HorizontalFacesAloneWouldSplitASteppedCeiling) {
 }
 
 TEST(LevelRegions, LevelsAreThoseOfTheWholeFit) {
-  const std::vector<BoundaryFace> faces = Faces(0.3);
-  absl::StatusOr<PlanarRegionSet> whole = FitPlanarRegions(faces, Grid(), {});
+  absl::StatusOr<PlanarRegionSet> whole = FitPlanarRegions(Faces(0.3), Grid(), {});
   ASSERT_TRUE(whole.ok()) << whole.status();
-  absl::StatusOr<std::vector<PlanarRegion>> by_slab = LevelRegions(faces, Grid(), {}, 1);
+  absl::StatusOr<std::vector<PlanarRegion>> by_slab = LevelRegions(SortedFaces(0.3), Grid(), {}, 1);
   ASSERT_TRUE(by_slab.ok()) << by_slab.status();
   absl::StatusOr<std::vector<Level>> a = SplitLevelsFromRegions(whole->regions);
   absl::StatusOr<std::vector<Level>> b = SplitLevelsFromRegions(*by_slab);
@@ -132,11 +140,11 @@ TEST(LevelRegions, LevelsAreThoseOfTheWholeFit) {
 }
 
 TEST(LevelRegions, BandHoldsTheFacesOfTheLevelAndItsMargin) {
-  const std::vector<BoundaryFace> faces = Faces(0);
+  const std::vector<BoundaryFace> faces = SortedFaces(0);
   Level level;
   level.split_z_low = 2.75;
   level.split_z_high = 6.0;
-  const std::vector<BoundaryFace> band = LevelBandFaces(faces, level, 0.5);
+  const std::span<const BoundaryFace> band = LevelBandFaces(faces, level, 0.5);
   size_t expected = 0;
   for (const BoundaryFace& f : faces) expected += f.center.z() >= 2.25 && f.center.z() < 6.5;
   EXPECT_EQ(band.size(), expected);
@@ -154,14 +162,34 @@ TEST(LevelRegions, BandHoldsTheFacesOfTheLevelAndItsMargin) {
   }));
 }
 
+TEST(LevelRegions, SortIsATotalOrder) {
+  // Whatever order the chunks' faces come in, the sorted faces are the same.
+  std::vector<BoundaryFace> reversed = Faces(0.3);
+  std::reverse(reversed.begin(), reversed.end());
+  ASSERT_TRUE(SortFacesByHeight(reversed).ok());
+  const std::vector<BoundaryFace> sorted = SortedFaces(0.3);
+  ASSERT_EQ(reversed.size(), sorted.size());
+  for (size_t i = 0; i < sorted.size(); ++i) {
+    ASSERT_EQ(reversed[i].center, sorted[i].center) << i;
+    ASSERT_EQ(reversed[i].axis, sorted[i].axis) << i;
+    ASSERT_EQ(reversed[i].sign, sorted[i].sign) << i;
+    if (i > 0) ASSERT_LE(sorted[i - 1].center.z(), sorted[i].center.z()) << i;
+  }
+}
+
 TEST(LevelRegions, RejectsBadSlabs) {
-  const std::vector<BoundaryFace> faces = Faces(0);
+  const std::vector<BoundaryFace> faces = SortedFaces(0);
   EXPECT_EQ(LevelRegions(faces, Grid(), {}, 0).status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(LevelRegions(faces, Grid(), {}, 100, -1).status().code(),
             absl::StatusCode::kInvalidArgument);
   std::vector<BoundaryFace> bad = faces;
   bad[10].center.z() = std::numeric_limits<double>::quiet_NaN();
   EXPECT_EQ(LevelRegions(bad, Grid()).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(SortFacesByHeight(bad).code(), absl::StatusCode::kInvalidArgument);
+  // Faces out of height order are refused, not fitted in wrong slabs.
+  std::vector<BoundaryFace> unsorted = faces;
+  std::swap(unsorted.front(), unsorted.back());
+  EXPECT_EQ(LevelRegions(unsorted, Grid()).status().code(), absl::StatusCode::kInvalidArgument);
   absl::StatusOr<std::vector<PlanarRegion>> none = LevelRegions({}, Grid());
   ASSERT_TRUE(none.ok());
   EXPECT_TRUE(none->empty());

@@ -1,7 +1,6 @@
 #include "services/merge/memory_budget.h"
 
 #include <string>
-#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -21,33 +20,13 @@ std::string Faces(uint64_t n) {
 
 }  // namespace
 
-absl::Status CheckPlanarMemory(std::string_view what, std::span<const BoundaryFace> faces,
-                               std::span<const Level> levels, uint64_t held_bytes,
+absl::Status CheckPlanarMemory(std::string_view what, uint64_t num_faces, uint64_t held_bytes,
                                uint64_t budget_bytes) {
-  const uint64_t need = uint64_t{faces.size()} * kPlanarBytesPerFace;
+  const uint64_t need = num_faces * kPlanarBytesPerFace;
   if (budget_bytes == 0 || held_bytes + need <= budget_bytes) return absl::OkStatus();
-  std::string where;
-  if (!levels.empty()) {
-    std::vector<uint64_t> on(levels.size(), 0);
-    uint64_t elsewhere = 0;  // above or below every level's split range
-    for (const BoundaryFace& f : faces) {
-      const int k = LevelContaining(levels, f.isosurface().z());
-      if (k >= 0) {
-        ++on[k];
-      } else {
-        ++elsewhere;
-      }
-    }
-    where = " (";
-    for (size_t k = 0; k < levels.size(); ++k) {
-      absl::StrAppend(&where, k > 0 ? ", " : "", "level ", levels[k].index, ": ", Faces(on[k]));
-    }
-    if (elsewhere > 0) absl::StrAppend(&where, ", outside the levels: ", Faces(elsewhere));
-    absl::StrAppend(&where, ")");
-  }
   return absl::ResourceExhaustedError(
-      absl::StrCat(std::string(what), ": ", Faces(faces.size()), " boundary faces", where,
-                   " need about ", Bytes(need), " on top of the ", Bytes(held_bytes),
+      absl::StrCat(std::string(what), ": ", Faces(num_faces), " boundary faces need about ",
+                   Bytes(need), " on top of the ", Bytes(held_bytes),
                    " the merge holds, over its memory budget of ", Bytes(budget_bytes),
                    ". Give the merge more memory (--memory-mb of `carvemap merge` or "
                    "`carvemap merger`, --merge-memory-mb of `carvemap run`; by default 90 % of the "

@@ -7,21 +7,16 @@
 #pragma once
 
 #include <cstdint>
-#include <span>
 #include <string_view>
 
 #include "absl/status/status.h"
-#include "services/levels/level_split.h"
-#include "services/mesh/boundary_faces.h"
 
 namespace carvemap {
 
-// OK when budget_bytes is 0 (no budget) or held_bytes + faces × kPlanarBytesPerFace fits it;
-// else ResourceExhausted naming `what` (the stage), the faces (per level of `levels`, by
-// their isosurface's height, when levels are known), the estimate, held_bytes and the budget.
-[[nodiscard]] absl::Status CheckPlanarMemory(std::string_view what,
-                                             std::span<const BoundaryFace> faces,
-                                             std::span<const Level> levels, uint64_t held_bytes,
-                                             uint64_t budget_bytes);
+// OK when budget_bytes is 0 (no budget) or held_bytes + num_faces × kPlanarBytesPerFace fits
+// it; else ResourceExhausted naming `what` (the stage and where its faces are), the number of
+// faces, the estimate, held_bytes and the budget.
+[[nodiscard]] absl::Status CheckPlanarMemory(std::string_view what, uint64_t num_faces,
+                                             uint64_t held_bytes, uint64_t budget_bytes);
 
 }  // namespace carvemap

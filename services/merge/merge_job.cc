@@ -88,10 +88,10 @@ absl::Status InStage(const char* stage, const absl::Status& s) {
 
 // CheckPlanarMemory against what this process holds now.
 absl::Status CheckPlanarMemory(const MergeOptions& options, std::string_view what,
-                               std::span<const BoundaryFace> faces, std::span<const Level> levels) {
+                               size_t num_faces) {
   if (options.memory_budget_bytes == 0) return absl::OkStatus();
-  return CheckPlanarMemory(what, faces, levels, ReadProcessStatus().resident_bytes,
-                           options.memory_budget_bytes);
+  return carvemap::CheckPlanarMemory(what, num_faces, ReadProcessStatus().resident_bytes,
+                                     options.memory_budget_bytes);
 }
 
 int MergeThreads(const MergeOptions& options) {
@@ -158,13 +158,13 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
     // follows the level, not the building.
     Clock::time_point t0 = Clock::now();
     PlanarRegionSet regions;
-    const std::vector<BoundaryFace> band = LevelBandFaces(faces, levels[k]);
+    const std::span<const BoundaryFace> band = LevelBandFaces(faces, levels[k]);
     if (absl::Status s = CheckPlanarMemory(
             options,
             absl::StrCat("level ", k, "'s planar regions (its faces from ",
                          absl::SixDigits(levels[k].split_z_low - kLevelBandMarginM), " to ",
                          absl::SixDigits(levels[k].split_z_high + kLevelBandMarginM), " m)"),
-            band, {});
+            band.size());
         !s.ok()) {
       return s;
     }
@@ -299,19 +299,23 @@ absl::StatusOr<std::optional<PlanarMesh>> PlanarMeshByLevel(
   PlanarMesh joined;
   size_t regions_before = 0, caps = 0;
   double cut_seconds = 0;
+  // Each split height's plane caps the parts on both its sides: found once, kept for the next.
+  CutPlane low{-std::numeric_limits<double>::infinity(), {}};
   for (size_t k = 0; k < parts; ++k) {
     if (absl::Status s = ReportMergeProgress(progress, "planar_mesh", k, parts); !s.ok()) return s;
-    const double lo = k == 0 ? -std::numeric_limits<double>::infinity() : levels[k].split_z_low;
     const double hi =
         k + 1 >= parts ? std::numeric_limits<double>::infinity() : levels[k + 1].split_z_low;
     const Clock::time_point t0 = Clock::now();
-    absl::StatusOr<LevelPart> part = CutLevelPart(faces, grid, lo, hi, xy_min, xy_max, interior_at);
+    absl::StatusOr<CutPlane> high = FindCutPlane(grid, hi, xy_min, xy_max, interior_at);
+    if (!high.ok()) return high.status();
+    absl::StatusOr<LevelPart> part = CutLevelPart(faces, grid, low, *high);
     if (!part.ok()) return part.status();
+    low = *std::move(high);
     cut_seconds += SecondsSince(t0);
     caps += part->caps;
     if (absl::Status s = CheckPlanarMemory(
             options, absl::StrCat("level ", k, "'s part of the building's planar mesh"),
-            part->faces, {});
+            part->faces.size());
         !s.ok()) {
       return s;
     }
@@ -787,12 +791,13 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   for (const BoundaryFace& f : *faces) face_area += f.area_m2();
   counts["boundary_faces"] = faces->size();
   counts["boundary_area_m2"] = face_area;
+  // By height: the levels' slabs and each level's band are ranges of them (level_regions.h).
+  if (absl::Status s = SortFacesByHeight(*faces); !s.ok()) return InStage("boundary_faces", s);
   timings["merge.boundary_faces"] = SecondsSince(t0);
   // planar regions (stage 2, §4.2.4) for the levels, fitted a slab of heights at a time
   // (level_regions.h); each level's own are fitted with its floor plan.
-  if (absl::Status s =
-          CheckPlanarMemory(options, "the levels' planar regions (a slab of heights)",
-                            std::span(*faces).first(std::min(faces->size(), kLevelSlabFaces)), {});
+  if (absl::Status s = CheckPlanarMemory(options, "the levels' planar regions (a slab of heights)",
+                                         std::min(faces->size(), kLevelSlabFaces));
       !s.ok()) {
     return InStage("planar_regions", s);
   }

@@ -8,16 +8,44 @@
 
 namespace carvemap {
 
-absl::StatusOr<LevelPart> CutLevelPart(std::span<const BoundaryFace> faces, const OctreeGrid& grid,
-                                       double z_low, double z_high, const Eigen::Vector2d& xy_min,
-                                       const Eigen::Vector2d& xy_max,
-                                       const InteriorAtFn& interior_at) {
+absl::StatusOr<CutPlane> FindCutPlane(const OctreeGrid& grid, double z,
+                                      const Eigen::Vector2d& xy_min, const Eigen::Vector2d& xy_max,
+                                      const InteriorAtFn& interior_at) {
+  CutPlane plane;
+  if (!std::isfinite(z)) {
+    plane.z = z;
+    return plane;
+  }
   const double res = grid.resolution_m();
-  auto plane = [res](double z) { return std::isfinite(z) ? std::round(z / res) * res : z; };
-  const double lo = plane(z_low), hi = plane(z_high);
+  plane.z = std::round(z / res) * res;
+  const int64_t i0 = std::llround(std::floor(xy_min.x() / res));
+  const int64_t i1 = std::llround(std::ceil(xy_max.x() / res));
+  const int64_t j0 = std::llround(std::floor(xy_min.y() / res));
+  const int64_t j1 = std::llround(std::ceil(xy_max.y() / res));
+  if (i1 > i0 && j1 > j0 && double(i1 - i0) * double(j1 - j0) > double(int64_t{1} << 28)) {
+    return absl::InvalidArgumentError("level cut: the faces' extent has more than 2^28 columns");
+  }
+  for (int64_t i = i0; i < i1; ++i) {
+    for (int64_t j = j0; j < j1; ++j) {
+      const double x = (double(i) + 0.5) * res, y = (double(j) + 0.5) * res;
+      absl::StatusOr<bool> below = interior_at(Eigen::Vector3d(x, y, plane.z - res / 2));
+      if (!below.ok()) return below.status();
+      if (!*below) continue;
+      absl::StatusOr<bool> above = interior_at(Eigen::Vector3d(x, y, plane.z + res / 2));
+      if (!above.ok()) return above.status();
+      if (*above) plane.crossings.emplace_back(x, y);
+    }
+  }
+  return plane;
+}
+
+absl::StatusOr<LevelPart> CutLevelPart(std::span<const BoundaryFace> faces, const OctreeGrid& grid,
+                                       const CutPlane& low, const CutPlane& high) {
+  const double res = grid.resolution_m();
+  const double lo = low.z, hi = high.z;
   if (!(lo < hi)) {
     return absl::InvalidArgumentError(
-        absl::StrCat("level cut: the part from ", z_low, " to ", z_high, " m is empty"));
+        absl::StrCat("level cut: the part from ", lo, " to ", hi, " m is empty"));
   }
   const double eps = 1e-6 * res;
   auto straddles = [&](double z0, double z1, double s) {
@@ -59,33 +87,16 @@ absl::StatusOr<LevelPart> CutLevelPart(std::span<const BoundaryFace> faces, cons
   }
 
   // Caps where free space crosses a plane.
-  const int64_t i0 = std::llround(std::floor(xy_min.x() / res));
-  const int64_t i1 = std::llround(std::ceil(xy_max.x() / res));
-  const int64_t j0 = std::llround(std::floor(xy_min.y() / res));
-  const int64_t j1 = std::llround(std::ceil(xy_max.y() / res));
-  if (i1 > i0 && j1 > j0 && double(i1 - i0) * double(j1 - j0) > double(int64_t{1} << 28)) {
-    return absl::InvalidArgumentError("level cut: the faces' extent has more than 2^28 columns");
-  }
-  for (const auto& [s, sign] : {std::pair<double, int>{lo, 1}, std::pair<double, int>{hi, -1}}) {
-    if (!std::isfinite(s)) continue;
-    for (int64_t i = i0; i < i1; ++i) {
-      for (int64_t j = j0; j < j1; ++j) {
-        const double x = (double(i) + 0.5) * res, y = (double(j) + 0.5) * res;
-        absl::StatusOr<bool> below = interior_at(Eigen::Vector3d(x, y, s - res / 2));
-        if (!below.ok()) return below.status();
-        if (!*below) continue;
-        absl::StatusOr<bool> above = interior_at(Eigen::Vector3d(x, y, s + res / 2));
-        if (!above.ok()) return above.status();
-        if (!*above) continue;
-        BoundaryFace cap;
-        cap.axis = 2;
-        cap.sign = static_cast<int8_t>(sign);
-        cap.size_m = res;
-        cap.center = Eigen::Vector3d(x, y, s);
-        cap.isosurface_m = s + sign * res / 4;
-        part.faces.push_back(cap);
-        ++part.caps;
-      }
+  for (const auto& [plane, sign] : {std::pair<const CutPlane*, int>{&low, 1}, {&high, -1}}) {
+    for (const Eigen::Vector2d& xy : plane->crossings) {
+      BoundaryFace cap;
+      cap.axis = 2;
+      cap.sign = static_cast<int8_t>(sign);
+      cap.size_m = res;
+      cap.center = Eigen::Vector3d(xy.x(), xy.y(), plane->z);
+      cap.isosurface_m = plane->z + sign * res / 4;
+      part.faces.push_back(cap);
+      ++part.caps;
     }
   }
   return part;

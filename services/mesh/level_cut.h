@@ -28,20 +28,32 @@ namespace carvemap {
 // Whether the finest cell holding the point is interior (p > 0.5). Errors are passed on.
 using InteriorAtFn = std::function<absl::StatusOr<bool>(const Eigen::Vector3d&)>;
 
+// A cut plane: the lattice plane nearest a height, and the finest columns where the cells just
+// below and just above it are both interior (where the parts on either side get caps).
+struct CutPlane {
+  double z = 0;                            // m; ±infinity: no plane
+  std::vector<Eigen::Vector2d> crossings;  // the columns' centres, m
+};
+
+// The cut plane nearest `z` (±infinity: no plane, no crossings), its crossings looked for over
+// the finest columns of `xy_min`–`xy_max` (the faces' extent). Found once per plane, it caps
+// the parts on both its sides. Errors: InvalidArgument for an extent of more than 2^28 columns;
+// those of `interior_at`.
+[[nodiscard]] absl::StatusOr<CutPlane> FindCutPlane(const OctreeGrid& grid, double z,
+                                                    const Eigen::Vector2d& xy_min,
+                                                    const Eigen::Vector2d& xy_max,
+                                                    const InteriorAtFn& interior_at);
+
 struct LevelPart {
   std::vector<BoundaryFace> faces;  // the part's faces, then its caps
   size_t caps = 0;                  // the caps among them (the last ones)
 };
 
-// The part of `faces` between the lattice planes nearest `z_low` and `z_high` (either may be
-// ±infinity: no plane there). Caps are looked for over the finest columns of `xy_min`–`xy_max`
-// (the faces' extent). Errors: InvalidArgument for z_low ≥ z_high after rounding, a face whose
-// size is not a whole number of finest cells, or an extent of more than 2^28 columns; those of
-// `interior_at`.
+// The part of `faces` between the planes `low` and `high` (FindCutPlane's), capped at each
+// plane's crossings. Errors: InvalidArgument for low.z ≥ high.z, or a face whose size is not a
+// whole number of finest cells.
 [[nodiscard]] absl::StatusOr<LevelPart> CutLevelPart(std::span<const BoundaryFace> faces,
-                                                     const OctreeGrid& grid, double z_low,
-                                                     double z_high, const Eigen::Vector2d& xy_min,
-                                                     const Eigen::Vector2d& xy_max,
-                                                     const InteriorAtFn& interior_at);
+                                                     const OctreeGrid& grid, const CutPlane& low,
+                                                     const CutPlane& high);
 
 }  // namespace carvemap

@@ -37,6 +37,14 @@ double StackedRooms(const Vector3d& p) {
 
 absl::StatusOr<bool> InteriorAt(const Vector3d& p) { return StackedRooms(p) > 0; }
 
+// The cut plane at z, crossings looked for over the rooms' footprint.
+CutPlane Plane(double z, const InteriorAtFn& interior_at = InteriorAt) {
+  absl::StatusOr<CutPlane> plane =
+      FindCutPlane(Grid(), z, Vector2d(-0.1, -0.1), Vector2d(4.1, 3.1), interior_at);
+  EXPECT_TRUE(plane.ok()) << plane.status();
+  return plane.ok() ? *std::move(plane) : CutPlane{z, {}};
+}
+
 std::vector<BoundaryFace> Faces() {
   return VoxelFaces(kRes, Vector3i(-1, -1, -1), Vector3i(65, 49, 90), StackedRooms);
 }
@@ -53,12 +61,15 @@ PlanarMesh Mesh(const std::vector<BoundaryFace>& faces) {
 
 TEST(LevelCut, PartsAreClosedAndTogetherHoldEveryFace) {
   const std::vector<BoundaryFace> faces = Faces();
-  const Vector2d lo(-0.1, -0.1), hi(4.1, 3.1);
-  absl::StatusOr<LevelPart> lower = CutLevelPart(faces, Grid(), -kInf, 2.76, lo, hi, InteriorAt);
-  absl::StatusOr<LevelPart> upper = CutLevelPart(faces, Grid(), 2.76, kInf, lo, hi, InteriorAt);
+  const CutPlane split = Plane(2.76);
+  // 2.76 rounds to the lattice plane at 2.75 m; the shaft's 16 × 16 cells cross it.
+  EXPECT_EQ(split.z, 2.75);
+  EXPECT_EQ(split.crossings.size(), 256u);
+  absl::StatusOr<LevelPart> lower = CutLevelPart(faces, Grid(), Plane(-kInf), split);
+  absl::StatusOr<LevelPart> upper = CutLevelPart(faces, Grid(), split, Plane(kInf));
   ASSERT_TRUE(lower.ok()) << lower.status();
   ASSERT_TRUE(upper.ok()) << upper.status();
-  // 2.76 rounds to the lattice plane at 2.75 m: the shaft's 16 × 16 cells are capped on both.
+  // Both parts are capped there.
   EXPECT_EQ(lower->caps, 256u);
   EXPECT_EQ(upper->caps, 256u);
   EXPECT_EQ(lower->faces.size() - lower->caps + upper->faces.size() - upper->caps, faces.size());
@@ -78,7 +89,7 @@ TEST(LevelCut, PartsAreClosedAndTogetherHoldEveryFace) {
   }
   EXPECT_EQ(CountSelfIntersections(both).pairs, 0u);
   // No plane: the part is every face, uncapped.
-  absl::StatusOr<LevelPart> all = CutLevelPart(faces, Grid(), -kInf, kInf, lo, hi, InteriorAt);
+  absl::StatusOr<LevelPart> all = CutLevelPart(faces, Grid(), Plane(-kInf), Plane(kInf));
   ASSERT_TRUE(all.ok());
   EXPECT_EQ(all->faces.size(), faces.size());
   EXPECT_EQ(all->caps, 0u);
@@ -92,11 +103,10 @@ TEST(LevelCut, CoarseFacesAcrossThePlaneAreCutIntoCells) {
   wall.center = Vector3d(1.0, 1.125, 2.625);
   wall.isosurface_m = 1.0;
   const std::vector<BoundaryFace> faces = {wall};
-  auto none = [](const Vector3d&) -> absl::StatusOr<bool> { return false; };
   absl::StatusOr<LevelPart> lower =
-      CutLevelPart(faces, Grid(), -kInf, 2.625, Vector2d(0, 0), Vector2d(1, 1), none);
+      CutLevelPart(faces, Grid(), CutPlane{-kInf, {}}, CutPlane{2.625, {}});
   absl::StatusOr<LevelPart> upper =
-      CutLevelPart(faces, Grid(), 2.625, kInf, Vector2d(0, 0), Vector2d(1, 1), none);
+      CutLevelPart(faces, Grid(), CutPlane{2.625, {}}, CutPlane{kInf, {}});
   ASSERT_TRUE(lower.ok() && upper.ok());
   ASSERT_EQ(lower->faces.size(), 8u);
   ASSERT_EQ(upper->faces.size(), 8u);
@@ -107,30 +117,33 @@ TEST(LevelCut, CoarseFacesAcrossThePlaneAreCutIntoCells) {
   }
   // A plane along the face's edge leaves it whole.
   absl::StatusOr<LevelPart> whole =
-      CutLevelPart(faces, Grid(), 2.75, kInf, Vector2d(0, 0), Vector2d(1, 1), none);
+      CutLevelPart(faces, Grid(), CutPlane{2.75, {}}, CutPlane{kInf, {}});
   ASSERT_TRUE(whole.ok());
   EXPECT_TRUE(whole->faces.empty());
 }
 
 TEST(LevelCut, RejectsEmptyPartsAndOddFaces) {
-  auto none = [](const Vector3d&) -> absl::StatusOr<bool> { return false; };
-  EXPECT_EQ(
-      CutLevelPart({}, Grid(), 2.0, 2.01, Vector2d(0, 0), Vector2d(1, 1), none).status().code(),
-      absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(CutLevelPart({}, Grid(), CutPlane{2.0, {}}, CutPlane{2.0, {}}).status().code(),
+            absl::StatusCode::kInvalidArgument);
   BoundaryFace odd;
   odd.axis = 1;
   odd.size_m = 1.5 * kRes;
   odd.center = Vector3d(0, 0, 2.0);
   const std::vector<BoundaryFace> faces = {odd};
-  EXPECT_EQ(
-      CutLevelPart(faces, Grid(), 2.0, kInf, Vector2d(0, 0), Vector2d(1, 1), none).status().code(),
-      absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(CutLevelPart(faces, Grid(), CutPlane{2.0, {}}, CutPlane{kInf, {}}).status().code(),
+            absl::StatusCode::kInvalidArgument);
   auto failing = [](const Vector3d&) -> absl::StatusOr<bool> {
     return absl::DataLossError("tile unreadable");
   };
-  EXPECT_EQ(
-      CutLevelPart({}, Grid(), 2.0, kInf, Vector2d(0, 0), Vector2d(1, 1), failing).status().code(),
-      absl::StatusCode::kDataLoss);
+  EXPECT_EQ(FindCutPlane(Grid(), 2.0, Vector2d(0, 0), Vector2d(1, 1), failing).status().code(),
+            absl::StatusCode::kDataLoss);
+  // No plane at infinity: nothing is looked up.
+  absl::StatusOr<CutPlane> none =
+      FindCutPlane(Grid(), kInf, Vector2d(0, 0), Vector2d(1, 1), failing);
+  ASSERT_TRUE(none.ok());
+  EXPECT_TRUE(none->crossings.empty());
+  EXPECT_EQ(FindCutPlane(Grid(), 2.0, Vector2d(0, 0), Vector2d(1e6, 1e6), failing).status().code(),
+            absl::StatusCode::kInvalidArgument);
 }
 
 }  // namespace
