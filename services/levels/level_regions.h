@@ -14,14 +14,15 @@
 // Walls: each level's wall samples come from the regions of the faces in its height range and
 // a margin (LevelBandFaces), fitted for that level alone.
 //
-// Both read the faces sorted by height (SortFacesByHeight), so that a slab or a level is a
-// range of them and nothing is copied beside the building's faces.
+// Both read the faces sorted by height (sorted_faces.h) a range at a time, so that the merge
+// holds a slab's or a level's faces, not the building's.
 //
 // Plain functions over plain data: no files, no logging. Thread-compatible.
 #pragma once
 
 #include <cstddef>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -30,6 +31,7 @@
 #include "services/levels/level_split.h"
 #include "services/mesh/boundary_faces.h"
 #include "services/mesh/planar_regions.h"
+#include "services/mesh/sorted_faces.h"
 
 namespace carvemap {
 
@@ -41,19 +43,21 @@ inline constexpr size_t kLevelSlabFaces = size_t{1} << 20;
 // carved steps, so that a region whose centroid lies in the core is fitted whole.
 inline constexpr double kLevelSlabMarginM = 0.5;
 
-// Sorts `faces` in place by centre height, then x, y, axis, sign and size: a total order, so
-// that the result does not depend on the order the faces were collected in. Errors:
-// InvalidArgument for a face whose centre is not finite (the faces are then left unsorted).
-[[nodiscard]] absl::Status SortFacesByHeight(std::vector<BoundaryFace>& faces);
+// The planar regions that the levels read, of the sorted faces that `heights` indexes and
+// `read` reads, fitted slab by slab: the cores are consecutive ranges of the faces' centre
+// heights (whole lattice planes, at most `slab_faces` faces each unless one plane has more);
+// each slab adds the faces within `margin_m` above and below its core. A region is kept when its
+// centroid's height lies in its slab's core. Each keeps its normal, centroid, area and
+// eigenvalues; its `faces` list is left empty. The order: slabs from the bottom up, each slab's
+// regions in FitPlanarRegions' order; ids are positions. Errors: FitPlanarRegions' and
+// `read`'s, and InvalidArgument for slab_faces = 0 or a negative or non-finite margin.
+[[nodiscard]] absl::StatusOr<std::vector<PlanarRegion>> LevelRegions(
+    const FaceHeights& heights, const ReadFacesFn& read, const OctreeGrid& grid,
+    const PlanarRegionOptions& options = {}, size_t slab_faces = kLevelSlabFaces,
+    double margin_m = kLevelSlabMarginM);
 
-// The planar regions of `faces` (sorted by height) that the levels read, fitted slab by slab: the
-// cores are consecutive ranges of the faces' centre heights (whole lattice planes, at most
-// `slab_faces` faces each unless one plane has more); each slab adds the faces within `margin_m`
-// above and below its core. A region is kept when its centroid's height lies in its slab's core.
-// Each keeps its normal, centroid, area and eigenvalues; its `faces` list is left empty. The order:
-// slabs from the bottom up, each slab's regions in FitPlanarRegions' order; ids are positions.
-// Errors: FitPlanarRegions', and InvalidArgument for slab_faces = 0, a negative or non-finite
-// margin, a face whose height is not finite, or faces not sorted by height.
+// LevelRegions of faces held in memory, sorted by height; also InvalidArgument for faces that
+// are not sorted or whose height is not finite.
 [[nodiscard]] absl::StatusOr<std::vector<PlanarRegion>> LevelRegions(
     std::span<const BoundaryFace> faces, const OctreeGrid& grid,
     const PlanarRegionOptions& options = {}, size_t slab_faces = kLevelSlabFaces,
@@ -65,10 +69,10 @@ inline constexpr double kLevelSlabMarginM = 0.5;
 // fitted at once.
 inline constexpr double kLevelBandMarginM = 0.5;
 
-// The range of `faces` (sorted by height) whose centre's height lies in
+// The index range of the sorted faces whose centre's height lies in
 // [level.split_z_low − margin_m, level.split_z_high + margin_m).
-[[nodiscard]] std::span<const BoundaryFace> LevelBandFaces(std::span<const BoundaryFace> faces,
-                                                           const Level& level,
-                                                           double margin_m = kLevelBandMarginM);
+[[nodiscard]] std::pair<uint64_t, uint64_t> LevelBand(const FaceHeights& heights,
+                                                      const Level& level,
+                                                      double margin_m = kLevelBandMarginM);
 
 }  // namespace carvemap

@@ -141,10 +141,13 @@ TEST(LevelRegions, LevelsAreThoseOfTheWholeFit) {
 
 TEST(LevelRegions, BandHoldsTheFacesOfTheLevelAndItsMargin) {
   const std::vector<BoundaryFace> faces = SortedFaces(0);
+  absl::StatusOr<FaceHeights> heights = HeightsOf(faces, Grid());
+  ASSERT_TRUE(heights.ok()) << heights.status();
   Level level;
   level.split_z_low = 2.75;
   level.split_z_high = 6.0;
-  const std::span<const BoundaryFace> band = LevelBandFaces(faces, level, 0.5);
+  const auto [begin, end] = LevelBand(*heights, level, 0.5);
+  const std::span<const BoundaryFace> band = std::span(faces).subspan(begin, end - begin);
   size_t expected = 0;
   for (const BoundaryFace& f : faces) expected += f.center.z() >= 2.25 && f.center.z() < 6.5;
   EXPECT_EQ(band.size(), expected);
@@ -162,19 +165,14 @@ TEST(LevelRegions, BandHoldsTheFacesOfTheLevelAndItsMargin) {
   }));
 }
 
-TEST(LevelRegions, SortIsATotalOrder) {
-  // Whatever order the chunks' faces come in, the sorted faces are the same.
-  std::vector<BoundaryFace> reversed = Faces(0.3);
-  std::reverse(reversed.begin(), reversed.end());
-  ASSERT_TRUE(SortFacesByHeight(reversed).ok());
-  const std::vector<BoundaryFace> sorted = SortedFaces(0.3);
-  ASSERT_EQ(reversed.size(), sorted.size());
-  for (size_t i = 0; i < sorted.size(); ++i) {
-    ASSERT_EQ(reversed[i].center, sorted[i].center) << i;
-    ASSERT_EQ(reversed[i].axis, sorted[i].axis) << i;
-    ASSERT_EQ(reversed[i].sign, sorted[i].sign) << i;
-    if (i > 0) ASSERT_LE(sorted[i - 1].center.z(), sorted[i].center.z()) << i;
-  }
+TEST(LevelRegions, ReadErrorsArePassedOn) {
+  const std::vector<BoundaryFace> faces = SortedFaces(0);
+  absl::StatusOr<FaceHeights> heights = HeightsOf(faces, Grid());
+  ASSERT_TRUE(heights.ok());
+  const ReadFacesFn failing = [](uint64_t, uint64_t) -> absl::StatusOr<std::vector<BoundaryFace>> {
+    return absl::DataLossError("faces file truncated");
+  };
+  EXPECT_EQ(LevelRegions(*heights, failing, Grid()).status().code(), absl::StatusCode::kDataLoss);
 }
 
 TEST(LevelRegions, RejectsBadSlabs) {
@@ -185,7 +183,6 @@ TEST(LevelRegions, RejectsBadSlabs) {
   std::vector<BoundaryFace> bad = faces;
   bad[10].center.z() = std::numeric_limits<double>::quiet_NaN();
   EXPECT_EQ(LevelRegions(bad, Grid()).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(SortFacesByHeight(bad).code(), absl::StatusCode::kInvalidArgument);
   // Faces out of height order are refused, not fitted in wrong slabs.
   std::vector<BoundaryFace> unsorted = faces;
   std::swap(unsorted.front(), unsorted.back());

@@ -186,15 +186,26 @@ absl::StatusOr<DenseMeshStreamResult> StreamDenseMesh(TileSet& tiles, const Dens
   return result;
 }
 
+absl::Status CollectBoundaryFacesInto(TileSet& tiles, const BoundaryFaceSink& sink,
+                                      const ChunkProgressFn& progress, int threads) {
+  return ForEachChunk<std::vector<BoundaryFace>>(
+      tiles, tiles.chunks(), /*low_only=*/false, threads,
+      [](const ChunkNeighbourhood& hood) { return ChunkBoundaryFaces(hood); },
+      [&](std::vector<BoundaryFace>&& f) { return sink(std::move(f)); }, progress,
+      "boundary_faces");
+}
+
 absl::StatusOr<std::vector<BoundaryFace>> CollectBoundaryFaces(TileSet& tiles,
                                                                const ChunkProgressFn& progress,
                                                                int threads) {
   std::vector<BoundaryFace> faces;
-  absl::Status s = ForEachChunk<std::vector<BoundaryFace>>(
-      tiles, tiles.chunks(), /*low_only=*/false, threads,
-      [](const ChunkNeighbourhood& hood) { return ChunkBoundaryFaces(hood); },
-      [&](std::vector<BoundaryFace>&& f) { faces.insert(faces.end(), f.begin(), f.end()); },
-      progress, "boundary_faces");
+  absl::Status s = CollectBoundaryFacesInto(
+      tiles,
+      [&](std::vector<BoundaryFace>&& f) {
+        faces.insert(faces.end(), f.begin(), f.end());
+        return absl::OkStatus();
+      },
+      progress, threads);
   if (!s.ok()) return s;
   // Grown by doubling, the vector can hold twice its faces; the later stages keep it whole.
   faces.shrink_to_fit();

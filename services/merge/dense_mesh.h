@@ -124,4 +124,11 @@ class ColumnSelfIntersections {
 [[nodiscard]] absl::StatusOr<std::vector<BoundaryFace>> CollectBoundaryFaces(
     TileSet& tiles, const ChunkProgressFn& progress = nullptr, int threads = 1);
 
+// CollectBoundaryFaces, each chunk's faces given to `sink` as they come (in the same order)
+// instead of held. The sink's error stops the walk and is returned.
+using BoundaryFaceSink = std::function<absl::Status(std::vector<BoundaryFace>&&)>;
+[[nodiscard]] absl::Status CollectBoundaryFacesInto(TileSet& tiles, const BoundaryFaceSink& sink,
+                                                    const ChunkProgressFn& progress = nullptr,
+                                                    int threads = 1);
+
 }  // namespace carvemap

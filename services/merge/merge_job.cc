@@ -14,6 +14,7 @@
 #include <utility>
 #include <vector>
 
+#include "absl/cleanup/cleanup.h"
 #include "absl/strings/str_cat.h"
 #include "services/floorplan/floorplan_export.h"
 #include "services/floorplan/floorplan_pipeline.h"
@@ -22,6 +23,7 @@
 #include "services/levels/level_regions.h"
 #include "services/levels/level_split.h"
 #include "services/merge/dense_mesh.h"
+#include "services/merge/face_store.h"
 #include "services/merge/memory_budget.h"
 #include "services/merge/segment_tiles.h"
 #include "services/merge/tile_set.h"
@@ -119,11 +121,28 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string
   return (*reader)->PathPositions();
 }
 
+// The boundary faces of `tiles` in a FaceStore at `path`, sorted by height (face_store.h): the
+// stages after read them a slab or a level at a time.
+absl::StatusOr<std::unique_ptr<FaceStore>> StoreBoundaryFaces(TileSet& tiles,
+                                                              const std::string& path,
+                                                              const ChunkProgressFn& progress,
+                                                              int threads) {
+  absl::StatusOr<std::unique_ptr<FaceStore>> store = FaceStore::Create(path, tiles.grid());
+  if (!store.ok()) return store.status();
+  if (absl::Status s = CollectBoundaryFacesInto(
+          tiles, [&](std::vector<BoundaryFace>&& f) { return (*store)->Add(f); }, progress,
+          threads);
+      !s.ok()) {
+    return s;
+  }
+  if (absl::Status s = (*store)->Finish(); !s.ok()) return s;
+  return store;
+}
+
 // Floor plans per level (docs/DESIGN.md §6 stages 4–5; §5.3, §3.3) ➜ level_<k>/floorplan.geojson,
 // floorplan.svg, extruded.ply. A level whose plan cannot be made is not fatal: the other outputs
 // stand and job.json says why under "warnings".
-absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
-                            const std::vector<BoundaryFace>& faces,
+absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles, const FaceStore& faces,
                             const std::vector<Level>& levels, const fs::path& out,
                             nlohmann::json& job, nlohmann::json& counts, nlohmann::json& timings,
                             std::vector<std::string>& outputs, std::vector<std::string>& warnings,
@@ -158,17 +177,19 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
     // follows the level, not the building.
     Clock::time_point t0 = Clock::now();
     PlanarRegionSet regions;
-    const std::span<const BoundaryFace> band = LevelBandFaces(faces, levels[k]);
+    const auto [band_begin, band_end] = LevelBand(faces.heights(), levels[k]);
     if (absl::Status s = CheckPlanarMemory(
             options,
             absl::StrCat("level ", k, "'s planar regions (its faces from ",
                          absl::SixDigits(levels[k].split_z_low - kLevelBandMarginM), " to ",
                          absl::SixDigits(levels[k].split_z_high + kLevelBandMarginM), " m)"),
-            band.size());
+            band_end - band_begin);
         !s.ok()) {
       return s;
     }
-    if (absl::StatusOr<PlanarRegionSet> fit = FitPlanarRegions(band, tiles.grid(), {}); fit.ok()) {
+    absl::StatusOr<std::vector<BoundaryFace>> band = faces.Read(band_begin, band_end);
+    if (!band.ok()) return band.status();
+    if (absl::StatusOr<PlanarRegionSet> fit = FitPlanarRegions(*band, tiles.grid(), {}); fit.ok()) {
       regions = *std::move(fit);
     } else {
       return fit.status();
@@ -178,7 +199,7 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles,
     t0 = Clock::now();
     OctreeWallSampleReport sample_report;
     absl::StatusOr<WallSampleSet> samples =
-        OctreeWallSamples(band, regions, tiles.grid(), levels[k], *path, label_at,
+        OctreeWallSamples(*band, regions, tiles.grid(), levels[k], *path, label_at,
                           OctreeWallSampleOptions{}, &sample_report);
     if (!samples.ok()) {
       if (absl::IsInvalidArgument(samples.status()) || absl::IsFailedPrecondition(samples.status())) {
@@ -280,16 +301,10 @@ absl::StatusOr<TriangleMesh> WriteBuildingMesh(PlanarMesh planar, const fs::path
 // shells, joined into one mesh (region ids offset). nullopt when a level's mesh cannot be
 // built (job.json says why).
 absl::StatusOr<std::optional<PlanarMesh>> PlanarMeshByLevel(
-    const MergeOptions& options, const std::vector<BoundaryFace>& faces, TileSet& tiles,
+    const MergeOptions& options, const FaceStore& faces, TileSet& tiles,
     std::span<const Level> levels, nlohmann::json& counts, nlohmann::json& timings,
     std::vector<std::string>& warnings, const MergeProgressCallback& progress) {
   const OctreeGrid& grid = tiles.grid();
-  Eigen::Vector2d xy_min = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
-  Eigen::Vector2d xy_max = -xy_min;
-  for (const BoundaryFace& f : faces) {
-    xy_min = xy_min.cwiseMin(f.center.head<2>() - Eigen::Vector2d::Constant(f.size_m / 2));
-    xy_max = xy_max.cwiseMax(f.center.head<2>() + Eigen::Vector2d::Constant(f.size_m / 2));
-  }
   const InteriorAtFn interior_at = [&tiles](const Eigen::Vector3d& x) -> absl::StatusOr<bool> {
     absl::StatusOr<LeafQuery> q = tiles.Query(x);
     if (!q.ok()) return q.status();
@@ -306,10 +321,18 @@ absl::StatusOr<std::optional<PlanarMesh>> PlanarMeshByLevel(
     const double hi =
         k + 1 >= parts ? std::numeric_limits<double>::infinity() : levels[k + 1].split_z_low;
     const Clock::time_point t0 = Clock::now();
-    absl::StatusOr<CutPlane> high = FindCutPlane(grid, hi, xy_min, xy_max, interior_at);
+    absl::StatusOr<CutPlane> high =
+        FindCutPlane(grid, hi, faces.xy_min(), faces.xy_max(), interior_at);
     if (!high.ok()) return high.status();
-    absl::StatusOr<LevelPart> part = CutLevelPart(faces, grid, low, *high);
+    // The faces that may reach between the planes: a coarse face's centre lies up to half its
+    // side beyond them.
+    const double reach = faces.max_size_m() + grid.resolution_m();
+    const auto [begin, end] = faces.heights().Range(low.z - reach, high->z + reach);
+    absl::StatusOr<std::vector<BoundaryFace>> near = faces.Read(begin, end);
+    if (!near.ok()) return near.status();
+    absl::StatusOr<LevelPart> part = CutLevelPart(*near, grid, low, *high);
     if (!part.ok()) return part.status();
+    *near = {};
     low = *std::move(high);
     cut_seconds += SecondsSince(t0);
     caps += part->caps;
@@ -470,16 +493,17 @@ absl::StatusOr<TriangleMesh> BuildingStage(const MergeOptions& options, const Oc
   absl::StatusOr<std::unique_ptr<TileSet>> btiles =
       TileSet::Open((work / "building").string(), grid.resolution_m(), options.cache_budget_bytes);
   if (!btiles.ok()) return btiles.status();
-  absl::StatusOr<std::vector<BoundaryFace>> bfaces = CollectBoundaryFaces(
-      **btiles, StageProgress(progress, "building_faces"), MergeThreads(options));
+  absl::StatusOr<std::unique_ptr<FaceStore>> bfaces =
+      StoreBoundaryFaces(**btiles, (work / "building.faces").string(),
+                         StageProgress(progress, "building_faces"), MergeThreads(options));
   if (!bfaces.ok()) return bfaces.status();
   // The cache is filled again only by the caps' queries along the split heights and by the
   // dense fallback below.
   (*btiles)->ReleaseCache();
   absl::StatusOr<std::optional<PlanarMesh>> by_level =
-      PlanarMeshByLevel(options, *bfaces, **btiles, levels, counts, timings, warnings, progress);
+      PlanarMeshByLevel(options, **bfaces, **btiles, levels, counts, timings, warnings, progress);
   if (!by_level.ok()) return by_level.status();
-  bfaces = std::vector<BoundaryFace>{};
+  bfaces = nullptr;
   std::optional<TriangleMesh> building;
   if (*by_level) {
     absl::StatusOr<TriangleMesh> written =
@@ -782,28 +806,37 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   std::vector<std::string> outputs;
   std::vector<std::string> warnings;
 
-  // boundary faces (stage 1)
+  // boundary faces (stage 1), sorted by height into a scratch file that the stages below read
+  // a slab or a level at a time (face_store.h)
+  const fs::path scratch = out / ".faces";
+  fs::create_directories(scratch, ec);
+  if (ec) {
+    return absl::UnavailableError(
+        absl::StrCat(scratch.string(), ": cannot create: ", ec.message()));
+  }
+  absl::Cleanup remove_scratch = [&scratch] {
+    std::error_code ignored;
+    fs::remove_all(scratch, ignored);
+  };
   Clock::time_point t0 = Clock::now();
-  absl::StatusOr<std::vector<BoundaryFace>> faces =
-      CollectBoundaryFaces(tiles, StageProgress(progress, "boundary_faces"), MergeThreads(options));
+  absl::StatusOr<std::unique_ptr<FaceStore>> faces =
+      StoreBoundaryFaces(tiles, (scratch / "job.faces").string(),
+                         StageProgress(progress, "boundary_faces"), MergeThreads(options));
   if (!faces.ok()) return InStage("boundary_faces", faces.status());
-  double face_area = 0;
-  for (const BoundaryFace& f : *faces) face_area += f.area_m2();
-  counts["boundary_faces"] = faces->size();
-  counts["boundary_area_m2"] = face_area;
-  // By height: the levels' slabs and each level's band are ranges of them (level_regions.h).
-  if (absl::Status s = SortFacesByHeight(*faces); !s.ok()) return InStage("boundary_faces", s);
+  counts["boundary_faces"] = (*faces)->size();
+  counts["boundary_area_m2"] = (*faces)->area_m2();
   timings["merge.boundary_faces"] = SecondsSince(t0);
   // planar regions (stage 2, §4.2.4) for the levels, fitted a slab of heights at a time
   // (level_regions.h); each level's own are fitted with its floor plan.
   if (absl::Status s = CheckPlanarMemory(options, "the levels' planar regions (a slab of heights)",
-                                         std::min(faces->size(), kLevelSlabFaces));
+                                         std::min<uint64_t>((*faces)->size(), kLevelSlabFaces));
       !s.ok()) {
     return InStage("planar_regions", s);
   }
   t0 = Clock::now();
   if (absl::Status s = ReportMergeProgress(progress, "planar_regions", 0, 1); !s.ok()) return s;
-  absl::StatusOr<std::vector<PlanarRegion>> level_regions = LevelRegions(*faces, grid);
+  absl::StatusOr<std::vector<PlanarRegion>> level_regions =
+      LevelRegions((*faces)->heights(), (*faces)->Reader(), grid);
   if (!level_regions.ok()) return InStage("planar_regions", level_regions.status());
   counts["level_planar_regions"] = level_regions->size();
   timings["merge.planar_regions"] = SecondsSince(t0);
@@ -836,20 +869,20 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   // floor plans (stages 4–5, §5.3, §3.3) ➜ level_<k>/floorplan.geojson, floorplan.svg,
   // extruded.ply; job.json "rooms"
   std::vector<std::pair<Level, FloorPlan>> plans;
-  if (absl::Status s = FloorPlanStage(options, tiles, *faces, levels->levels, out, job, counts,
+  if (absl::Status s = FloorPlanStage(options, tiles, **faces, levels->levels, out, job, counts,
                                       timings, outputs, warnings, progress, plans);
       !s.ok()) {
     return InStage("floorplan", s);
   }
 
-  // The building's faces grow with its size and, once the floor plans are made, serve only the
-  // planar mesh of a job without plans (which fits its own regions).
-  const size_t num_boundary_faces = faces->size();
+  // Once the floor plans are made, the faces serve only the planar mesh of a job without
+  // plans (which fits its own regions).
+  const size_t num_boundary_faces = (*faces)->size();
   const size_t num_planar_regions =
       level_regions->size() + counts.value("floorplan_planar_regions", size_t{0});
   counts["planar_regions"] = num_planar_regions;
   level_regions = std::vector<PlanarRegion>{};
-  if (!plans.empty()) faces = std::vector<BoundaryFace>{};
+  if (!plans.empty()) *faces = nullptr;
 
   // dense mesh (§4.3.3) ➜ mesh/dense.ply, written as it is welded and checked for
   // self-intersections on the way: it grows with the building and is not held.
@@ -900,7 +933,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
     // The regions above made the levels (and would have made the floor plans); the planar
     // mesh gets its own, grown for it (mesh_growth, §4.3.3), a level at a time.
     absl::StatusOr<std::optional<PlanarMesh>> by_level = PlanarMeshByLevel(
-        options, *faces, tiles, levels->levels, counts, timings, warnings, progress);
+        options, **faces, tiles, levels->levels, counts, timings, warnings, progress);
     if (!by_level.ok()) return InStage("planar_mesh", by_level.status());
     std::optional<TriangleMesh> building;
     if (*by_level) {
