@@ -80,6 +80,8 @@ absl::Status ResolveNorth(MergeFlags& flags) {
 }
 
 absl::Status RunMergeCommand(MergeFlags& flags) {
+  // The merge's stages run one after another: what one frees goes back to the system.
+  MapLargeBuffersAlone();
   flags.options.cache_budget_bytes = static_cast<uint64_t>(flags.cache_mb * (1 << 20));
   flags.options.memory_budget_bytes = MemoryBudgetBytes(flags.memory_mb);
   flags.options.job = {{"command", "carvemap merge"},

@@ -388,6 +388,8 @@ absl::Status RunMerger(MergerFlags flags, LogFormat log_format) {
   if (!secret.ok()) return secret.status();
   flags.spec.cluster_secret = *std::move(secret);
   flags.spec.memory_budget_bytes = MemoryBudgetBytes(flags.memory_mb);
+  // The merge's stages run one after another: what one frees goes back to the system.
+  MapLargeBuffersAlone();
   if (flags.spec.memory_budget_bytes > 0) {
     spdlog::info("merger: memory budget {:.0f} MiB",
                  double(flags.spec.memory_budget_bytes) / (1 << 20));

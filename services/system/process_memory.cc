@@ -1,5 +1,7 @@
 #include "services/system/process_memory.h"
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <string>
@@ -25,6 +27,11 @@ ProcessStatus ParseProcessStatus(std::string_view status) {
 
 ProcessStatus ReadProcessStatus() {
   return ParseProcessStatus(ReadSmallFile("/proc/self/status").value_or(""));
+}
+
+bool MapLargeBuffersAlone(size_t min_bytes) {
+  // Setting the threshold also turns glibc's raising of it off.
+  return mallopt(M_MMAP_THRESHOLD, static_cast<int>(min_bytes)) == 1;
 }
 
 std::optional<uint64_t> BytesOfMemoryMax(std::string_view text) {

@@ -3,6 +3,7 @@
 #ifndef CARVEMAP_SERVICES_SYSTEM_PROCESS_MEMORY_H_
 #define CARVEMAP_SERVICES_SYSTEM_PROCESS_MEMORY_H_
 
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string_view>
@@ -21,6 +22,14 @@ ProcessStatus ParseProcessStatus(std::string_view status);
 
 // ParseProcessStatus of /proc/self/status.
 ProcessStatus ReadProcessStatus();
+
+// Has the allocator map each buffer of `min_bytes` or more on its own (glibc's M_MMAP_THRESHOLD),
+// so that a stage's large buffers go back to the system when it frees them. By default glibc
+// raises that threshold to the largest buffer freed so far (up to 32 MiB); after that, buffers
+// below it come from the heap, and what one stage freed stays resident under the next one's
+// peak. For a process that runs stages one after another (the merge). Returns false when the
+// allocator refuses.
+bool MapLargeBuffersAlone(size_t min_bytes = size_t{1} << 20);
 
 // The bytes a cgroup v2 `memory.max` (or v1 `memory.limit_in_bytes`) text allows: nullopt for
 // "max", for v1's "no limit" (a value of 2^62 or more) and for text that does not parse.

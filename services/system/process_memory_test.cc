@@ -23,6 +23,20 @@ TEST(ProcessStatus, ResidentGrowsWithTouchedMemoryAndPeakHoldsIt) {
   EXPECT_GE(after.peak_resident_bytes, before.resident_bytes + (size_t{60} << 20));
 }
 
+TEST(ProcessStatus, FreedLargeBuffersLeaveTheResidentSet) {
+  ASSERT_TRUE(MapLargeBuffersAlone());
+  // A 24 MiB buffer freed would have raised glibc's threshold above the 8 MiB one below, which
+  // would then have come from the heap and stayed resident once freed.
+  { std::vector<char> big(size_t{24} << 20, 1); }
+  uint64_t with = 0;
+  {
+    std::vector<char> block(size_t{8} << 20, 1);
+    with = ReadProcessStatus().resident_bytes;
+  }
+  const uint64_t without = ReadProcessStatus().resident_bytes;
+  EXPECT_GE(with, without + (size_t{7} << 20));
+}
+
 TEST(ProcessStatus, StatusText) {
   const ProcessStatus m = ParseProcessStatus(
       "Name:\tcarvemap\nVmPeak:\t 900000 kB\nVmHWM:\t  812344 kB\nVmRSS:\t  402112 kB\n"
