@@ -101,9 +101,10 @@ absl::Status RunMergeCommand(MergeFlags& flags) {
   const MergeSummary& s = *summary;
   std::cout << std::fixed << std::setprecision(3) << "merged " << s.num_tiles << " tiles, "
             << s.num_leaves << " leaves at " << s.resolution_m << " m in " << s.seconds_total
-            << " s\n"
-            << "  interior " << s.interior_volume_m3 << " m3, observed exterior "
-            << s.exterior_observed_volume_m3 << " m3\n"
+            << " s, peak memory " << std::setprecision(0)
+            << double(ReadProcessStatus().peak_resident_bytes) / (1 << 20) << " MiB\n"
+            << std::setprecision(3) << "  interior " << s.interior_volume_m3
+            << " m3, observed exterior " << s.exterior_observed_volume_m3 << " m3\n"
             << "  " << s.octree_bt_path << ": " << s.num_bt_nodes << " nodes (OctoMap .bt)\n";
   if (s.topdown_width > 0) {
     std::cout << "  " << s.topdown_png_path << ": " << s.topdown_width << "x" << s.topdown_height
