@@ -12,7 +12,7 @@
 // measures the difference on the office). Walls are cut there; the levels do not read them.
 //
 // Walls: each level's wall samples come from the regions of the faces in its height range and
-// a margin (LevelBandFaces), fitted for that level alone.
+// a margin (LevelBand), fitted for that level alone.
 //
 // Both read the faces sorted by height (sorted_faces.h) a range at a time, so that the merge
 // holds a slab's or a level's faces, not the building's.
@@ -25,7 +25,6 @@
 #include <utility>
 #include <vector>
 
-#include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "services/geometry/octree_keys.h"
 #include "services/levels/level_split.h"

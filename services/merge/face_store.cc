@@ -69,10 +69,9 @@ absl::StatusOr<std::vector<BoundaryFace>> ReadRecords(const std::string& path, u
 
 FaceStore::FaceStore(std::string path, const OctreeGrid& grid)
     : path_(std::move(path)),
-      half_cell_m_(grid.resolution_m() / 2),
       xy_min_(Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity())),
       xy_max_(-xy_min_) {
-  heights_.half_cell_m = half_cell_m_;
+  heights_.half_cell_m = grid.resolution_m() / 2;
 }
 
 absl::StatusOr<std::unique_ptr<FaceStore>> FaceStore::Create(std::string path,

@@ -75,7 +75,6 @@ class FaceStore {
   absl::Status Flush(Bucket& bucket);
 
   std::string path_;
-  double half_cell_m_ = 0;
   std::map<int64_t, Bucket> buckets_;  // by floor(height / kFaceBucketM)
   bool finished_ = false;
   FaceHeights heights_;

@@ -44,7 +44,7 @@ absl::Status FaceHeights::Append(double z) {
     return absl::InvalidArgumentError(
         absl::StrCat("face ", size(), " has a height that is not finite (", z, " m)"));
   }
-  const int64_t key = std::llround(h);
+  const int64_t key = KeyOf(z);
   if (starts.empty()) starts.push_back(0);
   if (!keys.empty() && key < keys.back()) {
     return absl::InvalidArgumentError(absl::StrCat("the faces are not sorted by height (face ",

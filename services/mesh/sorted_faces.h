@@ -37,7 +37,7 @@ struct FaceHeights {
   std::vector<uint64_t> starts;  // starts[i]: the first face at keys[i]; then the face count
 
   [[nodiscard]] uint64_t size() const { return starts.empty() ? 0 : starts.back(); }
-  // The face's height key.
+  // The key of height `z`.
   [[nodiscard]] int64_t KeyOf(double z) const;
   // The index range [begin, end) of the faces whose centre height lies in [z_low, z_high)
   // (either may be ±infinity).
