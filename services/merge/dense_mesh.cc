@@ -207,7 +207,7 @@ absl::StatusOr<std::vector<BoundaryFace>> CollectBoundaryFaces(TileSet& tiles,
       },
       progress, threads);
   if (!s.ok()) return s;
-  // Grown by doubling, the vector can hold twice its faces; the later stages keep it whole.
+  // Grown by doubling, the vector can hold twice its faces; its callers keep it whole.
   faces.shrink_to_fit();
   return faces;
 }

@@ -94,15 +94,22 @@ FaceStore::~FaceStore() {
 
 absl::Status FaceStore::Add(std::span<const BoundaryFace> faces) {
   if (finished_) return absl::FailedPreconditionError(absl::StrCat(path_, ": already sorted"));
+  // A chunk's faces lie within a few buckets: the last one found is looked up first.
+  int64_t last_key = 0;
+  Bucket* last = nullptr;
   for (const BoundaryFace& f : faces) {
     if (!f.center.allFinite()) {
       return absl::InvalidArgumentError(
           absl::StrCat(path_, ": a boundary face's centre is not finite"));
     }
     const int64_t k = static_cast<int64_t>(std::floor(f.center.z() / kFaceBucketM));
-    auto [it, added] = buckets_.try_emplace(k);
-    if (added) it->second.path = absl::StrCat(path_, ".", k);
-    Bucket& bucket = it->second;
+    if (last == nullptr || k != last_key) {
+      auto [it, added] = buckets_.try_emplace(k);
+      if (added) it->second.path = absl::StrCat(path_, ".", k);
+      last_key = k;
+      last = &it->second;
+    }
+    Bucket& bucket = *last;
     const size_t at = bucket.pending.size();
     bucket.pending.resize(at + kRecordBytes);
     Encode(f, bucket.pending.data() + at);

@@ -314,6 +314,9 @@ absl::StatusOr<std::optional<PlanarMesh>> PlanarMeshByLevel(
   PlanarMesh joined;
   size_t regions_before = 0, caps = 0;
   double cut_seconds = 0;
+  // The faces that may reach between two planes: a coarse face's centre lies up to half its
+  // side beyond them.
+  const double reach = faces.max_size_m() + grid.resolution_m();
   // Each split height's plane caps the parts on both its sides: found once, kept for the next.
   CutPlane low{-std::numeric_limits<double>::infinity(), {}};
   for (size_t k = 0; k < parts; ++k) {
@@ -324,9 +327,6 @@ absl::StatusOr<std::optional<PlanarMesh>> PlanarMeshByLevel(
     absl::StatusOr<CutPlane> high =
         FindCutPlane(grid, hi, faces.xy_min(), faces.xy_max(), interior_at);
     if (!high.ok()) return high.status();
-    // The faces that may reach between the planes: a coarse face's centre lies up to half its
-    // side beyond them.
-    const double reach = faces.max_size_m() + grid.resolution_m();
     const auto [begin, end] = faces.heights().Range(low.z - reach, high->z + reach);
     absl::StatusOr<std::vector<BoundaryFace>> near = faces.Read(begin, end);
     if (!near.ok()) return near.status();
@@ -363,6 +363,23 @@ absl::StatusOr<std::optional<PlanarMesh>> PlanarMeshByLevel(
   counts["building_level_caps"] = caps;
   timings["merge.planar_mesh_level_cut"] = cut_seconds;
   return std::optional<PlanarMesh>(std::move(joined));
+}
+
+// PlanarMeshByLevel written by WriteBuildingMesh: the mesh written, or nullopt when a level's
+// mesh cannot be built (job.json says why).
+absl::StatusOr<std::optional<TriangleMesh>> PlanarBuildingMesh(
+    const MergeOptions& options, const FaceStore& faces, TileSet& tiles,
+    std::span<const Level> levels, const fs::path& out, nlohmann::json& counts,
+    nlohmann::json& timings, std::vector<std::string>& outputs, std::vector<std::string>& warnings,
+    const MergeProgressCallback& progress) {
+  absl::StatusOr<std::optional<PlanarMesh>> by_level =
+      PlanarMeshByLevel(options, faces, tiles, levels, counts, timings, warnings, progress);
+  if (!by_level.ok()) return by_level.status();
+  if (!*by_level) return std::optional<TriangleMesh>();
+  absl::StatusOr<TriangleMesh> written =
+      WriteBuildingMesh(**std::move(by_level), out, counts, timings, outputs, warnings);
+  if (!written.ok()) return written.status();
+  return std::optional<TriangleMesh>(*std::move(written));
 }
 
 // §5.6's object split as this job asks for it; the re-carving region reaches as far up as the
@@ -500,17 +517,11 @@ absl::StatusOr<TriangleMesh> BuildingStage(const MergeOptions& options, const Oc
   // The cache is filled again only by the caps' queries along the split heights and by the
   // dense fallback below.
   (*btiles)->ReleaseCache();
-  absl::StatusOr<std::optional<PlanarMesh>> by_level =
-      PlanarMeshByLevel(options, **bfaces, **btiles, levels, counts, timings, warnings, progress);
-  if (!by_level.ok()) return by_level.status();
+  absl::StatusOr<std::optional<TriangleMesh>> planar = PlanarBuildingMesh(
+      options, **bfaces, **btiles, levels, out, counts, timings, outputs, warnings, progress);
+  if (!planar.ok()) return planar.status();
   bfaces = nullptr;
-  std::optional<TriangleMesh> building;
-  if (*by_level) {
-    absl::StatusOr<TriangleMesh> written =
-        WriteBuildingMesh(**std::move(by_level), out, counts, timings, outputs, warnings);
-    if (!written.ok()) return written.status();
-    building = *std::move(written);
-  }
+  std::optional<TriangleMesh> building = *std::move(planar);
   if (!building) {
     // The planar mesher failed (its reason is in the warnings): the building volume's dense
     // mesh stands in, watertight by construction, so combined.ply stays whole.
@@ -932,17 +943,10 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
     }
     // The regions above made the levels (and would have made the floor plans); the planar
     // mesh gets its own, grown for it (mesh_growth, §4.3.3), a level at a time.
-    absl::StatusOr<std::optional<PlanarMesh>> by_level = PlanarMeshByLevel(
-        options, **faces, tiles, levels->levels, counts, timings, warnings, progress);
-    if (!by_level.ok()) return InStage("planar_mesh", by_level.status());
-    std::optional<TriangleMesh> building;
-    if (*by_level) {
-      absl::StatusOr<TriangleMesh> written =
-          WriteBuildingMesh(**std::move(by_level), out, counts, timings, outputs, warnings);
-      if (!written.ok()) return InStage("planar_mesh", written.status());
-      building = *std::move(written);
-    }
-    if (building) building_triangles = building->triangles.size();
+    absl::StatusOr<std::optional<TriangleMesh>> building = PlanarBuildingMesh(
+        options, **faces, tiles, levels->levels, out, counts, timings, outputs, warnings, progress);
+    if (!building.ok()) return InStage("planar_mesh", building.status());
+    if (*building) building_triangles = (*building)->triangles.size();
     timings["merge.planar_mesh"] = SecondsSince(t0);
   } else {
     absl::StatusOr<SegmentStageResult> seg =
