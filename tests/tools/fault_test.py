@@ -198,7 +198,10 @@ def check_json_logs(trial):
 def cmd_coordinator_restart(args):
     ref = reference(args)
     moments = [
-        ("ingest", lambda j: state(j) == "INGESTING"),
+        # The ingest is the slices' binning: INGESTING itself only plans the slices (a few
+        # milliseconds), so the moment also covers CARVING before any slice is committed.
+        ("ingest", lambda j: state(j) == "INGESTING"
+         or (state(j) == "CARVING" and j.progress.chunks_done == 0)),
         ("carving", lambda j: state(j) == "CARVING"
          and j.progress.chunks_done >= j.progress.chunks_total // 3),
         # The merge's second pass: chunks queued or leased again during MERGING (docs/RPC.md).
