@@ -6,6 +6,7 @@
 #include <deque>
 #include <numeric>
 #include <queue>
+#include <span>
 #include <tuple>
 #include <utility>
 
@@ -138,7 +139,9 @@ std::vector<Link> Aggregate(std::vector<Link> links) {
     }
   }
   links.resize(kept);
-  links.shrink_to_fit();
+  // A copy at the new size costs both vectors at once: worth it only when it frees much (the
+  // groups' links, a fraction of the faces'), not for the face links, nearly all distinct.
+  if (kept < links.capacity() / 2) links.shrink_to_fit();
   return links;
 }
 
@@ -385,6 +388,11 @@ class Fitter {
     }
     face_comp_.assign(faces_.size(), 0);
     std::vector<int64_t> comp_of_root(faces_.size(), -1);
+    // Made at their number: a group is ~350 B, and a doubling vector holds up to three times
+    // as many during its last copy.
+    size_t num_comps = 0;
+    for (uint32_t i = 0; i < faces_.size(); ++i) num_comps += uf.Find(i) == i;
+    comps_.reserve(num_comps);
     for (uint32_t i = 0; i < faces_.size(); ++i) {  // ids in canonical order of first face
       const uint32_t r = uf.Find(i);
       if (comp_of_root[r] < 0) {
@@ -409,12 +417,27 @@ class Fitter {
     }
     links.resize(kept);
     comp_links_ = Aggregate(std::move(links));
-    comp_adj_.assign(comps_.size(), {});
-    for (uint32_t i = 0; i < comp_links_.size(); ++i) {
-      comp_adj_[comp_links_[i].a].push_back(comp_links_[i].b);
-      comp_adj_[comp_links_[i].b].push_back(comp_links_[i].a);
+    // Each group's neighbours, sorted: one flat array (CSR) rather than a vector per group.
+    comp_adj_start_.assign(comps_.size() + 1, 0);
+    for (const Link& l : comp_links_) {
+      ++comp_adj_start_[l.a + 1];
+      ++comp_adj_start_[l.b + 1];
     }
-    for (auto& adj : comp_adj_) std::sort(adj.begin(), adj.end());
+    std::partial_sum(comp_adj_start_.begin(), comp_adj_start_.end(), comp_adj_start_.begin());
+    comp_adj_.resize(comp_adj_start_.back());
+    std::vector<uint32_t> fill(comp_adj_start_.begin(), comp_adj_start_.end() - 1);
+    for (const Link& l : comp_links_) {
+      comp_adj_[fill[l.a]++] = l.b;
+      comp_adj_[fill[l.b]++] = l.a;
+    }
+    for (size_t c = 0; c < comps_.size(); ++c) {
+      std::sort(comp_adj_.begin() + comp_adj_start_[c], comp_adj_.begin() + comp_adj_start_[c + 1]);
+    }
+  }
+
+  std::span<const uint32_t> Neighbours(uint32_t c) const {
+    return std::span<const uint32_t>(comp_adj_).subspan(
+        comp_adj_start_[c], comp_adj_start_[c + 1] - comp_adj_start_[c]);
   }
 
   // --- (b) PCA region growing (§4.2.4, Fig 4.6c) --------------------------------------------
@@ -509,11 +532,13 @@ class Fitter {
     for (uint32_t seed : order) {
       if (comp_region_[seed] >= 0) continue;
       const int64_t rid = int64_t(regions_.size());
-      Group r = comps_[seed];
+      // A group is read no more once it is in a region: the seed is moved into it, and an
+      // absorbed group's faces freed, so the groups' faces are not held twice.
+      Group r = std::move(comps_[seed]);
       r.limit = std::max(tol_, r.max_dist);
-      std::vector<uint32_t> members = {seed};
       comp_region_[seed] = rid;
-      std::deque<uint32_t> queue(comp_adj_[seed].begin(), comp_adj_[seed].end());
+      const std::span<const uint32_t> seed_adj = Neighbours(seed);
+      std::deque<uint32_t> queue(seed_adj.begin(), seed_adj.end());
       while (!queue.empty()) {
         const uint32_t c = queue.front();
         queue.pop_front();
@@ -523,13 +548,17 @@ class Fitter {
         tested_weight[c] = r.area;
         if (!TryAbsorb(r, comps_[c])) continue;
         comp_region_[c] = rid;
-        members.push_back(c);
-        for (uint32_t d : comp_adj_[c]) {
+        comps_[c] = Group();
+        for (uint32_t d : Neighbours(c)) {
           if (comp_region_[d] < 0) queue.push_back(d);
         }
       }
       regions_.push_back(std::move(r));
     }
+    flood_fill_groups_ = comps_.size();
+    std::vector<Group>().swap(comps_);
+    std::vector<uint32_t>().swap(comp_adj_);
+    std::vector<size_t>().swap(comp_adj_start_);
   }
 
   // --- (c) Relaxation: merge adjacent regions within 15° (§4.2.4, Fig 4.6d) -----------------
@@ -566,6 +595,8 @@ class Fitter {
       const uint32_t a = uint32_t(comp_region_[l.a]), b = uint32_t(comp_region_[l.b]);
       if (a != b) links.push_back({std::min(a, b), std::max(a, b), l.boundary});
     }
+    std::vector<Link>().swap(comp_links_);
+    std::vector<int64_t>().swap(comp_region_);
     links = Aggregate(std::move(links));
     std::vector<absl::flat_hash_map<uint32_t, Boundary>> adj(nr);
     for (const Link& l : links) {
@@ -651,7 +682,7 @@ class Fitter {
 
   PlanarRegionSet Output() const {
     PlanarRegionSet out;
-    out.flood_fill_groups = comps_.size();
+    out.flood_fill_groups = flood_fill_groups_;
     out.grown_regions = grown_regions_;
     out.face_region.assign(faces_.size(), -1);
     std::vector<std::pair<uint32_t, size_t>> by_first;  // (smallest input index, region)
@@ -692,7 +723,9 @@ class Fitter {
   std::vector<uint32_t> face_comp_;
   std::vector<Group> comps_;
   std::vector<Link> comp_links_;
-  std::vector<std::vector<uint32_t>> comp_adj_;
+  std::vector<uint32_t> comp_adj_;      // groups' neighbours, group c's at
+  std::vector<size_t> comp_adj_start_;  // [comp_adj_start_[c], comp_adj_start_[c + 1])
+  size_t flood_fill_groups_ = 0;
   std::vector<int64_t> comp_region_;
   std::vector<Group> regions_;
   double recompute_budget_ = 0;
