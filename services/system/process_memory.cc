@@ -34,6 +34,8 @@ bool MapLargeBuffersAlone(size_t min_bytes) {
   return mallopt(M_MMAP_THRESHOLD, static_cast<int>(min_bytes)) == 1;
 }
 
+bool ReturnFreedMemory() { return malloc_trim(0) == 1; }
+
 std::optional<uint64_t> BytesOfMemoryMax(std::string_view text) {
   const std::string s(text);
   unsigned long long bytes = 0;

@@ -31,6 +31,13 @@ ProcessStatus ReadProcessStatus();
 // allocator refuses.
 bool MapLargeBuffersAlone(size_t min_bytes = size_t{1} << 20);
 
+// Gives the system back the whole free pages inside the allocator's heaps (glibc's
+// malloc_trim). A stage that makes and frees millions of small blocks (the planar regions'
+// groups) leaves them free but resident, scattered below blocks still in use, where the next
+// stage's peak sits on top of them. Returns whether any memory was given back. Costs a walk
+// over the free lists: call it between stages, not in loops.
+bool ReturnFreedMemory();
+
 // The bytes a cgroup v2 `memory.max` (or v1 `memory.limit_in_bytes`) text allows: nullopt for
 // "max", for v1's "no limit" (a value of 2^62 or more) and for text that does not parse.
 std::optional<uint64_t> BytesOfMemoryMax(std::string_view text);

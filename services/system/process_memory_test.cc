@@ -1,6 +1,8 @@
 #include "services/system/process_memory.h"
 
+#include <array>
 #include <cstring>
+#include <memory>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -35,6 +37,23 @@ TEST(ProcessStatus, FreedLargeBuffersLeaveTheResidentSet) {
   }
   const uint64_t without = ReadProcessStatus().resident_bytes;
   EXPECT_GE(with, without + (size_t{7} << 20));
+}
+
+TEST(ProcessStatus, FreedSmallBlocksGoBackWhenAsked) {
+  // 64 MiB in 64-byte blocks, then all freed but every 4096th (one per ~256 KiB): glibc keeps
+  // the free pages between the survivors resident until ReturnFreedMemory.
+  std::vector<std::unique_ptr<std::array<char, 64>>> blocks(size_t{1} << 20);
+  for (auto& b : blocks) {
+    b = std::make_unique<std::array<char, 64>>();
+    b->fill(1);
+  }
+  for (size_t i = 0; i < blocks.size(); ++i) {
+    if (i % 4096 != 0) blocks[i].reset();
+  }
+  const uint64_t freed = ReadProcessStatus().resident_bytes;
+  ReturnFreedMemory();
+  const uint64_t returned = ReadProcessStatus().resident_bytes;
+  EXPECT_GE(freed, returned + (size_t{32} << 20));
 }
 
 TEST(ProcessStatus, StatusText) {
