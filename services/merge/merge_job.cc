@@ -174,7 +174,10 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles, const F
       return s;
     }
     // §4.2.4's regions of this level's faces alone (level_regions.h): the memory of the fit
-    // follows the level, not the building.
+    // follows the level, not the building. The tiles the last level's wall samples read are
+    // dropped first: the fit reads none, and this level's samples read other ones.
+    tiles.ReleaseCache();
+    ReturnFreedMemory();  // the last level's fit: millions of small blocks, freed
     Clock::time_point t0 = Clock::now();
     PlanarRegionSet regions;
     const auto [band_begin, band_end] = LevelBand(faces.heights(), levels[k]);
@@ -327,6 +330,8 @@ absl::StatusOr<std::optional<PlanarMesh>> PlanarMeshByLevel(
     absl::StatusOr<CutPlane> high =
         FindCutPlane(grid, hi, faces.xy_min(), faces.xy_max(), interior_at);
     if (!high.ok()) return high.status();
+    tiles.ReleaseCache();  // the plane's tiles are not read again; the fit below reads none
+    ReturnFreedMemory();   // what the last level's fit and mesh freed
     const auto [begin, end] = faces.heights().Range(low.z - reach, high->z + reach);
     absl::StatusOr<std::vector<BoundaryFace>> near = faces.Read(begin, end);
     if (!near.ok()) return near.status();
@@ -514,8 +519,8 @@ absl::StatusOr<TriangleMesh> BuildingStage(const MergeOptions& options, const Oc
       StoreBoundaryFaces(**btiles, (work / "building.faces").string(),
                          StageProgress(progress, "building_faces"), MergeThreads(options));
   if (!bfaces.ok()) return bfaces.status();
-  // The cache is filled again only by the caps' queries along the split heights and by the
-  // dense fallback below.
+  // The cache is filled again only by the caps' queries along each split height (dropped
+  // before each level's fit) and by the dense fallback below.
   (*btiles)->ReleaseCache();
   absl::StatusOr<std::optional<TriangleMesh>> planar = PlanarBuildingMesh(
       options, **bfaces, **btiles, levels, out, counts, timings, outputs, warnings, progress);
@@ -834,6 +839,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
       StoreBoundaryFaces(tiles, (scratch / "job.faces").string(),
                          StageProgress(progress, "boundary_faces"), MergeThreads(options));
   if (!faces.ok()) return InStage("boundary_faces", faces.status());
+  tiles.ReleaseCache();  // the levels' fits read no tile; the wall samples read their own
   counts["boundary_faces"] = (*faces)->size();
   counts["boundary_area_m2"] = (*faces)->area_m2();
   timings["merge.boundary_faces"] = SecondsSince(t0);
@@ -849,6 +855,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   absl::StatusOr<std::vector<PlanarRegion>> level_regions =
       LevelRegions((*faces)->heights(), (*faces)->Reader(), grid);
   if (!level_regions.ok()) return InStage("planar_regions", level_regions.status());
+  ReturnFreedMemory();  // the slabs' fits
   counts["level_planar_regions"] = level_regions->size();
   timings["merge.planar_regions"] = SecondsSince(t0);
 
