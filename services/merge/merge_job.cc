@@ -177,7 +177,7 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles, const F
     // follows the level, not the building. The tiles the last level's wall samples read are
     // dropped first: the fit reads none, and this level's samples read other ones.
     tiles.ReleaseCache();
-    ReturnFreedMemory();  // the last level's fit: millions of small blocks, freed
+    ReturnFreedMemory();  // the small blocks the last fit freed (millions of them)
     Clock::time_point t0 = Clock::now();
     PlanarRegionSet regions;
     const auto [band_begin, band_end] = LevelBand(faces.heights(), levels[k]);
