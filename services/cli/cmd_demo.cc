@@ -144,6 +144,7 @@ absl::Status RunDemo(const DemoFlags& flags) {
       "  input/gt/               the truth: building.json, surfaces.ply, objects.ply\n"
       "                          (docs/DESIGN.md §4)\n"
       "  octree.bt               the carved occupancy octree (OctoMap binary; opens in octovis)\n"
+      "  octree.ot               the same with each node's log-odds (OctoMap's library reads it)\n"
       "  levels.json             floor and ceiling heights of each level (§5.2)\n"
       "  level_<k>/              topdown.png open-height map (§5.4); floorplan.geojson and .svg,\n"
       "                          the rooms (§3.3); extruded.ply, the 2.5D model\n"

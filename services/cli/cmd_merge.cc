@@ -1,7 +1,7 @@
 // `carvemap merge TILES_DIR -o OUT [--scan SCAN.h5] [--resolution R]`: the merge (docs/DESIGN.md
-// §6, §7) of a tiles directory: OUT/octree.bt, OUT/levels.json, OUT/level_<k>/topdown.png (+
-// topdown.json), with --scan OUT/level_<k>/floorplan.geojson, floorplan.svg and extruded.ply,
-// OUT/mesh/dense.ply, OUT/mesh/building.ply and OUT/job.json.
+// §6, §7) of a tiles directory: OUT/octree.bt, OUT/octree.ot, OUT/levels.json,
+// OUT/level_<k>/topdown.png (+ topdown.json), with --scan OUT/level_<k>/floorplan.geojson,
+// floorplan.svg and extruded.ply, OUT/mesh/dense.ply, OUT/mesh/building.ply and OUT/job.json.
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -105,7 +105,9 @@ absl::Status RunMergeCommand(MergeFlags& flags) {
             << double(ReadProcessStatus().peak_resident_bytes) / (1 << 20) << " MiB\n"
             << std::setprecision(3) << "  interior " << s.interior_volume_m3
             << " m3, observed exterior " << s.exterior_observed_volume_m3 << " m3\n"
-            << "  " << s.octree_bt_path << ": " << s.num_bt_nodes << " nodes (OctoMap .bt)\n";
+            << "  " << s.octree_bt_path << ": " << s.num_bt_nodes << " nodes (OctoMap .bt)\n"
+            << "  " << s.octree_ot_path << ": " << s.num_ot_nodes
+            << " nodes (OctoMap .ot, log-odds)\n";
   if (s.topdown_width > 0) {
     std::cout << "  " << s.topdown_png_path << ": " << s.topdown_width << "x" << s.topdown_height
               << " px, origin (" << s.topdown_origin_x_m << ", " << s.topdown_origin_y_m
@@ -136,9 +138,10 @@ absl::Status RunMergeCommand(MergeFlags& flags) {
 
 void RegisterMerge(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
-      "merge", "Merge carved tiles into the job's outputs: octree.bt (OctoMap), levels.json, "
-               "level_<k>/topdown.png (open height, §5.4), mesh/dense.ply, mesh/building.ply "
-               "and job.json");
+      "merge",
+      "Merge carved tiles into the job's outputs: octree.bt and octree.ot (OctoMap), levels.json, "
+      "level_<k>/topdown.png (open height, §5.4), mesh/dense.ply, mesh/building.ply "
+      "and job.json");
   auto flags = std::make_shared<MergeFlags>();
   cmd->add_option("tiles", flags->options.tiles_dir, "Directory of c_<x>_<y>_<z>.h5 tiles")
       ->required();
@@ -178,8 +181,9 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
   cmd->add_option("--topdown-max-m", flags->options.topdown_max_height_m,
                   "Open height drawn as white (255) in topdown.png")
       ->capture_default_str();
-  cmd->add_flag("!--no-meshes", flags->options.meshes,
-                "Skip faces, regions, levels and meshes (octree.bt, level_0 and job.json only)");
+  cmd->add_flag(
+      "!--no-meshes", flags->options.meshes,
+      "Skip faces, regions, levels and meshes (octree.bt, octree.ot, level_0 and job.json only)");
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress line");
   cmd->callback([flags, &exit_code] { exit_code = ReportStatus("merge", RunMergeCommand(*flags)); });
 }

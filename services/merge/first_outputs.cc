@@ -8,7 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "services/geometry/octree_keys.h"
-#include "services/merge/octree_bt_writer.h"
+#include "services/merge/octomap_writer.h"
 #include "services/merge/tile_set.h"
 #include "services/merge/topdown_map.h"
 #include "storage/atomic_file.h"
@@ -122,12 +122,28 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
     return absl::OkStatus();
   };
   summary.octree_bt_path = (out / "octree.bt").string();
-  absl::StatusOr<OctreeBtStats> bt = WriteOctreeBt(tiles, summary.octree_bt_path, visit);
+  absl::StatusOr<OctomapFileStats> bt = WriteOctreeBt(tiles, summary.octree_bt_path, visit);
   if (!bt.ok()) return bt.status();
   summary.num_tiles = bt->num_tiles;
   summary.num_bt_nodes = bt->num_nodes;
   timings["merge.octree_bt"] = SecondsSince(t0);
   if (absl::Status s = ReportMergeProgress(progress, "octree_bt", num_tiles, num_tiles); !s.ok()) return s;
+
+  // octree.ot: the same tree with each node's log-odds (a second read of each tile: its
+  // pruning differs from the .bt's, so the two cannot share one walk's placeholders).
+  t0 = Clock::now();
+  uint64_t visited_ot = 0;
+  summary.octree_ot_path = (out / "octree.ot").string();
+  absl::StatusOr<OctomapFileStats> ot =
+      WriteOctreeOt(tiles, summary.octree_ot_path, [&](const TileData&) {
+        return ReportMergeProgress(progress, "octree_ot", visited_ot++, num_tiles);
+      });
+  if (!ot.ok()) return ot.status();
+  summary.num_ot_nodes = ot->num_nodes;
+  timings["merge.octree_ot"] = SecondsSince(t0);
+  if (absl::Status s = ReportMergeProgress(progress, "octree_ot", num_tiles, num_tiles); !s.ok()) {
+    return s;
+  }
 
   // level_<k>/topdown.png (§5.4), one per level
   t0 = Clock::now();
@@ -166,6 +182,7 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
   Put(job, "versions", "carvemap", CARVEMAP_VERSION);
   Put(job, "versions", "tile_format", absl::StrCat(kTileFormat, "/", kTileVersion));
   Put(job, "versions", "octree_bt", "OctoMap OcTree binary (id OcTree)");
+  Put(job, "versions", "octree_ot", "OctoMap OcTree file (id OcTree, float log-odds)");
   Put(job, "versions", "topdown", "carvemap-topdown/1");
   Put(job, "parameters", "merge",
       {{"tiles_dir", options.tiles_dir},
@@ -173,8 +190,11 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
        {"chunk_depth", summary.chunk_depth},
        {"cache_budget_bytes", options.cache_budget_bytes},
        {"topdown_max_height_m", options.topdown_max_height_m},
-       {"bt_occupancy", "free = observed with p > 0.5 (interior), occupied = observed with "
-                        "p <= 0.5, unknown = unobserved"},
+       {"bt_occupancy",
+        "free = observed with p > 0.5 (interior), occupied = observed with "
+        "p <= 0.5, unknown = unobserved"},
+       {"ot_log_odds", absl::StrCat("log(q / (1 - q)), q = 1 - p clamped to [", kOtMinProbability,
+                                    ", 1 - ", kOtMinProbability, "]; unobserved: no node")},
        {"topdown_levels", options.levels.empty()
                               ? "level_0 covers the whole height (no levels found)"
                               : "level_<k> covers levels.json's [split_z_low, split_z_high)"}});
@@ -183,6 +203,7 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
   Put(job, "counts", "leaves", total_leaves);
   Put(job, "counts", "observed_leaves", summary.num_observed_leaves);
   Put(job, "counts", "octree_bt_nodes", summary.num_bt_nodes);
+  Put(job, "counts", "octree_ot_nodes", summary.num_ot_nodes);
   Put(job, "counts", "interior_volume_m3", summary.interior_volume_m3);
   Put(job, "counts", "exterior_observed_volume_m3", summary.exterior_observed_volume_m3);
   Put(job, "counts", "observed_volume_m3", summary.observed_volume_m3);
@@ -200,7 +221,7 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
   nlohmann::json outputs = job.contains("outputs") && job["outputs"].is_array()
                                ? job["outputs"]
                                : nlohmann::json::array();
-  std::vector<std::string> mine = {"octree.bt", "job.json"};
+  std::vector<std::string> mine = {"octree.bt", "octree.ot", "job.json"};
   mine.insert(mine.end(), topdown_outputs.begin(), topdown_outputs.end());
   for (const std::string& name : mine) {
     if (std::find(outputs.begin(), outputs.end(), name) == outputs.end()) outputs.push_back(name);

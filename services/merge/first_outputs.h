@@ -1,5 +1,6 @@
 // The first merge outputs of a job (docs/DESIGN.md §6, §7): from the carved tiles, out of core,
 //   <output_dir>/octree.bt              OctoMap binary tree (occupancy from p) — opens in octovis
+//   <output_dir>/octree.ot              OctoMap tree with each node's log-odds (from p)
 //   <output_dir>/level_0/topdown.png    open-height map (§5.4); level_0 covers the whole
 //                                       height until levels (§5.2, docs/DESIGN.md §6.3) exist
 //   <output_dir>/level_0/topdown.json   its georeference (origin, resolution) and gray scale
@@ -51,8 +52,8 @@ struct FirstOutputsOptions {
   [[nodiscard]] absl::Status Validate() const;
 };
 
-// Progress of a running merge: `stage` is "index", "octree_bt", "topdown_png" or "job_json";
-// `done`/`total` count tiles (or 0/1 for single-step stages).
+// Progress of a running merge: `stage` is "index", "octree_bt", "octree_ot", "topdown_png" or
+// "job_json"; `done`/`total` count tiles (or 0/1 for single-step stages).
 struct MergeProgress {
   std::string stage;
   uint64_t done = 0;
@@ -68,6 +69,7 @@ absl::Status ReportMergeProgress(const MergeProgressCallback& progress, const ch
 struct MergeSummary {
   // Absolute-or-as-given paths of what was written.
   std::string octree_bt_path;
+  std::string octree_ot_path;
   std::string topdown_png_path;
   std::string topdown_json_path;
   std::string job_json_path;
@@ -78,6 +80,7 @@ struct MergeSummary {
   uint64_t num_leaves = 0;           // rows over all tiles
   uint64_t num_observed_leaves = 0;  // count > 0
   uint64_t num_bt_nodes = 0;         // nodes of octree.bt (its "size" line)
+  uint64_t num_ot_nodes = 0;         // nodes of octree.ot
   double interior_volume_m3 = 0;           // observed with p > 0.5 (open space)
   double exterior_observed_volume_m3 = 0;  // observed with p ≤ 0.5 (solid)
   double observed_volume_m3 = 0;           // both
@@ -102,14 +105,14 @@ struct MergeSummary {
   nlohmann::json job;  // exactly what was written to job.json
 };
 
-// Runs the merge's first outputs over `options.tiles_dir`, reading each tile once (octree.bt,
-// counts and the topdown sums share that read). Memory: the tile cache plus the topdown image
-// (5 bytes per pixel at the octree resolution over the chunks' xy bounding box).
-// Errors name the file: NotFound for a missing tiles dir; DataLoss for a corrupt tile or one
-// whose content disagrees with its name; InvalidArgument for bad options or tiles of mixed or
-// unexpected resolution; OutOfRange for chunks beyond OctoMap's 16-level key space; Cancelled
-// when `progress` returns false; Unavailable for I/O errors on the outputs.
-// Not thread-safe with other HDF5 use in the process (storage/tile_store.h).
+// Runs the merge's first outputs over `options.tiles_dir`, reading each tile twice (octree.bt,
+// counts and the topdown sums share the first read; octree.ot has the second). Memory: the tile
+// cache plus the topdown image (5 bytes per pixel at the octree resolution over the chunks' xy
+// bounding box). Errors name the file: NotFound for a missing tiles dir; DataLoss for a corrupt
+// tile or one whose content disagrees with its name; InvalidArgument for bad options or tiles of
+// mixed or unexpected resolution; OutOfRange for chunks beyond OctoMap's 16-level key space;
+// Cancelled when `progress` returns false; Unavailable for I/O errors on the outputs. Not
+// thread-safe with other HDF5 use in the process (storage/tile_store.h).
 absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& options,
                                                const MergeProgressCallback& progress = nullptr);
 

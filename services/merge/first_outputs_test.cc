@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -69,7 +70,8 @@ TEST_F(FirstOutputsTest, WritesAllOutputs) {
     return true;
   });
   ASSERT_TRUE(summary.ok()) << summary.status();
-  EXPECT_EQ(stages, (std::vector<std::string>{"index", "octree_bt", "topdown_png", "job_json"}));
+  EXPECT_EQ(stages, (std::vector<std::string>{"index", "octree_bt", "octree_ot", "topdown_png",
+                                              "job_json"}));
   const std::string out = dir_ + "/out";
   EXPECT_EQ(summary->num_tiles, 3u);
   EXPECT_DOUBLE_EQ(summary->resolution_m, 0.125);
@@ -88,6 +90,16 @@ TEST_F(FirstOutputsTest, WritesAllOutputs) {
   ASSERT_NE(solid_node, nullptr);
   EXPECT_TRUE(tree.isNodeOccupied(solid_node));
   EXPECT_EQ(tree.search(-1.5, 0.5, 0.5), nullptr);
+  // octree.ot: the same places, with their log-odds.
+  std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(out + "/octree.ot"));
+  auto* ot = dynamic_cast<octomap::OcTree*>(read.get());
+  ASSERT_NE(ot, nullptr);
+  EXPECT_EQ(ot->size(), summary->num_ot_nodes);
+  ASSERT_NE(ot->search(1.0, 1.0, 1.0), nullptr);
+  EXPECT_LT(ot->search(1.0, 1.0, 1.0)->getLogOdds(), 0);
+  ASSERT_NE(ot->search(-0.5, 1.5, 0.5), nullptr);
+  EXPECT_GT(ot->search(-0.5, 1.5, 0.5)->getLogOdds(), 0);
+  EXPECT_EQ(ot->search(-1.5, 0.5, 0.5), nullptr);
 
   auto png = ReadPngGray8(out + "/level_0/topdown.png");
   ASSERT_TRUE(png.ok()) << png.status();
@@ -101,14 +113,15 @@ TEST_F(FirstOutputsTest, WritesAllOutputs) {
   EXPECT_EQ(job["counts"]["frames"], 1000);  // the caller's counts are kept
   EXPECT_EQ(job["counts"]["tiles"], 3);
   EXPECT_EQ(job["counts"]["octree_bt_nodes"], summary->num_bt_nodes);
+  EXPECT_EQ(job["counts"]["octree_ot_nodes"], summary->num_ot_nodes);
   EXPECT_EQ(job["versions"]["tile_format"], "carvemap-tile/2");
   EXPECT_TRUE(job["versions"].contains("carvemap"));
   EXPECT_DOUBLE_EQ(job["parameters"]["merge"]["resolution_m"].get<double>(), 0.125);
-  for (const char* t : {"merge.index", "merge.octree_bt", "merge.topdown_png",
+  for (const char* t : {"merge.index", "merge.octree_bt", "merge.octree_ot", "merge.topdown_png",
                         "merge.first_outputs", "merge.total"}) {
     EXPECT_TRUE(job["timings_s"].contains(t)) << t;
   }
-  EXPECT_EQ(job["outputs"], (nlohmann::json{"scan.h5", "octree.bt", "job.json",
+  EXPECT_EQ(job["outputs"], (nlohmann::json{"scan.h5", "octree.bt", "octree.ot", "job.json",
                                             "level_0/topdown.json", "level_0/topdown.png"}));
   for (const auto& entry : fs::recursive_directory_iterator(out)) {
     EXPECT_EQ(entry.path().string().find(".partial"), std::string::npos) << entry.path();

@@ -10,12 +10,17 @@ spec alone:
     `list uchar int` faces, and is watertight: every undirected edge is used by exactly two
     triangles, once in each direction, no triangle repeats or has a repeated vertex;
   - every object of job.json has its fields and its listed mesh; combined.ply has exactly the
-    triangles of building.ply and objects.ply.
+    triangles of building.ply and objects.ply;
+  - octree.ot is OctoMap's tree file (header "# Octomap OcTree file", id OcTree, size, res,
+    data), then `size` nodes depth first, each a little-endian float32 log-odds and a byte of
+    which children follow, forming one whole tree; every value finite and within the clamp
+    (±13.82); every inner node's value the largest of its children's.
 
 Usage: check_outputs.py OUT_DIR [--level-tol 0.05] [--gt GT_DIR] [--selftest]
   --gt: the simulator's gt/ folder, when the job's input was not copied into OUT_DIR/input.
   --selftest: also checks that the checks can fail (a mesh with a triangle removed or flipped
-  is not watertight; levels moved by 2 × the tolerance do not match the truth).
+  is not watertight; levels moved by 2 × the tolerance do not match the truth; an octree.ot
+  whose root value is changed or whose last node is cut off is refused).
 """
 import argparse
 import json
@@ -104,6 +109,48 @@ def watertight_problems(path, xyz, tri):
     return problems
 
 
+def ot_problems(name, data, resolution=None):
+    """What is wrong with the bytes of an octree.ot (see the module's docstring)."""
+    head, sep, body = data.partition(b"\ndata\n")
+    if not sep or not head.startswith(b"# Octomap OcTree file"):
+        return [f"{name}: not an OctoMap tree file"]
+    fields = {}
+    for line in head.decode("ascii", "replace").splitlines()[1:]:
+        words = line.split()
+        if len(words) == 2 and not line.startswith("#"):
+            fields[words[0]] = words[1]
+    problems = []
+    if fields.get("id") != "OcTree":
+        problems.append(f"{name}: id {fields.get('id')}, not OcTree")
+    if resolution is not None and abs(float(fields.get("res", "nan")) - resolution) > 1e-12:
+        problems.append(f"{name}: res {fields.get('res')}, the job's is {resolution}")
+    size = int(fields.get("size", -1))
+    if len(body) % 5 != 0 or len(body) // 5 != size:
+        return problems + [f"{name}: {len(body)} bytes of nodes for size {size} (5 bytes each)"]
+    rec = np.frombuffer(body, dtype=np.dtype([("v", "<f4"), ("m", "u1")]))
+    values = rec["v"].astype(np.float64)
+    if not np.all(np.isfinite(values)) or (size and np.abs(values).max() > 13.82):
+        problems.append(f"{name}: a value not finite or beyond the clamp")
+    children = np.unpackbits(rec["m"][:, None], axis=1).sum(axis=1)
+    stack, bad_max = [], 0  # [node, children still to come, their largest value]
+    for i in range(size):
+        if stack:
+            stack[-1][1] -= 1
+            stack[-1][2] = max(stack[-1][2], values[i])
+        elif i > 0:
+            return problems + [f"{name}: node {i} follows a complete tree"]
+        if children[i]:
+            stack.append([i, int(children[i]), -np.inf])
+        while stack and stack[-1][1] == 0:
+            node, _, largest = stack.pop()
+            bad_max += values[node] != largest
+    if stack:
+        problems.append(f"{name}: the tree ends with {len(stack)} node(s) missing children")
+    if bad_max:
+        problems.append(f"{name}: {bad_max} inner node(s) not the largest of their children")
+    return problems
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
@@ -164,6 +211,14 @@ def main():
         print(f"objects: {len(job.get('objects', []))}; combined = building + objects "
               f"({counts[2]} = {counts[0]} + {counts[1]})")
     job_counts = job.get("counts", {})
+    ot_path = os.path.join(args.out, "octree.ot")
+    if "octree.ot" in outputs:
+        data = open(ot_path, "rb").read()
+        problems += ot_problems("octree.ot", data, job.get("params", {}).get("resolution_m"))
+        if len(data.partition(b"\ndata\n")[2]) // 5 != job_counts.get("octree_ot_nodes"):
+            problems.append(f"octree.ot: job.json says {job_counts.get('octree_ot_nodes')} nodes")
+        print(f"octree.ot: {job_counts.get('octree_ot_nodes')} nodes, one tree, inner nodes the "
+              "largest of their children")
     # §5.5 on request: points.ply holds the points kept, vertices only.
     if "points.ply" in outputs:
         xyz, tri = read_ply(os.path.join(args.out, "points.ply"))
@@ -197,7 +252,17 @@ def main():
                 moved = [dict(lv, floor_z=lv["floor_z"] + 2 * args.level_tol) for lv in levels]
                 if any(abs(lv["floor_z"] - t["floor_z"]) <= args.level_tol for lv in moved):
                     problems.append("selftest: levels moved off the truth still matched")
-        print("selftest: the checks reject a cut mesh, a flipped triangle and moved levels")
+        if "octree.ot" in outputs:
+            data = open(ot_path, "rb").read()
+            at = data.index(b"\ndata\n") + 6
+            root = np.frombuffer(data[at:at + 4], "<f4")[0]
+            changed = data[:at] + np.float32(root + 1).tobytes() + data[at + 4:]
+            if not ot_problems("changed", changed):
+                problems.append("selftest: an octree.ot with its root's value changed passed")
+            if not ot_problems("cut", data[:-5]):
+                problems.append("selftest: an octree.ot without its last node passed")
+        print("selftest: the checks reject a cut mesh, a flipped triangle, moved levels and a "
+              "changed or cut octree.ot")
 
     for p in problems:
         print("FAIL:", p, file=sys.stderr)

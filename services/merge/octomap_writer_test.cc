@@ -1,8 +1,10 @@
-#include "services/merge/octree_bt_writer.h"
+#include "services/merge/octomap_writer.h"
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <random>
 #include <sstream>
 #include <string>
@@ -66,8 +68,8 @@ TEST_P(OctreeBtWriterTest, RandomTilesRoundTripThroughLiboctomap) {
   const std::string tiles_dir = dir + "/tiles";
   fs::create_directories(tiles_dir);
   std::mt19937 rng(301 + k);
-  const std::vector<ChunkKey> keys = {{0, 0, 0},   {1, 0, 0},  {-1, 0, 0}, {-1, -1, -1},
-                                      {3, -2, 1},  {0, 1, -1}, {-5, 7, 2}, {1, 1, 1}};
+  const std::vector<ChunkKey> keys = {{0, 0, 0},  {1, 0, 0},  {-1, 0, 0}, {-1, -1, -1},
+                                      {3, -2, 1}, {0, 1, -1}, {-5, 7, 2}, {1, 1, 1}};
   octomap::OcTree reference(2.0 / (1 << k));
   for (const ChunkKey& key : keys) {
     TileData tile = RandomTile(rng, k, key);
@@ -133,6 +135,113 @@ TEST_P(OctreeBtWriterTest, RandomTilesRoundTripThroughLiboctomap) {
 }
 
 INSTANTIATE_TEST_SUITE_P(ChunkDepths, OctreeBtWriterTest, ::testing::Values(1, 2, 3, 4, 5));
+
+// The same tiles through liboctomap with each observed leaf's log-odds on all its finest cells,
+// the inner nodes' values made (the largest child's) and the tree pruned, as OctoMap's own
+// tools would leave it.
+void FillOctomapLogOdds(const TileData& tile, octomap::OcTree& tree) {
+  const int k = tile.grid.chunk_depth;
+  const int n = 1 << k;
+  for (const TileLeaf& leaf : tile.leaves) {
+    if (!leaf.stats.observed()) continue;
+    const float log_odds = OtLogOddsOf(leaf.stats);
+    const int side = 1 << (k - leaf.node.depth);
+    const Eigen::Vector3i lo = tile.chunk * n + leaf.node.local * side;
+    for (int x = 0; x < side; ++x) {
+      for (int y = 0; y < side; ++y) {
+        for (int z = 0; z < side; ++z) {
+          const octomap::OcTreeKey key(lo.x() + x + kOctomapKeyOffset,
+                                       lo.y() + y + kOctomapKeyOffset,
+                                       lo.z() + z + kOctomapKeyOffset);
+          tree.setNodeValue(key, log_odds, true);
+        }
+      }
+    }
+  }
+}
+
+class OctreeOtWriterTest : public ::testing::TestWithParam<int> {};
+
+TEST_P(OctreeOtWriterTest, RandomTilesRoundTripThroughLiboctomap) {
+  const int k = GetParam();
+  const std::string dir = FreshDir();
+  const std::string tiles_dir = dir + "/tiles";
+  fs::create_directories(tiles_dir);
+  std::mt19937 rng(307 + k);
+  const std::vector<ChunkKey> keys = {{0, 0, 0},  {1, 0, 0},  {-1, 0, 0}, {-1, -1, -1},
+                                      {3, -2, 1}, {0, 1, -1}, {-5, 7, 2}, {1, 1, 1}};
+  octomap::OcTree reference(2.0 / (1 << k));
+  // setNodeValue clamps to these; ours stay within ±13.8 (kOtMinProbability).
+  reference.setClampingThresMin(1e-7);
+  reference.setClampingThresMax(1 - 1e-7);
+  for (const ChunkKey& key : keys) {
+    TileData tile = RandomTile(rng, k, key);
+    // Runs of one value, so that some siblings prune: every third leaf takes its
+    // predecessor's stats.
+    for (size_t i = 1; i < tile.leaves.size(); ++i) {
+      if (i % 3 == 0) tile.leaves[i].stats = tile.leaves[i - 1].stats;
+    }
+    ASSERT_TRUE(WriteTile(tiles_dir, tile).ok());
+    FillOctomapLogOdds(tile, reference);
+  }
+  reference.updateInnerOccupancy();
+  reference.prune();
+
+  auto tiles = TileSet::Open(tiles_dir, 0, 1 << 20);
+  ASSERT_TRUE(tiles.ok()) << tiles.status();
+  const std::string path = dir + "/octree.ot";
+  auto stats = WriteOctreeOt(**tiles, path);
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  EXPECT_EQ(stats->num_tiles, keys.size());
+  EXPECT_FALSE(fs::exists(PartialPath(path)));
+  EXPECT_EQ(fs::file_size(path), stats->bytes);
+
+  // Byte for byte the tree liboctomap writes for the same content (after the header).
+  std::stringstream ref_bytes;
+  ASSERT_TRUE(reference.write(ref_bytes));
+  EXPECT_EQ(BodyAfterData(ReadAll(path)), BodyAfterData(ref_bytes.str()));
+  EXPECT_EQ(stats->num_nodes, reference.size());
+
+  // Read by liboctomap's generic reader, as octovis and OctoMap's tools open .ot files.
+  std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(path));
+  ASSERT_NE(read, nullptr);
+  auto* tree = dynamic_cast<octomap::OcTree*>(read.get());
+  ASSERT_NE(tree, nullptr) << read->getTreeType();
+  EXPECT_EQ(tree->size(), stats->num_nodes);
+  EXPECT_DOUBLE_EQ(tree->getResolution(), (*tiles)->grid().resolution_m());
+  std::uniform_real_distribution<double> ux(-12, 10), uy(-6, 16), uz(-4, 8);
+  int known = 0;
+  for (int i = 0; i < 20000; ++i) {
+    const Eigen::Vector3d x(ux(rng), uy(rng), uz(rng));
+    absl::StatusOr<LeafQuery> q = (*tiles)->Query(x);
+    ASSERT_TRUE(q.ok()) << q.status();
+    const octomap::OcTreeNode* node = tree->search(x.x(), x.y(), x.z());
+    if (!q->stats.observed()) {
+      EXPECT_EQ(node, nullptr) << x.transpose();
+      continue;
+    }
+    ++known;
+    ASSERT_NE(node, nullptr) << x.transpose();
+    EXPECT_EQ(node->getLogOdds(), OtLogOddsOf(q->stats)) << x.transpose();
+    // The .bt's label is the sign of the log-odds (OctoMap's default threshold, p = 0.5).
+    EXPECT_EQ(tree->isNodeOccupied(node), BtLabelOf(q->stats) == BtLabel::kOccupied);
+  }
+  EXPECT_GT(known, 100);
+}
+
+INSTANTIATE_TEST_SUITE_P(ChunkDepths, OctreeOtWriterTest, ::testing::Values(1, 2, 3, 4, 5));
+
+TEST(OctreeOtWriter, LogOddsOfOccupancyFromTheCarveMapsProbability) {
+  LeafStats open, solid, even, sure;
+  open.Add(0.8, 1.0);   // p(open) 0.8: occupancy 0.2
+  solid.Add(0.1, 2.0);  // occupancy 0.9
+  even.Add(0.5, 1.0);
+  sure.Add(1.0, 1.0);  // every ray agreed: clamped, finite
+  EXPECT_NEAR(OtLogOddsOf(open), std::log(0.2 / 0.8), 1e-6);
+  EXPECT_NEAR(OtLogOddsOf(solid), std::log(0.9 / 0.1), 1e-6);
+  EXPECT_EQ(OtLogOddsOf(even), 0.0f);
+  EXPECT_NEAR(OtLogOddsOf(sure), std::log(kOtMinProbability / (1 - kOtMinProbability)), 1e-4);
+}
 
 TEST(OctreeBtWriter, EightEqualChunksPruneIntoOneLeaf) {
   const std::string dir = FreshDir();

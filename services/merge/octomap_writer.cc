@@ -1,4 +1,4 @@
-#include "services/merge/octree_bt_writer.h"
+#include "services/merge/octomap_writer.h"
 
 #include <fcntl.h>
 #include <unistd.h>
@@ -6,8 +6,11 @@
 #include <algorithm>
 #include <array>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <functional>
+#include <limits>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -19,6 +22,11 @@ namespace carvemap {
 BtLabel BtLabelOf(const LeafStats& stats) {
   if (!stats.observed()) return BtLabel::kUnknown;
   return stats.interior() ? BtLabel::kFree : BtLabel::kOccupied;
+}
+
+float OtLogOddsOf(const LeafStats& stats) {
+  const double occupied = std::clamp(1.0 - stats.p(), kOtMinProbability, 1.0 - kOtMinProbability);
+  return static_cast<float>(std::log(occupied / (1.0 - occupied)));
 }
 
 namespace {
@@ -36,6 +44,12 @@ Kind KindOf(BtLabel label) {
   }
   return Kind::kEmpty;
 }
+
+// What a subtree came out as: nothing (unknown), a leaf or an inner node, and (.ot) its value.
+struct Node {
+  Kind kind = Kind::kEmpty;
+  float log_odds = 0;
+};
 
 // Wide enough for any uint32 node count; OctoMap reads the field with `>>`, so the spaces that
 // pad it are harmless and let the count be filled in once the tree has been written.
@@ -126,59 +140,25 @@ struct SortedChunk {
   ChunkKey key;
 };
 
-class BtWriter {
- public:
-  BtWriter(TileSet& tiles, BodyFile& body, const TileVisitor& visit)
-      : tiles_(tiles), body_(body), visit_(visit), k_(tiles.grid().chunk_depth),
-        chunk_level_(kOctomapTreeDepth - k_) {}
-
-  absl::Status Run(std::vector<SortedChunk> chunks) {
-    chunks_ = std::move(chunks);
-    if (chunks_.empty()) return absl::OkStatus();
-    // The root is never a leaf in the format (it is always read as an inner node), and it
-    // could only become one if every chunk of the key space had a tile.
-    absl::StatusOr<Kind> root = WriteInner(
-        [&](int i) { return WriteAbove(1, Range(1, i, 0, chunks_.size())); },
-        /*may_collapse=*/false);
-    if (!root.ok()) return root.status();
-    if (*root == Kind::kInner) ++nodes_;
-    return absl::OkStatus();
+// The two formats differ only in how a node is laid out; the depth-first walk is shared.
+//
+// .bt (OccupancyOcTreeBase::readBinaryNode): leaves have no bytes of their own, an inner node
+// is 2 bytes of 2-bit child labels written before its children; 8 leaves of one label prune.
+struct BtFormat {
+  static constexpr size_t kInnerBytes = 2;
+  static constexpr char kFirstLine[] = "# Octomap OcTree binary file\n";
+  static Node Leaf(const LeafStats& stats) { return {KindOf(BtLabelOf(stats)), 0}; }
+  static absl::Status WriteLeaf(BodyFile&, const Node&) { return absl::OkStatus(); }
+  static bool Collapses(const std::array<Node, 8>& c) {
+    return c[0].kind != Kind::kInner &&
+           std::all_of(c.begin(), c.end(), [&](const Node& n) { return n.kind == c[0].kind; });
   }
-  [[nodiscard]] uint64_t nodes() const { return nodes_; }
-  [[nodiscard]] uint64_t tiles_read() const { return tiles_read_; }
-
- private:
-  using ChildFn = std::function<absl::StatusOr<Kind>(int)>;
-
-  // Writes one inner node: a 2-byte placeholder, then each child's subtree in child order
-  // (the order OctoMap's readBinaryNode recurses in), then the real bits. A node whose
-  // children are all unknown disappears; one whose 8 children are leaves of one label becomes
-  // that leaf (OctoMap's prune()).
-  absl::StatusOr<Kind> WriteInner(const ChildFn& child, bool may_collapse) {
-    const uint64_t pos = body_.Pos();
-    const uint8_t zero[2] = {0, 0};
-    if (absl::Status s = body_.Append(zero, 2); !s.ok()) return s;
-    std::array<Kind, 8> kinds;
-    int present = 0;
-    for (int i = 0; i < 8; ++i) {
-      absl::StatusOr<Kind> kind = child(i);
-      if (!kind.ok()) return kind.status();
-      kinds[i] = *kind;
-      if (*kind != Kind::kEmpty) ++present;
-    }
-    if (present == 0) {
-      body_.Truncate(pos);
-      return Kind::kEmpty;
-    }
-    if (may_collapse && present == 8 && kinds[0] != Kind::kInner &&
-        std::all_of(kinds.begin(), kinds.end(), [&](Kind k) { return k == kinds[0]; })) {
-      body_.Truncate(pos);
-      return kinds[0];
-    }
+  static absl::StatusOr<Node> FinishInner(BodyFile& body, uint64_t pos,
+                                          const std::array<Node, 8>& children) {
     uint8_t bytes[2] = {0, 0};
     for (int i = 0; i < 8; ++i) {
       uint8_t bits = 0;  // low bit at 2(i mod 4), high bit at 2(i mod 4) + 1
-      switch (kinds[i]) {
+      switch (children[i].kind) {
         case Kind::kEmpty:
           bits = 0b00;
           break;
@@ -194,9 +174,104 @@ class BtWriter {
       }
       bytes[i / 4] |= static_cast<uint8_t>(bits << (2 * (i % 4)));
     }
+    if (absl::Status s = body.Patch(pos, bytes, 2); !s.ok()) return s;
+    return Node{Kind::kInner, 0};
+  }
+};
+
+// .ot (OcTreeBaseImpl::readNodesRecurs with OcTreeNode::readData): every node, leaf or inner,
+// is its log-odds (a float, host order as OctoMap writes it) and a byte of which children
+// follow (bit i: child i), written before its children. An inner node's value is the largest
+// of its children's (OctoMap's updateInnerOccupancy); 8 leaves of one value prune (prune()).
+struct OtFormat {
+  static constexpr size_t kInnerBytes = sizeof(float) + 1;
+  static constexpr char kFirstLine[] = "# Octomap OcTree file\n";
+  static Node Leaf(const LeafStats& stats) {
+    if (!stats.observed()) return {};
+    const float log_odds = OtLogOddsOf(stats);
+    return {log_odds > 0 ? Kind::kOccupied : Kind::kFree, log_odds};
+  }
+  static absl::Status WriteLeaf(BodyFile& body, const Node& leaf) {
+    char bytes[kInnerBytes] = {};
+    std::memcpy(bytes, &leaf.log_odds, sizeof(float));
+    return body.Append(bytes, sizeof bytes);
+  }
+  static bool Collapses(const std::array<Node, 8>& c) {
+    return c[0].kind != Kind::kInner && std::all_of(c.begin(), c.end(), [&](const Node& n) {
+             return n.kind != Kind::kInner && n.log_odds == c[0].log_odds;
+           });
+  }
+  static absl::StatusOr<Node> FinishInner(BodyFile& body, uint64_t pos,
+                                          const std::array<Node, 8>& children) {
+    float max = -std::numeric_limits<float>::infinity();
+    uint8_t present = 0;
+    for (int i = 0; i < 8; ++i) {
+      if (children[i].kind == Kind::kEmpty) continue;
+      present |= static_cast<uint8_t>(1u << i);
+      max = std::max(max, children[i].log_odds);
+    }
+    char bytes[kInnerBytes];
+    std::memcpy(bytes, &max, sizeof(float));
+    bytes[sizeof(float)] = static_cast<char>(present);
+    if (absl::Status s = body.Patch(pos, bytes, sizeof bytes); !s.ok()) return s;
+    return Node{Kind::kInner, max};
+  }
+};
+
+template <typename Format>
+class TreeWriter {
+ public:
+  TreeWriter(TileSet& tiles, BodyFile& body, const TileVisitor& visit)
+      : tiles_(tiles),
+        body_(body),
+        visit_(visit),
+        k_(tiles.grid().chunk_depth),
+        chunk_level_(kOctomapTreeDepth - k_) {}
+
+  absl::Status Run(std::vector<SortedChunk> chunks) {
+    chunks_ = std::move(chunks);
+    if (chunks_.empty()) return absl::OkStatus();
+    // The root is never a leaf in either format (it is always read as an inner node), and it
+    // could only become one if every chunk of the key space had a tile.
+    absl::StatusOr<Node> root =
+        WriteInner([&](int i) { return WriteAbove(1, Range(1, i, 0, chunks_.size())); },
+                   /*may_collapse=*/false);
+    if (!root.ok()) return root.status();
+    if (root->kind == Kind::kInner) ++nodes_;
+    return absl::OkStatus();
+  }
+  [[nodiscard]] uint64_t nodes() const { return nodes_; }
+  [[nodiscard]] uint64_t tiles_read() const { return tiles_read_; }
+
+ private:
+  using ChildFn = std::function<absl::StatusOr<Node>(int)>;
+
+  // Writes one inner node: a placeholder, then each child's subtree in child order (the order
+  // OctoMap's readers recurse in), then the node's real bytes. A node whose children are all
+  // unknown disappears; one whose 8 children are leaves that prune becomes that leaf.
+  absl::StatusOr<Node> WriteInner(const ChildFn& child, bool may_collapse) {
+    const uint64_t pos = body_.Pos();
+    const char zero[Format::kInnerBytes] = {};
+    if (absl::Status s = body_.Append(zero, sizeof zero); !s.ok()) return s;
+    std::array<Node, 8> children;
+    int present = 0;
+    for (int i = 0; i < 8; ++i) {
+      absl::StatusOr<Node> node = child(i);
+      if (!node.ok()) return node.status();
+      children[i] = *node;
+      if (node->kind != Kind::kEmpty) ++present;
+    }
+    if (present == 0) {
+      body_.Truncate(pos);
+      return Node{};
+    }
+    if (may_collapse && present == 8 && Format::Collapses(children)) {
+      body_.Truncate(pos);
+      if (absl::Status s = Format::WriteLeaf(body_, children[0]); !s.ok()) return s;
+      return children[0];
+    }
     nodes_ += static_cast<uint64_t>(present);
-    if (absl::Status s = body_.Patch(pos, bytes, 2); !s.ok()) return s;
-    return Kind::kInner;
+    return Format::FinishInner(body_, pos, children);
   }
 
   struct Span {
@@ -214,17 +289,15 @@ class BtWriter {
   }
 
   // The node at OctoMap depth `depth` holding chunks [span.lo, span.hi).
-  absl::StatusOr<Kind> WriteAbove(int depth, Span span) {
-    if (span.lo == span.hi) return Kind::kEmpty;
+  absl::StatusOr<Node> WriteAbove(int depth, Span span) {
+    if (span.lo == span.hi) return Node{};
     if (depth == chunk_level_) return WriteChunk(chunks_[span.lo].key);
     return WriteInner(
-        [&, span](int i) {
-          return WriteAbove(depth + 1, Range(depth + 1, i, span.lo, span.hi));
-        },
+        [&, span](int i) { return WriteAbove(depth + 1, Range(depth + 1, i, span.lo, span.hi)); },
         /*may_collapse=*/true);
   }
 
-  absl::StatusOr<Kind> WriteChunk(const ChunkKey& key) {
+  absl::StatusOr<Node> WriteChunk(const ChunkKey& key) {
     absl::StatusOr<std::shared_ptr<const TileData>> tile = tiles_.Get(key);
     if (!tile.ok()) return tile.status();
     ++tiles_read_;
@@ -234,19 +307,22 @@ class BtWriter {
     const TileData& t = **tile;
     first_cells_.resize(t.leaves.size());
     for (size_t i = 0; i < t.leaves.size(); ++i) {
-      first_cells_[i] = MortonCode(t.leaves[i].node.local)
-                        << (3 * (k_ - t.leaves[i].node.depth));
+      first_cells_[i] = MortonCode(t.leaves[i].node.local) << (3 * (k_ - t.leaves[i].node.depth));
     }
     return WriteInChunk(t, tiles_.PathOf(key), 0, 0, 0, t.leaves.size());
   }
 
   // The node of the chunk at local depth `depth` with Morton code `code`, holding rows
   // [lo, hi) of the tile (canonical order: by first finest cell, non-overlapping).
-  absl::StatusOr<Kind> WriteInChunk(const TileData& t, const std::string& path, int depth,
+  absl::StatusOr<Node> WriteInChunk(const TileData& t, const std::string& path, int depth,
                                     uint64_t code, size_t lo, size_t hi) {
-    if (lo == hi) return Kind::kEmpty;
+    if (lo == hi) return Node{};
     if (hi - lo == 1 && t.leaves[lo].node.depth == depth) {
-      return KindOf(BtLabelOf(t.leaves[lo].stats));
+      const Node leaf = Format::Leaf(t.leaves[lo].stats);
+      if (leaf.kind != Kind::kEmpty) {
+        if (absl::Status s = Format::WriteLeaf(body_, leaf); !s.ok()) return s;
+      }
+      return leaf;
     }
     for (size_t i = lo; i < hi; ++i) {
       if (t.leaves[i].node.depth <= depth) {  // ReadTile rejects overlaps; stay defensive
@@ -255,7 +331,7 @@ class BtWriter {
     }
     const int shift = 3 * (k_ - depth - 1);
     return WriteInner(
-        [&, depth, code, lo, hi, shift](int i) -> absl::StatusOr<Kind> {
+        [&, depth, code, lo, hi, shift](int i) -> absl::StatusOr<Node> {
           const uint64_t child = code * 8 + uint64_t(i);
           auto b = std::lower_bound(first_cells_.begin() + lo, first_cells_.begin() + hi,
                                     child << shift);
@@ -277,10 +353,10 @@ class BtWriter {
   uint64_t tiles_read_ = 0;
 };
 
-}  // namespace
-
-absl::StatusOr<OctreeBtStats> WriteOctreeBt(TileSet& tiles, const std::string& path,
-                                            const TileVisitor& visit) {
+// Writes `path` in Format from every tile of `tiles` (WriteOctreeBt, WriteOctreeOt).
+template <typename Format>
+absl::StatusOr<OctomapFileStats> WriteOctomapFile(TileSet& tiles, const std::string& path,
+                                                  const TileVisitor& visit) {
   const int k = tiles.grid().chunk_depth;
   const int chunk_level = kOctomapTreeDepth - k;
   // Our chunk c is OctoMap's node (c·2^k + 32768) / 2^k = c + 2^(15−k) at depth 16 − k.
@@ -303,16 +379,16 @@ absl::StatusOr<OctreeBtStats> WriteOctreeBt(TileSet& tiles, const std::string& p
   const std::string partial = PartialPath(path);
   BodyFile body(partial);
   absl::Status status = body.Open();
-  OctreeBtStats stats;
+  OctomapFileStats stats;
   size_t size_field = 0;
   if (status.ok()) {
-    std::string header = "# Octomap OcTree binary file\nid OcTree\nsize ";
+    std::string header = absl::StrCat(Format::kFirstLine, "id OcTree\nsize ");
     size_field = header.size();
     header += std::string(kSizeFieldWidth, ' ');
     header += absl::StrFormat("\nres %.17g\ndata\n", tiles.grid().resolution_m());
     status = body.Append(header.data(), header.size());
   }
-  BtWriter writer(tiles, body, visit);
+  TreeWriter<Format> writer(tiles, body, visit);
   if (status.ok()) status = writer.Run(std::move(chunks));
   if (status.ok() && writer.nodes() > 0xffffffffULL) {
     // OctoMap reads the size as a 32-bit unsigned.
@@ -334,6 +410,18 @@ absl::StatusOr<OctreeBtStats> WriteOctreeBt(TileSet& tiles, const std::string& p
   stats.num_nodes = writer.nodes();
   stats.num_tiles = writer.tiles_read();
   return stats;
+}
+
+}  // namespace
+
+absl::StatusOr<OctomapFileStats> WriteOctreeBt(TileSet& tiles, const std::string& path,
+                                               const TileVisitor& visit) {
+  return WriteOctomapFile<BtFormat>(tiles, path, visit);
+}
+
+absl::StatusOr<OctomapFileStats> WriteOctreeOt(TileSet& tiles, const std::string& path,
+                                               const TileVisitor& visit) {
+  return WriteOctomapFile<OtFormat>(tiles, path, visit);
 }
 
 }  // namespace carvemap
