@@ -10,7 +10,7 @@
 // the grid is also written as OUT/occupancy.png.
 // `--floorplan eigencrust` makes the interior by §3.2 instead (floorplan_pipeline.h).
 // Writes the same files as the merge (docs/DESIGN.md §7): OUT/level_<k>/floorplan.geojson,
-// floorplan.svg, extruded.ply, and OUT/job.json last.
+// floorplan.svg, floorplan.dxf, extruded.ply, and OUT/job.json last.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -79,8 +79,8 @@ nlohmann::json PlanCounts(const LevelFloorPlan& r) {
   return c;
 }
 
-// Writes OUT/level_<k>/{floorplan.geojson, floorplan.svg, extruded.ply}; appends them to
-// `outputs`.
+// Writes OUT/level_<k>/{floorplan.geojson, floorplan.svg, floorplan.dxf, extruded.ply}; appends
+// them to `outputs`.
 absl::Status WriteLevel(const fs::path& out, int level, const LevelFloorPlan& r,
                         nlohmann::json& outputs) {
   const std::string name = absl::StrCat("level_", level);
@@ -89,7 +89,7 @@ absl::Status WriteLevel(const fs::path& out, int level, const LevelFloorPlan& r,
   if (absl::Status s = WriteExtrudedPly((dir / "extruded.ply").string(), r.extruded); !s.ok()) {
     return s;
   }
-  for (const char* file : {"floorplan.geojson", "floorplan.svg", "extruded.ply"}) {
+  for (const char* file : {"floorplan.geojson", "floorplan.svg", "floorplan.dxf", "extruded.ply"}) {
     outputs.push_back(absl::StrCat(name, "/", file));
   }
   return absl::OkStatus();
@@ -403,8 +403,9 @@ absl::Status RunFloorplan(FloorplanFlags& f) {
     std::printf("  level %d room %d: %.1f m²\n", room["level"].get<int>(), room["room"].get<int>(),
                 room["area_m2"].get<double>());
   }
-  std::printf("wrote %s/level_<k>/{floorplan.geojson, floorplan.svg, extruded.ply} and %s\n",
-              out.string().c_str(), (out / "job.json").string().c_str());
+  std::printf(
+      "wrote %s/level_<k>/{floorplan.geojson, floorplan.svg, floorplan.dxf, extruded.ply} and %s\n",
+      out.string().c_str(), (out / "job.json").string().c_str());
   return absl::OkStatus();
 }
 
@@ -414,7 +415,8 @@ void RegisterFloorplan(CLI::App& app, int& exit_code) {
       "Floor plan with rooms and a 2.5D model from a 2D occupancy grid map and the walk "
       "(§3.1.2, §3.3), from a 2D laser scan's rays (--scan), or from a scan.h5's points "
       "(--cloud, §3.1.1): writes "
-      "OUT/level_<k>/floorplan.geojson, floorplan.svg, extruded.ply and OUT/job.json");
+      "OUT/level_<k>/floorplan.geojson, floorplan.svg, floorplan.dxf, extruded.ply and "
+      "OUT/job.json");
   auto f = std::make_shared<FloorplanFlags>();
   CLI::Option* gridmap =
       cmd->add_option("--gridmap", f->gridmap,

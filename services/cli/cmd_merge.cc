@@ -1,7 +1,8 @@
 // `carvemap merge TILES_DIR -o OUT [--scan SCAN.h5] [--resolution R]`: the merge (docs/DESIGN.md
 // §6, §7) of a tiles directory: OUT/octree.bt, OUT/octree.ot, OUT/levels.json,
 // OUT/level_<k>/topdown.png (+ topdown.json), with --scan OUT/level_<k>/floorplan.geojson,
-// floorplan.svg and extruded.ply, OUT/mesh/dense.ply, OUT/mesh/building.ply and OUT/job.json.
+// floorplan.svg, floorplan.dxf and extruded.ply, OUT/mesh/dense.ply, OUT/mesh/building.ply and
+// OUT/job.json.
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -119,8 +120,8 @@ absl::Status RunMergeCommand(MergeFlags& flags) {
               << " planar regions, " << s.num_levels << " level(s) (levels.json)\n"
               << "  mesh/dense.ply: " << s.dense_triangles << " triangles\n";
     if (s.num_rooms > 0) {
-      std::cout << "  level_<k>/floorplan.geojson, floorplan.svg, extruded.ply: " << s.num_rooms
-                << " rooms\n";
+      std::cout << "  level_<k>/floorplan.geojson, floorplan.svg, floorplan.dxf, extruded.ply: "
+                << s.num_rooms << " rooms\n";
     }
     if (s.building_triangles > 0) {
       std::cout << "  mesh/building.ply: " << s.building_triangles << " triangles\n";

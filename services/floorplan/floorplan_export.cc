@@ -10,6 +10,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "services/floorplan/floorplan_dxf.h"
 #include "storage/atomic_file.h"
 
 namespace carvemap {
@@ -132,34 +133,13 @@ std::string FloorPlanSvg(const FloorPlan& plan, const FloorPlanOutline& outline)
                     "stroke-width=\"3\" stroke-linejoin=\"round\" points=\"",
                     points, "\"/>\n");
   }
-  // Labels: a triangle's centroid is inside its room, and the seed (§3.3.2, the largest
-  // circumcircle) sits in the room's open middle.
   for (size_t r = 0; r < pieces.size(); ++r) {
     if (pieces[r].empty()) continue;
-    int label = plan.rooms[r].seed_triangle;
-    if (label < 0 || label >= static_cast<int>(plan.triangles.size()) ||
-        plan.triangle_room[label] != static_cast<int>(r)) {
-      label = -1;
-      double best = 0;
-      for (size_t t = 0; t < plan.triangles.size(); ++t) {
-        if (plan.triangle_room[t] != static_cast<int>(r)) continue;
-        const auto& tri = plan.triangles[t];
-        const Eigen::Vector2d e1 = plan.vertices[tri[1]] - plan.vertices[tri[0]];
-        const Eigen::Vector2d e2 = plan.vertices[tri[2]] - plan.vertices[tri[0]];
-        const double area = e1.x() * e2.y() - e1.y() * e2.x();
-        if (label < 0 || area > best) {
-          label = static_cast<int>(t);
-          best = area;
-        }
-      }
-    }
-    if (label < 0) continue;
-    const auto& tri = plan.triangles[label];
-    const Eigen::Vector2d c =
-        (plan.vertices[tri[0]] + plan.vertices[tri[1]] + plan.vertices[tri[2]]) / 3.0;
+    const std::optional<Eigen::Vector2d> c = RoomLabelPoint(plan, static_cast<int>(r));
+    if (!c) continue;
     double area = 0;
     for (const RoomPolygon* piece : pieces[r]) area += piece->area_m2;
-    const std::string at = px(c);
+    const std::string at = px(*c);
     const size_t comma = at.find(',');
     absl::StrAppend(&svg, "<text class=\"area\" x=\"", at.substr(0, comma), "\" y=\"",
                     at.substr(comma + 1),
@@ -195,7 +175,12 @@ absl::Status WriteFloorPlanFiles(const std::string& dir, const FloorPlan& plan,
     return s;
   }
   const std::string svg = FloorPlanSvg(plan, outline);
-  return WriteFileAtomically(dir + "/floorplan.svg", [&](std::ostream& out) { out << svg; });
+  if (absl::Status s =
+          WriteFileAtomically(dir + "/floorplan.svg", [&](std::ostream& out) { out << svg; });
+      !s.ok()) {
+    return s;
+  }
+  return WriteFloorPlanDxf(dir + "/floorplan.dxf", plan, outline);
 }
 
 absl::Status WriteExtrudedPly(const std::string& path, const TriangleMesh& mesh) {

@@ -30,7 +30,8 @@ namespace carvemap {
 // plan is wider than 20 m).
 [[nodiscard]] std::string FloorPlanSvg(const FloorPlan& plan, const FloorPlanOutline& outline);
 
-// Writes dir/floorplan.geojson and dir/floorplan.svg (creating dir). Errors name the file.
+// Writes dir/floorplan.geojson, dir/floorplan.svg and dir/floorplan.dxf (floorplan_dxf.h),
+// creating dir. Errors name the file.
 [[nodiscard]] absl::Status WriteFloorPlanFiles(const std::string& dir, const FloorPlan& plan,
                                                const FloorPlanOutline& outline);
 

@@ -220,6 +220,7 @@ TEST(FloorPlanExportTest, WritesFilesAndPly) {
   std::stringstream svg;
   svg << svg_file.rdbuf();
   EXPECT_EQ(svg.str(), FloorPlanSvg(plan, *outline));
+  EXPECT_TRUE(std::filesystem::is_regular_file(dir + "/floorplan.dxf"));  // floorplan_dxf_test
   absl::StatusOr<TriangleMesh> mesh = ExtrudeFloorPlan(plan);
   ASSERT_TRUE(mesh.ok());
   ASSERT_TRUE(WriteExtrudedPly(dir + "/extruded.ply", *mesh).ok());

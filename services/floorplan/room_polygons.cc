@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <numbers>
+#include <optional>
 #include <utility>
 
 #include "absl/container/flat_hash_map.h"
@@ -239,6 +240,31 @@ absl::StatusOr<FloorPlanOutline> TraceFloorPlan(const FloorPlan& plan) {
     outline.walls.push_back(std::move(points));
   }
   return outline;
+}
+
+std::optional<Eigen::Vector2d> RoomLabelPoint(const FloorPlan& plan, int room) {
+  // A triangle's centroid is inside its room, and the seed (§3.3.2, the largest circumcircle)
+  // sits in the room's open middle.
+  int label = plan.rooms[room].seed_triangle;
+  if (label < 0 || label >= static_cast<int>(plan.triangles.size()) ||
+      plan.triangle_room[label] != room) {
+    label = -1;
+    double best = 0;
+    for (size_t t = 0; t < plan.triangles.size(); ++t) {
+      if (plan.triangle_room[t] != room) continue;
+      const auto& tri = plan.triangles[t];
+      const Eigen::Vector2d e1 = plan.vertices[tri[1]] - plan.vertices[tri[0]];
+      const Eigen::Vector2d e2 = plan.vertices[tri[2]] - plan.vertices[tri[0]];
+      const double area = e1.x() * e2.y() - e1.y() * e2.x();
+      if (label < 0 || area > best) {
+        label = static_cast<int>(t);
+        best = area;
+      }
+    }
+  }
+  if (label < 0) return std::nullopt;
+  const auto& tri = plan.triangles[label];
+  return (plan.vertices[tri[0]] + plan.vertices[tri[1]] + plan.vertices[tri[2]]) / 3.0;
 }
 
 }  // namespace carvemap

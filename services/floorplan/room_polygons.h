@@ -6,6 +6,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <optional>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -44,6 +45,10 @@ struct FloorPlanOutline {
 // any vertex still visited twice cuts the ring in two. Positive rings are outers; each negative
 // ring is a hole of the smallest outer of the same room around it. Errors: ValidateFloorPlan's.
 [[nodiscard]] absl::StatusOr<FloorPlanOutline> TraceFloorPlan(const FloorPlan& plan);
+
+// Where a room's label goes: the centroid of its seed triangle (§3.3.2), or of its largest
+// triangle when the seed is not one of its triangles; nullopt for a room without triangles.
+[[nodiscard]] std::optional<Eigen::Vector2d> RoomLabelPoint(const FloorPlan& plan, int room);
 
 // Shoelace signed area of a ring (not closed), m²: positive when CCW.
 [[nodiscard]] double RingSignedArea(const std::vector<Eigen::Vector2d>& ring);

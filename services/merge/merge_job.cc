@@ -140,8 +140,8 @@ absl::StatusOr<std::unique_ptr<FaceStore>> StoreBoundaryFaces(TileSet& tiles,
 }
 
 // Floor plans per level (docs/DESIGN.md §6 stages 4–5; §5.3, §3.3) ➜ level_<k>/floorplan.geojson,
-// floorplan.svg, extruded.ply. A level whose plan cannot be made is not fatal: the other outputs
-// stand and job.json says why under "warnings".
+// floorplan.svg, floorplan.dxf, extruded.ply. A level whose plan cannot be made is not fatal: the
+// other outputs stand and job.json says why under "warnings".
 absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles, const FaceStore& faces,
                             const std::vector<Level>& levels, const fs::path& out,
                             nlohmann::json& job, nlohmann::json& counts, nlohmann::json& timings,
@@ -235,7 +235,8 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles, const F
       return s;
     }
     CountSelfIntersectionsInto(plan->extruded, "extruded", counts, timings, &warnings);
-    for (const char* name : {"floorplan.geojson", "floorplan.svg", "extruded.ply"}) {
+    for (const char* name :
+         {"floorplan.geojson", "floorplan.svg", "floorplan.dxf", "extruded.ply"}) {
       outputs.push_back(absl::StrCat(level_name, "/", name));
     }
     for (auto& room : RoomsToJson(*plan)) rooms.push_back(room);
@@ -885,7 +886,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   timings["merge.levels"] = SecondsSince(t0);
 
   // floor plans (stages 4–5, §5.3, §3.3) ➜ level_<k>/floorplan.geojson, floorplan.svg,
-  // extruded.ply; job.json "rooms"
+  // floorplan.dxf, extruded.ply; job.json "rooms"
   std::vector<std::pair<Level, FloorPlan>> plans;
   if (absl::Status s = FloorPlanStage(options, tiles, **faces, levels->levels, out, job, counts,
                                       timings, outputs, warnings, progress, plans);

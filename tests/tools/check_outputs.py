@@ -14,7 +14,10 @@ spec alone:
   - octree.ot is OctoMap's tree file (header "# Octomap OcTree file", id OcTree, size, res,
     data), then `size` nodes depth first, each a little-endian float32 log-odds and a byte of
     which children follow, forming one whole tree; every value finite and within the clamp
-    (±13.82); every inner node's value the largest of its children's.
+    (±13.82); every inner node's value the largest of its children's;
+  - each level_<k>/floorplan.dxf listed opens in ezdxf (Debian's python3-ezdxf) with no error
+    in its audit, has the layers ROOMS, WALLS, DOORS and LABELS, one label per room of the
+    level in job.json, and closed room rings whose signed areas sum to the level's room area.
 
 Usage: check_outputs.py OUT_DIR [--level-tol 0.05] [--gt GT_DIR] [--selftest]
   --gt: the simulator's gt/ folder, when the job's input was not copied into OUT_DIR/input.
@@ -151,6 +154,40 @@ def ot_problems(name, data, resolution=None):
     return problems
 
 
+def dxf_problems(path, rooms):
+    """What is wrong with a level's floorplan.dxf against job.json's rooms of that level."""
+    try:
+        import ezdxf
+    except ImportError:
+        return [f"{path}: python3-ezdxf is not installed (scripts/install-deps.sh)"]
+    try:
+        doc = ezdxf.readfile(path)
+    except (IOError, ezdxf.DXFStructureError) as e:
+        return [f"{path}: ezdxf cannot read it: {e}"]
+    problems = []
+    audit = doc.audit()
+    if audit.has_errors:
+        problems.append(f"{path}: ezdxf's audit found {len(audit.errors)} error(s)")
+    for layer in ("ROOMS", "WALLS", "DOORS", "LABELS"):
+        if layer not in doc.layers:
+            problems.append(f"{path}: no layer {layer}")
+    msp = doc.modelspace()
+    area = 0.0
+    for pl in msp.query('LWPOLYLINE[layer=="ROOMS"]'):
+        if not pl.closed:
+            problems.append(f"{path}: a room ring is not closed")
+        pts = np.array([(x, y) for x, y, *_ in pl.get_points()])
+        area += 0.5 * float(np.sum(pts[:, 0] * np.roll(pts[:, 1], -1)
+                                   - np.roll(pts[:, 0], -1) * pts[:, 1]))
+    want = sum(r["area_m2"] for r in rooms)
+    if abs(area - want) > 1e-6 * max(1.0, want):
+        problems.append(f"{path}: room rings enclose {area:.4f} m², job.json's rooms {want:.4f}")
+    labels = len(msp.query('TEXT[layer=="LABELS"]'))
+    if labels != len([r for r in rooms if r["area_m2"] > 0]):
+        problems.append(f"{path}: {labels} labels for {len(rooms)} rooms")
+    return problems
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
@@ -211,6 +248,14 @@ def main():
         print(f"objects: {len(job.get('objects', []))}; combined = building + objects "
               f"({counts[2]} = {counts[0]} + {counts[1]})")
     job_counts = job.get("counts", {})
+    for name in sorted(outputs):
+        if name.endswith("/floorplan.dxf"):
+            level = int(name.split("/")[0].split("_")[1])
+            rooms = [r for r in job.get("rooms", []) if r.get("level") == level]
+            found = dxf_problems(os.path.join(args.out, name), rooms)
+            problems += found
+            print(f"{name}: {'read by ezdxf' if not found else 'NOT as job.json says'}, "
+                  f"{len(rooms)} rooms")
     ot_path = os.path.join(args.out, "octree.ot")
     if "octree.ot" in outputs:
         data = open(ot_path, "rb").read()
