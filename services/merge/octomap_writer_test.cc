@@ -4,7 +4,9 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <memory>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -37,14 +39,16 @@ std::string BodyAfterData(const std::string& bt) {
   return at == std::string::npos ? std::string() : bt.substr(at + 6);
 }
 
-// Builds the same tree with liboctomap itself: every finest cell of every observed leaf set
-// to a log-odds by label, then prune(), as OctoMap's own tools would produce it.
-void FillOctomap(const TileData& tile, octomap::OcTree& tree) {
+// Builds the same tree with liboctomap itself: every finest cell of every leaf that has a value
+// set to it (lazily; the callers then make the inner nodes and prune, as OctoMap's own tools
+// would leave the tree).
+void FillOctomap(const TileData& tile, octomap::OcTree& tree,
+                 const std::function<std::optional<float>(const LeafStats&)>& value_of) {
   const int k = tile.grid.chunk_depth;
   const int n = 1 << k;
   for (const TileLeaf& leaf : tile.leaves) {
-    const BtLabel label = BtLabelOf(leaf.stats);
-    if (label == BtLabel::kUnknown) continue;
+    const std::optional<float> value = value_of(leaf.stats);
+    if (!value) continue;
     const int side = 1 << (k - leaf.node.depth);
     const Eigen::Vector3i lo = tile.chunk * n + leaf.node.local * side;
     for (int x = 0; x < side; ++x) {
@@ -53,12 +57,29 @@ void FillOctomap(const TileData& tile, octomap::OcTree& tree) {
           const octomap::OcTreeKey key(lo.x() + x + kOctomapKeyOffset,
                                        lo.y() + y + kOctomapKeyOffset,
                                        lo.z() + z + kOctomapKeyOffset);
-          tree.setNodeValue(key, label == BtLabel::kOccupied ? 2.0f : -2.0f, true);
+          tree.setNodeValue(key, *value, true);
         }
       }
     }
   }
 }
+
+// .bt: a log-odds by label.
+std::optional<float> LabelValue(const LeafStats& stats) {
+  const BtLabel label = BtLabelOf(stats);
+  if (label == BtLabel::kUnknown) return std::nullopt;
+  return label == BtLabel::kOccupied ? 2.0f : -2.0f;
+}
+
+// .ot: the leaf's own log-odds.
+std::optional<float> LogOddsValue(const LeafStats& stats) {
+  if (!stats.observed()) return std::nullopt;
+  return OtLogOddsOf(stats);
+}
+
+// Chunks around the origin and apart, of every sign.
+const std::vector<ChunkKey> kChunks = {{0, 0, 0},  {1, 0, 0},  {-1, 0, 0}, {-1, -1, -1},
+                                       {3, -2, 1}, {0, 1, -1}, {-5, 7, 2}, {1, 1, 1}};
 
 class OctreeBtWriterTest : public ::testing::TestWithParam<int> {};
 
@@ -68,13 +89,12 @@ TEST_P(OctreeBtWriterTest, RandomTilesRoundTripThroughLiboctomap) {
   const std::string tiles_dir = dir + "/tiles";
   fs::create_directories(tiles_dir);
   std::mt19937 rng(301 + k);
-  const std::vector<ChunkKey> keys = {{0, 0, 0},  {1, 0, 0},  {-1, 0, 0}, {-1, -1, -1},
-                                      {3, -2, 1}, {0, 1, -1}, {-5, 7, 2}, {1, 1, 1}};
+  const std::vector<ChunkKey>& keys = kChunks;
   octomap::OcTree reference(2.0 / (1 << k));
   for (const ChunkKey& key : keys) {
     TileData tile = RandomTile(rng, k, key);
     ASSERT_TRUE(WriteTile(tiles_dir, tile).ok());
-    FillOctomap(tile, reference);
+    FillOctomap(tile, reference, LabelValue);
   }
   reference.updateInnerOccupancy();
   reference.prune();
@@ -136,30 +156,6 @@ TEST_P(OctreeBtWriterTest, RandomTilesRoundTripThroughLiboctomap) {
 
 INSTANTIATE_TEST_SUITE_P(ChunkDepths, OctreeBtWriterTest, ::testing::Values(1, 2, 3, 4, 5));
 
-// The same tiles through liboctomap with each observed leaf's log-odds on all its finest cells,
-// the inner nodes' values made (the largest child's) and the tree pruned, as OctoMap's own
-// tools would leave it.
-void FillOctomapLogOdds(const TileData& tile, octomap::OcTree& tree) {
-  const int k = tile.grid.chunk_depth;
-  const int n = 1 << k;
-  for (const TileLeaf& leaf : tile.leaves) {
-    if (!leaf.stats.observed()) continue;
-    const float log_odds = OtLogOddsOf(leaf.stats);
-    const int side = 1 << (k - leaf.node.depth);
-    const Eigen::Vector3i lo = tile.chunk * n + leaf.node.local * side;
-    for (int x = 0; x < side; ++x) {
-      for (int y = 0; y < side; ++y) {
-        for (int z = 0; z < side; ++z) {
-          const octomap::OcTreeKey key(lo.x() + x + kOctomapKeyOffset,
-                                       lo.y() + y + kOctomapKeyOffset,
-                                       lo.z() + z + kOctomapKeyOffset);
-          tree.setNodeValue(key, log_odds, true);
-        }
-      }
-    }
-  }
-}
-
 class OctreeOtWriterTest : public ::testing::TestWithParam<int> {};
 
 TEST_P(OctreeOtWriterTest, RandomTilesRoundTripThroughLiboctomap) {
@@ -168,8 +164,7 @@ TEST_P(OctreeOtWriterTest, RandomTilesRoundTripThroughLiboctomap) {
   const std::string tiles_dir = dir + "/tiles";
   fs::create_directories(tiles_dir);
   std::mt19937 rng(307 + k);
-  const std::vector<ChunkKey> keys = {{0, 0, 0},  {1, 0, 0},  {-1, 0, 0}, {-1, -1, -1},
-                                      {3, -2, 1}, {0, 1, -1}, {-5, 7, 2}, {1, 1, 1}};
+  const std::vector<ChunkKey>& keys = kChunks;
   octomap::OcTree reference(2.0 / (1 << k));
   // setNodeValue clamps to these; ours stay within ±13.8 (kOtMinProbability).
   reference.setClampingThresMin(1e-7);
@@ -182,7 +177,7 @@ TEST_P(OctreeOtWriterTest, RandomTilesRoundTripThroughLiboctomap) {
       if (i % 3 == 0) tile.leaves[i].stats = tile.leaves[i - 1].stats;
     }
     ASSERT_TRUE(WriteTile(tiles_dir, tile).ok());
-    FillOctomapLogOdds(tile, reference);
+    FillOctomap(tile, reference, LogOddsValue);
   }
   reference.updateInnerOccupancy();
   reference.prune();
