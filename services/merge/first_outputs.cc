@@ -94,8 +94,8 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
   }
   timings["merge.index"] = SecondsSince(t0);
 
-  // octree.bt, with the per-tile counts and the topdown sums gathered on the same single
-  // read of each tile.
+  // octree.bt and octree.ot, with the per-tile counts and the topdown sums gathered on the
+  // same single read of each tile.
   t0 = Clock::now();
   std::vector<TopdownMap> topdowns;
   for (const TopdownZRange& range : level_ranges) topdowns.emplace_back(tiles.grid(), tiles.chunks(), range);
@@ -122,28 +122,15 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
     return absl::OkStatus();
   };
   summary.octree_bt_path = (out / "octree.bt").string();
-  absl::StatusOr<OctomapFileStats> bt = WriteOctreeBt(tiles, summary.octree_bt_path, visit);
-  if (!bt.ok()) return bt.status();
-  summary.num_tiles = bt->num_tiles;
-  summary.num_bt_nodes = bt->num_nodes;
+  summary.octree_ot_path = (out / "octree.ot").string();
+  absl::StatusOr<OctomapFilesStats> octrees =
+      WriteOctomapFiles(tiles, summary.octree_bt_path, summary.octree_ot_path, visit);
+  if (!octrees.ok()) return octrees.status();
+  summary.num_tiles = octrees->num_tiles;
+  summary.num_bt_nodes = octrees->bt.num_nodes;
+  summary.num_ot_nodes = octrees->ot.num_nodes;
   timings["merge.octree_bt"] = SecondsSince(t0);
   if (absl::Status s = ReportMergeProgress(progress, "octree_bt", num_tiles, num_tiles); !s.ok()) return s;
-
-  // octree.ot: the same tree with each node's log-odds (a second read of each tile: its
-  // pruning differs from the .bt's, so the two cannot share one walk's placeholders).
-  t0 = Clock::now();
-  uint64_t visited_ot = 0;
-  summary.octree_ot_path = (out / "octree.ot").string();
-  absl::StatusOr<OctomapFileStats> ot =
-      WriteOctreeOt(tiles, summary.octree_ot_path, [&](const TileData&) {
-        return ReportMergeProgress(progress, "octree_ot", visited_ot++, num_tiles);
-      });
-  if (!ot.ok()) return ot.status();
-  summary.num_ot_nodes = ot->num_nodes;
-  timings["merge.octree_ot"] = SecondsSince(t0);
-  if (absl::Status s = ReportMergeProgress(progress, "octree_ot", num_tiles, num_tiles); !s.ok()) {
-    return s;
-  }
 
   // level_<k>/topdown.png (§5.4), one per level
   t0 = Clock::now();

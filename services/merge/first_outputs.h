@@ -52,7 +52,7 @@ struct FirstOutputsOptions {
   [[nodiscard]] absl::Status Validate() const;
 };
 
-// Progress of a running merge: `stage` is "index", "octree_bt", "octree_ot", "topdown_png" or
+// Progress of a running merge: `stage` is "index", "octree_bt" (both octrees), "topdown_png" or
 // "job_json"; `done`/`total` count tiles (or 0/1 for single-step stages).
 struct MergeProgress {
   std::string stage;
@@ -105,14 +105,14 @@ struct MergeSummary {
   nlohmann::json job;  // exactly what was written to job.json
 };
 
-// Runs the merge's first outputs over `options.tiles_dir`, reading each tile twice (octree.bt,
-// counts and the topdown sums share the first read; octree.ot has the second). Memory: the tile
-// cache plus the topdown image (5 bytes per pixel at the octree resolution over the chunks' xy
-// bounding box). Errors name the file: NotFound for a missing tiles dir; DataLoss for a corrupt
-// tile or one whose content disagrees with its name; InvalidArgument for bad options or tiles of
-// mixed or unexpected resolution; OutOfRange for chunks beyond OctoMap's 16-level key space;
-// Cancelled when `progress` returns false; Unavailable for I/O errors on the outputs. Not
-// thread-safe with other HDF5 use in the process (storage/tile_store.h).
+// Runs the merge's first outputs over `options.tiles_dir`, reading each tile once (octree.bt,
+// octree.ot, counts and the topdown sums share that read). Memory: the tile cache plus the topdown
+// image (5 bytes per pixel at the octree resolution over the chunks' xy bounding box). Errors name
+// the file: NotFound for a missing tiles dir; DataLoss for a corrupt tile or one whose content
+// disagrees with its name; InvalidArgument for bad options or tiles of mixed or unexpected
+// resolution; OutOfRange for chunks beyond OctoMap's 16-level key space; Cancelled when `progress`
+// returns false; Unavailable for I/O errors on the outputs. Not thread-safe with other HDF5 use in
+// the process (storage/tile_store.h).
 absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& options,
                                                const MergeProgressCallback& progress = nullptr);
 

@@ -70,8 +70,7 @@ TEST_F(FirstOutputsTest, WritesAllOutputs) {
     return true;
   });
   ASSERT_TRUE(summary.ok()) << summary.status();
-  EXPECT_EQ(stages, (std::vector<std::string>{"index", "octree_bt", "octree_ot", "topdown_png",
-                                              "job_json"}));
+  EXPECT_EQ(stages, (std::vector<std::string>{"index", "octree_bt", "topdown_png", "job_json"}));
   const std::string out = dir_ + "/out";
   EXPECT_EQ(summary->num_tiles, 3u);
   EXPECT_DOUBLE_EQ(summary->resolution_m, 0.125);
@@ -117,7 +116,7 @@ TEST_F(FirstOutputsTest, WritesAllOutputs) {
   EXPECT_EQ(job["versions"]["tile_format"], "carvemap-tile/2");
   EXPECT_TRUE(job["versions"].contains("carvemap"));
   EXPECT_DOUBLE_EQ(job["parameters"]["merge"]["resolution_m"].get<double>(), 0.125);
-  for (const char* t : {"merge.index", "merge.octree_bt", "merge.octree_ot", "merge.topdown_png",
+  for (const char* t : {"merge.index", "merge.octree_bt", "merge.topdown_png",
                         "merge.first_outputs", "merge.total"}) {
     EXPECT_TRUE(job["timings_s"].contains(t)) << t;
   }

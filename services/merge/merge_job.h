@@ -22,7 +22,7 @@
 //   object_mesh      dual contouring of the (finer) object tiles, split into objects ➜
 //                    mesh/objects.ply (face property `object`), mesh/objects/<id>.ply,
 //                    mesh/combined.ply (`object`, −1 = building); job.json "objects"
-//   octree_bt, octree_ot, topdown_png, job_json
+//   octree_bt, topdown_png, job_json
 //                    MergeFirstOutputs: octree.bt, octree.ot, level_<k>/topdown.png per
 //                    level, job.json last (its presence means the merge finished)
 // Every file goes through "<name>.partial" and a rename. A stage that cannot make its output

@@ -100,7 +100,7 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
   ASSERT_TRUE(s.ok()) << s.status();
   EXPECT_EQ(stages, (std::vector<std::string>{"boundary_faces", "planar_regions", "levels",
                                               "dense_mesh", "planar_mesh", "index", "octree_bt",
-                                              "octree_ot", "topdown_png", "job_json"}));
+                                              "topdown_png", "job_json"}));
   const double res = 0.125;
   // 6 walls of the box: 2(32·24 + 32·20 + 24·20) faces.
   EXPECT_EQ(s->num_boundary_faces, 2u * (32 * 24 + 32 * 20 + 24 * 20));

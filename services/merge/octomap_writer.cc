@@ -11,6 +11,7 @@
 #include <cstring>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -31,7 +32,8 @@ float OtLogOddsOf(const LeafStats& stats) {
 
 namespace {
 
-enum class Kind : uint8_t { kEmpty, kFree, kOccupied, kInner };
+// The values are .bt's 2-bit child codes.
+enum class Kind : uint8_t { kEmpty = 0b00, kFree = 0b01, kOccupied = 0b10, kInner = 0b11 };
 
 Kind KindOf(BtLabel label) {
   switch (label) {
@@ -157,22 +159,7 @@ struct BtFormat {
                                           const std::array<Node, 8>& children) {
     uint8_t bytes[2] = {0, 0};
     for (int i = 0; i < 8; ++i) {
-      uint8_t bits = 0;  // low bit at 2(i mod 4), high bit at 2(i mod 4) + 1
-      switch (children[i].kind) {
-        case Kind::kEmpty:
-          bits = 0b00;
-          break;
-        case Kind::kFree:
-          bits = 0b01;
-          break;
-        case Kind::kOccupied:
-          bits = 0b10;
-          break;
-        case Kind::kInner:
-          bits = 0b11;
-          break;
-      }
-      bytes[i / 4] |= static_cast<uint8_t>(bits << (2 * (i % 4)));
+      bytes[i / 4] |= static_cast<uint8_t>(static_cast<uint8_t>(children[i].kind) << (2 * (i % 4)));
     }
     if (absl::Status s = body.Patch(pos, bytes, 2); !s.ok()) return s;
     return Node{Kind::kInner, 0};
@@ -218,12 +205,26 @@ struct OtFormat {
   }
 };
 
-template <typename Format>
+// One file of the walk: none when `body` is null.
+struct Output {
+  BodyFile* body = nullptr;
+  uint64_t nodes = 0;  // the header's size: every node written, root included
+};
+
+// What a subtree came out as in each file.
+struct Nodes {
+  Node bt, ot;
+};
+
+// The depth-first walk over the tiles, writing both files on one read of each tile; each
+// file has its own node layout and pruning (its Format), so a node may be a leaf in one and
+// an inner node in the other.
 class TreeWriter {
  public:
-  TreeWriter(TileSet& tiles, BodyFile& body, const TileVisitor& visit)
+  TreeWriter(TileSet& tiles, Output& bt, Output& ot, const TileVisitor& visit)
       : tiles_(tiles),
-        body_(body),
+        bt_(bt),
+        ot_(ot),
         visit_(visit),
         k_(tiles.grid().chunk_depth),
         chunk_level_(kOctomapTreeDepth - k_) {}
@@ -233,45 +234,77 @@ class TreeWriter {
     if (chunks_.empty()) return absl::OkStatus();
     // The root is never a leaf in either format (it is always read as an inner node), and it
     // could only become one if every chunk of the key space had a tile.
-    absl::StatusOr<Node> root =
+    absl::StatusOr<Nodes> root =
         WriteInner([&](int i) { return WriteAbove(1, Range(1, i, 0, chunks_.size())); },
                    /*may_collapse=*/false);
     if (!root.ok()) return root.status();
-    if (root->kind == Kind::kInner) ++nodes_;
+    if (root->bt.kind == Kind::kInner) ++bt_.nodes;
+    if (root->ot.kind == Kind::kInner) ++ot_.nodes;
     return absl::OkStatus();
   }
-  [[nodiscard]] uint64_t nodes() const { return nodes_; }
   [[nodiscard]] uint64_t tiles_read() const { return tiles_read_; }
 
  private:
-  using ChildFn = std::function<absl::StatusOr<Node>(int)>;
+  using ChildFn = std::function<absl::StatusOr<Nodes>(int)>;
 
-  // Writes one inner node: a placeholder, then each child's subtree in child order (the order
-  // OctoMap's readers recurse in), then the node's real bytes. A node whose children are all
-  // unknown disappears; one whose 8 children are leaves that prune becomes that leaf.
-  absl::StatusOr<Node> WriteInner(const ChildFn& child, bool may_collapse) {
-    const uint64_t pos = body_.Pos();
+  // An inner node's bytes are reserved before its children and filled in after them.
+  template <typename Format>
+  static absl::Status Reserve(Output& out, uint64_t& pos) {
+    if (out.body == nullptr) return absl::OkStatus();
+    pos = out.body->Pos();
     const char zero[Format::kInnerBytes] = {};
-    if (absl::Status s = body_.Append(zero, sizeof zero); !s.ok()) return s;
-    std::array<Node, 8> children;
-    int present = 0;
-    for (int i = 0; i < 8; ++i) {
-      absl::StatusOr<Node> node = child(i);
-      if (!node.ok()) return node.status();
-      children[i] = *node;
-      if (node->kind != Kind::kEmpty) ++present;
-    }
+    return out.body->Append(zero, sizeof zero);
+  }
+
+  // A node whose children are all unknown disappears; one whose 8 children are leaves that
+  // prune becomes that leaf; else its reserved bytes are filled in.
+  template <typename Format>
+  static absl::StatusOr<Node> Fill(Output& out, uint64_t pos, const std::array<Node, 8>& children,
+                                   bool may_collapse) {
+    if (out.body == nullptr) return Node{};
+    const int present = static_cast<int>(std::count_if(
+        children.begin(), children.end(), [](const Node& n) { return n.kind != Kind::kEmpty; }));
     if (present == 0) {
-      body_.Truncate(pos);
+      out.body->Truncate(pos);
       return Node{};
     }
     if (may_collapse && present == 8 && Format::Collapses(children)) {
-      body_.Truncate(pos);
-      if (absl::Status s = Format::WriteLeaf(body_, children[0]); !s.ok()) return s;
+      out.body->Truncate(pos);
+      if (absl::Status s = Format::WriteLeaf(*out.body, children[0]); !s.ok()) return s;
       return children[0];
     }
-    nodes_ += static_cast<uint64_t>(present);
-    return Format::FinishInner(body_, pos, children);
+    out.nodes += static_cast<uint64_t>(present);
+    return Format::FinishInner(*out.body, pos, children);
+  }
+
+  template <typename Format>
+  static absl::StatusOr<Node> Leaf(Output& out, const LeafStats& stats) {
+    if (out.body == nullptr) return Node{};
+    const Node leaf = Format::Leaf(stats);
+    if (leaf.kind != Kind::kEmpty) {
+      if (absl::Status s = Format::WriteLeaf(*out.body, leaf); !s.ok()) return s;
+    }
+    return leaf;
+  }
+
+  // Writes one inner node in each file, its children's subtrees in child order (the order
+  // OctoMap's readers recurse in) between its reserved bytes and their filling in.
+  absl::StatusOr<Nodes> WriteInner(const ChildFn& child, bool may_collapse) {
+    uint64_t bt_pos = 0, ot_pos = 0;
+    if (absl::Status s = Reserve<BtFormat>(bt_, bt_pos); !s.ok()) return s;
+    if (absl::Status s = Reserve<OtFormat>(ot_, ot_pos); !s.ok()) return s;
+    std::array<Node, 8> bt, ot;
+    for (int i = 0; i < 8; ++i) {
+      absl::StatusOr<Nodes> nodes = child(i);
+      if (!nodes.ok()) return nodes.status();
+      bt[i] = nodes->bt;
+      ot[i] = nodes->ot;
+    }
+    absl::StatusOr<Node> b = Fill<BtFormat>(bt_, bt_pos, bt, may_collapse);
+    if (!b.ok()) return b.status();
+    absl::StatusOr<Node> o = Fill<OtFormat>(ot_, ot_pos, ot, may_collapse);
+    if (!o.ok()) return o.status();
+    return Nodes{*b, *o};
   }
 
   struct Span {
@@ -289,15 +322,15 @@ class TreeWriter {
   }
 
   // The node at OctoMap depth `depth` holding chunks [span.lo, span.hi).
-  absl::StatusOr<Node> WriteAbove(int depth, Span span) {
-    if (span.lo == span.hi) return Node{};
+  absl::StatusOr<Nodes> WriteAbove(int depth, Span span) {
+    if (span.lo == span.hi) return Nodes{};
     if (depth == chunk_level_) return WriteChunk(chunks_[span.lo].key);
     return WriteInner(
         [&, span](int i) { return WriteAbove(depth + 1, Range(depth + 1, i, span.lo, span.hi)); },
         /*may_collapse=*/true);
   }
 
-  absl::StatusOr<Node> WriteChunk(const ChunkKey& key) {
+  absl::StatusOr<Nodes> WriteChunk(const ChunkKey& key) {
     absl::StatusOr<std::shared_ptr<const TileData>> tile = tiles_.Get(key);
     if (!tile.ok()) return tile.status();
     ++tiles_read_;
@@ -314,15 +347,15 @@ class TreeWriter {
 
   // The node of the chunk at local depth `depth` with Morton code `code`, holding rows
   // [lo, hi) of the tile (canonical order: by first finest cell, non-overlapping).
-  absl::StatusOr<Node> WriteInChunk(const TileData& t, const std::string& path, int depth,
-                                    uint64_t code, size_t lo, size_t hi) {
-    if (lo == hi) return Node{};
+  absl::StatusOr<Nodes> WriteInChunk(const TileData& t, const std::string& path, int depth,
+                                     uint64_t code, size_t lo, size_t hi) {
+    if (lo == hi) return Nodes{};
     if (hi - lo == 1 && t.leaves[lo].node.depth == depth) {
-      const Node leaf = Format::Leaf(t.leaves[lo].stats);
-      if (leaf.kind != Kind::kEmpty) {
-        if (absl::Status s = Format::WriteLeaf(body_, leaf); !s.ok()) return s;
-      }
-      return leaf;
+      absl::StatusOr<Node> b = Leaf<BtFormat>(bt_, t.leaves[lo].stats);
+      if (!b.ok()) return b.status();
+      absl::StatusOr<Node> o = Leaf<OtFormat>(ot_, t.leaves[lo].stats);
+      if (!o.ok()) return o.status();
+      return Nodes{*b, *o};
     }
     for (size_t i = lo; i < hi; ++i) {
       if (t.leaves[i].node.depth <= depth) {  // ReadTile rejects overlaps; stay defensive
@@ -331,7 +364,7 @@ class TreeWriter {
     }
     const int shift = 3 * (k_ - depth - 1);
     return WriteInner(
-        [&, depth, code, lo, hi, shift](int i) -> absl::StatusOr<Node> {
+        [&, depth, code, lo, hi, shift](int i) -> absl::StatusOr<Nodes> {
           const uint64_t child = code * 8 + uint64_t(i);
           auto b = std::lower_bound(first_cells_.begin() + lo, first_cells_.begin() + hi,
                                     child << shift);
@@ -343,20 +376,66 @@ class TreeWriter {
   }
 
   TileSet& tiles_;
-  BodyFile& body_;
+  Output& bt_;
+  Output& ot_;
   const TileVisitor& visit_;
   const int k_;
   const int chunk_level_;  // OctoMap depth of chunk nodes
   std::vector<SortedChunk> chunks_;
   std::vector<uint64_t> first_cells_;  // of the tile being written
-  uint64_t nodes_ = 0;
   uint64_t tiles_read_ = 0;
 };
 
-// Writes `path` in Format from every tile of `tiles` (WriteOctreeBt, WriteOctreeOt).
-template <typename Format>
-absl::StatusOr<OctomapFileStats> WriteOctomapFile(TileSet& tiles, const std::string& path,
-                                                  const TileVisitor& visit) {
+// One OctoMap file being written: "<path>.partial", its header with the node count's field
+// left blank until the tree is written, then a rename.
+class OctomapFile {
+ public:
+  explicit OctomapFile(std::string path) : path_(std::move(path)), body_(PartialPath(path_)) {}
+
+  absl::Status Start(const char* first_line, double resolution_m) {
+    if (absl::Status s = body_.Open(); !s.ok()) return s;
+    std::string header = absl::StrCat(first_line, "id OcTree\nsize ");
+    size_field_ = header.size();
+    header += std::string(kSizeFieldWidth, ' ');
+    header += absl::StrFormat("\nres %.17g\ndata\n", resolution_m);
+    return body_.Append(header.data(), header.size());
+  }
+  // Writes the count of `nodes`, then closes and commits the file.
+  absl::Status Finish(uint64_t nodes) {
+    if (nodes > 0xffffffffULL) {  // OctoMap reads the size as a 32-bit unsigned.
+      return absl::ResourceExhaustedError(
+          absl::StrCat(path_, ": ", nodes, " nodes exceed the 2^32 − 1 OctoMap's header can hold"));
+    }
+    std::string count = std::to_string(nodes);
+    count.resize(kSizeFieldWidth, ' ');
+    if (absl::Status s = body_.Patch(size_field_, count.data(), count.size()); !s.ok()) return s;
+    bytes_ = body_.Pos();
+    if (absl::Status s = body_.Close(); !s.ok()) return s;
+    if (absl::Status s = CommitPartial(path_); !s.ok()) return s;
+    committed_ = true;
+    return absl::OkStatus();
+  }
+  // Removes what was written, committed or not.
+  void Abandon() {
+    std::remove(PartialPath(path_).c_str());
+    if (committed_) std::remove(path_.c_str());
+  }
+  [[nodiscard]] BodyFile& body() { return body_; }
+  [[nodiscard]] uint64_t bytes() const { return bytes_; }
+
+ private:
+  std::string path_;
+  BodyFile body_;
+  size_t size_field_ = 0;
+  uint64_t bytes_ = 0;
+  bool committed_ = false;
+};
+
+}  // namespace
+
+absl::StatusOr<OctomapFilesStats> WriteOctomapFiles(TileSet& tiles, const std::string& bt_path,
+                                                    const std::string& ot_path,
+                                                    const TileVisitor& visit) {
   const int k = tiles.grid().chunk_depth;
   const int chunk_level = kOctomapTreeDepth - k;
   // Our chunk c is OctoMap's node (c·2^k + 32768) / 2^k = c + 2^(15−k) at depth 16 − k.
@@ -376,52 +455,34 @@ absl::StatusOr<OctomapFileStats> WriteOctomapFile(TileSet& tiles, const std::str
   std::sort(chunks.begin(), chunks.end(),
             [](const SortedChunk& a, const SortedChunk& b) { return a.code < b.code; });
 
-  const std::string partial = PartialPath(path);
-  BodyFile body(partial);
-  absl::Status status = body.Open();
-  OctomapFileStats stats;
-  size_t size_field = 0;
-  if (status.ok()) {
-    std::string header = absl::StrCat(Format::kFirstLine, "id OcTree\nsize ");
-    size_field = header.size();
-    header += std::string(kSizeFieldWidth, ' ');
-    header += absl::StrFormat("\nres %.17g\ndata\n", tiles.grid().resolution_m());
-    status = body.Append(header.data(), header.size());
+  std::optional<OctomapFile> bt_file, ot_file;
+  Output bt, ot;
+  absl::Status status;
+  const double res = tiles.grid().resolution_m();
+  if (!bt_path.empty()) {
+    bt_file.emplace(bt_path);
+    status = bt_file->Start(BtFormat::kFirstLine, res);
+    bt.body = &bt_file->body();
   }
-  TreeWriter<Format> writer(tiles, body, visit);
+  if (status.ok() && !ot_path.empty()) {
+    ot_file.emplace(ot_path);
+    status = ot_file->Start(OtFormat::kFirstLine, res);
+    ot.body = &ot_file->body();
+  }
+  TreeWriter writer(tiles, bt, ot, visit);
   if (status.ok()) status = writer.Run(std::move(chunks));
-  if (status.ok() && writer.nodes() > 0xffffffffULL) {
-    // OctoMap reads the size as a 32-bit unsigned.
-    status = absl::ResourceExhaustedError(absl::StrCat(
-        path, ": ", writer.nodes(), " nodes exceed the 2^32 − 1 OctoMap's header can hold"));
-  }
-  if (status.ok()) {
-    std::string count = std::to_string(writer.nodes());
-    count.resize(kSizeFieldWidth, ' ');
-    status = body.Patch(size_field, count.data(), count.size());
-  }
-  stats.bytes = body.Pos();
-  if (status.ok()) status = body.Close();
-  if (status.ok()) status = CommitPartial(path);
-  if (!status.ok()) {
-    std::remove(partial.c_str());
+  if (status.ok() && bt_file) status = bt_file->Finish(bt.nodes);
+  if (status.ok() && ot_file) status = ot_file->Finish(ot.nodes);
+  if (!status.ok()) {  // neither file stands unless both do
+    if (bt_file) bt_file->Abandon();
+    if (ot_file) ot_file->Abandon();
     return status;
   }
-  stats.num_nodes = writer.nodes();
+  OctomapFilesStats stats;
   stats.num_tiles = writer.tiles_read();
+  if (bt_file) stats.bt = {bt.nodes, bt_file->bytes()};
+  if (ot_file) stats.ot = {ot.nodes, ot_file->bytes()};
   return stats;
-}
-
-}  // namespace
-
-absl::StatusOr<OctomapFileStats> WriteOctreeBt(TileSet& tiles, const std::string& path,
-                                               const TileVisitor& visit) {
-  return WriteOctomapFile<BtFormat>(tiles, path, visit);
-}
-
-absl::StatusOr<OctomapFileStats> WriteOctreeOt(TileSet& tiles, const std::string& path,
-                                               const TileVisitor& visit) {
-  return WriteOctomapFile<OtFormat>(tiles, path, visit);
 }
 
 }  // namespace carvemap

@@ -49,22 +49,25 @@ enum class BtLabel : uint8_t { kUnknown, kFree, kOccupied };
 
 struct OctomapFileStats {
   uint64_t num_nodes = 0;  // the header's size: every node, inner and leaf, root included
-  uint64_t num_tiles = 0;  // tiles read (each once)
   uint64_t bytes = 0;      // file size
+};
+struct OctomapFilesStats {
+  uint64_t num_tiles = 0;   // tiles read (each once)
+  OctomapFileStats bt, ot;  // zero for a file not asked for
 };
 
 // Called once per tile, in the order written; a non-OK status (e.g. Cancelled) stops the
 // write and is returned as is.
 using TileVisitor = std::function<absl::Status(const TileData& tile)>;
 
-// Writes `path` (through "<path>.partial" and a rename) from every tile of `tiles`, calling
-// `visit` on each. Sibling leaves that OctoMap's prune() would merge are merged (.bt: one
-// label; .ot: one value). OutOfRange for a chunk beyond OctoMap's key space (|leaf key| >
-// 32768, i.e. about ±2 km at 6.25 cm); tile errors as TileSet::Get; Unavailable naming `path`
-// for I/O errors.
-absl::StatusOr<OctomapFileStats> WriteOctreeBt(TileSet& tiles, const std::string& path,
-                                               const TileVisitor& visit = nullptr);
-absl::StatusOr<OctomapFileStats> WriteOctreeOt(TileSet& tiles, const std::string& path,
-                                               const TileVisitor& visit = nullptr);
+// Writes `bt_path` (.bt) and `ot_path` (.ot), each through "<path>.partial" and a rename, from
+// one read of every tile of `tiles`, calling `visit` on each; an empty path is not written.
+// Sibling leaves that OctoMap's prune() would merge are merged (.bt: one label; .ot: one value).
+// OutOfRange for a chunk beyond OctoMap's key space (|leaf key| > 32768, i.e. about ±2 km at
+// 6.25 cm); tile errors as TileSet::Get; Unavailable naming the file for I/O errors. On any
+// error neither file is left.
+absl::StatusOr<OctomapFilesStats> WriteOctomapFiles(TileSet& tiles, const std::string& bt_path,
+                                                    const std::string& ot_path,
+                                                    const TileVisitor& visit = nullptr);
 
 }  // namespace carvemap

@@ -103,7 +103,7 @@ TEST_P(OctreeBtWriterTest, RandomTilesRoundTripThroughLiboctomap) {
   ASSERT_TRUE(tiles.ok()) << tiles.status();
   const std::string path = dir + "/octree.bt";
   int visited = 0;
-  auto stats = WriteOctreeBt(**tiles, path, [&](const TileData&) {
+  auto stats = WriteOctomapFiles(**tiles, path, "", [&](const TileData&) {
     ++visited;
     return absl::OkStatus();
   });
@@ -111,18 +111,18 @@ TEST_P(OctreeBtWriterTest, RandomTilesRoundTripThroughLiboctomap) {
   EXPECT_EQ(visited, int(keys.size()));
   EXPECT_EQ(stats->num_tiles, keys.size());
   EXPECT_FALSE(fs::exists(PartialPath(path)));
-  EXPECT_EQ(fs::file_size(path), stats->bytes);
+  EXPECT_EQ(fs::file_size(path), stats->bt.bytes);
 
   // Byte for byte the tree liboctomap writes for the same content (after the header).
   std::stringstream ref_bytes;
   ASSERT_TRUE(reference.writeBinaryConst(ref_bytes));
   const std::string ours = ReadAll(path);
   EXPECT_EQ(BodyAfterData(ours), BodyAfterData(ref_bytes.str()));
-  EXPECT_EQ(stats->num_nodes, reference.size());
+  EXPECT_EQ(stats->bt.num_nodes, reference.size());
 
   octomap::OcTree tree(0.1);
   ASSERT_TRUE(tree.readBinary(path));
-  EXPECT_EQ(tree.size(), stats->num_nodes);
+  EXPECT_EQ(tree.size(), stats->bt.num_nodes);
   EXPECT_DOUBLE_EQ(tree.getResolution(), (*tiles)->grid().resolution_m());
 
   // Many points: occupancy and unknown-ness agree with the tiles.
@@ -185,24 +185,24 @@ TEST_P(OctreeOtWriterTest, RandomTilesRoundTripThroughLiboctomap) {
   auto tiles = TileSet::Open(tiles_dir, 0, 1 << 20);
   ASSERT_TRUE(tiles.ok()) << tiles.status();
   const std::string path = dir + "/octree.ot";
-  auto stats = WriteOctreeOt(**tiles, path);
+  auto stats = WriteOctomapFiles(**tiles, "", path);
   ASSERT_TRUE(stats.ok()) << stats.status();
   EXPECT_EQ(stats->num_tiles, keys.size());
   EXPECT_FALSE(fs::exists(PartialPath(path)));
-  EXPECT_EQ(fs::file_size(path), stats->bytes);
+  EXPECT_EQ(fs::file_size(path), stats->ot.bytes);
 
   // Byte for byte the tree liboctomap writes for the same content (after the header).
   std::stringstream ref_bytes;
   ASSERT_TRUE(reference.write(ref_bytes));
   EXPECT_EQ(BodyAfterData(ReadAll(path)), BodyAfterData(ref_bytes.str()));
-  EXPECT_EQ(stats->num_nodes, reference.size());
+  EXPECT_EQ(stats->ot.num_nodes, reference.size());
 
   // Read by liboctomap's generic reader, as octovis and OctoMap's tools open .ot files.
   std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(path));
   ASSERT_NE(read, nullptr);
   auto* tree = dynamic_cast<octomap::OcTree*>(read.get());
   ASSERT_NE(tree, nullptr) << read->getTreeType();
-  EXPECT_EQ(tree->size(), stats->num_nodes);
+  EXPECT_EQ(tree->size(), stats->ot.num_nodes);
   EXPECT_DOUBLE_EQ(tree->getResolution(), (*tiles)->grid().resolution_m());
   std::uniform_real_distribution<double> ux(-12, 10), uy(-6, 16), uz(-4, 8);
   int known = 0;
@@ -251,12 +251,12 @@ TEST(OctreeBtWriter, EightEqualChunksPruneIntoOneLeaf) {
   }
   auto tiles = TileSet::Open(dir + "/tiles", 0, 0);
   ASSERT_TRUE(tiles.ok());
-  auto stats = WriteOctreeBt(**tiles, dir + "/octree.bt");
+  auto stats = WriteOctomapFiles(**tiles, dir + "/octree.bt", "");
   ASSERT_TRUE(stats.ok()) << stats.status();
   // The root, one inner node per depth down to 15 − k, and there the 4 m leaf.
-  EXPECT_EQ(stats->num_nodes, uint64_t(kOctomapTreeDepth - k));
+  EXPECT_EQ(stats->bt.num_nodes, uint64_t(kOctomapTreeDepth - k));
   octomap::OcTree tree(dir + "/octree.bt");
-  EXPECT_EQ(tree.size(), stats->num_nodes);
+  EXPECT_EQ(tree.size(), stats->bt.num_nodes);
   const octomap::OcTreeNode* node = tree.search(3.9, 0.1, 2.0);
   ASSERT_NE(node, nullptr);
   EXPECT_FALSE(tree.isNodeOccupied(node));
@@ -270,9 +270,9 @@ TEST(OctreeBtWriter, EmptyTilesGiveAnEmptyTreeOctomapReads) {
   ASSERT_TRUE(WriteTile(dir + "/tiles", tile).ok());
   auto tiles = TileSet::Open(dir + "/tiles", 0, 0);
   ASSERT_TRUE(tiles.ok());
-  auto stats = WriteOctreeBt(**tiles, dir + "/octree.bt");
+  auto stats = WriteOctomapFiles(**tiles, dir + "/octree.bt", "");
   ASSERT_TRUE(stats.ok()) << stats.status();
-  EXPECT_EQ(stats->num_nodes, 0u);
+  EXPECT_EQ(stats->bt.num_nodes, 0u);
   EXPECT_EQ(BodyAfterData(ReadAll(dir + "/octree.bt")), "");
   octomap::OcTree tree(0.1);
   EXPECT_TRUE(tree.readBinary(dir + "/octree.bt"));
@@ -289,7 +289,7 @@ TEST(OctreeBtWriter, ChunkBeyondOctomapKeySpaceIsOutOfRange) {
   ASSERT_TRUE(WriteTile(dir + "/tiles", tile).ok());
   auto tiles = TileSet::Open(dir + "/tiles", 0, 0);
   ASSERT_TRUE(tiles.ok());
-  auto stats = WriteOctreeBt(**tiles, dir + "/octree.bt");
+  auto stats = WriteOctomapFiles(**tiles, dir + "/octree.bt", "");
   EXPECT_EQ(stats.status().code(), absl::StatusCode::kOutOfRange);
   EXPECT_NE(stats.status().message().find("c_1024_0_0.h5"), std::string::npos);
   EXPECT_FALSE(fs::exists(dir + "/octree.bt"));
@@ -304,11 +304,13 @@ TEST(OctreeBtWriter, CorruptTileIsDataLossNamingItAndLeavesNoFile) {
   std::ofstream(dir + "/tiles/c_2_0_0.h5") << "not an hdf5 file";
   auto tiles = TileSet::Open(dir + "/tiles", 0.0625, 0);
   ASSERT_TRUE(tiles.ok());
-  auto stats = WriteOctreeBt(**tiles, dir + "/octree.bt");
+  auto stats = WriteOctomapFiles(**tiles, dir + "/octree.bt", dir + "/octree.ot");
   EXPECT_EQ(stats.status().code(), absl::StatusCode::kDataLoss);
   EXPECT_NE(stats.status().message().find("c_2_0_0.h5"), std::string::npos);
-  EXPECT_FALSE(fs::exists(dir + "/octree.bt"));
-  EXPECT_FALSE(fs::exists(PartialPath(dir + "/octree.bt")));
+  for (const char* name : {"/octree.bt", "/octree.ot"}) {
+    EXPECT_FALSE(fs::exists(dir + name));
+    EXPECT_FALSE(fs::exists(PartialPath(dir + name)));
+  }
 }
 
 TEST(OctreeBtWriter, VisitorErrorStopsTheWrite) {
@@ -319,10 +321,11 @@ TEST(OctreeBtWriter, VisitorErrorStopsTheWrite) {
   ASSERT_TRUE(WriteTile(dir + "/tiles", tile).ok());
   auto tiles = TileSet::Open(dir + "/tiles", 0, 0);
   ASSERT_TRUE(tiles.ok());
-  auto stats = WriteOctreeBt(**tiles, dir + "/octree.bt",
-                             [](const TileData&) { return absl::CancelledError("stop"); });
+  auto stats = WriteOctomapFiles(**tiles, dir + "/octree.bt", dir + "/octree.ot",
+                                 [](const TileData&) { return absl::CancelledError("stop"); });
   EXPECT_EQ(stats.status().code(), absl::StatusCode::kCancelled);
   EXPECT_FALSE(fs::exists(dir + "/octree.bt"));
+  EXPECT_FALSE(fs::exists(dir + "/octree.ot"));
 }
 
 }  // namespace
