@@ -121,6 +121,13 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string
   return (*reader)->PathPositions();
 }
 
+// Before a planar fit, which reads no tile: the cached tiles, and the small blocks the last fit
+// freed (millions of them, resident until given back), go back to the system.
+void ClearForFit(TileSet& tiles) {
+  tiles.ReleaseCache();
+  ReturnFreedMemory();
+}
+
 // The boundary faces of `tiles` in a FaceStore at `path`, sorted by height (face_store.h): the
 // stages after read them a slab or a level at a time.
 absl::StatusOr<std::unique_ptr<FaceStore>> StoreBoundaryFaces(TileSet& tiles,
@@ -174,10 +181,9 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles, const F
       return s;
     }
     // §4.2.4's regions of this level's faces alone (level_regions.h): the memory of the fit
-    // follows the level, not the building. The tiles the last level's wall samples read are
-    // dropped first: the fit reads none, and this level's samples read other ones.
-    tiles.ReleaseCache();
-    ReturnFreedMemory();  // the small blocks the last fit freed (millions of them)
+    // follows the level, not the building. This level's wall samples read other tiles than
+    // the last one's.
+    ClearForFit(tiles);
     Clock::time_point t0 = Clock::now();
     PlanarRegionSet regions;
     const auto [band_begin, band_end] = LevelBand(faces.heights(), levels[k]);
@@ -331,8 +337,7 @@ absl::StatusOr<std::optional<PlanarMesh>> PlanarMeshByLevel(
     absl::StatusOr<CutPlane> high =
         FindCutPlane(grid, hi, faces.xy_min(), faces.xy_max(), interior_at);
     if (!high.ok()) return high.status();
-    tiles.ReleaseCache();  // the plane's tiles are not read again; the fit below reads none
-    ReturnFreedMemory();   // what the last level's fit and mesh freed
+    ClearForFit(tiles);  // the plane's tiles are not read again
     const auto [begin, end] = faces.heights().Range(low.z - reach, high->z + reach);
     absl::StatusOr<std::vector<BoundaryFace>> near = faces.Read(begin, end);
     if (!near.ok()) return near.status();
@@ -840,7 +845,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
       StoreBoundaryFaces(tiles, (scratch / "job.faces").string(),
                          StageProgress(progress, "boundary_faces"), MergeThreads(options));
   if (!faces.ok()) return InStage("boundary_faces", faces.status());
-  tiles.ReleaseCache();  // the levels' fits read no tile; the wall samples read their own
+  ClearForFit(tiles);  // the wall samples read their own tiles again
   counts["boundary_faces"] = (*faces)->size();
   counts["boundary_area_m2"] = (*faces)->area_m2();
   timings["merge.boundary_faces"] = SecondsSince(t0);
