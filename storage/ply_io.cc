@@ -51,10 +51,12 @@ absl::Status WritePly(const std::string& path, const TriangleMesh& mesh,
   });
 }
 
-PlyStreamWriter::PlyStreamWriter(std::string path) : path_(std::move(path)) {}
+PlyStreamWriter::PlyStreamWriter(std::string path, std::string face_property)
+    : path_(std::move(path)), face_property_(std::move(face_property)) {}
 
-absl::StatusOr<std::unique_ptr<PlyStreamWriter>> PlyStreamWriter::Create(const std::string& path) {
-  std::unique_ptr<PlyStreamWriter> w(new PlyStreamWriter(path));
+absl::StatusOr<std::unique_ptr<PlyStreamWriter>> PlyStreamWriter::Create(
+    const std::string& path, const std::string& face_property) {
+  std::unique_ptr<PlyStreamWriter> w(new PlyStreamWriter(path, face_property));
   w->vertex_out_.open(path + ".vertices.partial", std::ios::binary | std::ios::trunc);
   w->face_out_.open(path + ".faces.partial", std::ios::binary | std::ios::trunc);
   if (!w->vertex_out_ || !w->face_out_) {
@@ -86,16 +88,29 @@ absl::Status PlyStreamWriter::AddVertices(std::span<const Eigen::Vector3f> verti
   return absl::OkStatus();
 }
 
-absl::Status PlyStreamWriter::AddTriangles(std::span<const Eigen::Vector3i> triangles) {
+absl::Status PlyStreamWriter::AddTriangles(std::span<const Eigen::Vector3i> triangles,
+                                           int face_value) {
   errno = 0;
   const unsigned char three = 3;
   for (const Eigen::Vector3i& t : triangles) {
     face_out_.write(reinterpret_cast<const char*>(&three), 1);
     face_out_.write(reinterpret_cast<const char*>(t.data()), 3 * sizeof(int));
+    if (!face_property_.empty()) {
+      face_out_.write(reinterpret_cast<const char*>(&face_value), sizeof(int));
+    }
   }
   if (!face_out_) return StreamWriteError(path_, errno);
   triangles_ += triangles.size();
   return absl::OkStatus();
+}
+
+absl::Status PlyStreamWriter::AddMesh(const TriangleMesh& mesh, int face_value) {
+  const int offset = static_cast<int>(vertices_);
+  if (absl::Status s = AddVertices(mesh.vertices); !s.ok()) return s;
+  std::vector<Eigen::Vector3i> shifted;
+  shifted.reserve(mesh.triangles.size());
+  for (const Eigen::Vector3i& t : mesh.triangles) shifted.push_back(t.array() + offset);
+  return AddTriangles(shifted, face_value);
 }
 
 absl::Status PlyStreamWriter::Finish() {
@@ -111,8 +126,9 @@ absl::Status PlyStreamWriter::Finish() {
         << "element vertex " << vertices_ << "\n"
         << "property float x\nproperty float y\nproperty float z\n"
         << "element face " << triangles_ << "\n"
-        << "property list uchar int vertex_indices\n"
-        << "end_header\n";
+        << "property list uchar int vertex_indices\n";
+    if (!face_property_.empty()) out << "property int " << face_property_ << "\n";
+    out << "end_header\n";
     std::vector<char> buffer(size_t{1} << 20);
     for (const char* part : {".vertices.partial", ".faces.partial"}) {
       std::ifstream in(path_ + part, std::ios::binary);
@@ -124,45 +140,6 @@ absl::Status PlyStreamWriter::Finish() {
         in.read(buffer.data(), std::streamsize(buffer.size()));
         out.write(buffer.data(), in.gcount());
       }
-    }
-  });
-}
-
-absl::Status WritePlyParts(const std::string& path, std::span<const PlyPart> parts,
-                           const std::string& face_property) {
-  static_assert(std::endian::native == std::endian::little, "PLY writer assumes little-endian");
-  size_t vertices = 0, triangles = 0;
-  for (const PlyPart& part : parts) {
-    vertices += part.mesh->vertices.size();
-    triangles += part.mesh->triangles.size();
-  }
-  if (vertices > size_t(std::numeric_limits<int>::max())) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(path, ": ", vertices, " vertices do not fit PLY's int indices"));
-  }
-  return WriteFileAtomically(path, [&](std::ostream& out) {
-    out << "ply\nformat binary_little_endian 1.0\ncomment carvemap\n"
-        << "element vertex " << vertices << "\n"
-        << "property float x\nproperty float y\nproperty float z\n"
-        << "element face " << triangles << "\n"
-        << "property list uchar int vertex_indices\n"
-        << "property int " << face_property << "\n"
-        << "end_header\n";
-    for (const PlyPart& part : parts) {
-      for (const Eigen::Vector3f& v : part.mesh->vertices) {
-        out.write(reinterpret_cast<const char*>(v.data()), 3 * sizeof(float));
-      }
-    }
-    const unsigned char three = 3;
-    int offset = 0;
-    for (const PlyPart& part : parts) {
-      for (const Eigen::Vector3i& t : part.mesh->triangles) {
-        const Eigen::Vector3i shifted = (t.array() + offset).matrix();
-        out.write(reinterpret_cast<const char*>(&three), 1);
-        out.write(reinterpret_cast<const char*>(shifted.data()), 3 * sizeof(int));
-        out.write(reinterpret_cast<const char*>(&part.face_value), sizeof(int));
-      }
-      offset += int(part.mesh->vertices.size());
     }
   });
 }

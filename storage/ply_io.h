@@ -32,42 +32,37 @@ absl::Status WritePly(const std::string& path, const TriangleMesh& mesh,
                       const std::vector<int>* face_values = nullptr,
                       const std::string& face_property = "label");
 
-// One mesh of several written as one PLY (WritePlyParts); its triangles carry `face_value`.
-struct PlyPart {
-  const TriangleMesh* mesh = nullptr;
-  int face_value = 0;
-};
-
-// The same bytes as WritePly of the parts appended in order (TriangleMesh::Append), each
-// part's triangles with its face_value, without making that mesh: a large building's objects
-// are hundreds of MB, and objects.ply and combined.ply are each all of them.
-absl::Status WritePlyParts(const std::string& path, std::span<const PlyPart> parts,
-                           const std::string& face_property);
-
 // WritePly for a mesh that comes a piece at a time, in its final order (vertices, and
 // triangles with their final indices), and is never held whole: the pieces go to two files
 // beside `path` ("<path>.vertices.partial", "<path>.faces.partial"), joined under the header
 // into `path` by Finish (through "<path>.partial" and a rename). The bytes are WritePly's of
-// the whole mesh. The temporaries are removed by Finish or by the destructor; a writer not
-// finished leaves nothing under `path`. Errors name the file: PermissionDenied when a file
-// cannot be opened, DataLoss when a write fails (with the system's reason).
+// the whole mesh; with a `face_property`, each triangle carries the int value given with it
+// (WritePly's with face values, for meshes added one after another with AddMesh). The temporaries
+// are removed by Finish or by the destructor; a writer not finished leaves nothing under `path`.
+// Errors name the file: PermissionDenied when a file cannot be opened, DataLoss when a write fails
+// (with the system's reason).
 class PlyStreamWriter {
  public:
   [[nodiscard]] static absl::StatusOr<std::unique_ptr<PlyStreamWriter>> Create(
-      const std::string& path);
+      const std::string& path, const std::string& face_property = "");
   ~PlyStreamWriter();
   PlyStreamWriter(const PlyStreamWriter&) = delete;
   PlyStreamWriter& operator=(const PlyStreamWriter&) = delete;
 
   [[nodiscard]] absl::Status AddVertices(std::span<const Eigen::Vector3f> vertices);
-  [[nodiscard]] absl::Status AddTriangles(std::span<const Eigen::Vector3i> triangles);
+  // `face_value` is written only with a face property.
+  [[nodiscard]] absl::Status AddTriangles(std::span<const Eigen::Vector3i> triangles,
+                                          int face_value = 0);
+  // A whole mesh after the ones before it: its vertices, then its triangles offset by the
+  // vertices given before it.
+  [[nodiscard]] absl::Status AddMesh(const TriangleMesh& mesh, int face_value = 0);
   [[nodiscard]] absl::Status Finish();
   [[nodiscard]] uint64_t vertices() const { return vertices_; }
   [[nodiscard]] uint64_t triangles() const { return triangles_; }
 
  private:
-  explicit PlyStreamWriter(std::string path);
-  std::string path_;
+  PlyStreamWriter(std::string path, std::string face_property);
+  std::string path_, face_property_;
   std::ofstream vertex_out_, face_out_;
   uint64_t vertices_ = 0, triangles_ = 0;
   bool finished_ = false;

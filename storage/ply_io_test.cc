@@ -57,8 +57,9 @@ TEST(PlyIoTest, FaceValuesAndAppend) {
   EXPECT_EQ(WritePly(path, a, &wrong).code(), absl::StatusCode::kInvalidArgument);
 }
 
-// Parts written as one file: the very bytes of their concatenation with per-face values.
-TEST(PlyIoTest, PartsAreTheirConcatenation) {
+// Meshes streamed one after another with a face property: the very bytes of their
+// concatenation with per-face values.
+TEST(PlyIoTest, StreamedMeshesAreTheirConcatenation) {
   TriangleMesh a, b, c;
   a.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
   a.triangles = {{0, 1, 2}, {2, 1, 3}};
@@ -73,14 +74,21 @@ TEST(PlyIoTest, PartsAreTheirConcatenation) {
   const std::vector<int> values = {-1, -1, 4, 11};
   const std::string dir = testing::TempDir();
   ASSERT_TRUE(WritePly(dir + "/whole.ply", whole, &values, "object").ok());
-  const TriangleMesh empty;
-  const std::vector<PlyPart> parts = {{&a, -1}, {&b, 4}, {&empty, 8}, {&c, 11}};
-  ASSERT_TRUE(WritePlyParts(dir + "/parts.ply", parts, "object").ok());
+  absl::StatusOr<std::unique_ptr<PlyStreamWriter>> w =
+      PlyStreamWriter::Create(dir + "/parts.ply", "object");
+  ASSERT_TRUE(w.ok()) << w.status();
+  ASSERT_TRUE((*w)->AddMesh(a, -1).ok());
+  ASSERT_TRUE((*w)->AddMesh(b, 4).ok());
+  ASSERT_TRUE((*w)->AddMesh(TriangleMesh{}, 8).ok());
+  ASSERT_TRUE((*w)->AddMesh(c, 11).ok());
+  ASSERT_TRUE((*w)->Finish().ok());
   EXPECT_EQ(ReadAll(dir + "/parts.ply"), ReadAll(dir + "/whole.ply"));
-  // No parts: a valid empty mesh, as WritePly writes one.
+  // No meshes: a valid empty mesh, as WritePly writes one.
   const std::vector<int> none;
   ASSERT_TRUE(WritePly(dir + "/empty_whole.ply", TriangleMesh{}, &none, "object").ok());
-  ASSERT_TRUE(WritePlyParts(dir + "/empty_parts.ply", {}, "object").ok());
+  w = PlyStreamWriter::Create(dir + "/empty_parts.ply", "object");
+  ASSERT_TRUE(w.ok()) << w.status();
+  ASSERT_TRUE((*w)->Finish().ok());
   EXPECT_EQ(ReadAll(dir + "/empty_parts.ply"), ReadAll(dir + "/empty_whole.ply"));
 }
 

@@ -7,6 +7,7 @@
 #include <deque>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "absl/container/flat_hash_map.h"
@@ -157,21 +158,22 @@ void ColumnSelfIntersections::CountNext() {
 }
 
 absl::StatusOr<DenseMeshStreamResult> StreamDenseMesh(TileSet& tiles, const DenseMeshSink& sink,
-                                                      const ChunkProgressFn& progress,
-                                                      int threads) {
+                                                      const ChunkProgressFn& progress, int threads,
+                                                      bool count_self_intersections) {
   const std::vector<ChunkKey> chunks = DenseMeshChunks(tiles.chunks());
   DenseMeshStreamResult result;
-  ColumnSelfIntersections checks(kChunkSizeM, threads);
+  std::optional<ColumnSelfIntersections> checks;
+  if (count_self_intersections) checks.emplace(kChunkSizeM, threads);
   ChunkMeshWelder::Sink weld_sink;
   weld_sink.vertices = [&](std::span<const Eigen::Vector3f> v, std::span<const uint8_t>) {
     result.vertices += v.size();
-    checks.AddVertices(v);
+    if (checks) checks->AddVertices(v);
     return sink.vertices(v);
   };
   weld_sink.triangles = [&](const ChunkKey& chunk, std::span<const Eigen::Vector3i> t) {
     result.triangles += t.size();
-    checks.AddTriangles(chunk, t);
-    return sink.triangles(t);
+    if (checks) checks->AddTriangles(chunk, t);
+    return sink.triangles(chunk, t);
   };
   ChunkMeshWelder welder(tiles.grid().leaves_per_side(), std::move(weld_sink));
   if (absl::Status s = ContourAndWeld(tiles, chunks, welder, progress, threads, result.polygons,
@@ -181,8 +183,10 @@ absl::StatusOr<DenseMeshStreamResult> StreamDenseMesh(TileSet& tiles, const Dens
   }
   result.chunks = chunks.size();
   if (absl::StatusOr<TriangleMesh> rest = welder.Finish(); !rest.ok()) return rest.status();
-  result.self_intersections = checks.Finish();
-  result.self_intersection_seconds = checks.seconds();
+  if (checks) {
+    result.self_intersections = checks->Finish();
+    result.self_intersection_seconds = checks->seconds();
+  }
   return result;
 }
 

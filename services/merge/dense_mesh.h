@@ -58,11 +58,11 @@ struct DenseMeshResult {
     TileSet& tiles, const ChunkProgressFn& progress = nullptr, int threads = 1);
 
 // Where StreamDenseMesh puts the mesh: vertices in their final order (each call continues the
-// last's indices), triangles in their final order, indexing the vertices given so far. An
-// error stops the stream and is returned.
+// last's indices), triangles in their final order, a chunk's at a time (chunks in ChunkKeyLess
+// order), indexing the vertices given so far. An error stops the stream and is returned.
 struct DenseMeshSink {
   std::function<absl::Status(std::span<const Eigen::Vector3f>)> vertices;
-  std::function<absl::Status(std::span<const Eigen::Vector3i>)> triangles;
+  std::function<absl::Status(const ChunkKey& chunk, std::span<const Eigen::Vector3i>)> triangles;
 };
 
 struct DenseMeshStreamResult {
@@ -114,10 +114,11 @@ class ColumnSelfIntersections {
 // x-columns of chunks, whatever the building's size. Its self-intersections are counted on the
 // way, a window at a time: each chunk column's range along x with the triangles of the
 // columns beside it that reach into it (CountSelfIntersections' windows), on `threads`
-// threads. Errors: BuildDenseMesh's and the sink's.
+// threads, unless `count_self_intersections` is false (its counts are then zero). Errors:
+// BuildDenseMesh's and the sink's.
 [[nodiscard]] absl::StatusOr<DenseMeshStreamResult> StreamDenseMesh(
     TileSet& tiles, const DenseMeshSink& sink, const ChunkProgressFn& progress = nullptr,
-    int threads = 1);
+    int threads = 1, bool count_self_intersections = true);
 
 // All boundary faces of `tiles` (services/mesh/boundary_faces.h): the chunks' faces in
 // ChunkKeyLess order of their interior leaf's chunk, each chunk's in its deterministic order.

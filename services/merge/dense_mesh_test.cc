@@ -124,7 +124,12 @@ TEST(DenseMesh, StreamedIsTheBuiltMeshAndItsSelfIntersections) {
       streamed.vertices.insert(streamed.vertices.end(), v.begin(), v.end());
       return absl::OkStatus();
     };
-    sink.triangles = [&](std::span<const Eigen::Vector3i> t) {
+    ChunkKey last = ChunkKey::Zero();
+    bool first = true;
+    sink.triangles = [&](const ChunkKey& chunk, std::span<const Eigen::Vector3i> t) {
+      EXPECT_TRUE(first || !ChunkKeyLess()(chunk, last));  // chunks in order
+      first = false;
+      last = chunk;
       for (const Eigen::Vector3i& x : t) {
         EXPECT_LT(x.maxCoeff(), int(streamed.vertices.size()));  // named after its vertices
       }
@@ -146,7 +151,9 @@ TEST(DenseMesh, StreamedIsTheBuiltMeshAndItsSelfIntersections) {
   failing.vertices = [](std::span<const Eigen::Vector3f>) {
     return absl::DataLossError("disk full");
   };
-  failing.triangles = [](std::span<const Eigen::Vector3i>) { return absl::OkStatus(); };
+  failing.triangles = [](const ChunkKey&, std::span<const Eigen::Vector3i>) {
+    return absl::OkStatus();
+  };
   EXPECT_EQ(StreamDenseMesh(**set, failing).status().code(), absl::StatusCode::kDataLoss);
 }
 

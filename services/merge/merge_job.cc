@@ -25,6 +25,7 @@
 #include "services/merge/dense_mesh.h"
 #include "services/merge/face_store.h"
 #include "services/merge/memory_budget.h"
+#include "services/merge/object_files.h"
 #include "services/merge/segment_tiles.h"
 #include "services/merge/tile_set.h"
 #include "services/merge/trimmed_points.h"
@@ -615,8 +616,6 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   // The building's planar mesh, and the objects' re-carve (§5.6.1) when the caller can: the
   // building is made while the workers re-carve, so that neither waits for the other, then
   // the re-carved tiles are segmented.
-  std::vector<SegmentedObject> objects;
-  ObjectSplitReport split_report;
   ObjectSource source{(work / "objects").string(), grid.resolution_m(), std::nullopt};
   std::vector<RecarveChunk> again;
   const Clock::time_point t_recarve = Clock::now();
@@ -661,117 +660,92 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   if (!building.ok()) return building.status();
   result.building_triangles = building->triangles.size();
 
-  // The objects: dense mesh of the (finer) object tiles, split into closed pieces.
+  // The objects: dense mesh of the (finer) object tiles, split into closed pieces as it
+  // streams past, each kept piece's mesh into a scratch file; then each object's file.
   t0 = Clock::now();
+  ObjectLayout layout;
+  absl::StatusOr<std::unique_ptr<ObjectPieceFile>> pieces =
+      ObjectPieceFile::Create((work / "object_pieces").string());
+  if (!pieces.ok()) return pieces.status();
   if (segmented->object_tiles > 0) {
     counts["object_resolution_m"] = source.resolution_m;
     absl::StatusOr<std::unique_ptr<TileSet>> otiles =
         TileSet::Open(source.dir, source.resolution_m, options.cache_budget_bytes);
     if (!otiles.ok()) return otiles.status();
-    absl::StatusOr<DenseMeshResult> dense =
-        BuildDenseMesh(**otiles, StageProgress(progress, "object_mesh"), MergeThreads(options));
+    ObjectSplitter splitter(
+        source.finer_volume ? *source.finer_volume : *volume, SplitOptionsFor(options, grid),
+        [&pieces](uint64_t key, const TriangleMesh& mesh) { return (*pieces)->Add(key, mesh); });
+    DenseMeshSink sink;
+    sink.vertices = [&splitter](std::span<const Eigen::Vector3f> v) {
+      splitter.AddVertices(v);
+      return absl::OkStatus();
+    };
+    sink.triangles = [&splitter](const ChunkKey& chunk, std::span<const Eigen::Vector3i> t) {
+      return splitter.AddTriangles(chunk.x(), t);
+    };
+    // Each object's crossings are counted below, on its own.
+    absl::StatusOr<DenseMeshStreamResult> dense =
+        StreamDenseMesh(**otiles, sink, StageProgress(progress, "object_mesh"),
+                        MergeThreads(options), /*count_self_intersections=*/false);
     if (!dense.ok()) return dense.status();
     if (absl::Status s = ReportMergeProgress(progress, "object_split", 0, 1); !s.ok()) return s;
     const Clock::time_point t_split = Clock::now();
-    objects = SplitObjects(dense->mesh, source.finer_volume ? *source.finer_volume : *volume,
-                           SplitOptionsFor(options, grid), &split_report);
+    absl::StatusOr<ObjectLayout> found = splitter.Finish();
+    if (!found.ok()) return found.status();
+    layout = *std::move(found);
     timings["merge.object_split"] = SecondsSince(t_split);
   }
-  fs::remove_all(work, ec);  // scratch: every output below is written from memory
-  const fs::path objects_dir = out / "mesh" / "objects";
-  fs::remove_all(objects_dir, ec);
-  fs::create_directories(objects_dir, ec);
-  if (ec) {
-    return absl::UnavailableError(
-        absl::StrCat(objects_dir.string(), ": cannot create: ", ec.message()));
-  }
+  if (absl::Status s = (*pieces)->FinishWriting(); !s.ok()) return s;
+  counts["object_scratch_bytes"] = (*pieces)->bytes();
+  const Clock::time_point t_files = Clock::now();
+  absl::StatusOr<ObjectFilesResult> files =
+      WriteObjectFiles(layout, **pieces, *building, out, MergeThreads(options),
+                       StageProgress(progress, "object_files"));
+  if (!files.ok()) return files.status();
+  timings["merge.object_files"] = SecondsSince(t_files);
+  *pieces = nullptr;
+  fs::remove_all(work, ec);  // scratch: every output is written
+
   uint64_t object_triangles = 0;
   uint64_t objects_crossing = 0;  // objects whose mesh crosses itself: one warning for all
   uint64_t object_pairs = 0, object_untested = 0;
   nlohmann::json listed = nlohmann::json::array();
-  // Each object's file and self-intersection check (each object on its own: objects that
-  // touch one another are separate models): minutes on a large building (office4 10 Hz:
-  // 1,250 objects, 19.5 M triangles), so on every thread, with a count to go by. The objects
-  // are independent; what they add to job.json is gathered in their order below.
-  const Clock::time_point t_files = Clock::now();
-  std::vector<SelfIntersections> crossings(objects.size());
-  std::vector<absl::Status> written(objects.size());
-  {
-    std::atomic<size_t> next{0}, done{0};
-    std::atomic<bool> cancelled{false};
-    // The calling thread reports the progress between its own objects.
-    const auto work = [&](bool reports) {
-      for (size_t i; !cancelled && (i = next.fetch_add(1)) < objects.size();) {
-        if (reports && !ReportMergeProgress(progress, "object_files", done, objects.size()).ok()) {
-          cancelled = true;
-          break;
-        }
-        const SegmentedObject& o = objects[i];
-        written[i] = WritePly((out / absl::StrCat("mesh/objects/", o.id, ".ply")).string(),
-                              o.mesh);
-        if (written[i].ok()) crossings[i] = CountSelfIntersections(o.mesh);
-        ++done;
-      }
-    };
-    {
-      std::vector<std::jthread> pool;
-      for (int t = 1; t < MergeThreads(options); ++t) pool.emplace_back(work, false);
-      work(true);
-    }
-    if (cancelled) return absl::CancelledError("merge cancelled during object_files");
-  }
-  timings["merge.object_files"] = SecondsSince(t_files);
-  for (size_t i = 0; i < objects.size(); ++i) {
-    if (!written[i].ok()) return written[i];
-    const SegmentedObject& o = objects[i];
+  for (size_t i = 0; i < layout.objects.size(); ++i) {
+    const SegmentedObject& o = layout.objects[i];
     const std::string name = absl::StrCat("mesh/objects/", o.id, ".ply");
-    objects_crossing += crossings[i].pairs > 0;
-    object_pairs += crossings[i].pairs;
-    object_untested += crossings[i].unchecked;
+    objects_crossing += files->crossings[i].pairs > 0;
+    object_pairs += files->crossings[i].pairs;
+    object_untested += files->crossings[i].unchecked;
     outputs.push_back(name);
-    object_triangles += o.mesh.triangles.size();
+    object_triangles += files->triangles[i];
     listed.push_back({{"id", o.id},
                       {"level", o.level},
                       {"room", o.room},
-                      {"aabb", {{o.box.min().x(), o.box.min().y(), o.box.min().z()},
-                                {o.box.max().x(), o.box.max().y(), o.box.max().z()}}},
+                      {"aabb",
+                       {{o.box.min().x(), o.box.min().y(), o.box.min().z()},
+                        {o.box.max().x(), o.box.max().y(), o.box.max().z()}}},
                       {"volume_m3", o.volume_m3},
-                      {"triangles", o.mesh.triangles.size()},
+                      {"triangles", files->triangles[i]},
                       {"mesh", name}});
   }
-  if (!objects.empty()) counts["object_self_intersections"] = object_pairs;
+  if (!layout.objects.empty()) counts["object_self_intersections"] = object_pairs;
   if (object_untested > 0) counts["object_triangles_not_tested"] = object_untested;
   if (objects_crossing > 0) {
     warnings.push_back(absl::StrCat("objects: the meshes of ", objects_crossing, " objects cross "
                                     "themselves (", object_pairs, " pairs of triangles)"));
   }
-  // objects.ply and combined.ply (face property `object`: −1 for the building) are written
-  // from the objects' own meshes, not from copies of them joined.
-  std::vector<PlyPart> parts;
-  parts.push_back({&*building, -1});
-  for (const SegmentedObject& o : objects) parts.push_back({&o.mesh, o.id});
-  if (absl::Status s = WritePlyParts((out / "mesh" / "objects.ply").string(),
-                                     std::span(parts).subspan(1), "object");
-      !s.ok()) {
-    return s;
-  }
   outputs.push_back("mesh/objects.ply");
-  if (absl::Status s = ReportMergeProgress(progress, "combined_ply", 0, 1); !s.ok()) return s;
-  if (absl::Status s = WritePlyParts((out / "mesh" / "combined.ply").string(), parts, "object");
-      !s.ok()) {
-    return s;
-  }
   outputs.push_back("mesh/combined.ply");
   job["objects"] = listed;
-  counts["objects"] = objects.size();
+  counts["objects"] = layout.objects.size();
   counts["object_triangles"] = object_triangles;
-  counts["object_components"] = split_report.components;
-  counts["objects_dropped_small"] = split_report.dropped_small;
-  counts["objects_dropped_cavities"] = split_report.dropped_cavities;
-  counts["objects_dropped_ceiling"] = split_report.dropped_ceiling;
-  counts["objects_grouped"] = split_report.grouped;
+  counts["object_components"] = layout.report.components;
+  counts["objects_dropped_small"] = layout.report.dropped_small;
+  counts["objects_dropped_cavities"] = layout.report.dropped_cavities;
+  counts["objects_dropped_ceiling"] = layout.report.dropped_ceiling;
+  counts["objects_grouped"] = layout.report.grouped;
   timings["merge.object_mesh"] = SecondsSince(t0);
-  result.objects = objects.size();
+  result.objects = layout.objects.size();
   return result;
 }
 
@@ -918,7 +892,9 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
     if (!ply.ok()) return InStage("dense_mesh", ply.status());
     DenseMeshSink sink;
     sink.vertices = [&ply](std::span<const Eigen::Vector3f> v) { return (*ply)->AddVertices(v); };
-    sink.triangles = [&ply](std::span<const Eigen::Vector3i> t) { return (*ply)->AddTriangles(t); };
+    sink.triangles = [&ply](const ChunkKey&, std::span<const Eigen::Vector3i> t) {
+      return (*ply)->AddTriangles(t);
+    };
     absl::StatusOr<DenseMeshStreamResult> dense =
         StreamDenseMesh(tiles, sink, StageProgress(progress, "dense_mesh"), MergeThreads(options));
     if (!dense.ok()) return InStage("dense_mesh", dense.status());

@@ -115,8 +115,7 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   std::vector<uint64_t> files_done;
   uint64_t files_total = 0;
   absl::StatusOr<MergeSummary> merged = RunMerge(m, [&](const MergeProgress& p) {
-    const bool late = p.stage == "object_split" || p.stage == "object_files" ||
-                      p.stage == "combined_ply";
+    const bool late = p.stage == "object_split" || p.stage == "object_files";
     if (late && (late_stages.empty() || late_stages.back() != p.stage)) {
       late_stages.push_back(p.stage);
     }
@@ -130,8 +129,8 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   const auto t2 = std::chrono::steady_clock::now();
   const nlohmann::json& job = merged->job;
   EXPECT_EQ(late_stages,
-            (std::vector<std::string>{"object_split", "object_files", "combined_ply"}));
-  // Counted from 0, between the calling thread's objects (the others go on other threads).
+            (std::vector<std::string>{"object_split", "object_files"}));
+  // Counted from 0, a batch of objects at a time.
   EXPECT_EQ(files_total, job.at("objects").size());
   ASSERT_FALSE(files_done.empty());
   EXPECT_EQ(files_done.front(), 0u);

@@ -7,6 +7,7 @@
 #include <tuple>
 
 #include "absl/container/flat_hash_map.h"
+#include "absl/strings/str_cat.h"
 #include "services/geometry/union_find.h"
 
 namespace carvemap {
@@ -149,132 +150,236 @@ Groups GroupStacked(std::vector<SegmentedObject> pieces, const PlanVolume& plan,
   return grouped;
 }
 
+// Flip: the stream faces the free space, an object's mesh faces out of the object.
+Eigen::Vector3i Flipped(const Eigen::Vector3i& t) { return {t[0], t[2], t[1]}; }
+
 }  // namespace
 
-std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
-                                          const PlanVolume& plan,
-                                          const ObjectSplitOptions& options,
-                                          ObjectSplitReport* report) {
-  ObjectSplitReport local_report;
-  ObjectSplitReport& rep = report ? *report : local_report;
-  rep = ObjectSplitReport{};
-  const auto& tris = object_mesh.triangles;
-  const auto& verts = object_mesh.vertices;
-  const int nv = static_cast<int>(verts.size());
-  const int nt = static_cast<int>(tris.size());
-  UnionFind<int> joined(nv);
-  for (const Eigen::Vector3i& t : tris) {
-    for (int e = 1; e < 3; ++e) joined.Union(t[0], t[e]);
-  }
-  // Components numbered by first appearance; each one's triangles in ascending order:
-  // order[start[c], start[c + 1]).
-  std::vector<int> start, order(nt);
-  {
-    std::vector<int> comp_of_root(nv, -1), comp_of(nt);
-    for (int i = 0; i < nt; ++i) {
-      int& c = comp_of_root[joined.Find(tris[i][0])];
-      if (c < 0) {
-        c = static_cast<int>(start.size());
-        start.push_back(0);
-      }
-      comp_of[i] = c;
-      ++start[c];
-    }
-    start.push_back(0);
-    std::exclusive_scan(start.begin(), start.end(), start.begin(), 0);
-    std::vector<int> next(start.begin(), start.end() - 1);
-    for (int i = 0; i < nt; ++i) order[next[comp_of[i]]++] = i;
-  }
-  const int num_comps = static_cast<int>(start.size()) - 1;
-  rep.components = num_comps;
-  const auto comp_triangles = [&](int c) {
-    return std::span<const int>(order).subspan(start[c], start[c + 1] - start[c]);
-  };
-  // Flip: the input faces the free space, an object's mesh faces out of the object.
-  const auto flipped = [](const Eigen::Vector3i& t) { return Eigen::Vector3i(t[0], t[2], t[1]); };
+ObjectSplitter::ObjectSplitter(const PlanVolume& plan, const ObjectSplitOptions& options,
+                               PieceSink sink)
+    : plan_(plan), options_(options), sink_(std::move(sink)) {}
 
-  // Each piece's box, volume, level and room first; meshes only for the objects kept (the
-  // specks, cavities and films dropped are most of the pieces of a building's re-carve).
-  std::vector<SegmentedObject> pieces;
-  std::vector<int> piece_comp;
-  for (int c = 0; c < num_comps; ++c) {
-    SegmentedObject obj;
-    for (int ti : comp_triangles(c)) {
-      for (int k = 0; k < 3; ++k) obj.box.extend(verts[tris[ti][k]].cast<double>());
+void ObjectSplitter::AddVertices(std::span<const Eigen::Vector3f> vertices) {
+  int v = static_cast<int>(finished_vertex_.size());
+  for (const Eigen::Vector3f& p : vertices) vertices_.emplace(v, Vertex{p, v}), ++v;
+  finished_vertex_.resize(v, false);
+}
+
+int ObjectSplitter::Find(int v) {
+  // Path halving, as UnionFind does, over the hash map of the open vertices.
+  for (;;) {
+    Vertex& x = vertices_.find(v)->second;
+    if (x.parent == v) return v;
+    const int grand = vertices_.find(x.parent)->second.parent;
+    x.parent = grand;
+    v = grand;
+  }
+}
+
+absl::Status ObjectSplitter::AddTriangles(int64_t column,
+                                          std::span<const Eigen::Vector3i> triangles) {
+  if (column < column_) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("object mesh: chunk column ", column, " after column ", column_));
+  }
+  if (column > column_) {
+    column_ = column;
+    if (absl::Status s = FinishPieces(column - 1); !s.ok()) return s;
+  }
+  for (const Eigen::Vector3i& t : triangles) {
+    int roots[3];
+    for (int k = 0; k < 3; ++k) {
+      if (t[k] < 0 || size_t(t[k]) >= finished_vertex_.size()) {
+        return absl::InvalidArgumentError(absl::StrCat("object mesh: triangle ", next_triangle_,
+                                                       " names vertex ", t[k], " of ",
+                                                       finished_vertex_.size()));
+      }
+      if (finished_vertex_[t[k]]) {
+        return absl::InternalError(
+            absl::StrCat("object mesh: triangle ", next_triangle_, " in chunk column ", column,
+                         " joins a piece finished before it (its vertex ", t[k], ")"));
+      }
+      roots[k] = Find(t[k]);
     }
-    // Divergence theorem, about the box centre to keep the sums small.
-    const Eigen::Vector3d o = obj.box.center();
-    double six_v = 0;
-    for (int ti : comp_triangles(c)) {
-      const Eigen::Vector3i t = flipped(tris[ti]);
-      const Eigen::Vector3d a = verts[t[0]].cast<double>() - o;
-      const Eigen::Vector3d b = verts[t[1]].cast<double>() - o;
-      const Eigen::Vector3d d = verts[t[2]].cast<double>() - o;
-      six_v += a.dot(b.cross(d));
+    // The piece with the most triangles absorbs the others (a vertex's first triangle makes
+    // its piece).
+    const auto size_of = [&](int r) {
+      auto it = open_.find(r);
+      return it == open_.end() ? size_t{0} : it->second.triangles.size();
+    };
+    int root = roots[0];
+    for (int k = 1; k < 3; ++k) {
+      if (roots[k] != root && size_of(roots[k]) > size_of(root)) root = roots[k];
     }
-    obj.volume_m3 = six_v / 6.0;
-    if (obj.volume_m3 < 0) {
-      ++rep.dropped_cavities;
-      continue;
+    OpenPiece& into = open_.try_emplace(root).first->second;
+    for (int k = 0; k < 3; ++k) {
+      if (roots[k] == root) continue;
+      vertices_.find(roots[k])->second.parent = root;
+      // Erasing leaves the other elements (and `into`) where they are.
+      if (auto it = open_.find(roots[k]); it != open_.end()) {
+        into.triangles.insert(into.triangles.end(), it->second.triangles.begin(),
+                              it->second.triangles.end());
+        into.last_column = std::max(into.last_column, it->second.last_column);
+        open_.erase(it);
+      }
     }
-    const PlanColumn col = LookupPlan(plan, obj.box.center());
+    into.triangles.emplace_back(next_triangle_++, t);
+    into.last_column = column;
+    ++open_triangles_;
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ObjectSplitter::FinishPieces(int64_t before_column) {
+  // In the order of their keys, so the sink sees the same order whatever the hash map's.
+  std::vector<std::pair<uint64_t, int>> done;
+  for (const auto& [root, piece] : open_) {
+    if (piece.last_column < before_column) {
+      uint64_t first = piece.triangles.front().first;
+      for (const auto& t : piece.triangles) first = std::min(first, t.first);
+      done.emplace_back(first, root);
+    }
+  }
+  std::sort(done.begin(), done.end());
+  for (const auto& [key, root] : done) {
+    auto it = open_.find(root);
+    OpenPiece piece = std::move(it->second);
+    open_.erase(it);
+    if (absl::Status s = FinishPiece(std::move(piece)); !s.ok()) return s;
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ObjectSplitter::FinishPiece(OpenPiece piece) {
+  auto& tris = piece.triangles;
+  std::sort(tris.begin(), tris.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  open_triangles_ -= tris.size();
+  ++report_.components;
+  const auto position = [&](int v) { return vertices_.find(v)->second.position; };
+  SegmentedObject obj;
+  for (const auto& [index, t] : tris) {
+    for (int k = 0; k < 3; ++k) obj.box.extend(position(t[k]).cast<double>());
+  }
+  // Divergence theorem, about the box centre to keep the sums small.
+  const Eigen::Vector3d o = obj.box.center();
+  double six_v = 0;
+  for (const auto& [index, tri] : tris) {
+    const Eigen::Vector3i t = Flipped(tri);
+    const Eigen::Vector3d a = position(t[0]).cast<double>() - o;
+    const Eigen::Vector3d b = position(t[1]).cast<double>() - o;
+    const Eigen::Vector3d d = position(t[2]).cast<double>() - o;
+    six_v += a.dot(b.cross(d));
+  }
+  obj.volume_m3 = six_v / 6.0;
+  bool keep = true;
+  if (obj.volume_m3 < 0) {
+    ++report_.dropped_cavities;
+    keep = false;
+  } else {
+    const PlanColumn col = LookupPlan(plan_, obj.box.center());
     obj.level = col.level;
     obj.room = col.room;
     // Specks are judged after grouping: a speck stacked on an object is part of it (a point
     // of a lamp's rod, a leg's foot).
-    if (!Speck(obj, options) && col.room >= 0 &&
-        obj.box.max().z() >= col.ceiling_z - options.ceiling_film_m) {
+    if (!Speck(obj, options_) && col.room >= 0 &&
+        obj.box.max().z() >= col.ceiling_z - options_.ceiling_film_m) {
       const Eigen::Vector3d size = obj.box.sizes();
       const double thin = std::min(size.x(), size.y()), wide = std::max(size.x(), size.y());
-      if (size.z() <= options.ceiling_film_m ||
-          (thin <= options.door_header_depth_m && wide >= options.door_header_min_width_m)) {
-        ++rep.dropped_ceiling;
-        continue;
+      if (size.z() <= options_.ceiling_film_m ||
+          (thin <= options_.door_header_depth_m && wide >= options_.door_header_min_width_m)) {
+        ++report_.dropped_ceiling;
+        keep = false;
       }
     }
-    pieces.push_back(std::move(obj));
-    piece_comp.push_back(c);
   }
-  Groups groups = GroupStacked(std::move(pieces), plan, options, rep);
+  absl::Status sunk;
+  if (keep) {
+    // The piece's mesh: vertices in the order its triangles first use them.
+    TriangleMesh mesh;
+    mesh.triangles.reserve(tris.size());
+    absl::flat_hash_map<int, int> local;
+    for (const auto& [index, t] : tris) {
+      Eigen::Vector3i u;
+      for (int k = 0; k < 3; ++k) {
+        auto [it, inserted] = local.emplace(t[k], static_cast<int>(mesh.vertices.size()));
+        if (inserted) mesh.vertices.push_back(position(t[k]));
+        u[k] = it->second;
+      }
+      mesh.triangles.push_back(Flipped(u));
+    }
+    summaries_.emplace_back(tris.front().first, std::move(obj));
+    if (sink_) sunk = sink_(tris.front().first, mesh);
+  }
+  for (const auto& [index, t] : tris) {
+    for (int k = 0; k < 3; ++k) {
+      finished_vertex_[t[k]] = true;
+      vertices_.erase(t[k]);
+    }
+  }
+  return sunk;
+}
+
+absl::StatusOr<ObjectLayout> ObjectSplitter::Finish() {
+  if (absl::Status s = FinishPieces(std::numeric_limits<int64_t>::max()); !s.ok()) return s;
+  vertices_.clear();
+  // Pieces in the order of their first triangles, as the whole mesh's components are numbered.
+  std::sort(summaries_.begin(), summaries_.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<SegmentedObject> pieces;
+  std::vector<uint64_t> keys;
+  pieces.reserve(summaries_.size());
+  keys.reserve(summaries_.size());
+  for (auto& [key, piece] : summaries_) {
+    keys.push_back(key);
+    pieces.push_back(std::move(piece));
+  }
+  summaries_.clear();
+  ObjectLayout layout;
+  layout.report = report_;
+  Groups groups = GroupStacked(std::move(pieces), plan_, options_, layout.report);
   std::vector<int> kept;
   for (int g = 0; g < static_cast<int>(groups.objects.size()); ++g) {
-    if (!TooSmall(groups.objects[g], options)) kept.push_back(g);
+    if (!TooSmall(groups.objects[g], options_)) kept.push_back(g);
   }
-  rep.dropped_small = groups.objects.size() - kept.size();
+  layout.report.dropped_small = groups.objects.size() - kept.size();
   std::sort(kept.begin(), kept.end(), [&](int i, int j) {
     const SegmentedObject &a = groups.objects[i], &b = groups.objects[j];
     return std::make_tuple(a.level, a.box.min().x(), a.box.min().y(), a.box.min().z()) <
            std::make_tuple(b.level, b.box.min().x(), b.box.min().y(), b.box.min().z());
   });
-  // The meshes: each piece's vertices in the order its triangles first use them, the pieces
-  // of an object one after the other (each a closed surface of its own).
-  std::vector<SegmentedObject> objects;
-  objects.reserve(kept.size());
-  std::vector<int> remap(nv, -1);
   for (int g : kept) {
-    SegmentedObject obj = std::move(groups.objects[g]);
-    obj.id = static_cast<int>(objects.size());
-    for (int p : groups.pieces[g]) {
-      const std::span<const int> piece = comp_triangles(piece_comp[p]);
-      for (int ti : piece) {
-        Eigen::Vector3i u;
-        for (int k = 0; k < 3; ++k) {
-          int& r = remap[tris[ti][k]];
-          if (r < 0) {
-            r = static_cast<int>(obj.mesh.vertices.size());
-            obj.mesh.vertices.push_back(verts[tris[ti][k]]);
-          }
-          u[k] = r;
-        }
-        obj.mesh.triangles.push_back(flipped(u));
-      }
-      for (int ti : piece) {
-        for (int k = 0; k < 3; ++k) remap[tris[ti][k]] = -1;
-      }
-    }
-    objects.push_back(std::move(obj));
+    SegmentedObject& obj = layout.objects.emplace_back(std::move(groups.objects[g]));
+    obj.id = static_cast<int>(layout.objects.size()) - 1;
+    std::vector<uint64_t>& of = layout.pieces.emplace_back();
+    for (int p : groups.pieces[g]) of.push_back(keys[p]);
   }
-  return objects;
+  return layout;
+}
+
+std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh, const PlanVolume& plan,
+                                          const ObjectSplitOptions& options,
+                                          ObjectSplitReport* report) {
+  // The whole mesh as one column: every piece is finished by Finish().
+  absl::flat_hash_map<uint64_t, TriangleMesh> meshes;
+  ObjectSplitter splitter(plan, options, [&](uint64_t key, const TriangleMesh& mesh) {
+    meshes.emplace(key, mesh);
+    return absl::OkStatus();
+  });
+  splitter.AddVertices(object_mesh.vertices);
+  absl::Status added = splitter.AddTriangles(0, object_mesh.triangles);
+  absl::StatusOr<ObjectLayout> layout =
+      added.ok() ? splitter.Finish() : absl::StatusOr<ObjectLayout>(added);
+  // Triangles naming vertices the mesh lacks are the caller's error; there is no other.
+  if (!layout.ok()) {
+    if (report) *report = ObjectSplitReport{};
+    return {};
+  }
+  if (report) *report = layout->report;
+  for (size_t i = 0; i < layout->objects.size(); ++i) {
+    for (uint64_t key : layout->pieces[i]) layout->objects[i].mesh.Append(meshes.at(key));
+  }
+  return std::move(layout->objects);
 }
 
 }  // namespace carvemap

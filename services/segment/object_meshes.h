@@ -11,10 +11,16 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
+#include <limits>
+#include <span>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Geometry>
 
+#include "absl/container/flat_hash_map.h"
+#include "absl/status/statusor.h"
 #include "services/segment/plan_volume.h"
 #include "storage/ply_io.h"
 
@@ -71,12 +77,77 @@ struct ObjectSplitReport {
   uint64_t grouped = 0;  // pieces joined to a piece stacked over or under them
 };
 
+// The objects of a building, found as its object mesh streams past (StreamDenseMesh's order:
+// chunk columns along x), so that memory holds the pieces still open, not the mesh. A piece
+// (one closed surface) is finished once the stream is two columns past the last column that
+// gave it a triangle: a dense mesh's triangles reach at most a few cells past their chunk, so
+// no later triangle can share its vertices (checked: one that does is an Internal error).
+// A finished piece that is kept (not a cavity, not a ceiling film) goes to `sink` with its mesh,
+// facing out of the object, its vertices in the order its triangles first use them, and its
+// key: the index of its first triangle in the stream. Finish() groups the pieces' summaries as
+// SplitObjects does; an object's mesh is its pieces' meshes appended in the order of its keys.
+//
+// Memory: the open pieces' triangles (~16 B each) and vertices (~32 B), one summary per kept
+// piece (~100 B), and one bit per vertex of the stream.
+struct ObjectLayout {
+  std::vector<SegmentedObject> objects;       // ids 0.. in order; meshes empty
+  std::vector<std::vector<uint64_t>> pieces;  // per object: its pieces' keys, ascending
+  ObjectSplitReport report;
+};
+
+class ObjectSplitter {
+ public:
+  using PieceSink = std::function<absl::Status(uint64_t key, const TriangleMesh& mesh)>;
+
+  ObjectSplitter(const PlanVolume& plan, const ObjectSplitOptions& options, PieceSink sink);
+  ObjectSplitter(const ObjectSplitter&) = delete;
+  ObjectSplitter& operator=(const ObjectSplitter&) = delete;
+
+  // The stream's next vertices (dual contouring's orientation: facing the free space).
+  void AddVertices(std::span<const Eigen::Vector3f> vertices);
+  // The next triangles, of a chunk in chunk column `column` (its x); columns never decrease.
+  // InvalidArgument for an index not given yet or a column going back; Internal for a triangle
+  // that joins a piece already finished; the sink's error.
+  [[nodiscard]] absl::Status AddTriangles(int64_t column,
+                                          std::span<const Eigen::Vector3i> triangles);
+  // Finishes the pieces still open and groups them (stack_gap_m, min_volume_m3, ...).
+  [[nodiscard]] absl::StatusOr<ObjectLayout> Finish();
+
+  // Triangles of the pieces not finished yet.
+  [[nodiscard]] size_t open_triangles() const { return open_triangles_; }
+
+ private:
+  struct Vertex {
+    Eigen::Vector3f position;
+    int parent;  // union-find over the open vertices; a root holds its piece's triangles
+  };
+  struct OpenPiece {
+    std::vector<std::pair<uint64_t, Eigen::Vector3i>> triangles;  // (index in the stream, t)
+    int64_t last_column = 0;
+  };
+  int Find(int v);
+  [[nodiscard]] absl::Status FinishPieces(int64_t before_column);
+  [[nodiscard]] absl::Status FinishPiece(OpenPiece piece);
+
+  const PlanVolume& plan_;
+  ObjectSplitOptions options_;
+  PieceSink sink_;
+  absl::flat_hash_map<int, Vertex> vertices_;  // given and not in a finished piece
+  absl::flat_hash_map<int, OpenPiece> open_;   // by root vertex
+  std::vector<bool> finished_vertex_;          // per vertex of the stream
+  int64_t column_ = std::numeric_limits<int64_t>::min();
+  uint64_t next_triangle_ = 0;
+  size_t open_triangles_ = 0;
+  std::vector<std::pair<uint64_t, SegmentedObject>> summaries_;  // kept pieces, by key
+  ObjectSplitReport report_;
+};
+
 // `object_mesh`: dual contouring of the object volume, counter-clockwise seen from the free
 // space (normals into the objects, as dual_contouring.h makes them). Objects are ordered by
 // level, then by the min corner of their box (x, y, z), so ids are deterministic. An inner
 // surface (a free cavity enclosed in an object) is dropped: its object stays watertight, filled.
 // Stacked pieces (options.stack_gap_m) are then joined: such an object's mesh is several closed
-// surfaces, each watertight.
+// surfaces, each watertight. ObjectSplitter over the whole mesh at once, held in memory.
 [[nodiscard]] std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
                                                         const PlanVolume& plan,
                                                         const ObjectSplitOptions& options,

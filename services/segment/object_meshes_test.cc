@@ -1,6 +1,9 @@
 #include "services/segment/object_meshes.h"
 
+#include <algorithm>
+#include <cmath>
 #include <map>
+#include <span>
 
 #include <gtest/gtest.h>
 
@@ -135,6 +138,85 @@ TEST_F(ObjectMeshesTest, PiecesStackWhereverTheirFootprintsMeet) {
   EXPECT_TRUE(objects[0].box.isApprox(
       Eigen::AlignedBox3d(Eigen::Vector3d(0.2, 0.2, 0), Eigen::Vector3d(3.8, 3.8, 0.83)), 1e-6));
   EXPECT_EQ(objects[0].mesh.triangles.size(), 3u * 12u);
+}
+
+// The mesh as StreamDenseMesh gives it, a chunk column at a time (columns 1 m wide here, by
+// each triangle's lowest x): pieces are finished as the stream passes them, and the objects
+// are those of the whole mesh, meshes and all.
+TEST_F(ObjectMeshesTest, StreamedByColumnsGivesTheWholeMeshsObjects) {
+  TriangleMesh boxes;
+  boxes.Append(InwardBox({5, 1, 0}, {6, 2, 0.5}));
+  boxes.Append(InwardBox({1, 1, 0}, {2, 3, 1}));
+  boxes.Append(Reversed(InwardBox({1.2f, 1.2f, 0.2f}, {1.8f, 2.8f, 0.8f})));
+  for (float z : {0.05f, 0.45f, 0.85f})
+    boxes.Append(InwardBox({3, 1, z}, {3.9f, 1.35f, z + 0.05f}));
+  boxes.Append(InwardBox({6.5f, 3, 1}, {6.64f, 3.14f, 1.1f}));
+  const auto column_of = [&](const Eigen::Vector3i& t) {
+    float x = boxes.vertices[t[0]].x();
+    for (int k = 1; k < 3; ++k) x = std::min(x, boxes.vertices[t[k]].x());
+    return static_cast<int64_t>(std::floor(x));
+  };
+  // The triangles in column order, as the stream gives them.
+  TriangleMesh streamed = boxes;
+  std::stable_sort(streamed.triangles.begin(), streamed.triangles.end(),
+                   [&](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
+                     return column_of(a) < column_of(b);
+                   });
+  ObjectSplitReport whole_report;
+  const std::vector<SegmentedObject> whole =
+      SplitObjects(streamed, volume_, ObjectSplitOptions{}, &whole_report);
+  ASSERT_EQ(whole.size(), 3u);  // the cabinet, the stacked boards, the table
+
+  std::map<uint64_t, TriangleMesh> pieces;
+  ObjectSplitter splitter(volume_, ObjectSplitOptions{}, [&](uint64_t key, const TriangleMesh& m) {
+    EXPECT_TRUE(pieces.emplace(key, m).second) << key;
+    return absl::OkStatus();
+  });
+  splitter.AddVertices(streamed.vertices);
+  size_t open_at_table = 0;
+  for (size_t i = 0; i < streamed.triangles.size();) {
+    const int64_t column = column_of(streamed.triangles[i]);
+    size_t j = i;
+    while (j < streamed.triangles.size() && column_of(streamed.triangles[j]) == column) ++j;
+    ASSERT_TRUE(
+        splitter.AddTriangles(column, std::span(streamed.triangles).subspan(i, j - i)).ok());
+    if (column == 5) open_at_table = splitter.open_triangles();
+    i = j;
+  }
+  // By column 5 the cabinet (columns 1–2) and the boards (column 3) are finished: only the
+  // table's triangles are open, all but the two of its side at x = 6 (column 6).
+  EXPECT_EQ(open_at_table, 10u);
+  absl::StatusOr<ObjectLayout> layout = splitter.Finish();
+  ASSERT_TRUE(layout.ok()) << layout.status();
+  EXPECT_EQ(splitter.open_triangles(), 0u);
+  EXPECT_EQ(layout->report.components, whole_report.components);
+  EXPECT_EQ(layout->report.grouped, whole_report.grouped);
+  EXPECT_EQ(layout->report.dropped_cavities, 1u);
+  ASSERT_EQ(layout->objects.size(), whole.size());
+  for (size_t i = 0; i < whole.size(); ++i) {
+    const SegmentedObject& o = layout->objects[i];
+    EXPECT_EQ(o.id, whole[i].id);
+    EXPECT_EQ(o.room, whole[i].room);
+    EXPECT_EQ(o.volume_m3, whole[i].volume_m3);
+    EXPECT_TRUE(o.box.isApprox(whole[i].box, 0));
+    TriangleMesh mesh;
+    for (uint64_t key : layout->pieces[i]) mesh.Append(pieces.at(key));
+    EXPECT_EQ(mesh.vertices, whole[i].mesh.vertices) << i;
+    EXPECT_EQ(mesh.triangles, whole[i].mesh.triangles) << i;
+  }
+}
+
+// A triangle that reaches back to a piece the stream has already finished is an error, not
+// a second object.
+TEST_F(ObjectMeshesTest, TriangleJoiningAFinishedPieceIsAnError) {
+  const TriangleMesh box = InwardBox({1, 1, 0}, {2, 2, 1});
+  ObjectSplitter splitter(volume_, ObjectSplitOptions{}, nullptr);
+  splitter.AddVertices(box.vertices);
+  const std::span<const Eigen::Vector3i> tris(box.triangles);
+  ASSERT_TRUE(splitter.AddTriangles(0, tris.first(6)).ok());
+  const absl::Status s = splitter.AddTriangles(2, tris.subspan(6));
+  EXPECT_EQ(s.code(), absl::StatusCode::kInternal) << s;
+  EXPECT_EQ(splitter.AddTriangles(1, tris.subspan(6)).code(), absl::StatusCode::kInvalidArgument);
 }
 
 TEST_F(ObjectMeshesTest, EmptyMeshHasNoObjects) {
