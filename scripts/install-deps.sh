@@ -18,6 +18,7 @@ PACKAGES=(
   libpugixml-dev  # storage/import/e57_reader.cc: the XML section of E57 files
   libdxflib-dev  # services/floorplan/floorplan_dxf.cc: floorplan.dxf
   python3-ezdxf  # tests/tools/check_outputs.py: an independent reader of floorplan.dxf
+  python3-pil  # tests/tools/check_outputs.py: an independent reader of occupancy.pgm
   # tests/tools/make_rosbag.py: ROS 1 bags written by ROS's own Python library
   python3-rosbag python3-roslz4 python3-sensor-msgs python3-tf2-msgs python3-geometry-msgs
   libgeographiclib-dev  # services/geomag/: the World Magnetic Model's declination (§2.3)

@@ -141,7 +141,8 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "merge",
       "Merge carved tiles into the job's outputs: octree.bt and octree.ot (OctoMap), levels.json, "
-      "level_<k>/topdown.png (open height, §5.4), mesh/dense.ply, mesh/building.ply "
+      "level_<k>/topdown.png (open height, §5.4) and occupancy.pgm/.yaml (a ROS map_server "
+      "map), mesh/dense.ply, mesh/building.ply "
       "and job.json");
   auto flags = std::make_shared<MergeFlags>();
   cmd->add_option("tiles", flags->options.tiles_dir, "Directory of c_<x>_<y>_<z>.h5 tiles")

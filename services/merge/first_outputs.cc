@@ -61,6 +61,16 @@ absl::Status FirstOutputsOptions::Validate() const {
     return absl::InvalidArgumentError(
         absl::StrCat("merge: topdown_max_height_m must be > 0, got ", topdown_max_height_m));
   }
+  if (!level_floors_z.empty() && level_floors_z.size() != levels.size()) {
+    return absl::InvalidArgumentError(absl::StrCat("merge: ", level_floors_z.size(),
+                                                   " level floors for ", levels.size(), " levels"));
+  }
+  if (!(occupancy_band_low_m < occupancy_band_high_m) || !std::isfinite(occupancy_band_low_m) ||
+      !std::isfinite(occupancy_band_high_m)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("merge: the occupancy band [", occupancy_band_low_m, ", ",
+                     occupancy_band_high_m, ") m above the floor is empty"));
+  }
   return absl::OkStatus();
 }
 
@@ -99,6 +109,13 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
   t0 = Clock::now();
   std::vector<TopdownMap> topdowns;
   for (const TopdownZRange& range : level_ranges) topdowns.emplace_back(tiles.grid(), tiles.chunks(), range);
+  std::vector<TopdownMap> occupancy;  // per level, over its band above the floor
+  for (double floor_z : options.level_floors_z) {
+    occupancy.emplace_back(tiles.grid(), tiles.chunks(),
+                           TopdownZRange{floor_z + options.occupancy_band_low_m,
+                                         floor_z + options.occupancy_band_high_m},
+                           /*occupancy=*/true);
+  }
   uint64_t visited = 0;
   auto visit = [&](const TileData& tile) -> absl::Status {
     if (absl::Status s = ReportMergeProgress(progress, "octree_bt", visited, num_tiles); !s.ok()) return s;
@@ -118,6 +135,9 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
     }
     for (TopdownMap& topdown : topdowns) {
       if (absl::Status s = topdown.AddTile(tile); !s.ok()) return s;
+    }
+    for (TopdownMap& band : occupancy) {
+      if (absl::Status s = band.AddTile(tile); !s.ok()) return s;
     }
     return absl::OkStatus();
   };
@@ -147,6 +167,23 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
     topdown_outputs.push_back(level + "/topdown.json");
     if (topdowns[k].geometry().width > 0 && topdowns[k].geometry().height > 0) {
       topdown_outputs.push_back(level + "/topdown.png");
+    }
+    if (k < occupancy.size() && occupancy[k].geometry().width > 0 &&
+        occupancy[k].geometry().height > 0) {
+      const TopdownZRange& band = occupancy[k].z_range();
+      const std::string about = absl::StrCat(
+          "carvemap ", level, ": a 2D occupancy grid for ROS map_server, from the octree's\n",
+          "observed leaves in [", band.z_lo_m, ", ", band.z_hi_m, ") m (the level's floor + [",
+          options.occupancy_band_low_m, ", ", options.occupancy_band_high_m, ") m).\n",
+          "0 = occupied (solid space in the band), 254 = free, 205 = unknown.");
+      if (absl::Status s = occupancy[k].WriteRosMap((out / level / "occupancy.pgm").string(),
+                                                    (out / level / "occupancy.yaml").string(),
+                                                    OccupancyThresholds{}, about);
+          !s.ok()) {
+        return s;
+      }
+      topdown_outputs.push_back(level + "/occupancy.pgm");
+      topdown_outputs.push_back(level + "/occupancy.yaml");
     }
     if (k == 0) {
       summary.topdown_png_path = png;
@@ -182,6 +219,7 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
         "p <= 0.5, unknown = unobserved"},
        {"ot_log_odds", absl::StrCat("log(q / (1 - q)), q = 1 - p clamped to [", kOtMinProbability,
                                     ", 1 - ", kOtMinProbability, "]; unobserved: no node")},
+       {"occupancy_band_m", {options.occupancy_band_low_m, options.occupancy_band_high_m}},
        {"topdown_levels", options.levels.empty()
                               ? "level_0 covers the whole height (no levels found)"
                               : "level_<k> covers levels.json's [split_z_low, split_z_high)"}});

@@ -4,6 +4,8 @@
 //   <output_dir>/level_0/topdown.png    open-height map (§5.4); level_0 covers the whole
 //                                       height until levels (§5.2, docs/DESIGN.md §6.3) exist
 //   <output_dir>/level_0/topdown.json   its georeference (origin, resolution) and gray scale
+//   <output_dir>/level_<k>/occupancy.pgm + .yaml   with levels: a 2D occupancy grid per level
+//                                       for ROS map_server (TopdownMap::WriteRosMap)
 //   <output_dir>/job.json               the caller's job document plus the merge's parameters,
 //                                       versions, timings and counts
 // Every file is written through "<name>.partial" and a rename, so a failed merge leaves no
@@ -46,9 +48,16 @@ struct FirstOutputsOptions {
   // The elevations of each level (§5.2, services/levels): level_<k>/topdown.png integrates
   // levels[k]. Empty: one level_0 over the whole height.
   std::vector<TopdownZRange> levels;
+  // Each level's floor height, m (one per level, or none): with them, level_<k>/occupancy.pgm
+  // and .yaml, the ROS map_server pair, over [floor + occupancy_band_low_m, floor +
+  // occupancy_band_high_m) (TopdownMap::ToOccupancy): from just above the floor (its
+  // unevenness) to a standing person's height.
+  std::vector<double> level_floors_z;
+  double occupancy_band_low_m = 0.1;
+  double occupancy_band_high_m = 1.8;
 
-  // InvalidArgument for empty dirs, a resolution that is not 2 m / 2^k, a non-object job or a
-  // non-positive topdown_max_height_m.
+  // InvalidArgument for empty dirs, a resolution that is not 2 m / 2^k, a non-object job, a
+  // non-positive topdown_max_height_m, floors not one per level or an empty occupancy band.
   [[nodiscard]] absl::Status Validate() const;
 };
 

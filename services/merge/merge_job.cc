@@ -848,6 +848,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   FirstOutputsOptions first = options.FirstOutputs();
   for (const Level& level : levels->levels) {
     first.levels.push_back(TopdownZRange{level.split_z_low, level.split_z_high});
+    first.level_floors_z.push_back(level.floor_z);
   }
   if (absl::Status s = WriteFileAtomically(
           (out / "levels.json").string(),

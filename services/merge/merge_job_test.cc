@@ -145,7 +145,8 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
   // job.json, written last, lists every output and the stage counts.
   const nlohmann::json job = ReadJson(options.output_dir + "/job.json");
   for (const char* o : {"octree.bt", "job.json", "levels.json", "mesh/dense.ply",
-                        "mesh/building.ply", "level_0/topdown.png", "level_0/topdown.json"}) {
+                        "mesh/building.ply", "level_0/topdown.png", "level_0/topdown.json",
+                        "level_0/occupancy.pgm", "level_0/occupancy.yaml"}) {
     EXPECT_NE(std::find(job["outputs"].begin(), job["outputs"].end(), o), job["outputs"].end())
         << o;
     EXPECT_TRUE(fs::exists(options.output_dir + "/" + o)) << o;

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
 #include "storage/atomic_file.h"
 
 namespace carvemap {
@@ -18,7 +19,7 @@ nlohmann::json OrNull(double v) { return std::isfinite(v) ? nlohmann::json(v) : 
 }  // namespace
 
 TopdownMap::TopdownMap(const OctreeGrid& grid, const std::vector<ChunkKey>& chunks,
-                       const TopdownZRange& z_range)
+                       const TopdownZRange& z_range, bool occupancy)
     : grid_(grid), z_range_(z_range) {
   geometry_.resolution_m = grid.resolution_m();
   if (chunks.empty()) return;
@@ -37,6 +38,10 @@ TopdownMap::TopdownMap(const OctreeGrid& grid, const std::vector<ChunkKey>& chun
   geometry_.width = static_cast<int>((int64_t{max_x} - min_x + 1) * n);
   geometry_.height = static_cast<int>((int64_t{max_y} - min_y + 1) * n);
   height_m_.assign(size_t(geometry_.width) * geometry_.height, 0.0f);
+  if (occupancy) {
+    observed_m_.assign(height_m_.size(), 0.0f);
+    solid_m_.assign(height_m_.size(), 0.0f);
+  }
 }
 
 absl::Status TopdownMap::AddTile(const TileData& tile) {
@@ -69,12 +74,19 @@ absl::Status TopdownMap::AddTile(const TileData& tile) {
       if (!(height > 0)) continue;
     }
     const float add = static_cast<float>(leaf.stats.p() * height);
+    const float solid = leaf.stats.interior() ? 0.0f : static_cast<float>(height);
     const int64_t col0 = chunk_col + int64_t{leaf.node.local.x()} * side;
     const int64_t up0 = chunk_row_from_bottom + int64_t{leaf.node.local.y()} * side;
     for (int dy = 0; dy < side; ++dy) {
       const int64_t row = geometry_.height - 1 - (up0 + dy);
-      float* line = height_m_.data() + row * geometry_.width + col0;
+      const size_t at = size_t(row * geometry_.width + col0);
+      float* line = height_m_.data() + at;
       for (int dx = 0; dx < side; ++dx) line[dx] += add;
+      if (observed_m_.empty()) continue;
+      for (int dx = 0; dx < side; ++dx) {
+        observed_m_[at + dx] += static_cast<float>(height);
+        solid_m_[at + dx] += solid;
+      }
     }
   }
   return absl::OkStatus();
@@ -128,6 +140,61 @@ absl::Status TopdownMap::Write(const std::string& png_path, const std::string& j
       {"max_open_height_m", max_open_height_m()},
   };
   return WriteFileAtomically(json_path, [&](std::ostream& out) { out << j.dump(2) << "\n"; });
+}
+
+Image<uint8_t> TopdownMap::ToOccupancy(const OccupancyThresholds& thresholds) const {
+  Image<uint8_t> image;
+  image.width = geometry_.width;
+  image.height = geometry_.height;
+  image.pixels.assign(height_m_.size(), kUnknownPixel);
+  if (observed_m_.empty()) return image;
+  const double occupied_min =
+      thresholds.occupied_min_m > 0 ? thresholds.occupied_min_m : grid_.resolution_m();
+  // Float sums of leaf heights: half a millimetre of slack against their rounding.
+  const double slack = 5e-4;
+  const double band = z_range_.z_hi_m - z_range_.z_lo_m;
+  const double free_min = thresholds.free_min_fraction * band;
+  for (size_t i = 0; i < image.pixels.size(); ++i) {
+    if (solid_m_[i] >= occupied_min - slack) {
+      image.pixels[i] = kOccupiedPixel;
+    } else if (solid_m_[i] < slack && observed_m_[i] >= free_min - slack) {
+      image.pixels[i] = kFreePixel;
+    }
+  }
+  return image;
+}
+
+absl::Status TopdownMap::WriteRosMap(const std::string& pgm_path, const std::string& yaml_path,
+                                     const OccupancyThresholds& thresholds,
+                                     const std::string& about) const {
+  if (observed_m_.empty()) {
+    return absl::FailedPreconditionError(
+        absl::StrCat(pgm_path, ": the map was not made with occupancy"));
+  }
+  if (!std::isfinite(z_range_.z_lo_m) || !std::isfinite(z_range_.z_hi_m)) {
+    return absl::FailedPreconditionError(
+        absl::StrCat(pgm_path, ": an occupancy map needs a bounded band of heights"));
+  }
+  // Binary PGM (netpbm P5): a header and the rows top first, one byte per pixel; too small a
+  // format to take a library for.
+  const Image<uint8_t> image = ToOccupancy(thresholds);
+  const auto write_pgm = [&](std::ostream& out) {
+    out << "P5\n" << image.width << " " << image.height << "\n255\n";
+    out.write(reinterpret_cast<const char*>(image.pixels.data()),
+              std::streamsize(image.pixels.size()));
+  };
+  if (absl::Status s = WriteFileAtomically(pgm_path, write_pgm); !s.ok()) return s;
+  return WriteFileAtomically(yaml_path, [&](std::ostream& out) {
+    for (const absl::string_view line : absl::StrSplit(about, '\n')) out << "# " << line << "\n";
+    out.precision(17);
+    out << "image: " << std::filesystem::path(pgm_path).filename().string() << "\n"
+        << "mode: trinary\n"
+        << "resolution: " << geometry_.resolution_m << "\n"
+        << "origin: [" << geometry_.origin_x_m << ", " << geometry_.origin_y_m << ", 0.0]\n"
+        << "negate: 0\n"
+        << "occupied_thresh: 0.65\n"
+        << "free_thresh: 0.196\n";
+  });
 }
 
 }  // namespace carvemap

@@ -43,12 +43,28 @@ struct TopdownZRange {
   }
 };
 
+// The map as a robot's navigation stack reads a 2D occupancy grid (ROS map_server's trinary
+// map): for a band of heights above a level's floor (the body of a robot or a person), a
+// column is occupied when it holds at least `occupied_min_m` of observed solid space (leaves
+// with p ≤ 0.5: walls, furniture, a desk's top), free when it holds none and at least
+// `free_min_fraction` of the band is observed open space, and unknown otherwise (never seen,
+// or the inside of a wall behind its observed skin).
+struct OccupancyThresholds {
+  double occupied_min_m = 0;  // 0: one leaf's height
+  double free_min_fraction = 0.5;
+};
+
+// Pixel values of ToOccupancy, as ROS's map_saver writes them: with `negate: 0` and the
+// thresholds WriteRosMap puts in the YAML, map_server reads them as occupied, free, unknown.
+inline constexpr uint8_t kOccupiedPixel = 0, kFreePixel = 254, kUnknownPixel = 205;
+
 class TopdownMap {
  public:
   // Covers the xy footprint of `chunks` (an empty list gives a 0×0 map) and the elevations of
-  // `z_range`.
+  // `z_range`. With `occupancy`, the map also sums each column's observed and solid heights in
+  // the range (ToOccupancy, WriteRosMap; 8 more bytes per pixel).
   TopdownMap(const OctreeGrid& grid, const std::vector<ChunkKey>& chunks,
-             const TopdownZRange& z_range = {});
+             const TopdownZRange& z_range = {}, bool occupancy = false);
 
   // Adds a tile's observed leaves (any order, each tile once). Tiles outside the footprint
   // given to the constructor are an error (InvalidArgument naming the chunk).
@@ -71,12 +87,24 @@ class TopdownMap {
   absl::Status Write(const std::string& png_path, const std::string& json_path,
                      double max_height_m, int level) const;
 
+  // Only for a map made with `occupancy` (else FailedPrecondition from WriteRosMap, an image of
+  // unknowns from ToOccupancy): kOccupiedPixel, kFreePixel or kUnknownPixel per pixel.
+  [[nodiscard]] Image<uint8_t> ToOccupancy(const OccupancyThresholds& thresholds) const;
+  // The ROS map_server pair: a binary PGM (P5) of ToOccupancy and its YAML (image, mode
+  // trinary, resolution, origin [x, y, 0] of the lower-left corner, negate 0, occupied_thresh
+  // 0.65, free_thresh 0.196), both through "<name>.partial" and a rename. `about` goes into the
+  // YAML as comment lines.
+  absl::Status WriteRosMap(const std::string& pgm_path, const std::string& yaml_path,
+                           const OccupancyThresholds& thresholds, const std::string& about) const;
+
  private:
   OctreeGrid grid_;
   TopdownZRange z_range_;
   int64_t min_leaf_x_ = 0, min_leaf_y_ = 0;  // leaf keys of column (col 0, bottom row)
   TopdownGeometry geometry_;
   std::vector<float> height_m_;  // row-major, row 0 = top (largest y)
+  // With `occupancy`: observed height and observed solid (p ≤ 0.5) height, as height_m_.
+  std::vector<float> observed_m_, solid_m_;
 };
 
 }  // namespace carvemap

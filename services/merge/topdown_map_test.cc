@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <iterator>
 #include <limits>
 
 #include <gtest/gtest.h>
@@ -47,10 +48,10 @@ class TopdownMapTest : public ::testing::Test {
     slab.leaves = {Leaf(1, {0, 0, 0}, 0.2)};
     tiles_ = {box, coarse, stacked, slab};
   }
-  TopdownMap Build(const TopdownZRange& z_range = {}) {
+  TopdownMap Build(const TopdownZRange& z_range = {}, bool occupancy = false) {
     std::vector<ChunkKey> chunks;
     for (const TileData& t : tiles_) chunks.push_back(t.chunk);
-    TopdownMap map(OctreeGrid{kK}, chunks, z_range);
+    TopdownMap map(OctreeGrid{kK}, chunks, z_range, occupancy);
     for (const TileData& t : tiles_) EXPECT_TRUE(map.AddTile(t).ok());
     return map;
   }
@@ -182,6 +183,60 @@ TEST_F(TopdownMapTest, SidecarNamesTheZRange) {
   ASSERT_TRUE(Build().Write(dir + "/c.png", dir + "/c.json", 3.0, 0).ok());
   j = nlohmann::json::parse(std::ifstream(dir + "/c.json"));
   EXPECT_EQ(j["z_range"], "all");
+}
+
+// The band 0.1–1.8 m over a floor at 0: the box's and the coarse chunks' columns are open
+// through it (free), the exterior slab is 0.9 m of solid in it (occupied), and the rest was
+// never observed (unknown). The PGM and YAML are what ROS's map_server reads.
+TEST_F(TopdownMapTest, OccupancyOfABandIsFreeOccupiedOrUnknown) {
+  TopdownMap map = Build(TopdownZRange{0.1, 1.8}, /*occupancy=*/true);
+  const TopdownGeometry& g = map.geometry();
+  const Image<uint8_t> occ = map.ToOccupancy(OccupancyThresholds{});
+  int counts[3] = {0, 0, 0};
+  for (int row = 0; row < g.height; ++row) {
+    for (int col = 0; col < g.width; ++col) {
+      const double x = g.origin_x_m + (col + 0.5) * kRes;
+      const double y = g.origin_y_m + (g.height - 1 - row + 0.5) * kRes;
+      uint8_t expected = kUnknownPixel;
+      if ((x > -1.5 && x < -0.5 && y > 0.5 && y < 1.25) || (x > 0 && y > 0)) expected = kFreePixel;
+      if (x > 0 && x < 1 && y > -2 && y < -1) expected = kOccupiedPixel;
+      EXPECT_EQ(occ.at(row, col), expected) << "row " << row << " col " << col;
+      counts[expected == kFreePixel ? 0 : expected == kOccupiedPixel ? 1 : 2]++;
+    }
+  }
+  EXPECT_EQ(counts[0], 12 + 64);
+  EXPECT_EQ(counts[1], 16);
+  // More solid than the slab holds in the band: the slab is unknown (observed, not free).
+  auto [r, c] = RowCol(g, 0.5, -1.5);
+  EXPECT_EQ(map.ToOccupancy(OccupancyThresholds{1.0, 0.5}).at(r, c), kUnknownPixel);
+  // A band mostly above what was observed: the box (0–2 m) covers too little of 1.5–4 m.
+  const TopdownMap high = Build(TopdownZRange{1.5, 4.0}, true);
+  auto [rb, cb] = RowCol(g, -1.0, 1.0);
+  EXPECT_EQ(high.ToOccupancy(OccupancyThresholds{}).at(rb, cb), kUnknownPixel);
+
+  const std::string dir = FreshDir();
+  ASSERT_TRUE(map.WriteRosMap(dir + "/occupancy.pgm", dir + "/occupancy.yaml", {}, "a\nb").ok());
+  std::ifstream pgm(dir + "/occupancy.pgm", std::ios::binary);
+  std::string magic;
+  int width = 0, height = 0, maxval = 0;
+  pgm >> magic >> width >> height >> maxval;
+  pgm.get();  // the one whitespace byte before the raster
+  std::vector<uint8_t> raster(size_t(width) * height);
+  pgm.read(reinterpret_cast<char*>(raster.data()), std::streamsize(raster.size()));
+  EXPECT_TRUE(pgm && pgm.peek() == EOF);
+  EXPECT_EQ(magic, "P5");
+  EXPECT_EQ(width, 16);
+  EXPECT_EQ(height, 16);
+  EXPECT_EQ(maxval, 255);
+  EXPECT_EQ(raster, occ.pixels);
+  std::ifstream yaml_in(dir + "/occupancy.yaml");
+  const std::string yaml((std::istreambuf_iterator<char>(yaml_in)), {});
+  EXPECT_EQ(yaml,
+            "# a\n# b\nimage: occupancy.pgm\nmode: trinary\nresolution: 0.25\n"
+            "origin: [-2, -2, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n");
+  // A map made without occupancy has none to write.
+  EXPECT_EQ(Build().WriteRosMap(dir + "/x.pgm", dir + "/x.yaml", {}, "").code(),
+            absl::StatusCode::kFailedPrecondition);
 }
 
 TEST(TopdownMap, TileOutsideTheFootprintIsRejected) {

@@ -17,7 +17,13 @@ spec alone:
     (±13.82); every inner node's value the largest of its children's;
   - each level_<k>/floorplan.dxf listed opens in ezdxf (Debian's python3-ezdxf) with no error
     in its audit, has the layers ROOMS, WALLS, DOORS and LABELS, one label per room of the
-    level in job.json, and closed room rings whose signed areas sum to the level's room area.
+    level in job.json, and closed room rings whose signed areas sum to the level's room area;
+  - each level_<k>/occupancy.yaml listed is a ROS map_server map: its keys (image, mode,
+    resolution, origin, negate, occupied_thresh, free_thresh) read with python3-yaml, its image
+    read with Pillow (python3-pil) as 8-bit gray of topdown.json's size, resolution and origin;
+    read with map_server's rule (p = (255 − v) / 255; occupied above occupied_thresh, free
+    below free_thresh) it has free and occupied cells, and no free cell where topdown.png
+    shows no open space.
 
 Usage: check_outputs.py OUT_DIR [--level-tol 0.05] [--gt GT_DIR] [--selftest]
   --gt: the simulator's gt/ folder, when the job's input was not copied into OUT_DIR/input.
@@ -188,6 +194,48 @@ def dxf_problems(path, rooms):
     return problems
 
 
+def ros_map_problems(out, name):
+    """What is wrong with a level's occupancy.yaml and its image, as map_server reads them."""
+    try:
+        import yaml
+        from PIL import Image
+    except ImportError as e:
+        return [f"{name}: {e} (scripts/install-deps.sh installs python3-yaml, python3-pil)"]
+    path = os.path.join(out, name)
+    meta = yaml.safe_load(open(path))
+    problems = []
+    for key in ("image", "mode", "resolution", "origin", "negate", "occupied_thresh",
+                "free_thresh"):
+        if key not in meta:
+            problems.append(f"{name}: no '{key}'")
+    if problems:
+        return problems
+    level_dir = os.path.dirname(path)
+    image = Image.open(os.path.join(level_dir, meta["image"]))
+    topdown = json.load(open(os.path.join(level_dir, "topdown.json")))
+    if image.mode != "L" or image.size != (topdown["width"], topdown["height"]):
+        problems.append(f"{name}: image {image.mode} {image.size}, topdown.json "
+                        f"{topdown['width']}x{topdown['height']}")
+        return problems
+    if abs(meta["resolution"] - topdown["resolution_m"]) > 1e-12 or \
+            any(abs(a - b) > 1e-9 for a, b in zip(meta["origin"][:2], topdown["origin_m"])):
+        problems.append(f"{name}: resolution/origin {meta['resolution']} {meta['origin']} differ "
+                        f"from topdown.json's {topdown['resolution_m']} {topdown['origin_m']}")
+    v = np.asarray(image, dtype=np.float64)
+    p = (255.0 - v) / 255.0 if meta["negate"] == 0 else v / 255.0
+    occupied = p > meta["occupied_thresh"]
+    free = p < meta["free_thresh"]
+    if not occupied.any() or not free.any():
+        problems.append(f"{name}: {occupied.sum()} occupied and {free.sum()} free cells")
+    open_height = np.asarray(Image.open(os.path.join(level_dir, topdown["image"])))
+    if (free & (open_height == 0)).any():
+        problems.append(f"{name}: {(free & (open_height == 0)).sum()} free cells where "
+                        "topdown.png has no open space")
+    print(f"{name}: {free.sum()} free, {occupied.sum()} occupied, "
+          f"{(~free & ~occupied).sum()} unknown cells, as map_server reads them")
+    return problems
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
@@ -256,6 +304,9 @@ def main():
             problems += found
             print(f"{name}: {'read by ezdxf' if not found else 'NOT as job.json says'}, "
                   f"{len(rooms)} rooms")
+    for name in sorted(outputs):
+        if name.endswith("/occupancy.yaml"):
+            problems += ros_map_problems(args.out, name)
     ot_path = os.path.join(args.out, "octree.ot")
     if "octree.ot" in outputs:
         data = open(ot_path, "rb").read()
