@@ -19,6 +19,7 @@ PACKAGES=(
   libdxflib-dev  # services/floorplan/floorplan_dxf.cc: floorplan.dxf
   python3-ezdxf  # tests/tools/check_outputs.py: an independent reader of floorplan.dxf
   python3-pil  # tests/tools/check_outputs.py: an independent reader of occupancy.pgm
+  libtinygltf-dev  # storage/glb_writer_test.cc: an independent reader of mesh/model.glb
   # tests/tools/make_rosbag.py: ROS 1 bags written by ROS's own Python library
   python3-rosbag python3-roslz4 python3-sensor-msgs python3-tf2-msgs python3-geometry-msgs
   libgeographiclib-dev  # services/geomag/: the World Magnetic Model's declination (§2.3)

@@ -153,6 +153,7 @@ absl::Status RunDemo(const DemoFlags& flags) {
       "  mesh/building.ply       planar mesh of the building without furniture (§5.6)\n"
       "  mesh/objects.ply        the furniture; mesh/objects/<id>.ply one watertight mesh each\n"
       "  mesh/combined.ply       building + objects\n"
+      "  mesh/model.glb          building, rooms and objects as one glTF scene (any viewer)\n"
       "  job.json                parameters, counts, rooms, objects, timings and any warnings\n"
       "  tiles/                  one HDF5 tile per 2 m chunk (storage/TILE_FORMAT.md)\n"
       "  object_tiles/           the chunks holding objects, carved again finer (§5.6.1)\n",

@@ -199,4 +199,27 @@ absl::StatusOr<TriangleMesh> ExtrudeFloorPlan(const FloorPlan& plan) {
   return mesh;
 }
 
+absl::StatusOr<TriangleMesh> ExtrudeRoom(const FloorPlan& plan, int room) {
+  if (room < 0 || room >= static_cast<int>(plan.rooms.size())) {
+    return absl::OutOfRangeError(
+        absl::StrCat("floor plan: no room ", room, " (", plan.rooms.size(), " rooms)"));
+  }
+  FloorPlan one;
+  one.level = plan.level;
+  one.vertices = plan.vertices;
+  one.vertex_floor_z = plan.vertex_floor_z;
+  one.vertex_ceiling_z = plan.vertex_ceiling_z;
+  one.rooms = {plan.rooms[room]};
+  one.rooms[0].seed_triangle = -1;
+  for (size_t t = 0; t < plan.triangles.size() && t < plan.triangle_room.size(); ++t) {
+    if (plan.triangle_room[t] != room) continue;
+    if (static_cast<int>(t) == plan.rooms[room].seed_triangle) {
+      one.rooms[0].seed_triangle = static_cast<int>(one.triangles.size());
+    }
+    one.triangles.push_back(plan.triangles[t]);
+    one.triangle_room.push_back(0);
+  }
+  return ExtrudeFloorPlan(one);
+}
+
 }  // namespace carvemap

@@ -101,6 +101,34 @@ TEST(ExtrusionTest, ThreeRoomsMeetingAtAVertex) {
   ExpectClosedSolid(plan);
 }
 
+// Each room alone is a closed solid of its own area and height, and the rooms' volumes sum to
+// the whole plan's.
+TEST(ExtrusionTest, EachRoomAloneIsAClosedSolid) {
+  FloorPlan plan = GridPlan(
+      2, 2, 1.0, [](int i, int j) { return j == 1 ? 2 : i; }, 3);
+  plan.rooms[0] = {.floor_z = 0, .ceiling_z = 2.5};
+  plan.rooms[1] = {.floor_z = 0.5, .ceiling_z = 3.0};
+  plan.rooms[2] = {.floor_z = 0.25, .ceiling_z = 2.75};
+  const double heights[3] = {2.5, 2.5, 2.5};
+  const double areas[3] = {1, 1, 2};
+  double sum = 0;
+  for (int r = 0; r < 3; ++r) {
+    absl::StatusOr<TriangleMesh> room = ExtrudeRoom(plan, r);
+    ASSERT_TRUE(room.ok()) << room.status();
+    EXPECT_TRUE(CheckMesh(*room).watertight()) << r << ": " << CheckMesh(*room).ToString();
+    EXPECT_NEAR(SignedVolume(*room), areas[r] * heights[r], 1e-9) << r;
+    for (const Eigen::Vector3i& t : room->triangles) {
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_GE(room->vertices[t[k]].z(), plan.rooms[r].floor_z - 1e-6);
+        EXPECT_LE(room->vertices[t[k]].z(), plan.rooms[r].ceiling_z + 1e-6);
+      }
+    }
+    sum += SignedVolume(*room);
+  }
+  EXPECT_NEAR(sum, ExpectedVolume(plan), 1e-9);
+  EXPECT_EQ(ExtrudeRoom(plan, 3).status().code(), absl::StatusCode::kOutOfRange);
+}
+
 TEST(ExtrusionTest, RoomWithColumn) {
   FloorPlan plan = GridPlan(
       5, 5, 1.0, [](int i, int j) { return i == 2 && j == 2 ? -1 : 0; }, 1);

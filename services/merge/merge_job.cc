@@ -25,6 +25,7 @@
 #include "services/merge/dense_mesh.h"
 #include "services/merge/face_store.h"
 #include "services/merge/memory_budget.h"
+#include "services/merge/model_glb.h"
 #include "services/merge/object_files.h"
 #include "services/merge/segment_tiles.h"
 #include "services/merge/tile_set.h"
@@ -698,10 +699,17 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   if (absl::Status s = (*pieces)->FinishWriting(); !s.ok()) return s;
   counts["object_scratch_bytes"] = (*pieces)->bytes();
   const Clock::time_point t_files = Clock::now();
+  absl::StatusOr<std::unique_ptr<ModelGlb>> glb =
+      ModelGlb::Create((out / "mesh" / "model.glb").string(), *building, plans);
+  if (!glb.ok()) return glb.status();
   absl::StatusOr<ObjectFilesResult> files =
       WriteObjectFiles(layout, **pieces, *building, out, MergeThreads(options),
-                       StageProgress(progress, "object_files"));
+                       StageProgress(progress, "object_files"),
+                       [&glb](const SegmentedObject& o, const TriangleMesh& mesh) {
+                         return (*glb)->AddObject(o, mesh);
+                       });
   if (!files.ok()) return files.status();
+  if (absl::Status s = (*glb)->Finish(); !s.ok()) return s;
   timings["merge.object_files"] = SecondsSince(t_files);
   *pieces = nullptr;
   fs::remove_all(work, ec);  // scratch: every output is written
@@ -736,6 +744,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   }
   outputs.push_back("mesh/objects.ply");
   outputs.push_back("mesh/combined.ply");
+  outputs.push_back("mesh/model.glb");
   job["objects"] = listed;
   counts["objects"] = layout.objects.size();
   counts["object_triangles"] = object_triangles;
@@ -936,7 +945,18 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
     absl::StatusOr<std::optional<TriangleMesh>> building = PlanarBuildingMesh(
         options, **faces, tiles, levels->levels, out, counts, timings, outputs, warnings, progress);
     if (!building.ok()) return InStage("planar_mesh", building.status());
-    if (*building) building_triangles = (*building)->triangles.size();
+    if (*building) {
+      building_triangles = (*building)->triangles.size();
+      // The building alone as the glTF scene: no rooms and no objects without floor plans.
+      absl::StatusOr<std::unique_ptr<ModelGlb>> glb =
+          ModelGlb::Create((out / "mesh" / "model.glb").string(), **building, {});
+      if (!glb.ok()) return InStage("planar_mesh", glb.status());
+      if (absl::Status s = (*glb)->Finish(); !s.ok()) return InStage("planar_mesh", s);
+      outputs.push_back("mesh/model.glb");
+    } else {
+      std::error_code ec;
+      fs::remove(out / "mesh" / "model.glb", ec);
+    }
     timings["merge.planar_mesh"] = SecondsSince(t0);
   } else {
     absl::StatusOr<SegmentStageResult> seg =

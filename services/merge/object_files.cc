@@ -89,11 +89,9 @@ absl::StatusOr<TriangleMesh> ObjectPieceFile::Read(std::span<const uint64_t> key
   return mesh;
 }
 
-absl::StatusOr<ObjectFilesResult> WriteObjectFiles(const ObjectLayout& layout,
-                                                   const ObjectPieceFile& pieces,
-                                                   const TriangleMesh& building,
-                                                   const fs::path& out, int threads,
-                                                   const ChunkProgressFn& progress) {
+absl::StatusOr<ObjectFilesResult> WriteObjectFiles(
+    const ObjectLayout& layout, const ObjectPieceFile& pieces, const TriangleMesh& building,
+    const fs::path& out, int threads, const ChunkProgressFn& progress, const ObjectMeshFn& also) {
   const fs::path objects_dir = out / "mesh" / "objects";
   std::error_code ec;
   fs::remove_all(objects_dir, ec);  // an earlier merge's objects are not this one's
@@ -152,6 +150,9 @@ absl::StatusOr<ObjectFilesResult> WriteObjectFiles(const ObjectLayout& layout,
       result.triangles[first + i] = meshes[i].triangles.size();
       if (absl::Status s = (*all)->AddMesh(meshes[i], id); !s.ok()) return s;
       if (absl::Status s = (*combined)->AddMesh(meshes[i], id); !s.ok()) return s;
+      if (also) {
+        if (absl::Status s = also(layout.objects[first + i], meshes[i]); !s.ok()) return s;
+      }
       meshes[i] = TriangleMesh{};
     }
   }

@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -72,10 +73,13 @@ struct ObjectFilesResult {
 // are separate models), and streams them, in id order, into mesh/objects.ply and, after
 // `building` (face value −1), mesh/combined.ply (face property `object`). Objects are read,
 // written and checked on `threads` threads a batch at a time; memory is a batch of objects.
-// `progress` (objects done, objects) may cancel. `out` is the output folder, with mesh/
-// in it. Errors name the file; Cancelled when `progress` says so.
+// `progress` (objects done, objects) may cancel; `also`, when set, gets each object with its
+// mesh, in id order, after the joined files (mesh/model.glb). `out` is the output folder, with
+// mesh/ in it. Errors name the file, or are `also`'s; Cancelled when `progress` says so.
+using ObjectMeshFn = std::function<absl::Status(const SegmentedObject&, const TriangleMesh&)>;
 [[nodiscard]] absl::StatusOr<ObjectFilesResult> WriteObjectFiles(
     const ObjectLayout& layout, const ObjectPieceFile& pieces, const TriangleMesh& building,
-    const std::filesystem::path& out, int threads, const ChunkProgressFn& progress = nullptr);
+    const std::filesystem::path& out, int threads, const ChunkProgressFn& progress = nullptr,
+    const ObjectMeshFn& also = nullptr);
 
 }  // namespace carvemap

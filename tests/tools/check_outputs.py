@@ -18,6 +18,11 @@ spec alone:
   - each level_<k>/floorplan.dxf listed opens in ezdxf (Debian's python3-ezdxf) with no error
     in its audit, has the layers ROOMS, WALLS, DOORS and LABELS, one label per room of the
     level in job.json, and closed room rings whose signed areas sum to the level's room area;
+  - mesh/model.glb, when listed, is binary glTF 2.0 (header, JSON chunk, BIN chunk of the
+    buffer's length, parsed with the standard library): every accessor inside its view and
+    every view inside the buffer; under its root the nodes "building" (the triangles of
+    building.ply), "rooms" (one node per room of job.json) and "objects" (one node per object
+    of job.json, named "object <id>", with the triangles of its mesh/objects/<id>.ply);
   - each level_<k>/occupancy.yaml listed is a ROS map_server map: its keys (image, mode,
     resolution, origin, negate, occupied_thresh, free_thresh) read with python3-yaml, its image
     read with Pillow (python3-pil) as 8-bit gray of topdown.json's size, resolution and origin;
@@ -194,6 +199,65 @@ def dxf_problems(path, rooms):
     return problems
 
 
+def glb_problems(out, job):
+    """What is wrong with mesh/model.glb against the spec's layout and job.json."""
+    import struct
+    path = os.path.join(out, "mesh", "model.glb")
+    data = open(path, "rb").read()
+    magic, version, length = struct.unpack_from("<III", data, 0)
+    if magic != 0x46546C67 or version != 2 or length != len(data):
+        return [f"{path}: header {magic:#x} v{version} length {length} of {len(data)} bytes"]
+    json_len, json_type = struct.unpack_from("<II", data, 12)
+    if json_type != 0x4E4F534A or json_len % 4:
+        return [f"{path}: the first chunk is not a 4-aligned JSON chunk"]
+    gltf = json.loads(data[20:20 + json_len])
+    bin_at = 20 + json_len
+    bin_len = struct.unpack_from("<II", data, bin_at)[0] if bin_at < len(data) else 0
+    problems = []
+    buffers = gltf.get("buffers", [])
+    if buffers and buffers[0]["byteLength"] > bin_len:
+        problems.append(f"{path}: buffer of {buffers[0]['byteLength']} bytes, BIN chunk {bin_len}")
+    views = gltf.get("bufferViews", [])
+    for v in views:
+        if v["byteOffset"] + v["byteLength"] > buffers[0]["byteLength"]:
+            problems.append(f"{path}: a buffer view ends past the buffer")
+    sizes = {5126: 4, 5125: 4}
+    comps = {"VEC3": 3, "SCALAR": 1}
+    for a in gltf.get("accessors", []):
+        if a["count"] * sizes[a["componentType"]] * comps[a["type"]] > \
+                views[a["bufferView"]]["byteLength"]:
+            problems.append(f"{path}: an accessor reads past its view")
+    nodes = gltf["nodes"]
+    named = {nodes[c]["name"]: nodes[c] for c in nodes[gltf["scenes"][0]["nodes"][0]]["children"]}
+
+    def triangles(node):
+        if "mesh" not in node:
+            return 0
+        return gltf["accessors"][gltf["meshes"][node["mesh"]]["primitives"][0]["indices"]][
+            "count"] // 3
+    building_ply = len(read_ply(os.path.join(out, "mesh", "building.ply"))[1])
+    if "building" not in named or triangles(named["building"]) != building_ply:
+        problems.append(f"{path}: no node 'building' with building.ply's {building_ply} triangles")
+    objects = named.get("objects", {}).get("children", [])
+    if "objects" in named or job.get("objects"):
+        if len(objects) != len(job.get("objects", [])):
+            problems.append(f"{path}: {len(objects)} object nodes, job.json "
+                            f"{len(job.get('objects', []))} objects")
+        for node, obj in zip(objects, job.get("objects", [])):
+            n = nodes[node]
+            if n["name"] != f"object {obj['id']}" or triangles(n) != obj["triangles"]:
+                problems.append(f"{path}: node {n['name']} ({triangles(n)} triangles) is not "
+                                f"object {obj['id']} ({obj['triangles']})")
+                break
+    rooms = named.get("rooms", {}).get("children", [])
+    if "rooms" in named and len(rooms) != len([r for r in job.get("rooms", [])
+                                               if r.get("area_m2", 0) > 0]):
+        problems.append(f"{path}: {len(rooms)} room nodes, job.json {len(job.get('rooms', []))}")
+    print(f"mesh/model.glb: {len(nodes)} nodes ({len(rooms)} rooms, {len(objects)} objects), "
+          f"{bin_len} bytes of buffer")
+    return problems
+
+
 def ros_map_problems(out, name):
     """What is wrong with a level's occupancy.yaml and its image, as map_server reads them."""
     try:
@@ -304,6 +368,8 @@ def main():
             problems += found
             print(f"{name}: {'read by ezdxf' if not found else 'NOT as job.json says'}, "
                   f"{len(rooms)} rooms")
+    if "mesh/model.glb" in outputs:
+        problems += glb_problems(args.out, job)
     for name in sorted(outputs):
         if name.endswith("/occupancy.yaml"):
             problems += ros_map_problems(args.out, name)
