@@ -20,6 +20,9 @@ PACKAGES=(
   python3-ezdxf  # tests/tools/check_outputs.py: an independent reader of floorplan.dxf
   python3-pil  # tests/tools/check_outputs.py: an independent reader of occupancy.pgm
   libtinygltf-dev  # storage/glb_writer_test.cc: an independent reader of mesh/model.glb
+  libjs-three libjs-leaflet  # services/report: the report's 3D view and floor plans
+  libcivetweb-dev  # `carvemap serve`
+  chromium  # tests/tools/report_test.py: the report in a real browser, headless
   # tests/tools/make_rosbag.py: ROS 1 bags written by ROS's own Python library
   python3-rosbag python3-roslz4 python3-sensor-msgs python3-tf2-msgs python3-geometry-msgs
   libgeographiclib-dev  # services/geomag/: the World Magnetic Model's declination (§2.3)

@@ -8,7 +8,8 @@ repositories); a build stage running CMake + Ninja like scripts/build.sh; a runt
 copying only the binary from the build stage, running as a numeric non-root user, with
 ENTRYPOINT carvemap and an explicit HEALTHCHECK (or HEALTHCHECK NONE); the .dockerignore;
 and that the runtime stage installs the Debian package of every shared library
-`ldd BUILD/carvemap` lists (and no package that provides none of them).
+`ldd BUILD/carvemap` lists (and no package that provides none of them, but for the job
+report's JavaScript libraries, libjs-three and libjs-leaflet).
 """
 import os
 import re
@@ -240,7 +241,12 @@ def main():
         if pkg not in installed:
             fail(f"runtime stage does not install {pkg}, which provides {path} "
                  f"(`ldd {binary}`)")
-    for pkg in sorted(installed - needed):
+    # Files, not libraries, that the binary reads at run time: the job report's viewers
+    # (services/report/job_report.h copies them beside each job's outputs).
+    data_packages = {"libjs-three", "libjs-leaflet"}
+    for pkg in sorted(data_packages - installed):
+        fail(f"runtime stage does not install {pkg}, which the job report copies from")
+    for pkg in sorted(installed - needed - data_packages):
         fail(f"runtime stage installs {pkg}, which provides no library of {binary}")
 
     if errors:

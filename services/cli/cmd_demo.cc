@@ -154,10 +154,13 @@ absl::Status RunDemo(const DemoFlags& flags) {
       "  mesh/objects.ply        the furniture; mesh/objects/<id>.ply one watertight mesh each\n"
       "  mesh/combined.ply       building + objects\n"
       "  mesh/model.glb          building, rooms and objects as one glTF scene (any viewer)\n"
+      "  index.html, report/     the report: numbers, time per stage, plans, 3D (a browser)\n"
       "  job.json                parameters, counts, rooms, objects, timings and any warnings\n"
       "  tiles/                  one HDF5 tile per 2 m chunk (storage/TILE_FORMAT.md)\n"
-      "  object_tiles/           the chunks holding objects, carved again finer (§5.6.1)\n",
-      out_dir.c_str());
+      "  object_tiles/           the chunks holding objects, carved again finer (§5.6.1)\n"
+      "\nthe report: %s/index.html; for its 3D view run\n"
+      "  carvemap serve %s\nand open http://127.0.0.1:8080/index.html\n",
+      out_dir.c_str(), out_dir.c_str(), out_dir.c_str());
   return absl::OkStatus();
 }
 

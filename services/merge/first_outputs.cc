@@ -11,6 +11,7 @@
 #include "services/merge/octomap_writer.h"
 #include "services/merge/tile_set.h"
 #include "services/merge/topdown_map.h"
+#include "services/report/job_report.h"
 #include "storage/atomic_file.h"
 #include "storage/tile_store.h"
 
@@ -252,6 +253,14 @@ absl::StatusOr<MergeSummary> MergeFirstOutputs(const FirstOutputsOptions& option
     if (std::find(outputs.begin(), outputs.end(), name) == outputs.end()) outputs.push_back(name);
   }
   job["outputs"] = outputs;
+
+  // index.html, the report in the browser, from the job document as it will be written; a job
+  // whose report cannot be made (the viewers' libraries missing) says why in its warnings.
+  if (absl::Status s = WriteJobReport(out.string(), job); s.ok()) {
+    job["outputs"].push_back("index.html");
+  } else {
+    job["warnings"].push_back(std::string(s.message()));
+  }
 
   summary.job_json_path = (out / "job.json").string();
   if (absl::Status s = WriteFileAtomically(

@@ -6,6 +6,7 @@
 //   <output_dir>/level_0/topdown.json   its georeference (origin, resolution) and gray scale
 //   <output_dir>/level_<k>/occupancy.pgm + .yaml   with levels: a 2D occupancy grid per level
 //                                       for ROS map_server (TopdownMap::WriteRosMap)
+//   <output_dir>/index.html + report/   the job report in the browser (services/report)
 //   <output_dir>/job.json               the caller's job document plus the merge's parameters,
 //                                       versions, timings and counts
 // Every file is written through "<name>.partial" and a rename, so a failed merge leaves no

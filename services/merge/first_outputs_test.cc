@@ -121,7 +121,8 @@ TEST_F(FirstOutputsTest, WritesAllOutputs) {
     EXPECT_TRUE(job["timings_s"].contains(t)) << t;
   }
   EXPECT_EQ(job["outputs"], (nlohmann::json{"scan.h5", "octree.bt", "octree.ot", "job.json",
-                                            "level_0/topdown.json", "level_0/topdown.png"}));
+                                            "level_0/topdown.json", "level_0/topdown.png",
+                                            "index.html"}));
   for (const auto& entry : fs::recursive_directory_iterator(out)) {
     EXPECT_EQ(entry.path().string().find(".partial"), std::string::npos) << entry.path();
   }
