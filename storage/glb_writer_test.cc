@@ -8,18 +8,14 @@
 #include <gtest/gtest.h>
 #include <tiny_gltf.h>
 
+#include "tests/support/test_meshes.h"
+
 namespace carvemap {
 namespace {
 
-namespace fs = std::filesystem;
+using testing::Tetrahedron;
 
-TriangleMesh Tetrahedron(const Eigen::Vector3f& at, float size) {
-  TriangleMesh m;
-  m.vertices = {at, at + Eigen::Vector3f(size, 0, 0), at + Eigen::Vector3f(0, size, 0),
-                at + Eigen::Vector3f(0, 0, size)};
-  m.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
-  return m;
-}
+namespace fs = std::filesystem;
 
 // An accessor's elements as T, through its buffer view, as a reader finds them.
 template <typename T>

@@ -6,16 +6,12 @@
 #include <gtest/gtest.h>
 #include <tiny_gltf.h>
 
+#include "tests/support/test_meshes.h"
+
 namespace carvemap {
 namespace {
 
-TriangleMesh Tetrahedron(const Eigen::Vector3f& at, float size) {
-  TriangleMesh m;
-  m.vertices = {at, at + Eigen::Vector3f(size, 0, 0), at + Eigen::Vector3f(0, size, 0),
-                at + Eigen::Vector3f(0, 0, size)};
-  m.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
-  return m;
-}
+using testing::Tetrahedron;
 
 // Two rooms side by side (4 × 2 m and 2 × 2 m) on a square grid, two triangles per cell.
 FloorPlan TwoRooms() {

@@ -8,24 +8,15 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/support/test_meshes.h"
+
 namespace carvemap {
 namespace {
 
+using testing::ReadFileBytes;
+using testing::Tetrahedron;
+
 namespace fs = std::filesystem;
-
-std::string ReadAll(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-// A tetrahedron at `at`, `scale` m across.
-TriangleMesh Tetrahedron(const Eigen::Vector3f& at, float scale) {
-  TriangleMesh m;
-  m.vertices = {at, at + Eigen::Vector3f(scale, 0, 0), at + Eigen::Vector3f(0, scale, 0),
-                at + Eigen::Vector3f(0, 0, scale)};
-  m.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
-  return m;
-}
 
 class ObjectFilesTest : public ::testing::Test {
  protected:
@@ -68,8 +59,8 @@ TEST_F(ObjectFilesTest, ObjectsAreTheirPiecesJoinedAndTheJoinedFilesTheirConcate
   first.Append(b);
   ASSERT_TRUE(WritePly((dir_ / "expect_0.ply").string(), first).ok());
   ASSERT_TRUE(WritePly((dir_ / "expect_1.ply").string(), c).ok());
-  EXPECT_EQ(ReadAll(dir_ / "mesh/objects/0.ply"), ReadAll(dir_ / "expect_0.ply"));
-  EXPECT_EQ(ReadAll(dir_ / "mesh/objects/1.ply"), ReadAll(dir_ / "expect_1.ply"));
+  EXPECT_EQ(ReadFileBytes(dir_ / "mesh/objects/0.ply"), ReadFileBytes(dir_ / "expect_0.ply"));
+  EXPECT_EQ(ReadFileBytes(dir_ / "mesh/objects/1.ply"), ReadFileBytes(dir_ / "expect_1.ply"));
   EXPECT_FALSE(fs::exists(dir_ / "mesh/objects/7.ply"));
   EXPECT_EQ(result->triangles, (std::vector<uint64_t>{8, 4}));
   ASSERT_EQ(result->crossings.size(), 2u);
@@ -79,14 +70,14 @@ TEST_F(ObjectFilesTest, ObjectsAreTheirPiecesJoinedAndTheJoinedFilesTheirConcate
   objects.Append(c);
   const std::vector<int> ids = {0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1};
   ASSERT_TRUE(WritePly((dir_ / "expect_objects.ply").string(), objects, &ids, "object").ok());
-  EXPECT_EQ(ReadAll(dir_ / "mesh/objects.ply"), ReadAll(dir_ / "expect_objects.ply"));
+  EXPECT_EQ(ReadFileBytes(dir_ / "mesh/objects.ply"), ReadFileBytes(dir_ / "expect_objects.ply"));
   TriangleMesh combined = building;
   combined.Append(objects);
   std::vector<int> with_building = {-1, -1, -1, -1};
   with_building.insert(with_building.end(), ids.begin(), ids.end());
   ASSERT_TRUE(
       WritePly((dir_ / "expect_combined.ply").string(), combined, &with_building, "object").ok());
-  EXPECT_EQ(ReadAll(dir_ / "mesh/combined.ply"), ReadAll(dir_ / "expect_combined.ply"));
+  EXPECT_EQ(ReadFileBytes(dir_ / "mesh/combined.ply"), ReadFileBytes(dir_ / "expect_combined.ply"));
 }
 
 // A scratch file cut short (a full disk) or a key never stored is an error naming the file,

@@ -8,16 +8,14 @@
 #include <gtest/gtest.h>
 
 #include "services/report/report_assets.h"
+#include "tests/support/test_meshes.h"
 
 namespace carvemap {
 namespace {
 
-namespace fs = std::filesystem;
+using testing::ReadFileBytes;
 
-std::string ReadAll(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
+namespace fs = std::filesystem;
 
 void Write(const fs::path& path, const std::string& text) {
   fs::create_directories(path.parent_path());
@@ -54,17 +52,16 @@ class JobReportTest : public ::testing::Test {
 TEST_F(JobReportTest, WritesThePageItsDataAndTheLibraries) {
   const nlohmann::json job = {{"job_id", "j-1"}, {"rooms", {{{"level", 0}, {"room", 0}}}}};
   ASSERT_TRUE(WriteJobReport(out_.string(), job, libs_).ok());
-  EXPECT_EQ(ReadAll(out_ / "index.html"), kReportIndexHtml);
-  EXPECT_EQ(ReadAll(out_ / "report/report.js"), kReportJs);
-  EXPECT_EQ(ReadAll(out_ / "report/lib/three.min.js"), "var THREE = {};");
+  EXPECT_EQ(ReadFileBytes(out_ / "index.html"), kReportIndexHtml);
+  EXPECT_EQ(ReadFileBytes(out_ / "report/report.js"), kReportJs);
+  EXPECT_EQ(ReadFileBytes(out_ / "report/lib/three.min.js"), "var THREE = {};");
   for (const char* f : {"GLTFLoader.js", "OrbitControls.js", "leaflet.js", "leaflet.css"}) {
     EXPECT_TRUE(fs::exists(out_ / "report/lib" / f)) << f;
     // Every library the page loads is one the report copies.
-    EXPECT_NE(std::string(kReportIndexHtml).find(std::string("report/lib/") + f),
-              std::string::npos)
+    EXPECT_NE(std::string(kReportIndexHtml).find(std::string("report/lib/") + f), std::string::npos)
         << f;
   }
-  const std::string js = ReadAll(out_ / "report/data.js");
+  const std::string js = ReadFileBytes(out_ / "report/data.js");
   const std::string prefix = "window.CARVEMAP = ";
   ASSERT_EQ(js.substr(0, prefix.size()), prefix);
   ASSERT_EQ(js.substr(js.size() - 2), ";\n");
