@@ -31,6 +31,9 @@ PACKAGES=(
   python3 python3-h5py python3-numpy
   yamllint python3-yaml kubernetes-client
   python3-grpcio python3-grpc-tools  # tests/tools: an independent client of the job API
+  # python/: pip builds the package offline (--no-build-isolation), into a venv over these
+  python3-pip python3-setuptools python3-wheel python3-venv
+  python3-pytest  # python/tests: the Python package's tests (ctest python_package)
   iproute2  # tests/tools/fault_test.py, deploy/local/netns.sh: ip netns, veth links
   time  # /usr/bin/time: CPU seconds in tests/bench/*.sh (e2e_floorplan_3d_freiburg101 runs one)
   strace  # tests/tools/durability_trace.py: the order of fsyncs and renames in a real job
