@@ -395,12 +395,13 @@ def tail(path, n=30):
 
 # ---- outputs ---------------------------------------------------------------------------------
 
-# What a job writes that depends on the moment it ran (timings), not on the data.
-VOLATILE = {"job.json"}
+# What a job writes that depends on the moment it ran (timings), not on the data: job.json,
+# and the report's copy of it.
+VOLATILE = {"job.json", "report/data.js"}
 
 
 def output_files(out_dir):
-    """{relative path: sha256} of every file under out_dir but job.json and hidden folders."""
+    """{relative path: sha256} of every file under out_dir but VOLATILE's and hidden folders."""
     files = {}
     for root, dirs, names in os.walk(out_dir):
         dirs[:] = [d for d in dirs if not d.startswith(".")]

@@ -5,8 +5,8 @@ Every job here is the same small job (the `room` preset, 5 Hz, 2° beams, 8 s of
 carved again at 3.125 cm), submitted by the same tenant with the same idempotency key, so it
 gets the same job id and therefore (tiles record their job id) byte-identical outputs however
 it ran. The undisturbed run is the reference; every disturbed run must reproduce all of its
-files (tiles/, object_tiles/, meshes, plans, octree.bt: everything but job.json, which holds
-timings) byte for byte.
+files (tiles/, object_tiles/, meshes, plans, octree.bt: everything but job.json and the
+report's copy of it, report/data.js, which hold timings) byte for byte.
 
   reference            simulate the scan and run the job undisturbed (the fixture of the rest)
   coordinator-restart  the coordinator SIGKILLed during ingest, during carving, and during the
