@@ -385,6 +385,9 @@ absl::Status ReadSensorAttrs(hid_t group, SensorInfo& info) {
   info.sigma_t_s = (*sigma_t)[0];
   info.range_sigma = {(*range_sigma)[0], (*range_sigma)[1]};
   info.max_range_m = (*max_range)[0];
+  if (const std::string problem = SensorParametersProblem(info); !problem.empty()) {
+    return absl::InvalidArgumentError(problem);
+  }
   return absl::OkStatus();
 }
 

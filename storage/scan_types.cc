@@ -1,5 +1,8 @@
 #include "storage/scan_types.h"
 
+#include <cmath>
+#include <sstream>
+
 #include <Eigen/Geometry>
 
 namespace carvemap {
@@ -22,6 +25,35 @@ void TurnAboutVertical(double yaw_rad, PathCovariance& c) {
     v[0] = float(t(0, 0)), v[1] = float(t(0, 1)), v[2] = float(t(0, 2));
     v[3] = float(t(1, 1)), v[4] = float(t(1, 2)), v[5] = float(t(2, 2));
   }
+}
+
+std::string SensorParametersProblem(const SensorInfo& info) {
+  const bool finite = info.R_s2c.allFinite() && info.T_s2c.allFinite() &&
+                      std::isfinite(info.sigma_t_s) && std::isfinite(info.range_sigma[0]) &&
+                      std::isfinite(info.range_sigma[1]) && std::isfinite(info.max_range_m);
+  if (!finite) return "non-finite extrinsics or noise parameters";
+  // The same tolerance as the path's quaternions' unit norm would give a rotation built from
+  // them in double precision, far above float rounding of a matrix written by hand.
+  constexpr double kTolerance = 1e-6;
+  const double off = (info.R_s2c * info.R_s2c.transpose() - Eigen::Matrix3d::Identity())
+                         .cwiseAbs()
+                         .maxCoeff();
+  const double det = info.R_s2c.determinant();
+  if (off > kTolerance || std::abs(det - 1) > kTolerance) {
+    std::ostringstream why;
+    why << "R_s2c is not a rotation (R·Rᵀ is off the identity by up to " << off
+        << ", det R = " << det << ")";
+    return why.str();
+  }
+  if (info.sigma_t_s < 0 || info.range_sigma[0] < 0 || info.range_sigma[1] < 0) {
+    return "sigma_t and range_sigma must not be negative";
+  }
+  if (!(info.max_range_m > 0)) {
+    std::ostringstream why;
+    why << "max_range must be > 0 m, got " << info.max_range_m;
+    return why.str();
+  }
+  return "";
 }
 
 std::string_view SensorKindName(SensorKind kind) {

@@ -45,6 +45,12 @@ struct SensorInfo {
   double max_range_m = 30.0;
 };
 
+// What is wrong with a sensor's mounting and noise parameters (docs/DESIGN.md §3), or "" when
+// nothing: every value finite, R_s2c a rotation (R·Rᵀ = I and det R = 1 within 1e-6),
+// sigma_t and range_sigma not negative, max_range > 0. The writer refuses such a sensor and
+// the reader such a file.
+[[nodiscard]] std::string SensorParametersProblem(const SensorInfo& info);
+
 // One row of /sensors/<name>/frames: rays [first, first+count) of the sensor's /points.
 struct FrameRecord {
   double t;

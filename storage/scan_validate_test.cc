@@ -248,6 +248,33 @@ TEST(ScanValidateTest, SensorAttributeWrongShape) {
               ErrorNaming(path, "/sensors/h0", "attribute 'T_s2c' must hold 3 numbers"));
 }
 
+// Mounting and noise parameters §3 rules out: each named with the sensor's group.
+TEST(ScanValidateTest, SensorParametersOutOfRange) {
+  const struct {
+    const char* attr;
+    std::vector<double> values;
+    const char* detail;
+  } cases[] = {
+      {"R_s2c", {2, 0, 0, 0, 2, 0, 0, 0, 2}, "R_s2c is not a rotation"},
+      {"R_s2c", {1, 0, 0, 0, 1, 0, 0, 0, -1}, "R_s2c is not a rotation"},  // a reflection
+      {"R_s2c", {std::nan(""), 0, 0, 0, 1, 0, 0, 0, 1}, "non-finite"},
+      {"sigma_t", {-0.001}, "must not be negative"},
+      {"range_sigma", {0.01, -0.001}, "must not be negative"},
+      {"max_range", {0}, "max_range must be > 0 m"},
+  };
+  for (const auto& c : cases) {
+    const std::string path = WriteGoodScan();
+    {
+      Hid file = OpenForWrite(path);
+      Hid group(H5Gopen2(file.get(), "/sensors/h0", H5P_DEFAULT));
+      ReplaceAttr(group.get(), c.attr,
+                  [&] { (void)h5::WriteDoublesAttr(group.get(), c.attr, c.values); });
+    }
+    EXPECT_THAT(ScanReader::Open(path).status(), ErrorNaming(path, "/sensors/h0", c.detail))
+        << c.attr;
+  }
+}
+
 TEST(ScanValidateTest, UnknownSensorKind) {
   const std::string path = WriteGoodScan();
   {

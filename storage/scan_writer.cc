@@ -99,12 +99,8 @@ absl::Status ValidateSensorInfo(const SensorInfo& info) {
     return absl::InvalidArgumentError(
         absl::StrCat("sensor '", info.name, "': a grid sensor needs rows and cols > 0"));
   }
-  const bool finite = info.R_s2c.allFinite() && info.T_s2c.allFinite() &&
-                      std::isfinite(info.sigma_t_s) && std::isfinite(info.range_sigma[0]) &&
-                      std::isfinite(info.range_sigma[1]) && std::isfinite(info.max_range_m);
-  if (!finite) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("sensor '", info.name, "': non-finite extrinsics or noise parameters"));
+  if (const std::string problem = SensorParametersProblem(info); !problem.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("sensor '", info.name, "': ", problem));
   }
   return absl::OkStatus();
 }
