@@ -35,9 +35,8 @@ std::string SensorParametersProblem(const SensorInfo& info) {
   // The same tolerance as the path's quaternions' unit norm would give a rotation built from
   // them in double precision, far above float rounding of a matrix written by hand.
   constexpr double kTolerance = 1e-6;
-  const double off = (info.R_s2c * info.R_s2c.transpose() - Eigen::Matrix3d::Identity())
-                         .cwiseAbs()
-                         .maxCoeff();
+  const double off =
+      (info.R_s2c * info.R_s2c.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
   const double det = info.R_s2c.determinant();
   if (off > kTolerance || std::abs(det - 1) > kTolerance) {
     std::ostringstream why;
