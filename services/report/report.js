@@ -51,14 +51,13 @@
   const warnings = document.getElementById('warnings');
   for (const w of job.warnings || []) warnings.append(el('div', {class: 'warn'}, '⚠ ' + w));
 
-  // ---- where the time went: the job's stages, else the merge's ----
-  const stages = Object.entries(job.stage_seconds || {});
-  const merge = Object.entries(job.timings_s || {}).filter(([k]) => k.startsWith('merge.') &&
-      k !== 'merge.total' && k !== 'merge.first_outputs');
-  const bars = (stages.length ? stages : merge).filter(([, v]) => typeof v === 'number' && v > 0)
-                                                 .sort((a, b) => b[1] - a[1]).slice(0, 16);
+  // ---- where the time went: the job's stages (ingest, carve, merge), then the merge's ----
   const timings = document.getElementById('timings');
-  if (bars.length) {
+  function barChart(title, entries) {
+    const bars = entries.filter(([, v]) => typeof v === 'number' && v > 0)
+                        .sort((a, b) => b[1] - a[1]).slice(0, 14);
+    if (!bars.length) return 0;
+    timings.append(el('div', {class: 'note'}, title));
     const max = bars[0][1], rowH = 20, labelW = 190, barW = 260;
     const svg = document.createElementNS('http://www.w3.org/2000/svg', 'svg');
     svg.setAttribute('width', labelW + barW + 70);
@@ -78,10 +77,12 @@
       svg.append(label, bar, value);
     });
     timings.append(svg);
-    if (!stages.length) timings.append(el('div', {class: 'note'}, 'the merge\'s stages (job.json timings_s)'));
-  } else {
-    timings.append(el('div', {class: 'note'}, 'no timings in job.json'));
+    return bars.length;
   }
+  const drawn = barChart('the job\'s stages (job.json stage_seconds)', Object.entries(job.stage_seconds || {})) +
+      barChart('the merge\'s own stages (job.json timings_s)', Object.entries(job.timings_s || {}).filter(
+          ([k]) => k.startsWith('merge.') && k !== 'merge.total' && k !== 'merge.first_outputs'));
+  if (!drawn) timings.append(el('div', {class: 'note'}, 'no timings in job.json'));
 
   // ---- rooms table ----
   const roomTable = document.getElementById('rooms');
