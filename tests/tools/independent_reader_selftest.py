@@ -42,8 +42,8 @@ def write_scan(fname, mutate=None):
         g.attrs["R_s2c"] = parts["R"]
         g.attrs["T_s2c"] = np.zeros(3)
         g.attrs["sigma_t"] = 0.001
-        g.attrs["range_sigma"] = np.array([0.01, 0.0])
-        g.attrs["max_range"] = 30.0
+        g.attrs["range_sigma"] = parts.get("range_sigma", np.array([0.01, 0.0]))
+        g.attrs["max_range"] = parts.get("max_range", 30.0)
         g["frames"] = parts["frames"]
         g["points"] = parts["points"]
 
@@ -78,6 +78,22 @@ def main():
     def bad_q(p):
         p["path"]["qw"] = 0.9
     expect("non_unit_quaternion", False, bad_q)
+
+    def nearly_unit_q(p):  # within DESIGN §3's 1e-3 of unit: a valid file
+        p["path"]["qw"] = 1.0005
+    expect("quaternion_within_1e-3", True, nearly_unit_q)
+
+    def nan_rotation(p):
+        p["R"] = np.array([np.nan, 0, 0, 0, 1, 0, 0, 0, 1.0])
+    expect("extrinsic_nan", False, nan_rotation)
+
+    def negative_sigma(p):
+        p["range_sigma"] = np.array([0.01, -0.001])
+    expect("negative_range_sigma", False, negative_sigma)
+
+    def zero_max_range(p):
+        p["max_range"] = 0.0
+    expect("zero_max_range", False, zero_max_range)
 
     def bad_version(p):
         p["version"] = 2
