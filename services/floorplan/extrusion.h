@@ -36,7 +36,7 @@ void AssignRoomHeights(FloorPlan& plan);
 
 // One room's closed solid alone (its triangles extruded from its floor_z to its ceiling_z, as
 // ExtrudeFloorPlan would a plan of that room only): a room as a model of its own (mesh/
-// model.glb). Vertices of the plan the room does not use stay in the mesh, unreferenced.
+// model.glb). Only the room's own vertices get columns, as in ExtrudeFloorPlan.
 // Errors: ExtrudeFloorPlan's; OutOfRange for a room the plan lacks.
 [[nodiscard]] absl::StatusOr<TriangleMesh> ExtrudeRoom(const FloorPlan& plan, int room);
 
