@@ -1,4 +1,4 @@
-// `carvemap submit|watch|status|list|cancel|fetch --server HOST:PORT`: talk to a running
+// `carvemap upload|submit|watch|status|list|cancel|fetch --server HOST:PORT`: talk to a running
 // coordinator's JobService (docs/RPC.md). Thin shells over services/rpc/job_client.h.
 #include <atomic>
 #include <chrono>
@@ -38,6 +38,8 @@ struct ClientFlags {
   std::string artifact;
   std::string dest;
   SecurityFlags security;
+  std::string upload;       // a local file to upload (`upload`, `submit --upload`)
+  std::string upload_name;  // its name in the tenant's uploads/ folder; "" = its own
   std::string metrics;  // host:port or URL of the coordinator's /metrics
   double interval_s = 2;
   int count = 0;
@@ -103,14 +105,47 @@ absl::Status WatchWithProgress(JobClient& client, const std::string& job_id, boo
   return JobOutcome(*job);
 }
 
+// Uploads flags.upload with a progress line (docs/RPC.md "Uploads"), resuming after broken
+// connections.
+absl::StatusOr<UploadInfo> UploadWithProgress(JobClient& client, const ClientFlags& flags) {
+  ProgressLine line(!flags.quiet);
+  if (!flags.quiet) line.Update("hashing %s", flags.upload.c_str());
+  UploadOptions options;
+  options.name = flags.upload_name;
+  const auto start = std::chrono::steady_clock::now();
+  int64_t first = -1;
+  options.on_progress = [&](int64_t done, int64_t total) {
+    if (first < 0) first = done;
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double rate = s > 0 ? double(done - first) / s : 0;
+    line.Update("uploading %s  %.1f/%.1f MB  %.1f MB/s", flags.upload.c_str(), done / 1e6,
+                total / 1e6, rate / 1e6);
+  };
+  options.on_retry = [&](const absl::Status& why, double wait_s) {
+    line.Finish();
+    std::fprintf(stderr, "upload: %s; resuming in %.1f s\n", std::string(why.message()).c_str(),
+                 wait_s);
+  };
+  absl::StatusOr<UploadInfo> up = client.Upload(flags.upload, options);
+  line.Finish();
+  return up;
+}
+
 void RegisterClientCommands(CLI::App& app, int& exit_code) {
   auto flags = std::make_shared<ClientFlags>();
 
   CLI::App* submit = app.add_subcommand("submit", "Submit a carving job to a coordinator");
   AddServer(submit, *flags);
-  submit->add_option("input", flags->submit.input_path,
-                     "scan.h5, relative to the coordinator's data root")
-      ->required();
+  CLI::Option* input = submit->add_option(
+      "input", flags->submit.input_path,
+      "scan.h5, relative to the coordinator's data root (your tenant's folder)");
+  CLI::Option* upload = submit->add_option(
+      "--upload", flags->upload,
+      "Upload this local scan.h5 first (resumable; see `carvemap upload`), then submit it");
+  input->excludes(upload);
+  submit->add_option("--upload-name", flags->upload_name,
+                     "With --upload: its name in your uploads/ folder (default: its own)")
+      ->needs(upload);
   submit->add_option("-o,--output-name", flags->submit.output_name,
                      "Output folder name under the coordinator's output root (default: job id)");
   submit->add_option("--resolution", flags->submit.resolution_m,
@@ -146,6 +181,19 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
     flags->submit.north = flags->north.mode;
     flags->submit.location = flags->north.location;
     flags->submit.survey_date = flags->north.survey_date;
+    if (flags->submit.input_path.empty() && flags->upload.empty()) {
+      exit_code = ReportStatus(
+          "submit", absl::InvalidArgumentError("give the scan's path on the server, or --upload FILE"));
+      return;
+    }
+    if (!flags->upload.empty()) {
+      absl::StatusOr<UploadInfo> up = UploadWithProgress(client, *flags);
+      if (!up.ok()) {
+        exit_code = ReportStatus("submit", up.status());
+        return;
+      }
+      flags->submit.upload_id = up->upload_id;
+    }
     absl::StatusOr<JobInfo> job = client.Submit(flags->submit);
     if (!job.ok()) {
       exit_code = ReportStatus("submit", job.status());
@@ -154,6 +202,31 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
     std::printf("%s\n", job->job_id.c_str());
     if (flags->watch) {
       exit_code = ReportStatus("submit", WatchWithProgress(client, job->job_id, flags->quiet));
+    }
+  });
+
+  CLI::App* up = app.add_subcommand(
+      "upload",
+      "Upload a local scan.h5 into your folder on the coordinator (uploads/NAME), resumable: "
+      "after a broken connection it goes on from what the server holds, also when run again");
+  AddServer(up, *flags);
+  up->add_option("file", flags->upload, "The local file")->required()->check(CLI::ExistingFile);
+  up->add_option("--name", flags->upload_name,
+                 "Its name in your uploads/ folder, [A-Za-z0-9._-]{1,128} (default: its own)");
+  up->add_flag("-q,--quiet", flags->quiet, "No progress line");
+  up->callback([flags, &exit_code] {
+    std::unique_ptr<JobClient> connected = Connect(*flags, "upload", exit_code);
+    if (connected == nullptr) return;
+    absl::StatusOr<UploadInfo> info = UploadWithProgress(*connected, *flags);
+    if (!info.ok()) {
+      exit_code = ReportStatus("upload", info.status());
+      return;
+    }
+    std::printf("%s %s\n", info->upload_id.c_str(), info->input_path.c_str());
+    if (!flags->quiet) {
+      std::fprintf(stderr, "uploaded %s (%lld bytes): submit it with `carvemap submit %s`\n",
+                   flags->upload.c_str(), static_cast<long long>(info->size_bytes),
+                   info->input_path.c_str());
     }
   });
 

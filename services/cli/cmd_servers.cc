@@ -153,6 +153,7 @@ struct CoordinatorFlags {
   std::string tokens_file;
   std::string secret_file;
   bool no_merge = false;
+  double upload_quota_gb = 100;
   // The merge services (`carvemap merger`) and how to reach them; the bearer is the
   // coordinator's own cluster secret.
   MergeClientSpec merge;
@@ -180,6 +181,11 @@ absl::Status LoadSecrets(CoordinatorFlags& flags) {
 
 absl::Status RunCoordinator(CoordinatorFlags flags, LogFormat log_format) {
   if (absl::Status s = LoadSecrets(flags); !s.ok()) return s;
+  if (!(flags.upload_quota_gb >= 0) || flags.upload_quota_gb > 1e9) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--upload-quota-gb ", flags.upload_quota_gb, ": must be 0 (no limit) or more"));
+  }
+  flags.spec.upload_quota_bytes = static_cast<int64_t>(flags.upload_quota_gb * (1 << 30));
   // Each job's thread and gRPC's handler threads get a glibc malloc arena of their own (up to
   // eight per core), and an arena keeps what it once held: over 60 small jobs in a row the
   // coordinator's RSS grew 5.1 MiB after its first ten with the default, 1.3 MiB with two
@@ -305,6 +311,10 @@ void RegisterCoordinator(CLI::App& app, int& exit_code) {
   cmd->add_option("--max-jobs-per-tenant", s.max_jobs_per_tenant,
                   "Unfinished jobs a tenant may have; one more is refused (RESOURCE_EXHAUSTED). "
                   "0: no limit")
+      ->capture_default_str();
+  cmd->add_option("--upload-quota-gb", flags->upload_quota_gb,
+                  "GiB a tenant may hold in streamed uploads (`carvemap upload`, `submit "
+                  "--upload`): its uploads/ folder and unfinished uploads. 0: no limit")
       ->capture_default_str();
   cmd->add_option("--max-request-bytes", s.max_request_bytes,
                   "Largest request message accepted (larger: RESOURCE_EXHAUSTED)")

@@ -45,7 +45,8 @@
 #include "services/rpc/bearer_tokens.h"
 #include "services/rpc/coordinator_metrics.h"
 #include "services/rpc/process_metrics.h"
-#include "services/rpc/file_hash.h"
+#include "storage/file_hash.h"
+#include "storage/upload_store.h"
 #include "services/rpc/grpc_security.h"
 #include "services/rpc/server_log.h"
 #include "storage/confined_path.h"
@@ -164,6 +165,16 @@ absl::Status CheckWritableDir(const fs::path& dir, absl::string_view what) {
   return absl::OkStatus();
 }
 
+void ToProto(const UploadState& u, pb::Upload& out) {
+  out.set_upload_id(u.id);
+  out.set_name(u.name);
+  out.set_input_path(u.input_path);
+  out.set_size_bytes(u.size_bytes);
+  out.set_sha256_hex(u.sha256_hex);
+  out.set_received_bytes(u.received_bytes);
+  out.set_complete(u.complete);
+}
+
 }  // namespace
 
 absl::Status CoordinatorSpec::Validate() const {
@@ -201,6 +212,9 @@ absl::Status CoordinatorSpec::Validate() const {
         " tenants, whose inputs and outputs would mix; shared folders need a single tenant"));
   }
   if (max_jobs_per_tenant < 0) return absl::InvalidArgumentError("max_jobs_per_tenant < 0");
+  if (upload_quota_bytes < 0) {
+    return absl::InvalidArgumentError("upload quota must not be negative");
+  }
   if (max_request_bytes < 4096) {
     return absl::InvalidArgumentError("max_request_bytes must be >= 4096");
   }
@@ -265,6 +279,10 @@ class CoordinatorServer::Impl {
   absl::Status FetchArtifact(const Caller& caller, grpc::ServerContext& ctx,
                              const pb::FetchArtifactRequest& req,
                              grpc::ServerWriter<pb::ArtifactChunk>& writer);
+  absl::Status StartUpload(const Caller& caller, const pb::StartUploadRequest& req,
+                           pb::Upload& resp);
+  absl::Status UploadScan(const Caller& caller, grpc::ServerReader<pb::UploadScanRequest>& reader,
+                          pb::Upload& resp);
 
   // ---- CarveTaskService
   absl::Status RegisterWorker(grpc::ServerContext& ctx, const pb::RegisterWorkerRequest& req,
@@ -407,6 +425,7 @@ class CoordinatorServer::Impl {
   const CoordinatorSpec spec_;
   CoordinatorFolders folders_;
   std::unique_ptr<JobStore> store_;
+  std::unique_ptr<UploadStore> uploads_;
   GrpcServers servers_;  // the two APIs; the plaintext health port if asked for
   TokenTable tokens_;
   std::unique_ptr<grpc::Service> job_service_;
@@ -504,6 +523,22 @@ class JobServiceAdapter final : public pb::JobService::Service {
       return ToGrpcStatus(impl_.FetchArtifact(*caller, *ctx, *req, *writer));
     });
   }
+  grpc::Status StartUpload(grpc::ServerContext* ctx, const pb::StartUploadRequest* req,
+                           pb::Upload* resp) override {
+    return Timed(impl_.metrics(), "StartUpload", [&] {
+      auto caller = impl_.AuthenticateTenant(*ctx);
+      if (!caller.ok()) return ToGrpcStatus(caller.status());
+      return ToGrpcStatus(impl_.StartUpload(*caller, *req, *resp));
+    });
+  }
+  grpc::Status UploadScan(grpc::ServerContext* ctx, grpc::ServerReader<pb::UploadScanRequest>* reader,
+                          pb::Upload* resp) override {
+    return Timed(impl_.metrics(), "UploadScan", [&] {
+      auto caller = impl_.AuthenticateTenant(*ctx);
+      if (!caller.ok()) return ToGrpcStatus(caller.status());
+      return ToGrpcStatus(impl_.UploadScan(*caller, *reader, *resp));
+    });
+  }
 
  private:
   CoordinatorServer::Impl& impl_;
@@ -571,6 +606,8 @@ absl::Status CoordinatorServer::Impl::Start() {
       JobStore::Open((fs::path(folders_.work_dir) / "jobs.db").string());
   if (!store.ok()) return store.status();
   store_ = *std::move(store);
+  uploads_ = std::make_unique<UploadStore>(
+      UploadStore::Options{.quota_bytes = spec_.upload_quota_bytes});
   {
     absl::MutexLock lock(&mu_);
     LeaseTableOptions options;
@@ -1364,14 +1401,27 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
                                                 const pb::SubmitJobRequest& req,
                                                 pb::SubmitJobResponse& resp) {
   if (stopping_) return absl::UnavailableError("coordinator shutting down");
+  std::string input = req.input_path();
   if (req.input_case() == pb::SubmitJobRequest::kUploadId) {
-    return absl::UnimplementedError("upload_id input: streamed upload is not implemented yet");
+    absl::StatusOr<UploadState> upload =
+        uploads_->Find(folders_.DataDir(caller.tenant_dir), req.upload_id());
+    if (!upload.ok()) return upload.status();
+    if (!upload->complete) {
+      return absl::FailedPreconditionError(
+          absl::StrCat("upload ", upload->id, " holds ", upload->received_bytes, " of ",
+                       upload->size_bytes, " bytes: finish it first"));
+    }
+    input = upload->input_path;
   }
-  const std::string& input = req.input_path();
   // Text first (INVALID_ARGUMENT, nothing on disk looked at), the file after the parameters.
   if (absl::Status s = CheckConfinedPathText(input, "input_path"); !s.ok()) {
     return absl::InvalidArgumentError(
         absl::StrCat(s.message(), " (input paths are relative to the data root)"));
+  }
+  if (*fs::path(input).lexically_normal().begin() == ".uploads") {
+    return absl::InvalidArgumentError(
+        "input_path: .uploads/ holds unfinished uploads; submit the upload_id once it is "
+        "complete (or uploads/<name>)");
   }
   absl::StatusOr<JobParams> params = ResolveJobParams(FromProto(req.params()));
   if (!params.ok()) return params.status();
@@ -1741,6 +1791,65 @@ absl::Status CoordinatorServer::Impl::FetchArtifact(const Caller& caller,
     if (!writer.Write(out)) break;
     if (n == 0) break;
   } while (offset < size);
+  return absl::OkStatus();
+}
+
+// ---- Uploads
+
+absl::Status CoordinatorServer::Impl::StartUpload(const Caller& caller,
+                                                  const pb::StartUploadRequest& req,
+                                                  pb::Upload& resp) {
+  if (stopping_) return absl::UnavailableError("coordinator shutting down");
+  const std::string dir = folders_.DataDir(caller.tenant_dir);
+  if (absl::Status s = CheckWritableDir(dir, "data folder"); !s.ok()) {
+    spdlog::error("coordinator: uploads of tenant {}: {}", caller.tenant, s.ToString());
+    return absl::FailedPreconditionError(
+        "the tenant's data folder cannot be written: this server takes no uploads");
+  }
+  absl::StatusOr<UploadState> upload =
+      uploads_->Start(dir, {req.name(), req.size_bytes(), req.sha256_hex()}, NowMs());
+  if (!upload.ok()) return upload.status();
+  ToProto(*upload, resp);
+  if (!upload->complete) {
+    spdlog::info("coordinator: upload {} of tenant {}: {} ({} bytes), {} bytes held", upload->id,
+                 caller.tenant, upload->input_path, upload->size_bytes, upload->received_bytes);
+  }
+  return absl::OkStatus();
+}
+
+absl::Status CoordinatorServer::Impl::UploadScan(
+    const Caller& caller, grpc::ServerReader<pb::UploadScanRequest>& reader, pb::Upload& resp) {
+  if (stopping_) return absl::UnavailableError("coordinator shutting down");
+  pb::UploadScanRequest msg;
+  if (!reader.Read(&msg)) return absl::InvalidArgumentError("UploadScan: no message in the stream");
+  const std::string id = msg.upload_id();
+  absl::StatusOr<std::unique_ptr<UploadWriter>> writer =
+      uploads_->OpenWriter(folders_.DataDir(caller.tenant_dir), id);
+  if (!writer.ok()) return writer.status();
+  do {
+    if (stopping_) {
+      return absl::UnavailableError(
+          absl::StrCat("coordinator shutting down: resume upload ", id, " later"));
+    }
+    if (msg.upload_id() != id) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("every message of an UploadScan stream must name upload ", id));
+    }
+    if (absl::Status s = (*writer)->Append(msg.offset(), msg.data()).status(); !s.ok()) return s;
+  } while (reader.Read(&msg));
+  // The stream ended (the client finished, or went away: then no one reads the answer).
+  const UploadState& state = (*writer)->state();
+  if (state.received_bytes == state.size_bytes && !state.complete) {
+    absl::StatusOr<UploadState> done = (*writer)->Finish();
+    if (!done.ok()) {
+      spdlog::warn("coordinator: upload {} of tenant {}: {}", id, caller.tenant,
+                   done.status().ToString());
+      return done.status();
+    }
+    spdlog::info("coordinator: upload {} of tenant {} complete: {} ({} bytes)", id, caller.tenant,
+                 done->input_path, done->size_bytes);
+  }
+  ToProto((*writer)->state(), resp);
   return absl::OkStatus();
 }
 

@@ -79,6 +79,9 @@ struct CoordinatorSpec {
   // Jobs of one tenant not yet SUCCEEDED/FAILED/CANCELLED; one more is RESOURCE_EXHAUSTED.
   // 0 = no limit.
   int max_jobs_per_tenant = 0;
+  // Bytes a tenant may hold in streamed uploads (its uploads/ folder and what unfinished
+  // uploads announced; docs/RPC.md "Uploads"); more is RESOURCE_EXHAUSTED. 0 = no limit.
+  int64_t upload_quota_bytes = 0;
   // Largest request message the server accepts (gRPC's max receive message size); larger is
   // RESOURCE_EXHAUSTED before any handler runs.
   int max_request_bytes = 1 << 20;

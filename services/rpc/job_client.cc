@@ -4,14 +4,19 @@
 
 #include <chrono>
 #include <cstdio>
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
+#include <thread>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/synchronization/mutex.h"
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
 #include "services/grpc_status.h"
-#include "services/rpc/file_hash.h"
+#include "storage/file_hash.h"
 #include "services/rpc/grpc_security.h"
 #include "storage/atomic_file.h"
 
@@ -95,7 +100,11 @@ absl::Status JobClient::WaitForReady(double timeout_s) {
 
 absl::StatusOr<JobInfo> JobClient::Submit(const SubmitParams& params) {
   pb::SubmitJobRequest req;
-  req.set_input_path(params.input_path);
+  if (!params.upload_id.empty()) {
+    req.set_upload_id(params.upload_id);
+  } else {
+    req.set_input_path(params.input_path);
+  }
   req.set_output_name(params.output_name);
   req.mutable_params()->set_resolution_m(params.resolution_m);
   req.mutable_params()->set_object_resolution_m(params.object_resolution_m);
@@ -230,6 +239,102 @@ absl::StatusOr<JobInfo> JobClient::Watch(
   if (cancelled) return absl::CancelledError("watch cancelled");
   if (absl::Status s = FromGrpcStatus(status); !s.ok()) return s;
   return Get(job_id);
+}
+
+namespace {
+
+UploadInfo FromProto(const pb::Upload& u) {
+  UploadInfo out;
+  out.upload_id = u.upload_id();
+  out.name = u.name();
+  out.input_path = u.input_path();
+  out.size_bytes = u.size_bytes();
+  out.received_bytes = u.received_bytes();
+  out.complete = u.complete();
+  return out;
+}
+
+// What a broken connection or a restarting server looks like; worth resuming after.
+bool Resumable(const absl::Status& s) {
+  return absl::IsUnavailable(s) || absl::IsAborted(s) || absl::IsDeadlineExceeded(s) ||
+         absl::IsInternal(s) || absl::IsUnknown(s) || absl::IsCancelled(s) ||
+         (absl::IsFailedPrecondition(s) && absl::StrContains(s.message(), "resume from"));
+}
+
+}  // namespace
+
+absl::StatusOr<UploadInfo> JobClient::Upload(const std::string& path,
+                                             const UploadOptions& options) {
+  if (!impl_->init.ok()) return impl_->init;
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (ec) return absl::NotFoundError(absl::StrCat(path, ": ", ec.message()));
+  absl::StatusOr<std::string> sha = Sha256HexOfFile(path);
+  if (!sha.ok()) return sha.status();
+  pb::StartUploadRequest start;
+  start.set_name(options.name.empty() ? std::filesystem::path(path).filename().string()
+                                      : options.name);
+  start.set_size_bytes(static_cast<int64_t>(size));
+  start.set_sha256_hex(*sha);
+  const int64_t chunk = std::clamp<int64_t>(options.chunk_bytes, 1, 4 << 20);
+  std::string buf(static_cast<size_t>(chunk), '\0');
+  int idle_attempts = 0;
+  double wait_s = 0.5;
+  absl::Status last;
+  while (true) {
+    if (!last.ok()) {
+      if (!Resumable(last) || ++idle_attempts >= options.max_attempts) return last;
+      if (options.on_retry) options.on_retry(last, wait_s);
+      std::this_thread::sleep_for(std::chrono::duration<double>(wait_s));
+      wait_s = std::min(wait_s * 2, 8.0);
+    }
+    // Where the server stands; wait_for_ready rides out a reconnect.
+    pb::Upload state;
+    auto ctx = impl_->Context(60);
+    ctx->set_wait_for_ready(true);
+    last = FromGrpcStatus(impl_->stub->StartUpload(ctx.get(), start, &state));
+    if (!last.ok()) continue;
+    if (options.on_progress) options.on_progress(state.received_bytes(), state.size_bytes());
+    if (state.complete()) return FromProto(state);
+    const int64_t from = state.received_bytes();
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "rb"),
+                                                     &std::fclose);
+    if (f == nullptr || ::fseeko(f.get(), static_cast<off_t>(from), SEEK_SET) != 0) {
+      return absl::NotFoundError(absl::StrCat(path, ": cannot read: ", std::strerror(errno)));
+    }
+    grpc::ClientContext stream_ctx;
+    AttachBearer(stream_ctx, impl_->bearer);
+    pb::Upload result;
+    std::unique_ptr<grpc::ClientWriter<pb::UploadScanRequest>> writer =
+        impl_->stub->UploadScan(&stream_ctx, &result);
+    pb::UploadScanRequest msg;
+    msg.set_upload_id(state.upload_id());
+    int64_t offset = from;
+    bool short_file = false;
+    while (offset < state.size_bytes()) {
+      const size_t n = std::fread(buf.data(), 1, buf.size(), f.get());
+      if (n == 0) {
+        short_file = true;
+        break;
+      }
+      msg.set_offset(offset);
+      msg.set_data(buf.data(), n);
+      if (!writer->Write(msg)) break;  // the stream broke: Finish says why
+      offset += static_cast<int64_t>(n);
+      if (options.on_progress) options.on_progress(offset, state.size_bytes());
+    }
+    writer->WritesDone();
+    last = FromGrpcStatus(writer->Finish());
+    if (short_file) {
+      return absl::DataLossError(absl::StrCat(path, ": the file got shorter while it was sent"));
+    }
+    if (last.ok() && result.complete()) return FromProto(result);
+    if (last.ok()) last = absl::UnavailableError("the upload stream ended early");
+    if (result.received_bytes() > from || offset > from) {
+      idle_attempts = 0;  // it moved: the next stream is a fresh try
+      wait_s = 0.5;
+    }
+  }
 }
 
 void JobClient::CancelWatch() {

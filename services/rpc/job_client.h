@@ -42,6 +42,7 @@ struct WatchUpdate {
 
 struct SubmitParams {
   std::string input_path;  // relative to the coordinator's data root
+  std::string upload_id;   // instead of input_path: a finished upload (JobClient::Upload)
   std::string output_name;  // "" = the job id
   double resolution_m = 0;  // 0 = default
   double object_resolution_m = 0;  // §5.6.1 re-carving of the object chunks; 0 = default
@@ -53,6 +54,26 @@ struct SubmitParams {
   std::string location;             // §2.3 true north: "LAT,LON" in degrees; "" = magnetic
   std::string survey_date;          // with location: "YYYY-MM-DD"; "" = from the scan's times
   std::string idempotency_key;
+};
+
+struct UploadInfo {
+  std::string upload_id;
+  std::string name;
+  std::string input_path;  // "uploads/<name>" in the tenant's folder
+  int64_t size_bytes = 0, received_bytes = 0;
+  bool complete = false;
+};
+
+struct UploadOptions {
+  std::string name;  // the name in the tenant's uploads/ folder; "" = the file's own name
+  int64_t chunk_bytes = 256 << 10;  // per message: under the server's 1 MiB request limit
+  // Streams in a row that move no byte before giving up (a stream that moves some starts
+  // the count again).
+  int max_attempts = 8;
+  // (bytes the server holds, file size): after the hash, after every message sent.
+  std::function<void(int64_t, int64_t)> on_progress;
+  // A broken stream about to be resumed: why, and the seconds waited first.
+  std::function<void(const absl::Status&, double)> on_retry;
 };
 
 class JobClient {
@@ -76,6 +97,12 @@ class JobClient {
   absl::StatusOr<JobInfo> Watch(const std::string& job_id, double min_interval_s,
                                 const std::function<void(const WatchUpdate&)>& on_update);
   void CancelWatch();
+  // Uploads the file at `path` into the tenant's uploads/ folder (docs/RPC.md "Uploads"):
+  // hashes it, starts (or finds) the upload, streams what the server does not hold yet, and
+  // after a broken connection resumes from what it holds. Errors: the server's (ALREADY_EXISTS,
+  // RESOURCE_EXHAUSTED, DATA_LOSS when the file changed while it was sent), NOT_FOUND for a
+  // missing file, the last stream's error after max_attempts streams without progress.
+  absl::StatusOr<UploadInfo> Upload(const std::string& path, const UploadOptions& options);
   // Downloads artifact `name` of the job to `dest_path` (through "<dest>.partial" and a
   // rename), checking the SHA-256 the server sends.
   absl::Status Fetch(const std::string& job_id, const std::string& name,

@@ -25,7 +25,7 @@
 #include "services/geometry/octree_keys.h"
 #include "services/grpc_server_common.h"
 #include "services/grpc_status.h"
-#include "services/rpc/file_hash.h"
+#include "storage/file_hash.h"
 #include "services/rpc/grpc_security.h"
 #include "services/rpc/process_metrics.h"
 #include "services/rpc/server_log.h"

@@ -1,4 +1,4 @@
-#include "services/rpc/file_hash.h"
+#include "storage/file_hash.h"
 
 #include <openssl/evp.h>
 

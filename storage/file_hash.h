@@ -1,6 +1,6 @@
-// SHA-256 of a file, for TileInfo (carve.proto) and FetchArtifact's last chunk.
-#ifndef CARVEMAP_SERVICES_RPC_FILE_HASH_H_
-#define CARVEMAP_SERVICES_RPC_FILE_HASH_H_
+// SHA-256 of a file, for TileInfo (carve.proto), FetchArtifact's last chunk and uploads.
+#ifndef CARVEMAP_STORAGE_FILE_HASH_H_
+#define CARVEMAP_STORAGE_FILE_HASH_H_
 
 #include <string>
 
@@ -15,4 +15,4 @@ std::string Sha256Hex(const std::string& bytes);
 
 }  // namespace carvemap
 
-#endif  // CARVEMAP_SERVICES_RPC_FILE_HASH_H_
+#endif  // CARVEMAP_STORAGE_FILE_HASH_H_
