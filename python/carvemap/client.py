@@ -7,6 +7,8 @@ watch it with its progress, get, list and cancel jobs, and fetch the outputs to 
         for event in c.watch(job.job_id):
             print(event)
         c.fetch(job.job_id, "floor3/")                     # job.json and every output
+        up = c.upload("local/scan.h5")                     # or send the scan from here
+        job = c.submit(upload_id=up.upload_id)
 
 Every call carries `authorization: Bearer <token>`. Without arguments the client takes what
 `carvemap submit` takes from the environment: CARVEMAP_SERVER, CARVEMAP_TOKEN or
@@ -19,6 +21,7 @@ import json
 import os
 import shutil
 import tempfile
+import time
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -144,6 +147,27 @@ class Job:
 
 
 @dataclass
+class Upload:
+    """Where an upload stands (Upload in jobs.proto): input_path is "uploads/<name>" in your
+    tenant's folder; complete once every byte arrived and the SHA-256 matched."""
+    upload_id: str
+    name: str
+    input_path: str
+    size_bytes: int
+    received_bytes: int
+    complete: bool
+
+    @classmethod
+    def from_proto(cls, u):
+        return cls(u.upload_id, u.name, u.input_path, u.size_bytes, u.received_bytes,
+                   u.complete)
+
+
+# What a broken connection or a restarting server answers: worth resuming an upload after.
+_RESUMABLE = ("UNAVAILABLE", "ABORTED", "DEADLINE_EXCEEDED", "INTERNAL", "UNKNOWN", "CANCELLED")
+
+
+@dataclass
 class Stage:
     name: str
     elapsed_s: float
@@ -252,16 +276,22 @@ class JobClient:
             raise JobError.from_rpc(e) from None
 
     # -- jobs
-    def submit(self, input_path, output_name="", idempotency_key="", resolution_m=0.0,
+    def submit(self, input_path=None, output_name="", idempotency_key="", resolution_m=0.0,
                object_resolution_m=0.0, floorplan_method="", trimmed_points=False,
                min_object_volume_m3=0.0, evaluation="", north="", location="",
-               survey_date="", method="", workers_hint=0):
+               survey_date="", method="", workers_hint=0, upload_id=""):
         """Submits a job on `input_path`, a scan.h5 relative to your tenant's folder on the
-        server; returns the Job (QUEUED). 0 and "" mean the server's default; the resolved
-        values come back in Job.params. evaluation "fast" | "exact"; method "probabilistic" |
-        "voxel"; the rest as in jobs.proto JobParams and `carvemap submit --help`."""
-        req = pb.SubmitJobRequest(input_path=os.fspath(input_path), output_name=output_name,
-                                  idempotency_key=idempotency_key)
+        server, or on a finished upload (`upload_id`, from upload()); returns the Job (QUEUED).
+        0 and "" mean the server's default; the resolved values come back in Job.params.
+        evaluation "fast" | "exact"; method "probabilistic" | "voxel"; the rest as in
+        jobs.proto JobParams and `carvemap submit --help`."""
+        if (input_path is None) == (not upload_id):
+            raise ValueError("submit: give input_path or upload_id, not both")
+        req = pb.SubmitJobRequest(output_name=output_name, idempotency_key=idempotency_key)
+        if upload_id:
+            req.upload_id = upload_id
+        else:
+            req.input_path = os.fspath(input_path)
         p = req.params
         p.resolution_m = resolution_m
         p.object_resolution_m = object_resolution_m
@@ -358,6 +388,70 @@ class JobClient:
             if on_event is not None:
                 on_event(event)
         return self.get(job_id)
+
+    # -- uploads
+    def upload(self, path, name="", chunk_size_bytes=256 << 10, max_attempts=8,
+               on_progress=None):
+        """Uploads the local file `path` into your tenant's uploads/ folder on the server
+        (as `name`, default its own name) and returns the finished Upload; submit it with
+        submit(upload_id=...). Resumable: after a broken connection it goes on from the bytes
+        the server holds, also when called again for the same file. on_progress(received,
+        size) is called after every message. Gives up after `max_attempts` streams in a row
+        that moved no byte. JobError: ALREADY_EXISTS (the name is taken by another file),
+        RESOURCE_EXHAUSTED (quota, disk), DATA_LOSS (the file changed while it was sent)."""
+        path = os.fspath(path)
+        digest = hashlib.sha256()
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                digest.update(block)
+        start = pb.StartUploadRequest(name=name or os.path.basename(path),
+                                      size_bytes=os.path.getsize(path),
+                                      sha256_hex=digest.hexdigest())
+        idle, wait_s = 0, 0.5
+        while True:
+            begin, sent, short = None, [0], [False]
+            try:
+                state = self._stub.StartUpload(start, metadata=self._metadata,
+                                               timeout=self.timeout_s, wait_for_ready=True)
+                if on_progress:
+                    on_progress(state.received_bytes, state.size_bytes)
+                if state.complete:
+                    return Upload.from_proto(state)
+                begin = sent[0] = state.received_bytes
+
+                def messages():
+                    with open(path, "rb") as f:
+                        f.seek(begin)
+                        while sent[0] < state.size_bytes:
+                            data = f.read(chunk_size_bytes)
+                            if not data:
+                                short[0] = True
+                                return
+                            yield pb.UploadScanRequest(upload_id=state.upload_id,
+                                                       offset=sent[0], data=data)
+                            sent[0] += len(data)
+                            if on_progress:
+                                on_progress(sent[0], state.size_bytes)
+
+                result = self._stub.UploadScan(messages(), metadata=self._metadata)
+                if result.complete:
+                    return Upload.from_proto(result)
+                error = JobError("UNAVAILABLE", "the upload stream ended early")
+            except grpc.RpcError as e:
+                error = JobError.from_rpc(e)
+                resumable = error.code in _RESUMABLE or (
+                    error.code == "FAILED_PRECONDITION" and "resume from" in error.details)
+                if not resumable:
+                    raise error from None
+            if short[0]:
+                raise JobError("DATA_LOSS", f"{path}: the file got shorter while it was sent")
+            if begin is not None and sent[0] > begin:
+                idle, wait_s = 0, 0.5  # it moved: the next stream is a fresh try
+            idle += 1
+            if idle >= max_attempts:
+                raise error
+            time.sleep(wait_s)
+            wait_s = min(wait_s * 2, 8.0)
 
     # -- outputs
     def fetch_file(self, job_id, name, dest, chunk_size_bytes=0):

@@ -2,7 +2,7 @@
 coordinator with bearer tokens for tenants acme and beta, two workers): a scan written from
 numpy arrays is submitted, watched to SUCCEEDED with progress, listed, fetched (byte for byte,
 resumed, loaded), and a second job is cancelled; errors come back as JobError with gRPC's
-code. Then TLS: a coordinator serving TLS with a throw-away CA (tests/tools/make_test_pki.sh)."""
+code; a scan uploaded from here through a broken stream, resumed, and run. Then TLS: a coordinator serving TLS with a throw-away CA (tests/tools/make_test_pki.sh)."""
 import filecmp
 import os
 import subprocess
@@ -167,6 +167,42 @@ def test_token_from_the_environment(cluster, tmp_path, monkeypatch):
     monkeypatch.setenv("CARVEMAP_TOKEN_FILE", str(token_file))
     with JobClient() as client:
         assert all(j.tenant == "acme" for j in client.list())
+
+
+def test_upload_resumed_and_submitted(cluster, tmp_path):
+    """A scan sent from here: the first stream breaks part-way (the progress callback raises
+    inside the request iterator, so gRPC cancels the call); the upload resumes from the bytes
+    the server holds, lands byte-identical in uploads/, and a job on its id runs to the end."""
+    local = tmp_path / "room-here.h5"
+    write_box_room(str(local), seconds=8.0)
+    size = os.path.getsize(local)
+    seen, broke = [], []
+
+    def progress(received, total):
+        seen.append(received)
+        if not broke and received > size // 2:
+            broke.append(received)
+            raise ConnectionError("the network went away")
+
+    with JobClient(cluster.address, token=TOKEN) as client:
+        up = client.upload(local, name="sent.h5", chunk_size_bytes=64 << 10,
+                           on_progress=progress)
+        assert up.complete and up.input_path == "uploads/sent.h5" and up.size_bytes == size
+        # After the break the next stream started where the server stood, not at 0.
+        restart = seen.index(broke[0]) + 1
+        assert 0 < seen[restart] <= broke[0]
+        placed = os.path.join(cluster.data_root, "acme", "uploads", "sent.h5")
+        assert filecmp.cmp(placed, local, shallow=False)
+        assert client.upload(local, name="sent.h5").complete  # again: complete at once
+        with JobClient(cluster.address, token=OTHER) as other:
+            with pytest.raises(JobError) as e:
+                other.submit(upload_id=up.upload_id)
+            assert e.value.code == "NOT_FOUND"
+        with pytest.raises(ValueError):
+            client.submit("room.h5", upload_id=up.upload_id)
+        job = client.submit(upload_id=up.upload_id, output_name="sent")
+        assert job.input_path == "uploads/sent.h5"
+        assert client.wait(job.job_id, timeout_s=240).state == "SUCCEEDED", cluster.log_tails()
 
 
 def test_tls(tmp_path_factory, carvemap_bin):
