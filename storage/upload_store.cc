@@ -74,8 +74,8 @@ absl::Status EnsurePlainFolder(const std::string& dir, const char* sub) {
     return absl::InternalError(absl::StrCat(sub, "/: ", std::strerror(errno)));
   }
   if (::mkdir(path.c_str(), 0750) != 0 && errno != EEXIST) {
-    return absl::InternalError(absl::StrCat("cannot create ", sub, "/ in the tenant's folder: ",
-                                            std::strerror(errno)));
+    return absl::InternalError(
+        absl::StrCat("cannot create ", sub, "/ in the tenant's folder: ", std::strerror(errno)));
   }
   return SyncFolderOf(path);
 }
@@ -138,8 +138,8 @@ absl::StatusOr<UploadState> UploadStore::Find(const std::string& dir, const std:
   const int64_t final_size = FileSize(FinalPath(dir, s->name));
   if (s->complete) {
     if (final_size != s->size_bytes) {
-      return absl::NotFoundError(absl::StrCat("upload ", id, ": its file ", s->input_path,
-                                              " is gone or changed"));
+      return absl::NotFoundError(
+          absl::StrCat("upload ", id, ": its file ", s->input_path, " is gone or changed"));
     }
     s->received_bytes = s->size_bytes;
     return s;
@@ -228,10 +228,10 @@ absl::StatusOr<UploadState> UploadStore::Start(const std::string& dir, const Upl
     absl::StatusOr<UploadState> other = ReadRecord(dir, file.substr(0, file.size() - 5));
     if (!other.ok() || other->complete) continue;
     if (other->name == r.name) {
-      return absl::AlreadyExistsError(absl::StrCat(
-          "an upload of ", r.name, " with another size or SHA-256 is unfinished (", other->id,
-          "); it expires after ", options_.expire_after_ms / 3600000,
-          " h without data, or choose another name"));
+      return absl::AlreadyExistsError(
+          absl::StrCat("an upload of ", r.name, " with another size or SHA-256 is unfinished (",
+                       other->id, "); it expires after ", options_.expire_after_ms / 3600000,
+                       " h without data, or choose another name"));
     }
     used += other->size_bytes;
   }
@@ -309,9 +309,9 @@ absl::StatusOr<UploadState> UploadWriter::Append(int64_t offset, absl::string_vi
     return absl::FailedPreconditionError(absl::StrCat("upload ", s.id, " is complete"));
   }
   if (offset != s.received_bytes) {
-    return absl::FailedPreconditionError(
-        absl::StrCat("upload ", s.id, ": data for offset ", offset, ", but the server holds ",
-                     s.received_bytes, " bytes: resume from ", s.received_bytes));
+    return absl::FailedPreconditionError(absl::StrCat("upload ", s.id, ": data for offset ", offset,
+                                                      ", but the server holds ", s.received_bytes,
+                                                      " bytes: resume from ", s.received_bytes));
   }
   if (static_cast<int64_t>(data.size()) > s.size_bytes - s.received_bytes) {
     return absl::InvalidArgumentError(
@@ -345,9 +345,8 @@ absl::StatusOr<UploadState> UploadWriter::Finish() {
   UploadState& s = state_;
   if (s.complete) return s;
   if (s.received_bytes != s.size_bytes) {
-    return absl::FailedPreconditionError(absl::StrCat("upload ", s.id, " holds ",
-                                                      s.received_bytes, " of ", s.size_bytes,
-                                                      " bytes"));
+    return absl::FailedPreconditionError(
+        absl::StrCat("upload ", s.id, " holds ", s.received_bytes, " of ", s.size_bytes, " bytes"));
   }
   const std::string partial = WorkPath(dir_, s.id, ".partial");
   const std::string final_path = FinalPath(dir_, s.name);
@@ -371,9 +370,9 @@ absl::StatusOr<UploadState> UploadWriter::Finish() {
   if (::link(partial.c_str(), final_path.c_str()) != 0) {
     const int err = errno;
     if (err == EEXIST) {
-      return absl::AlreadyExistsError(
-          absl::StrCat(s.input_path, " appeared while ", s.id, " was uploading: choose another "
-                       "name, or remove it and resume"));
+      return absl::AlreadyExistsError(absl::StrCat(s.input_path, " appeared while ", s.id,
+                                                   " was uploading: choose another "
+                                                   "name, or remove it and resume"));
     }
     return absl::InternalError(
         absl::StrCat("upload ", s.id, ": cannot create ", s.input_path, ": ", std::strerror(err)));

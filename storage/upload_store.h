@@ -65,7 +65,10 @@ class UploadWriter {
  private:
   friend class UploadStore;
   UploadWriter(UploadStore* store, std::string dir, std::string key, UploadState state, int fd)
-      : store_(store), dir_(std::move(dir)), key_(std::move(key)), state_(std::move(state)),
+      : store_(store),
+        dir_(std::move(dir)),
+        key_(std::move(key)),
+        state_(std::move(state)),
         fd_(fd) {}
   UploadStore* store_;
   std::string dir_;  // the tenant's data folder
@@ -96,7 +99,7 @@ class UploadStore {
   [[nodiscard]] absl::StatusOr<UploadState> Find(const std::string& dir, const std::string& id);
   // The writer of upload `id`. Aborted while another writer of it is open; NotFound as Find.
   [[nodiscard]] absl::StatusOr<std::unique_ptr<UploadWriter>> OpenWriter(const std::string& dir,
-                                                                        const std::string& id);
+                                                                         const std::string& id);
 
  private:
   friend class UploadWriter;

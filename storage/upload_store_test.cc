@@ -3,10 +3,10 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <filesystem>
-#include <fstream>
 #include <algorithm>
 #include <chrono>
+#include <filesystem>
+#include <fstream>
 #include <random>
 #include <string>
 
@@ -24,8 +24,8 @@ class UploadStoreTest : public ::testing::Test {
  protected:
   void SetUp() override {
     dir_ = (fs::path(::testing::TempDir()) /
-            ("upload_store_" + std::string(
-                                   ::testing::UnitTest::GetInstance()->current_test_info()->name())))
+            ("upload_store_" +
+             std::string(::testing::UnitTest::GetInstance()->current_test_info()->name())))
                .string();
     fs::remove_all(dir_);
     fs::create_directories(dir_);
@@ -155,7 +155,8 @@ TEST_F(UploadStoreTest, OneWriterAtATime) {
 
 TEST_F(UploadStoreTest, BadRequestsAndNames) {
   UploadStore store({});
-  for (const std::string& name : std::vector<std::string>{"", ".hidden", "a/b", "../x", std::string(129, 'a')}) {
+  for (const std::string& name :
+       std::vector<std::string>{"", ".hidden", "a/b", "../x", std::string(129, 'a')}) {
     EXPECT_TRUE(absl::IsInvalidArgument(store.Start(dir_, Request(name), 1).status())) << name;
   }
   UploadRequest r = Request();
@@ -197,10 +198,9 @@ TEST_F(UploadStoreTest, StaleUnfinishedUploadsExpire) {
   UploadStore store({.expire_after_ms = 1000});
   absl::StatusOr<UploadState> stale = store.Start(dir_, Request("a.h5"), 0);
   ASSERT_TRUE(stale.ok());
-  const int64_t now_ms =
-      std::chrono::duration_cast<std::chrono::milliseconds>(
-          std::chrono::system_clock::now().time_since_epoch())
-          .count();
+  const int64_t now_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                             std::chrono::system_clock::now().time_since_epoch())
+                             .count();
   // Within the second: kept. A minute later: removed when the next upload starts.
   ASSERT_TRUE(store.Start(dir_, Request("b.h5"), now_ms).ok());
   EXPECT_TRUE(store.Find(dir_, stale->id).ok());

@@ -116,7 +116,8 @@ absl::StatusOr<UploadInfo> UploadWithProgress(JobClient& client, const ClientFla
   int64_t first = -1;
   options.on_progress = [&](int64_t done, int64_t total) {
     if (first < 0) first = done;
-    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const double rate = s > 0 ? double(done - first) / s : 0;
     line.Update("uploading %s  %.1f/%.1f MB  %.1f MB/s", flags.upload.c_str(), done / 1e6,
                 total / 1e6, rate / 1e6);
@@ -136,15 +137,16 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
 
   CLI::App* submit = app.add_subcommand("submit", "Submit a carving job to a coordinator");
   AddServer(submit, *flags);
-  CLI::Option* input = submit->add_option(
-      "input", flags->submit.input_path,
-      "scan.h5, relative to the coordinator's data root (your tenant's folder)");
+  CLI::Option* input =
+      submit->add_option("input", flags->submit.input_path,
+                         "scan.h5, relative to the coordinator's data root (your tenant's folder)");
   CLI::Option* upload = submit->add_option(
       "--upload", flags->upload,
       "Upload this local scan.h5 first (resumable; see `carvemap upload`), then submit it");
   input->excludes(upload);
-  submit->add_option("--upload-name", flags->upload_name,
-                     "With --upload: its name in your uploads/ folder (default: its own)")
+  submit
+      ->add_option("--upload-name", flags->upload_name,
+                   "With --upload: its name in your uploads/ folder (default: its own)")
       ->needs(upload);
   submit->add_option("-o,--output-name", flags->submit.output_name,
                      "Output folder name under the coordinator's output root (default: job id)");
@@ -183,7 +185,8 @@ void RegisterClientCommands(CLI::App& app, int& exit_code) {
     flags->submit.survey_date = flags->north.survey_date;
     if (flags->submit.input_path.empty() && flags->upload.empty()) {
       exit_code = ReportStatus(
-          "submit", absl::InvalidArgumentError("give the scan's path on the server, or --upload FILE"));
+          "submit",
+          absl::InvalidArgumentError("give the scan's path on the server, or --upload FILE"));
       return;
     }
     if (!flags->upload.empty()) {

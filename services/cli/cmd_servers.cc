@@ -182,8 +182,8 @@ absl::Status LoadSecrets(CoordinatorFlags& flags) {
 absl::Status RunCoordinator(CoordinatorFlags flags, LogFormat log_format) {
   if (absl::Status s = LoadSecrets(flags); !s.ok()) return s;
   if (!(flags.upload_quota_gb >= 0) || flags.upload_quota_gb > 1e9) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("--upload-quota-gb ", flags.upload_quota_gb, ": must be 0 (no limit) or more"));
+    return absl::InvalidArgumentError(absl::StrCat("--upload-quota-gb ", flags.upload_quota_gb,
+                                                   ": must be 0 (no limit) or more"));
   }
   flags.spec.upload_quota_bytes = static_cast<int64_t>(flags.upload_quota_gb * (1 << 30));
   // Each job's thread and gRPC's handler threads get a glibc malloc arena of their own (up to

@@ -34,9 +34,6 @@
 #include "coordinator/scan_north.h"
 #include "coordinator/scan_slices.h"
 #include "coordinator/worker_registry.h"
-#include "storage/hdf5_lock.h"
-#include "storage/partial_sums.h"
-#include "storage/scan_reader.h"
 #include "proto/carvemap/v1/carve.grpc.pb.h"
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
 #include "services/geometry/octree_keys.h"
@@ -44,13 +41,16 @@
 #include "services/grpc_status.h"
 #include "services/rpc/bearer_tokens.h"
 #include "services/rpc/coordinator_metrics.h"
-#include "services/rpc/process_metrics.h"
-#include "storage/file_hash.h"
-#include "storage/upload_store.h"
 #include "services/rpc/grpc_security.h"
+#include "services/rpc/process_metrics.h"
 #include "services/rpc/server_log.h"
 #include "storage/confined_path.h"
+#include "storage/file_hash.h"
+#include "storage/hdf5_lock.h"
 #include "storage/job_store.h"
+#include "storage/partial_sums.h"
+#include "storage/scan_reader.h"
+#include "storage/upload_store.h"
 
 namespace carvemap {
 namespace fs = std::filesystem;
@@ -531,7 +531,8 @@ class JobServiceAdapter final : public pb::JobService::Service {
       return ToGrpcStatus(impl_.StartUpload(*caller, *req, *resp));
     });
   }
-  grpc::Status UploadScan(grpc::ServerContext* ctx, grpc::ServerReader<pb::UploadScanRequest>* reader,
+  grpc::Status UploadScan(grpc::ServerContext* ctx,
+                          grpc::ServerReader<pb::UploadScanRequest>* reader,
                           pb::Upload* resp) override {
     return Timed(impl_.metrics(), "UploadScan", [&] {
       auto caller = impl_.AuthenticateTenant(*ctx);
@@ -606,8 +607,8 @@ absl::Status CoordinatorServer::Impl::Start() {
       JobStore::Open((fs::path(folders_.work_dir) / "jobs.db").string());
   if (!store.ok()) return store.status();
   store_ = *std::move(store);
-  uploads_ = std::make_unique<UploadStore>(
-      UploadStore::Options{.quota_bytes = spec_.upload_quota_bytes});
+  uploads_ =
+      std::make_unique<UploadStore>(UploadStore::Options{.quota_bytes = spec_.upload_quota_bytes});
   {
     absl::MutexLock lock(&mu_);
     LeaseTableOptions options;
@@ -1817,8 +1818,9 @@ absl::Status CoordinatorServer::Impl::StartUpload(const Caller& caller,
   return absl::OkStatus();
 }
 
-absl::Status CoordinatorServer::Impl::UploadScan(
-    const Caller& caller, grpc::ServerReader<pb::UploadScanRequest>& reader, pb::Upload& resp) {
+absl::Status CoordinatorServer::Impl::UploadScan(const Caller& caller,
+                                                 grpc::ServerReader<pb::UploadScanRequest>& reader,
+                                                 pb::Upload& resp) {
   if (stopping_) return absl::UnavailableError("coordinator shutting down");
   pb::UploadScanRequest msg;
   if (!reader.Read(&msg)) return absl::InvalidArgumentError("UploadScan: no message in the stream");

@@ -2,10 +2,10 @@
 
 #include <grpcpp/grpcpp.h>
 
-#include <chrono>
-#include <cstdio>
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <thread>
@@ -16,9 +16,9 @@
 #include "absl/synchronization/mutex.h"
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
 #include "services/grpc_status.h"
-#include "storage/file_hash.h"
 #include "services/rpc/grpc_security.h"
 #include "storage/atomic_file.h"
+#include "storage/file_hash.h"
 
 namespace carvemap {
 namespace pb = ::carvemap::v1;
@@ -297,8 +297,7 @@ absl::StatusOr<UploadInfo> JobClient::Upload(const std::string& path,
     if (options.on_progress) options.on_progress(state.received_bytes(), state.size_bytes());
     if (state.complete()) return FromProto(state);
     const int64_t from = state.received_bytes();
-    std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "rb"),
-                                                     &std::fclose);
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "rb"), &std::fclose);
     if (f == nullptr || ::fseeko(f.get(), static_cast<off_t>(from), SEEK_SET) != 0) {
       return absl::NotFoundError(absl::StrCat(path, ": cannot read: ", std::strerror(errno)));
     }
