@@ -16,6 +16,7 @@
 
 #include "absl/cleanup/cleanup.h"
 #include "absl/strings/str_cat.h"
+#include "services/floorplan/building_ifc.h"
 #include "services/floorplan/floorplan_export.h"
 #include "services/floorplan/floorplan_pipeline.h"
 #include "services/floorplan/octree_wall_samples.h"
@@ -562,6 +563,29 @@ absl::StatusOr<TriangleMesh> BuildingStage(const MergeOptions& options, const Oc
   return *std::move(building);
 }
 
+// building.ifc (docs/DESIGN.md §7): the levels' plans as one IFC 4 building model. It needs
+// the plans alone, so it is written as soon as they are made. A file that cannot be made is a
+// warning, not a failure: the plans' own files stand.
+void WriteBuildingIfcStage(std::span<const std::pair<Level, FloorPlan>> plans, const fs::path& out,
+                           nlohmann::json& counts, nlohmann::json& timings,
+                           std::vector<std::string>& outputs, std::vector<std::string>& warnings) {
+  std::error_code ec;
+  fs::remove(out / "building.ifc", ec);  // an earlier merge's into this folder is not this one's
+  if (plans.empty()) return;
+  const Clock::time_point t0 = Clock::now();
+  absl::StatusOr<BuildingIfcCounts> ifc = WriteBuildingIfc((out / "building.ifc").string(), plans);
+  if (ifc.ok()) {
+    outputs.push_back("building.ifc");
+    counts["ifc"] = {{"storeys", ifc->storeys},
+                     {"spaces", ifc->spaces},
+                     {"walls", ifc->walls},
+                     {"doors", ifc->doors}};
+  } else {
+    warnings.push_back(absl::StrCat("ifc: ", ifc.status().message()));
+  }
+  timings["merge.ifc"] = SecondsSince(t0);
+}
+
 // docs/DESIGN.md §6 stages 6–8 (§5.5, §5.6): the tiles segmented against the extruded plans into
 // building and object tiles (in <out>/.segment, removed afterwards), the building tiles' faces,
 // regions and planar mesh, the object tiles' dense mesh split into objects, and combined.ply.
@@ -882,6 +906,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
       !s.ok()) {
     return InStage("floorplan", s);
   }
+  WriteBuildingIfcStage(plans, out, counts, timings, outputs, warnings);
 
   // Once the floor plans are made, the faces serve only the planar mesh of a job without
   // plans (which fits its own regions).

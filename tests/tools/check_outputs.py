@@ -23,6 +23,9 @@ spec alone:
     every view inside the buffer; under its root the nodes "building" (the triangles of
     building.ply), "rooms" (one node per room of job.json) and "objects" (one node per object
     of job.json, named "object <id>", with the triangles of its mesh/objects/<id>.ply);
+  - building.ifc, when listed, is ISO 10303-21 text (header, FILE_SCHEMA(('IFC4')), a DATA
+    section of numbered instances, every #reference defined): one IfcBuildingStorey per level
+    of levels.json, one IfcSpace per room of job.json with an area, named "level <k> room <r>";
   - each level_<k>/occupancy.yaml listed is a ROS map_server map: its keys (image, mode,
     resolution, origin, negate, occupied_thresh, free_thresh) read with python3-yaml, its image
     read with Pillow (python3-pil) as 8-bit gray of topdown.json's size, resolution and origin;
@@ -34,7 +37,8 @@ Usage: check_outputs.py OUT_DIR [--level-tol 0.05] [--gt GT_DIR] [--selftest]
   --gt: the simulator's gt/ folder, when the job's input was not copied into OUT_DIR/input.
   --selftest: also checks that the checks can fail (a mesh with a triangle removed or flipped
   is not watertight; levels moved by 2 × the tolerance do not match the truth; an octree.ot
-  whose root value is changed or whose last node is cut off is refused).
+  whose root value is changed or whose last node is cut off is refused; so is a building.ifc
+  with a storey removed or a reference to no instance).
 """
 import argparse
 import json
@@ -258,6 +262,44 @@ def glb_problems(out, job):
     return problems
 
 
+def ifc_problems(path, text, job, levels):
+    """What is wrong with building.ifc's text against ISO 10303-21's layout, levels.json and
+    job.json."""
+    import re
+    if not text.startswith("ISO-10303-21;\nHEADER;") or not text.rstrip().endswith(
+            "END-ISO-10303-21;"):
+        return [f"{path}: not ISO 10303-21 text (header or end)"]
+    header, sep, data = text.partition("\nDATA;\n")
+    if not sep or "FILE_SCHEMA(('IFC4'));" not in header:
+        return [f"{path}: no FILE_SCHEMA(('IFC4')) header or no DATA section"]
+    data = data[:data.rfind("ENDSEC;")]
+    instances = {}
+    for m in re.finditer(r"#(\d+)\s*=\s*([A-Z0-9_]+)\s*\((.*?)\);\s*$", data, re.M | re.S):
+        instances[int(m.group(1))] = (m.group(2), m.group(3))
+    problems = []
+    if len(instances) != data.count(";"):
+        problems.append(f"{path}: {data.count(';')} statements, {len(instances)} instances read")
+    refs = {int(r) for _, args in instances.values()
+            for r in re.findall(r"#(\d+)", re.sub(r"'(?:[^']|'')*'", "''", args))}
+    if refs - instances.keys():
+        problems.append(f"{path}: #{min(refs - instances.keys())} referenced but not defined")
+    of_type = lambda t: [args for typ, args in instances.values() if typ == t]
+    storeys, spaces = of_type("IFCBUILDINGSTOREY"), of_type("IFCSPACE")
+    if len(storeys) != len(levels):
+        problems.append(f"{path}: {len(storeys)} storeys, levels.json {len(levels)} levels")
+    names = sorted(re.match(r"'(?:[^']|'')*',[^,]*,'((?:[^']|'')*)'", a).group(1) for a in spaces)
+    rooms = sorted(f"level {r['level']} room {r['room']}" for r in job.get("rooms", [])
+                   if r.get("area_m2", 0) > 0)
+    if names != rooms:
+        problems.append(f"{path}: spaces {names[:5]}… ({len(names)}), job.json rooms "
+                        f"{rooms[:5]}… ({len(rooms)})")
+    if not problems:
+        print(f"building.ifc: {len(instances)} instances, {len(storeys)} storeys, "
+              f"{len(spaces)} spaces, {len(of_type('IFCWALL'))} walls, "
+              f"{len(of_type('IFCDOOR'))} doors")
+    return problems
+
+
 def ros_map_problems(out, name):
     """What is wrong with a level's occupancy.yaml and its image, as map_server reads them."""
     try:
@@ -370,6 +412,10 @@ def main():
                   f"{len(rooms)} rooms")
     if "mesh/model.glb" in outputs:
         problems += glb_problems(args.out, job)
+    ifc_path = os.path.join(args.out, "building.ifc")
+    if "building.ifc" in outputs:
+        problems += ifc_problems(ifc_path, open(ifc_path, encoding="ascii", errors="replace").read(),
+                                 job, levels)
     for name in sorted(outputs):
         if name.endswith("/occupancy.yaml"):
             problems += ros_map_problems(args.out, name)
@@ -423,8 +469,18 @@ def main():
                 problems.append("selftest: an octree.ot with its root's value changed passed")
             if not ot_problems("cut", data[:-5]):
                 problems.append("selftest: an octree.ot without its last node passed")
-        print("selftest: the checks reject a cut mesh, a flipped triangle, moved levels and a "
-              "changed or cut octree.ot")
+        if "building.ifc" in outputs:
+            import re
+            text = open(ifc_path, encoding="ascii", errors="replace").read()
+            storey = re.search(r"\n#\d+=IFCBUILDINGSTOREY\(.*?\);", text)
+            if not ifc_problems("no storey", text.replace(storey.group(0), ""), job, levels):
+                problems.append("selftest: a building.ifc without a storey passed")
+            if not ifc_problems("dangling", text.replace("DATA;\n", "DATA;\n#999999999=IFCPOLYLINE("
+                                                         "(#999999998));\n", 1), job, levels):
+                problems.append("selftest: a building.ifc with an undefined #reference passed")
+        print("selftest: the checks reject a cut mesh, a flipped triangle, moved levels, a "
+              "changed or cut octree.ot and a building.ifc without a storey or with a dangling "
+              "reference")
 
     for p in problems:
         print("FAIL:", p, file=sys.stderr)
