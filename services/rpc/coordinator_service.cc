@@ -28,6 +28,7 @@
 #include "absl/synchronization/notification.h"
 #include "coordinator/job_folders.h"
 #include "coordinator/job_params.h"
+#include "coordinator/job_runner.h"
 #include "coordinator/lease_id.h"
 #include "coordinator/lease_table.h"
 #include "coordinator/rate_window.h"
@@ -237,7 +238,7 @@ absl::Status CoordinatorSpec::Validate() const {
 
 // ---------------------------------------------------------------------------------------------
 
-class CoordinatorServer::Impl {
+class CoordinatorServer::Impl final : public JobStages {
  public:
   explicit Impl(CoordinatorSpec spec) : spec_(std::move(spec)) {}
   ~Impl() { Shutdown(); }
@@ -365,7 +366,23 @@ class CoordinatorServer::Impl {
     }
     for (std::thread& t : ended) t.join();  // each has left RunJob: the join is immediate
   }
+  // A job's thread: its runtime, then coordinator/job_runner.h's RunJob over the stages below.
   void RunJob(const std::string& job_id);
+  // ---- JobStages (coordinator/job_runner.h)
+  absl::Status Ingest(const JobRecord& job) override { return PlanStage(job); }
+  absl::Status Carve(const JobRecord& job) override { return CarveStage(job.id); }
+  absl::Status Merge(const JobRecord& job) override { return MergeStage(job); }
+  void EnterStage(const std::string& job_id, const std::string& stage) override;
+  std::string TenantView(const std::string& job_id, const std::string& text) override {
+    absl::MutexLock lock(&mu_);
+    return TenantViewLocked(job_id, text);
+  }
+  void Moved(const std::string& job_id, JobState from, JobState to,
+             const std::string& reason) override;
+  void NotMoved(const std::string& job_id, JobState to, const absl::Status& why) override;
+  void CleanUp(const std::string& job_id, bool succeeded) override;
+  bool Stopping() override { return stopping_; }
+  absl::Status MergeStage(const JobRecord& job);
   // INGESTING: the scan checked (every row) and cut into time slices, one task each.
   absl::Status PlanStage(const JobRecord& job);
   // The plan of a job again, for a coordinator that resumes it (the same slices: PlanSlices
@@ -388,11 +405,10 @@ class CoordinatorServer::Impl {
   absl::StatusOr<std::string> RecarveStage(const std::string& job_id,
                                            const std::vector<RecarveChunk>& chunks,
                                            double resolution_m);
-  void FailJob(const std::string& job_id, const std::string& why);
   // Job.error as the tenant may read it (coordinator/job_folders.h TenantView). A job no
   // longer running has no runtime entry (CleanUp drops it) and none is made for it here: its
   // text still has the work folder hidden.
-  std::string TenantView(const std::string& job_id, std::string text) const
+  std::string TenantViewLocked(const std::string& job_id, std::string text) const
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
     static const JobRuntime kEnded;
     const auto it = runtime_.find(job_id);
@@ -401,8 +417,6 @@ class CoordinatorServer::Impl {
                                 JobFolders{rt.output_dir, rt.tiles_dir, rt.partials_dir},
                                 folders_.work_dir);
   }
-  void CleanUp(const std::string& job_id, bool succeeded);
-  void EnterStage(const std::string& job_id, const std::string& stage);
   void Sweep();
   // The job must exist and not be terminal; shared by CompleteChunk and FailChunk, which check
   // the store before the lease table (the table has forgotten cancelled jobs).
@@ -830,18 +844,22 @@ void CoordinatorServer::Impl::EnterStage(const std::string& job_id, const std::s
   }
 }
 
-void CoordinatorServer::Impl::FailJob(const std::string& job_id, const std::string& raw) {
-  std::string why;
-  {
-    absl::MutexLock lock(&mu_);
-    why = TenantView(job_id, raw);
-  }
-  absl::Status s = store_->TransitionJob(job_id, {JobState::kFailed, why, NowMs()});
+void CoordinatorServer::Impl::Moved(const std::string& job_id, JobState from, JobState to,
+                                    const std::string& reason) {
   JobsChanged();
-  if (s.ok()) {
-    spdlog::error("coordinator: job {} FAILED: {}", job_id, raw);
+  if (to == JobState::kFailed) {
+    spdlog::error("coordinator: job {} FAILED: {}", job_id, reason);
   } else {
-    spdlog::warn("coordinator: job {}: could not mark FAILED ({}): {}", job_id, s.ToString(), raw);
+    spdlog::info("coordinator: job {} {} -> {}", job_id, std::string(JobStateName(from)),
+                 std::string(JobStateName(to)));
+  }
+}
+
+void CoordinatorServer::Impl::NotMoved(const std::string& job_id, JobState to,
+                                       const absl::Status& why) {
+  JobsChanged();
+  if (to == JobState::kFailed) {
+    spdlog::warn("coordinator: job {}: could not mark FAILED: {}", job_id, why.ToString());
   }
 }
 
@@ -1235,165 +1253,102 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
     rt.output_dir = fs::absolute(folders_.OutputDir(*job)).lexically_normal().string();
     rt.params = JobParams::FromJson(job->params_json);
   }
-  JobState state = job->state;
-  auto move_to = [&](JobState to) {
-    absl::Status s = store_->TransitionJob(job_id, {to, "", NowMs()});
-    JobsChanged();
-    if (s.ok()) {
-      spdlog::info("coordinator: job {} {} -> {}", job_id, std::string(JobStateName(state)), std::string(JobStateName(to)));
-      state = to;
-    }
-    return s;
-  };
+  absl::StatusOr<JobState> ended =
+      carvemap::RunJob(job_id, *store_, *this, LeaseTable::Clock::System());
+  if (!ended.ok()) spdlog::error("coordinator: job {}: {}", job_id, ended.status().ToString());
+}
 
-  if (state == JobState::kIngesting) {
-    // A restart during ingest: the slices may already be stored (the crash came between
-    // AddChunks and the move to CARVING); then carving can go on, otherwise plan again.
-    absl::StatusOr<std::vector<ChunkRecord>> chunks = store_->ListChunks(job_id);
-    if (chunks.ok() && !chunks->empty()) {
-      if (!move_to(JobState::kCarving).ok()) return;
+absl::Status CoordinatorServer::Impl::MergeStage(const JobRecord& job) {
+  const std::string& job_id = job.id;
+  // After a restart in MERGING the plan and the turn to north are made again from the scan.
+  if (absl::Status s = EnsurePlan(job); !s.ok()) return s;
+  MergeJobRequest req;
+  {
+    absl::MutexLock lock(&mu_);
+    const JobRuntime& rt = runtime_[job_id];
+    req.job_id = job_id;
+    req.tiles_dir = rt.tiles_dir;
+    req.output_dir = rt.output_dir;
+    // Filled in below, through a confined descriptor as in the ingest.
+    req.params = rt.params.merge_params(rt.world_yaw_rad);
+    nlohmann::json doc = {{"job_id", job_id},
+                          {"input_path", job.input_path},
+                          {"output_name", job.output_name},
+                          {"params", nlohmann::json::parse(job.params_json, nullptr, false)},
+                          {"rays_carved", rt.rays_carved}};
+    if (absl::StatusOr<JobRecord> now = store_->GetJob(job_id); now.ok()) {
+      doc["chunks_total"] = now->counters.chunks_total;
+      doc["chunk_retries"] = now->counters.chunk_retries;
     }
+    nlohmann::json stages = nlohmann::json::object();
+    for (const auto& [name, timing] : rt.stages) stages[name] = timing.second;
+    doc["stage_seconds"] = stages;
+    doc["north"] = rt.north;
+    nlohmann::json carve = nlohmann::json::object();
+    if (rt.slices_counted == rt.slices.size()) {
+      carve = rt.carve_counts;
+      if (carve.value("rays", 0.0) > 0) {
+        carve["partial_bytes_per_ray"] =
+            carve.value("partial_bytes", 0.0) / carve.value("rays", 1.0);
+      }
+      // The counts earlier versions wrote as "ingest", for readers of that key.
+      nlohmann::json ingest = nlohmann::json::object();
+      for (const char* k : {"frames", "rays", "returns", "wedges", "wedge_chunk_pairs"}) {
+        if (carve.contains(k)) ingest[k] = carve[k];
+      }
+      doc["ingest"] = ingest;
+    }
+    carve["slices"] = rt.slices.size();
+    carve["slice_s"] = rt.slice_s;
+    doc["carve"] = carve;
+    req.job_json = doc.dump();
   }
-  if (state == JobState::kQueued || state == JobState::kIngesting) {
-    if (state == JobState::kQueued && !move_to(JobState::kIngesting).ok()) return;
-    EnterStage(job_id, "ingest");
-    absl::Status s = PlanStage(*job);
-    if (absl::IsCancelled(s)) {
-      if (!stopping_) CleanUp(job_id, false);
-      return;
+  // Merge stages show as "merge/<stage>" in the job's stage timings (WatchJob); a cancelled
+  // job or a stopping coordinator stops the merge at its next progress call.
+  std::string merge_stage;
+  std::chrono::steady_clock::time_point last_check{};
+  bool keep_going = true;
+  req.progress = [&](const std::string& stage, uint64_t done, uint64_t total) {
+    if (stage != merge_stage) {
+      merge_stage = stage;
+      EnterStage(job_id, "merge/" + stage);
     }
-    if (!s.ok()) {
-      FailJob(job_id, absl::StrCat("ingest: ", s.message()));
-      CleanUp(job_id, false);
-      return;
-    }
-    absl::StatusOr<JobRecord> now = store_->GetJob(job_id);
-    const bool empty = now.ok() && now->counters.chunks_total == 0;
-    if (!move_to(empty ? JobState::kMerging : JobState::kCarving).ok()) {
-      CleanUp(job_id, false);
-      return;
-    }
-  }
-  if (state == JobState::kCarving) {
-    EnterStage(job_id, "carve");
-    absl::Status s = CarveStage(job_id);
-    if (!s.ok()) {
-      if (stopping_) return;  // resumed by the next coordinator
-      if (!absl::IsCancelled(s)) FailJob(job_id, absl::StrCat("carve: ", s.message()));
-      CleanUp(job_id, false);
-      return;
-    }
-    if (!move_to(JobState::kMerging).ok()) {
-      CleanUp(job_id, false);
-      return;
-    }
-  }
-  if (state == JobState::kMerging) {
-    EnterStage(job_id, "merge");
-    // After a restart in MERGING the plan and the turn to north are made again from the scan.
-    if (absl::Status s = EnsurePlan(*job); !s.ok()) {
-      if (stopping_) return;
-      FailJob(job_id, absl::StrCat("merge: ", s.message()));
-      CleanUp(job_id, false);
-      return;
-    }
-    MergeJobRequest req;
     {
       absl::MutexLock lock(&mu_);
-      const JobRuntime& rt = runtime_[job_id];
-      req.job_id = job_id;
-      req.tiles_dir = rt.tiles_dir;
-      req.output_dir = rt.output_dir;
-      // Filled in below, through a confined descriptor as in the ingest.
-      req.params = rt.params.merge_params(rt.world_yaw_rad);
-      nlohmann::json doc = {{"job_id", job_id},
-                            {"input_path", job->input_path},
-                            {"output_name", job->output_name},
-                            {"params", nlohmann::json::parse(job->params_json, nullptr, false)},
-                            {"rays_carved", rt.rays_carved}};
-      if (absl::StatusOr<JobRecord> now = store_->GetJob(job_id); now.ok()) {
-        doc["chunks_total"] = now->counters.chunks_total;
-        doc["chunk_retries"] = now->counters.chunk_retries;
-      }
-      nlohmann::json stages = nlohmann::json::object();
-      for (const auto& [name, timing] : rt.stages) stages[name] = timing.second;
-      doc["stage_seconds"] = stages;
-      doc["north"] = rt.north;
-      nlohmann::json carve = nlohmann::json::object();
-      if (rt.slices_counted == rt.slices.size()) {
-        carve = rt.carve_counts;
-        if (carve.value("rays", 0.0) > 0) {
-          carve["partial_bytes_per_ray"] =
-              carve.value("partial_bytes", 0.0) / carve.value("rays", 1.0);
-        }
-        // The counts earlier versions wrote as "ingest", for readers of that key.
-        nlohmann::json ingest = nlohmann::json::object();
-        for (const char* k : {"frames", "rays", "returns", "wedges", "wedge_chunk_pairs"}) {
-          if (carve.contains(k)) ingest[k] = carve[k];
-        }
-        doc["ingest"] = ingest;
-      }
-      carve["slices"] = rt.slices.size();
-      carve["slice_s"] = rt.slice_s;
-      doc["carve"] = carve;
-      req.job_json = doc.dump();
+      JobRuntime& rt = runtime_[job_id];
+      rt.merge_done = done;
+      rt.merge_total = total;
     }
-    // Merge stages show as "merge/<stage>" in the job's stage timings (WatchJob); a cancelled
-    // job or a stopping coordinator stops the merge at its next progress call.
-    std::string merge_stage;
-    std::chrono::steady_clock::time_point last_check{};
-    bool keep_going = true;
-    req.progress = [&](const std::string& stage, uint64_t done, uint64_t total) {
-      if (stage != merge_stage) {
-        merge_stage = stage;
-        EnterStage(job_id, "merge/" + stage);
-      }
-      {
-        absl::MutexLock lock(&mu_);
-        JobRuntime& rt = runtime_[job_id];
-        rt.merge_done = done;
-        rt.merge_total = total;
-      }
-      if (stopping_) return false;
-      const auto now = std::chrono::steady_clock::now();
-      if (now - last_check > std::chrono::milliseconds(500)) {
-        last_check = now;
-        absl::StatusOr<JobRecord> j = store_->GetJob(job_id);
-        keep_going = !(j.ok() && IsTerminal(j->state));
-      }
-      return keep_going;
-    };
-    req.recarve = [this, &job_id](const std::vector<RecarveChunk>& chunks, double resolution_m) {
-      LogScope log_scope({{"job", job_id}});  // the merge may call it from a thread of its own
-      return RecarveStage(job_id, chunks, resolution_m);
-    };
-    if (spec_.merge) {
-      // The merge opens the scan itself, confined to the tenant's folder as at submit and
-      // ingest (LocalMerge here, or a merge service on the same shared storage).
-      req.scan_root = fs::absolute(folders_.DataDir(job->tenant_dir)).lexically_normal().string();
-      req.scan_input = job->input_path;
-      absl::Status merged;
-      if (spec_.merge_in_process) {
-        absl::MutexLock lock(&hdf5_mu_);
-        merged = spec_.merge(req);
-      } else {
-        merged = spec_.merge(req);
-      }
-      if (absl::Status s = merged; !s.ok()) {
-        if (stopping_) return;  // resumed by the next coordinator
-        if (!absl::IsCancelled(s)) FailJob(job_id, absl::StrCat("merge: ", s.message()));
-        CleanUp(job_id, false);
-        return;
-      }
+    if (stopping_) return false;
+    const auto now = std::chrono::steady_clock::now();
+    if (now - last_check > std::chrono::milliseconds(500)) {
+      last_check = now;
+      absl::StatusOr<JobRecord> j = store_->GetJob(job_id);
+      keep_going = !(j.ok() && IsTerminal(j->state));
+    }
+    return keep_going;
+  };
+  req.recarve = [this, &job_id](const std::vector<RecarveChunk>& chunks, double resolution_m) {
+    LogScope log_scope({{"job", job_id}});  // the merge may call it from a thread of its own
+    return RecarveStage(job_id, chunks, resolution_m);
+  };
+  if (spec_.merge) {
+    // The merge opens the scan itself, confined to the tenant's folder as at submit and
+    // ingest (LocalMerge here, or a merge service on the same shared storage).
+    req.scan_root = fs::absolute(folders_.DataDir(job.tenant_dir)).lexically_normal().string();
+    req.scan_input = job.input_path;
+    absl::Status merged;
+    if (spec_.merge_in_process) {
+      absl::MutexLock lock(&hdf5_mu_);
+      merged = spec_.merge(req);
     } else {
-      spdlog::warn("coordinator: job {}: no merge step configured; tiles only", job_id);
+      merged = spec_.merge(req);
     }
-    if (!move_to(JobState::kSucceeded).ok()) {
-      CleanUp(job_id, false);
-      return;
-    }
+    if (!merged.ok()) return merged;
+  } else {
+    spdlog::warn("coordinator: job {}: no merge step configured; tiles only", job_id);
   }
-  CleanUp(job_id, state == JobState::kSucceeded);
+  return absl::OkStatus();
 }
 
 // ---- JobService
@@ -2101,7 +2056,7 @@ absl::Status CoordinatorServer::Impl::FailChunk(const pb::FailChunkRequest& req,
   const std::string job_id = *JobOfLease(req.lease_id());  // checked by CheckLeaseJob
   absl::StatusOr<bool> requeued =
       // The table prefixes "worker <id>: " itself; the reason may become the job's error.
-      table_->Fail(req.lease_id(), req.generation(), TenantView(job_id, req.reason()),
+      table_->Fail(req.lease_id(), req.generation(), TenantViewLocked(job_id, req.reason()),
                    req.retryable());
   if (!requeued.ok()) return requeued.status();
   if (*requeued) WorkMayBeQueued();
