@@ -20,6 +20,7 @@ PACKAGES=(
   python3-ezdxf  # tests/tools/check_outputs.py: an independent reader of floorplan.dxf
   python3-pil  # tests/tools/check_outputs.py: an independent reader of occupancy.pgm
   libtinygltf-dev  # storage/glb_writer_test.cc: an independent reader of mesh/model.glb
+  libifcplusplus-dev  # tests/tools/ifcpp_check.cc: an independent reader of building.ifc
   libjs-three libjs-leaflet  # services/report: the report's 3D view and floor plans
   libcivetweb-dev  # `carvemap serve`
   chromium  # tests/tools/report_test.py: the report in a real browser, headless
