@@ -28,7 +28,9 @@
 #include "absl/synchronization/notification.h"
 #include "coordinator/job_folders.h"
 #include "coordinator/job_params.h"
+#include "coordinator/job_plan.h"
 #include "coordinator/job_runner.h"
+#include "coordinator/job_runtime.h"
 #include "coordinator/lease_id.h"
 #include "coordinator/lease_table.h"
 #include "coordinator/rate_window.h"
@@ -60,10 +62,6 @@ namespace pb = ::carvemap::v1;
 namespace {
 
 int64_t NowMs() { return LeaseTable::Clock::System().NowUnixMs(); }
-
-std::string PartialPath(const std::string& dir, uint32_t index) {
-  return (fs::path(dir) / absl::StrCat("slice_", index, ".part")).string();
-}
 
 JobParamsRequest FromProto(const pb::JobParams& in) {
   return {.resolution_m = in.resolution_m(),
@@ -296,46 +294,6 @@ class CoordinatorServer::Impl final : public JobStages {
   absl::Status FailChunk(const pb::FailChunkRequest& req, pb::FailChunkResponse& resp);
 
  private:
-  // What the coordinator knows about a running job besides the store: its directories and the
-  // live counters that are not worth a store write (rays).
-  struct JobRuntime {
-    std::string tiles_dir;
-    std::string partials_dir;  // <work>/<job>/partials: every pass's slices' partial sums
-    std::string output_dir;
-    std::string tenant_dir, input_path;  // the scan as the job names it (JobRecord)
-    JobParams params;
-    // The plan (scan_slices.h): made in INGESTING, made again (the same) by a restarted
-    // coordinator. Slice k of pass p is the task SliceTaskKey(k, p).
-    std::vector<ScanSlice> slices;
-    double slice_s = 0;
-    // §2.3's turn to north (scan_north.h), decided with the plan: every lease and the merge
-    // read the scan turned by it; job.json's "north" records it.
-    double world_yaw_rad = 0;
-    nlohmann::json north = nlohmann::json::object();
-    // The pass being carved: 0 the job's; ≥ 1 a re-carve of the merge (§5.6.1), whose partial
-    // sums go to pass_dir and whose chunks and regions are in regions_path.
-    int pass = 0;
-    int passes = 0;  // re-carves so far
-    std::string pass_dir, regions_path;
-    std::vector<ChunkCoord> pass_chunks;  // a re-carve's chunks
-    uint64_t merge_done = 0, merge_total = 0;  // the running merge stage's counts
-    int64_t rays_carved = 0;    // the slices' own rays, as completed (CompleteChunk stats)
-    int64_t rays_to_carve = 0;  // the slices' own rays, planned
-    // Rays as the workers' heartbeats report them, mid-slice too: the live rate.
-    RateWindow carve_rate;
-    // Tasks completed: the ETA once every ray is carved and the chunks' combines remain.
-    RateWindow task_rate;
-    // What the slices of the job's carve measured (job.json "carve"): frames, rays, returns,
-    // wedges, wedge-chunk pairs, votes, partial bytes; from `slices_counted` slices (fewer
-    // than all after a restart: then job.json has no counts).
-    nlohmann::json carve_counts = nlohmann::json::object();
-    size_t slices_counted = 0;
-    std::map<std::string, std::pair<std::chrono::steady_clock::time_point, double>> stages;
-    std::vector<std::string> stage_order;
-    std::optional<std::chrono::steady_clock::time_point> stage_start;
-    std::string current_stage;
-  };
-
   // The caller's job, or NOT_FOUND with the same message whether the id is unknown or
   // another tenant's: ids of others do not leak.
   absl::StatusOr<JobRecord> OwnJob(const Caller& caller, const std::string& job_id);
@@ -759,7 +717,7 @@ void CoordinatorServer::Impl::Sweep() {
     // Gauges: the chunks of every job in the lease table, workers, running jobs.
     int64_t queued = 0, leased = 0, done = 0, active = 0;
     for (const auto& [job_id, rt] : runtime_) {
-      if (!rt.current_stage.empty()) ++active;
+      if (!rt.stages.running().empty()) ++active;
       absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
       if (!p.ok()) continue;
       queued += p->chunks_queued;
@@ -829,19 +787,7 @@ absl::StatusOr<JobRecord> CoordinatorServer::Impl::OwnJob(const Caller& caller,
 
 void CoordinatorServer::Impl::EnterStage(const std::string& job_id, const std::string& stage) {
   absl::MutexLock lock(&mu_);
-  JobRuntime& rt = runtime_[job_id];
-  const auto now = std::chrono::steady_clock::now();
-  if (!rt.current_stage.empty() && rt.stage_start) {
-    rt.stages[rt.current_stage].second =
-        std::chrono::duration<double>(now - *rt.stage_start).count();
-  }
-  rt.current_stage = stage;
-  rt.stage_start = now;
-  if (!stage.empty()) {
-    // A stage entered again (a merge retried on another merge service) is listed once.
-    if (rt.stages.count(stage) == 0) rt.stage_order.push_back(stage);
-    rt.stages[stage] = {now, 0.0};
-  }
+  runtime_[job_id].stages.Enter(stage, std::chrono::steady_clock::now());
 }
 
 void CoordinatorServer::Impl::Moved(const std::string& job_id, JobState from, JobState to,
@@ -901,45 +847,28 @@ absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
   absl::StatusOr<ConfinedFile> scan =
       ConfinedFile::Open(folders_.DataDir(job.tenant_dir), job.input_path, "input_path");
   if (!scan.ok()) return scan.status();
-  absl::StatusOr<ScanSlicePlan> plan;
-  absl::StatusOr<ScanNorth> north;
+  absl::StatusOr<JobPlan> plan;
   {
     absl::MutexLock hdf5_lock(&hdf5_mu_);
     std::lock_guard<std::mutex> lock(Hdf5Lock());
-    // The frame tables only: the path is validated in blocks and not held (the workers read
-    // the poses their slices need).
-    ScanReader::OpenOptions open;
-    open.path_rows = ScanReader::PathRows::kNone;
-    absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan->path(), open);
-    if (!reader.ok()) return scan->Rename(reader.status());
-    plan = PlanScanSlices(**reader, SlicePlanOptions{});
-    if (plan.ok()) {
-      const JobParams params = JobParams::FromJson(job.params_json);
-      std::optional<NorthPlace> place;
-      if (!params.location.empty()) {
-        absl::StatusOr<NorthPlace> p = ParseNorthPlace(params.location, params.survey_date,
-                                                       "location");  // checked at submit
-        if (p.ok()) place = *p;
-      }
-      north = NorthOfScan(**reader, params.north, place);
-    }
+    plan = PlanJob(scan->path(), JobParams::FromJson(job.params_json));
   }
   if (!plan.ok()) return scan->Rename(plan.status());
-  if (!north.ok()) return scan->Rename(north.status());
-  if (north->decision.warn) {
-    spdlog::warn("coordinator: job {}: north: {}", job.id, north->decision.note);
-  } else if (north->decision.turned) {
+  const ScanNorth& north = plan->north;
+  if (north.decision.warn) {
+    spdlog::warn("coordinator: job {}: north: {}", job.id, north.decision.note);
+  } else if (north.decision.turned) {
     spdlog::info("coordinator: job {}: turned {:.2f}° to {} north (§2.3)", job.id,
-                 north->decision.yaw_rad * 180 / std::numbers::pi,
-                 north->place ? "true" : "magnetic");
+                 north.decision.yaw_rad * 180 / std::numbers::pi,
+                 north.place ? "true" : "magnetic");
   }
   absl::MutexLock lock(&mu_);
   JobRuntime& rt = runtime_[job.id];
-  rt.world_yaw_rad = north->decision.yaw_rad;
-  rt.north = NorthJson(*north);
-  rt.slices = std::move(plan->slices);
-  rt.slice_s = plan->slice_s;
-  rt.rays_to_carve = int64_t(plan->rays);  // the slices' own rows partition every frame
+  rt.world_yaw_rad = north.decision.yaw_rad;
+  rt.north = NorthJson(north);
+  rt.slices = std::move(plan->slices.slices);
+  rt.slice_s = plan->slices.slice_s;
+  rt.rays_to_carve = int64_t(plan->slices.rays);  // the slices' own rows partition every frame
   return absl::OkStatus();
 }
 
@@ -969,13 +898,7 @@ absl::Status CoordinatorServer::Impl::PlanStage(const JobRecord& job) {
   {
     absl::MutexLock lock(&mu_);
     const JobRuntime& rt = runtime_[job.id];
-    for (const ScanSlice& s : rt.slices) {
-      ChunkRecord r;
-      r.job_id = job.id;
-      r.key = SliceTaskKey(s.index, 0);
-      r.wedge_count = int64_t(s.own_rays);  // the task's size, for the store's listing
-      records.push_back(std::move(r));
-    }
+    records = SliceTasks(job.id, rt.slices, 0);
     spdlog::info("coordinator: job {}: {} rays in {} slices of {:.1f} s", job.id,
                  rt.rays_to_carve, rt.slices.size(), rt.slice_s);
   }
@@ -988,17 +911,9 @@ absl::StatusOr<std::vector<ChunkCoord>> CoordinatorServer::Impl::ChunksOfPass(
   {
     absl::MutexLock lock(&mu_);
     const JobRuntime& rt = runtime_[job_id];
-    for (const ScanSlice& s : rt.slices) paths.push_back(PartialPath(rt.pass_dir, s.index));
+    for (const ScanSlice& s : rt.slices) paths.push_back(SlicePartialPath(rt.pass_dir, s.index));
   }
-  std::set<ChunkCoord> chunks;
-  for (const std::string& p : paths) {
-    absl::StatusOr<PartialSumsIndex> index = ReadPartialIndex(p);
-    if (!index.ok()) return index.status();
-    for (const PartialSection& s : index->sections) {
-      chunks.insert({s.chunk.x(), s.chunk.y(), s.chunk.z()});
-    }
-  }
-  return std::vector<ChunkCoord>(chunks.begin(), chunks.end());
+  return ChunksOfPartials(paths);
 }
 
 absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
@@ -1186,15 +1101,10 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
     if (stored.ok()) {
       for (const ChunkRecord& c : *stored) existing.insert(c.key);
     }
-    for (const ScanSlice& s : rt.slices) {
-      const ChunkCoord key = SliceTaskKey(s.index, pass);
-      if (existing.count(key)) {
-        again.push_back(key);
+    for (ChunkRecord& r : SliceTasks(job_id, rt.slices, pass)) {
+      if (existing.count(r.key)) {
+        again.push_back(r.key);
       } else {
-        ChunkRecord r;
-        r.job_id = job_id;
-        r.key = key;
-        r.wedge_count = int64_t(s.own_rays);
         fresh.push_back(std::move(r));
       }
     }
@@ -1271,37 +1181,9 @@ absl::Status CoordinatorServer::Impl::MergeStage(const JobRecord& job) {
     req.output_dir = rt.output_dir;
     // Filled in below, through a confined descriptor as in the ingest.
     req.params = rt.params.merge_params(rt.world_yaw_rad);
-    nlohmann::json doc = {{"job_id", job_id},
-                          {"input_path", job.input_path},
-                          {"output_name", job.output_name},
-                          {"params", nlohmann::json::parse(job.params_json, nullptr, false)},
-                          {"rays_carved", rt.rays_carved}};
-    if (absl::StatusOr<JobRecord> now = store_->GetJob(job_id); now.ok()) {
-      doc["chunks_total"] = now->counters.chunks_total;
-      doc["chunk_retries"] = now->counters.chunk_retries;
-    }
-    nlohmann::json stages = nlohmann::json::object();
-    for (const auto& [name, timing] : rt.stages) stages[name] = timing.second;
-    doc["stage_seconds"] = stages;
-    doc["north"] = rt.north;
-    nlohmann::json carve = nlohmann::json::object();
-    if (rt.slices_counted == rt.slices.size()) {
-      carve = rt.carve_counts;
-      if (carve.value("rays", 0.0) > 0) {
-        carve["partial_bytes_per_ray"] =
-            carve.value("partial_bytes", 0.0) / carve.value("rays", 1.0);
-      }
-      // The counts earlier versions wrote as "ingest", for readers of that key.
-      nlohmann::json ingest = nlohmann::json::object();
-      for (const char* k : {"frames", "rays", "returns", "wedges", "wedge_chunk_pairs"}) {
-        if (carve.contains(k)) ingest[k] = carve[k];
-      }
-      doc["ingest"] = ingest;
-    }
-    carve["slices"] = rt.slices.size();
-    carve["slice_s"] = rt.slice_s;
-    doc["carve"] = carve;
-    req.job_json = doc.dump();
+    absl::StatusOr<JobRecord> now = store_->GetJob(job_id);
+    req.job_json =
+        MergeJobDocument(job, now.ok() ? std::optional(now->counters) : std::nullopt, rt).dump();
   }
   // Merge stages show as "merge/<stage>" in the job's stage timings (WatchJob); a cancelled
   // job or a stopping coordinator stops the merge at its next progress call.
@@ -1631,46 +1513,18 @@ bool CoordinatorServer::Impl::WriteProgress(grpc::ServerWriter<pb::JobEvent>& wr
       absl::MutexLock lock(&mu_);
       auto rt = runtime_.find(job->id);
       if (rt != runtime_.end()) {
-        const JobRuntime& r = rt->second;
-        const double stage_s =
-            r.stage_start ? std::chrono::duration<double>(now - *r.stage_start).count() : 0.0;
-        p->set_eta_s(-1);
-        // The merge's re-carving of the object chunks (§5.6.1) is a carve too.
-        const bool carving = state == JobState::kCarving || r.pass > 0;
-        if (carving) {
-          // The slices' own rays: carved so far as the workers' heartbeats report them (mid-slice
-          // too), and planned.
-          const double total = double(r.rays_to_carve);
-          const double done =
-              std::min(total, std::max(double(r.rays_carved), r.carve_rate.total()));
-          const double rate = r.carve_rate.Rate(now);
-          p->set_rays_done(int64_t(done));
-          p->set_rays_total(int64_t(total));
-          p->set_rays_per_s(rate);
-          const int64_t tasks_left = job->counters.chunks_total - job->counters.chunks_done;
-          if (done >= total && tasks_left > 0) {
-            // Every ray carved: what is left are the chunks' combines, at their own rate.
-            const double tasks_per_s = r.task_rate.Rate(now);
-            if (tasks_per_s > 0) p->set_eta_s(double(tasks_left) / tasks_per_s);
-          } else if (rate > 0) {
-            p->set_eta_s((total - done) / rate);
-          }
-        } else if (state == JobState::kMerging && r.merge_total > 0) {
-          p->set_stage_done(int64_t(r.merge_done));
-          p->set_stage_total(int64_t(r.merge_total));
-          if (r.merge_done > 0 && stage_s > 0) {
-            p->set_eta_s(stage_s * double(r.merge_total - std::min(r.merge_done, r.merge_total)) /
-                         double(r.merge_done));
-          }
-        }
-        for (const std::string& name : r.stage_order) {
-          const auto& [start, elapsed] = r.stages.at(name);
+        const JobProgress progress = ProgressOf(rt->second, job->counters, state, now);
+        p->set_rays_done(progress.rays_done);
+        p->set_rays_total(progress.rays_total);
+        p->set_rays_per_s(progress.rays_per_s);
+        p->set_eta_s(progress.eta_s);
+        p->set_stage_done(progress.stage_done);
+        p->set_stage_total(progress.stage_total);
+        for (const StageTimes::Stage& stage : progress.stages) {
           auto* st = p->add_stages();
-          st->set_stage(name);
-          const bool running = name == r.current_stage;
-          st->set_elapsed_s(running ? std::chrono::duration<double>(now - start).count()
-                                    : elapsed);
-          st->set_finished(!running);
+          st->set_stage(stage.name);
+          st->set_elapsed_s(stage.elapsed_s);
+          st->set_finished(stage.finished);
         }
       }
       std::set<std::string> active;
@@ -1969,11 +1823,11 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
           o->set_end(r.end);
         }
         task.set_own_rays(int64_t(slice->own_rays));
-        task.set_partial_path(PartialPath(pass_dir, slice->index));
+        task.set_partial_path(SlicePartialPath(pass_dir, slice->index));
         task.set_regions_path(regions_path);
       } else {
         pb::CombineTask& task = *lease.mutable_combine();
-        for (uint32_t k : slice_indices) task.add_partial_paths(PartialPath(pass_dir, k));
+        for (uint32_t k : slice_indices) task.add_partial_paths(SlicePartialPath(pass_dir, k));
       }
       spdlog::debug("coordinator: lease {} -> {} (attempt {})", grant->lease_id, req.worker_id(),
                     grant->attempt);
