@@ -16,6 +16,7 @@
 
 #include "services/floorplan/floorplan_dxf.h"
 #include "services/floorplan/room_polygons.h"
+#include "services/floorplan/test_plans.h"
 #include "storage/atomic_file.h"
 
 namespace carvemap {
@@ -372,47 +373,15 @@ Model Parse(const std::string& text) {
 
 // --- Hand-made plans ---------------------------------------------------------------------------
 
-void Heights(FloorPlan& plan, double floor_z, double ceiling_z) {
-  plan.vertex_floor_z.assign(plan.vertices.size(), floor_z);
-  plan.vertex_ceiling_z.assign(plan.vertices.size(), ceiling_z);
-  for (FloorPlanRoom& room : plan.rooms) {
-    room.floor_z = floor_z;
-    room.ceiling_z = ceiling_z;
-  }
-}
-
-// A 2 × 1 m strip cut into two rooms by the line x = 1 (one doorway).
+// A 2 × 1 m strip cut into two rooms by the line x = 1 (one doorway); room 1 lower than a door,
+// whose height is then the room's.
 FloorPlan TwoRooms() {
-  FloorPlan plan;
-  plan.vertices = {{0, 0}, {1, 0}, {2, 0}, {0, 1}, {1, 1}, {2, 1}};
-  plan.triangles = {{0, 1, 4}, {0, 4, 3}, {1, 2, 5}, {1, 5, 4}};
-  plan.triangle_room = {0, 0, 1, 1};
-  plan.rooms.resize(2);
-  plan.rooms[0].seed_triangle = 0;
-  plan.rooms[1].seed_triangle = 2;
-  Heights(plan, 0.0, 2.5);
-  plan.rooms[1].ceiling_z = 2.0;  // lower than a door: the door is the room's height
+  FloorPlan plan = TwoRoomsPlan(0.0, 2.5);
+  plan.rooms[1].ceiling_z = 2.0;
   return plan;
 }
 
-// A 3 × 3 m room (0, a ring: a profile with a void) around a 1 × 1 m room (1).
-FloorPlan RoomInRoom() {
-  FloorPlan plan;
-  plan.vertices = {{0, 0}, {3, 0}, {3, 3}, {0, 3}, {1, 1}, {2, 1}, {2, 2}, {1, 2}};
-  for (uint32_t i = 0; i < 4; ++i) {
-    const uint32_t j = (i + 1) % 4;
-    plan.triangles.push_back({i, j, 4 + j});
-    plan.triangles.push_back({i, 4 + j, 4 + i});
-  }
-  plan.triangles.push_back({4, 5, 6});
-  plan.triangles.push_back({4, 6, 7});
-  plan.triangle_room = {0, 0, 0, 0, 0, 0, 0, 0, 1, 1};
-  plan.rooms.resize(2);
-  plan.rooms[0].seed_triangle = 0;
-  plan.rooms[1].seed_triangle = 8;
-  Heights(plan, 3.0, 5.6);
-  return plan;
-}
+FloorPlan RoomInRoom() { return RoomInRoomPlan(3.0, 5.6); }
 
 // One room in two unit squares 1 m apart (two pieces: two solids), and an empty room.
 FloorPlan TwoPieces() {
@@ -422,7 +391,7 @@ FloorPlan TwoPieces() {
   plan.triangle_room = {0, 0, 0, 0};
   plan.rooms.resize(2);
   plan.rooms[0].seed_triangle = 0;
-  Heights(plan, 6.1, 8.4);
+  SetPlanHeights(plan, 6.1, 8.4);
   return plan;
 }
 
@@ -677,7 +646,7 @@ TEST(BuildingIfc, StraightWallsAreOneWallEachAndDoorsTakeTheRoomsHeight) {
   square.triangles = {{0, 1, 4}, {1, 3, 4}, {1, 2, 3}};
   square.triangle_room = {0, 0, 0};
   square.rooms.resize(1);
-  Heights(square, 0, 2.5);
+  SetPlanHeights(square, 0, 2.5);
   const std::vector<std::pair<Level, FloorPlan>> one = {{MakeLevel(0, 0, 2.5), square}};
   const absl::StatusOr<BuildingIfcCounts> square_counts = WriteBuildingIfc(path, one);
   ASSERT_TRUE(square_counts.ok()) << square_counts.status();

@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "services/floorplan/room_polygons.h"
+#include "services/floorplan/test_plans.h"
 #include "storage/atomic_file.h"
 
 namespace carvemap {
@@ -18,39 +19,8 @@ namespace {
 namespace fs = std::filesystem;
 using Eigen::Vector2d;
 
-// A 3 × 3 m room (0) around a 1 × 1 m room (1) in its middle.
-FloorPlan RoomInRoom() {
-  FloorPlan plan;
-  plan.vertices = {{0, 0}, {3, 0}, {3, 3}, {0, 3}, {1, 1}, {2, 1}, {2, 2}, {1, 2}};
-  for (uint32_t i = 0; i < 4; ++i) {
-    const uint32_t j = (i + 1) % 4;
-    plan.triangles.push_back({i, j, 4 + j});
-    plan.triangles.push_back({i, 4 + j, 4 + i});
-  }
-  plan.triangles.push_back({4, 5, 6});
-  plan.triangles.push_back({4, 6, 7});
-  plan.triangle_room = {0, 0, 0, 0, 0, 0, 0, 0, 1, 1};
-  plan.rooms.resize(2);
-  plan.rooms[0].seed_triangle = 0;
-  plan.rooms[1].seed_triangle = 8;
-  plan.vertex_floor_z.assign(plan.vertices.size(), 0.0);
-  plan.vertex_ceiling_z.assign(plan.vertices.size(), 2.5);
-  return plan;
-}
-
-// A 2 × 1 m strip cut into two rooms by the line x = 1.
-FloorPlan TwoRooms() {
-  FloorPlan plan;
-  plan.vertices = {{0, 0}, {1, 0}, {2, 0}, {0, 1}, {1, 1}, {2, 1}};
-  plan.triangles = {{0, 1, 4}, {0, 4, 3}, {1, 2, 5}, {1, 5, 4}};
-  plan.triangle_room = {0, 0, 1, 1};
-  plan.rooms.resize(2);
-  plan.rooms[0].seed_triangle = 0;
-  plan.rooms[1].seed_triangle = 2;
-  plan.vertex_floor_z.assign(plan.vertices.size(), 0.0);
-  plan.vertex_ceiling_z.assign(plan.vertices.size(), 2.5);
-  return plan;
-}
+FloorPlan RoomInRoom() { return RoomInRoomPlan(); }
+FloorPlan TwoRooms() { return TwoRoomsPlan(); }
 
 TEST(RoomBorders, AnOpenBorderRunsFromWallToWall) {
   const auto borders = RoomBorders(TwoRooms());
