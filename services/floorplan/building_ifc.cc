@@ -305,6 +305,11 @@ absl::StatusOr<BuildingIfcCounts> WriteBuildingIfc(
     return absl::InvalidArgumentError(
         absl::StrCat(path, ": wall_thickness_m and door_height_m must be positive"));
   }
+  if (!(options.min_door_width_m >= 0) || !(options.max_door_width_m >= options.min_door_width_m) ||
+      !std::isfinite(options.max_door_width_m)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": door widths must be 0 ≤ min_door_width_m ≤ max_door_width_m"));
+  }
   std::vector<LevelGeometry> geometry;
   for (const auto& [level, plan] : plans) {
     absl::StatusOr<LevelGeometry> g = Geometry(level, plan);
@@ -459,12 +464,14 @@ absl::StatusOr<BuildingIfcCounts> WriteBuildingIfc(
     // Walls: a slab behind each straight run's face, on the exterior side (the right of a
     // loop, whose interior is on its left), from the room's floor to its ceiling.
     std::vector<int> elements;
-    const auto boundary = [&](const std::string& role, int room, int element) {
+    const auto boundary = [&](const std::string& role, int room, int element,
+                              bool physical = true) {
       if (room < 0 || room >= static_cast<int>(space_of_room.size()) || !space_of_room[room]) {
         return;
       }
-      d.Add("IFCRELSPACEBOUNDARY", absl::StrCat(guid(role), ",$,$,$,", Ref(space_of_room[room]),
-                                                ",", Ref(element), ",$,.PHYSICAL.,.NOTDEFINED."));
+      d.Add("IFCRELSPACEBOUNDARY",
+            absl::StrCat(guid(role), ",$,$,$,", Ref(space_of_room[room]), ",", Ref(element), ",$,",
+                         physical ? ".PHYSICAL." : ".VIRTUAL.", ",.NOTDEFINED."));
     };
     for (size_t w = 0; w < g.walls.size(); ++w) {
       const WallRun& run = g.walls[w];
@@ -495,9 +502,24 @@ absl::StatusOr<BuildingIfcCounts> WriteBuildingIfc(
     // in a wall over the doorway would stand in a wall we never observed. The door is a
     // standalone IfcDoor (IFC allows a door that fills no opening), contained in the storey:
     // as wide as the chain of borders is long, min(door_height_m, the lower room's height)
-    // high, a slab across the doorway along the chain.
+    // high, a slab across the doorway along the chain. A chain of another width is no door.
     for (size_t i = 0; i < g.doors.size(); ++i) {
       const DoorChain& door = g.doors[i];
+      if (door.length_m < options.min_door_width_m || door.length_m > options.max_door_width_m) {
+        // Not a door's width: the two spaces' virtual boundary, without a body.
+        const std::string opening = absl::StrCat(name, " opening ", i);
+        const int ifc_opening = d.Add(
+            "IFCVIRTUALELEMENT",
+            absl::StrCat(guid(opening), ",$,", Str(opening), ",$,$,",
+                         Ref(placement(door.points.front(), level.floor_z, std::nullopt)), ",$,$"));
+        elements.push_back(ifc_opening);
+        boundary(opening + " bounds a", door.room_a, ifc_opening, false);
+        if (door.room_b != door.room_a) {
+          boundary(opening + " bounds b", door.room_b, ifc_opening, false);
+        }
+        ++counts.openings;
+        continue;
+      }
       const std::string door_name = absl::StrCat(name, " door ", i);
       const auto [floor_a, ceiling_a] = Heights(level, plan, door.room_a);
       const auto [floor_b, ceiling_b] = Heights(level, plan, door.room_b);

@@ -10,8 +10,10 @@
 //   of `wall_thickness_m` on the exterior side of the loop, from floor to ceiling of the room it
 //   bounds;
 //   IfcDoor per chain of borders between two rooms (RoomBorders, floorplan_dxf.h; "level <k>
-//   door <d>"): §3.3 splits rooms where the interior narrows, at doorways. Standalone, contained
-//   in the storey (building_ifc.cc says why);
+//   door <d>") as wide as a door: §3.3 splits rooms where the interior narrows, at doorways.
+//   Standalone, contained in the storey (building_ifc.cc says why). A chain narrower or wider
+//   than a door is an IfcVirtualElement ("level <k> opening <d>"), the virtual boundary IFC
+//   has for two spaces not separated by anything built;
 //   IfcRelSpaceBoundary from each space to the walls and doors around it.
 // Coordinates are the plans' (x, y in metres, z up); the model's y is what the job calls north
 // (IfcGeometricRepresentationContext.TrueNorth is left at its default, +y).
@@ -41,6 +43,11 @@ struct BuildingIfcOptions {
   double wall_thickness_m = 0.05;
   // A door's height, or the room's when lower (the plans do not see the door's top), m.
   double door_height_m = 2.1;
+  // Borders between two rooms this long (m) are doors; shorter ones (where three rooms meet)
+  // and longer ones (a room opening wide onto a corridor, which §3.3 splits where the interior
+  // narrows less than at a door) are the spaces' virtual boundaries.
+  double min_door_width_m = 0.5;
+  double max_door_width_m = 2.5;
 };
 
 struct BuildingIfcCounts {
@@ -48,6 +55,7 @@ struct BuildingIfcCounts {
   size_t spaces = 0;
   size_t walls = 0;
   size_t doors = 0;
+  size_t openings = 0;  // IfcVirtualElement
   size_t entities = 0;  // instances in the DATA section
 };
 

@@ -231,6 +231,7 @@ const std::map<std::string, size_t>& AttributeCounts() {
       {"IFCSPACE", 11},
       {"IFCWALL", 9},
       {"IFCDOOR", 13},
+      {"IFCVIRTUALELEMENT", 8},
       {"IFCRELAGGREGATES", 6},
       {"IFCRELCONTAINEDINSPATIALSTRUCTURE", 6},
       {"IFCRELDEFINESBYPROPERTIES", 6},
@@ -267,6 +268,7 @@ const std::set<std::string> kRooted = {"IFCPROJECT",
                                        "IFCSPACE",
                                        "IFCWALL",
                                        "IFCDOOR",
+                                       "IFCVIRTUALELEMENT",
                                        "IFCRELAGGREGATES",
                                        "IFCRELCONTAINEDINSPATIALSTRUCTURE",
                                        "IFCRELDEFINESBYPROPERTIES",
@@ -516,7 +518,7 @@ TEST(BuildingIfc, HierarchyStoreysSpacesWallsAndDoorsFollowThePlans) {
   EXPECT_EQ(body.args[0].text, "Body");
   EXPECT_EQ(body.args[6].ref, m.at(project).args[7].items[0].ref);
 
-  size_t spaces_expected = 0, doors_expected = 0;
+  size_t spaces_expected = 0, doors_expected = 0, openings_expected = 0;
   for (size_t k = 0; k < plans.size(); ++k) {
     const auto& [level, plan] = plans[k];
     SCOPED_TRACE("level " + std::to_string(level.index));
@@ -581,26 +583,41 @@ TEST(BuildingIfc, HierarchyStoreysSpacesWallsAndDoorsFollowThePlans) {
     // Walls and doors, contained in the storey.
     const auto contained = m.RelsTo("IFCRELCONTAINEDINSPATIALSTRUCTURE", 5, storeys[k]);
     ASSERT_EQ(contained.size(), 1u);
-    std::vector<int> walls, doors;
+    std::vector<int> walls, doors, openings;
     for (const Value& v : contained[0]->args[4].items) {
-      (m.at(v).type == "IFCWALL" ? walls : doors).push_back(v.ref);
+      const std::string& type = m.at(v).type;
+      (type == "IFCWALL" ? walls : type == "IFCDOOR" ? doors : openings).push_back(v.ref);
       EXPECT_EQ(m.RelsTo("IFCRELCONTAINEDINSPATIALSTRUCTURE", 4, v.ref).size(), 1u);
     }
-    const auto borders = RoomBorders(plan);
-    doors_expected += borders.size();
-    ASSERT_EQ(doors.size(), borders.size());
-    for (size_t i = 0; i < doors.size(); ++i) {
-      const Entity& door = m.at(doors[i]);
-      EXPECT_EQ(door.type, "IFCDOOR");
+    // Borders as wide as a door are doors, the others virtual boundaries, in border order.
+    const BuildingIfcOptions options;
+    size_t next_door = 0, next_opening = 0;
+    for (const auto& border : RoomBorders(plan)) {
       double length = 0;
-      for (size_t j = 1; j < borders[i].size(); ++j) {
-        length += (borders[i][j] - borders[i][j - 1]).norm();
+      for (size_t j = 1; j < border.size(); ++j) length += (border[j] - border[j - 1]).norm();
+      if (length < options.min_door_width_m || length > options.max_door_width_m) {
+        ASSERT_LT(next_opening, openings.size());
+        const int opening = openings[next_opening++];
+        EXPECT_EQ(m.at(opening).type, "IFCVIRTUALELEMENT");
+        EXPECT_EQ(m.at(opening).args.size(), 8u);
+        const auto bounds = m.RelsTo("IFCRELSPACEBOUNDARY", 5, opening);
+        ASSERT_EQ(bounds.size(), 2u);
+        EXPECT_EQ(bounds[0]->args[7].text, "VIRTUAL");
+        continue;
       }
+      ++doors_expected;
+      ASSERT_LT(next_door, doors.size());
+      const Entity& door = m.at(doors[next_door]);
       EXPECT_NEAR(door.args[9].number(), length, 1e-6);  // OverallWidth
       EXPECT_EQ(door.args[10].text, "DOOR");
       // Bounding both rooms' spaces.
-      EXPECT_EQ(m.RelsTo("IFCRELSPACEBOUNDARY", 5, doors[i]).size(), 2u);
+      const auto bounds = m.RelsTo("IFCRELSPACEBOUNDARY", 5, doors[next_door++]);
+      ASSERT_EQ(bounds.size(), 2u);
+      EXPECT_EQ(bounds[0]->args[7].text, "PHYSICAL");
     }
+    EXPECT_EQ(next_door, doors.size());
+    EXPECT_EQ(next_opening, openings.size());
+    openings_expected += openings.size();
     // The walls' runs cover the wall loops: their lengths add up to the loops' perimeter.
     const absl::StatusOr<FloorPlanOutline> outline = TraceFloorPlan(plan);
     ASSERT_TRUE(outline.ok());
@@ -623,6 +640,9 @@ TEST(BuildingIfc, HierarchyStoreysSpacesWallsAndDoorsFollowThePlans) {
   EXPECT_EQ(counts->spaces, spaces_expected);
   EXPECT_EQ(m.OfType("IFCDOOR").size(), doors_expected);
   EXPECT_EQ(counts->doors, doors_expected);
+  EXPECT_EQ(counts->openings, openings_expected);
+  EXPECT_GT(openings_expected, 0u);  // the room in a room: a 4 m closed border
+  EXPECT_GT(doors_expected, 0u);
   EXPECT_EQ(m.OfType("IFCWALL").size(), counts->walls);
   EXPECT_EQ(m.OfType("IFCWALLSTANDARDCASE").size(), 0u);
 }
