@@ -26,6 +26,7 @@
 #include "absl/strings/str_split.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/synchronization/notification.h"
+#include "coordinator/carve_task.h"
 #include "coordinator/job_folders.h"
 #include "coordinator/job_params.h"
 #include "coordinator/job_plan.h"
@@ -162,6 +163,49 @@ absl::Status CheckWritableDir(const fs::path& dir, absl::string_view what) {
         absl::StrCat(what, " ", dir.string(), ": not writable: ", std::strerror(errno)));
   }
   return absl::OkStatus();
+}
+
+void ToProto(const CarveTask& t, pb::Lease& lease) {
+  lease.set_job_id(t.grant.job_id);
+  lease.mutable_chunk()->set_x(t.grant.chunk.x);
+  lease.mutable_chunk()->set_y(t.grant.chunk.y);
+  lease.mutable_chunk()->set_z(t.grant.chunk.z);
+  lease.set_lease_id(t.grant.lease_id);
+  lease.set_generation(t.grant.generation);
+  lease.set_deadline_unix_ms(t.grant.deadline_unix_ms);
+  lease.set_attempt(t.grant.attempt);
+  pb::CarveParams& params = *lease.mutable_params();
+  params.set_resolution_m(t.resolution_m);
+  params.set_method(static_cast<pb::CarveMethod>(static_cast<int>(t.method)));
+  params.set_leaf_depth(t.leaf_depth);
+  params.set_tile_dir(t.tile_dir);
+  params.set_evaluation(ToProto(t.evaluation));
+  params.set_world_yaw_rad(t.world_yaw_rad);
+  if (const SliceWork* slice = std::get_if<SliceWork>(&t.work)) {
+    pb::SliceTask& task = *lease.mutable_slice();
+    task.set_index(slice->index);
+    task.set_pass(slice->pass);
+    task.set_scan_root(slice->scan_root);
+    task.set_scan_path(slice->scan_path);
+    for (const ScanReader::RowRange& r : slice->own) {
+      pb::RowRange* o = task.add_own();
+      o->set_begin(r.begin);
+      o->set_end(r.end);
+    }
+    for (const ScanReader::RowRange& r : slice->read) {
+      pb::RowRange* o = task.add_read();
+      o->set_begin(r.begin);
+      o->set_end(r.end);
+    }
+    task.set_own_rays(int64_t(slice->own_rays));
+    task.set_partial_path(slice->partial_path);
+    task.set_regions_path(slice->regions_path);
+  } else {
+    pb::CombineTask& task = *lease.mutable_combine();
+    for (const std::string& p : std::get<CombineWork>(t.work).partial_paths) {
+      task.add_partial_paths(p);
+    }
+  }
 }
 
 void ToProto(const UploadState& u, pb::Upload& out) {
@@ -1739,13 +1783,7 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
                         std::chrono::duration<double>(std::clamp(req.wait_s(), 0.0, 30.0));
   while (true) {
     if (stopping_) return absl::UnavailableError("coordinator shutting down");
-    std::optional<LeaseTable::Grant> grant;
-    JobParams job_params;
-    double world_yaw_rad = 0;
-    std::string tiles_dir, pass_dir, regions_path, scan_root, scan_input;
-    int pass = 0;
-    std::optional<ScanSlice> slice;
-    std::vector<uint32_t> slice_indices;  // a combine: every slice of the pass, in order
+    std::optional<absl::StatusOr<CarveTask>> task;
     {
       absl::MutexLock lock(&mu_);
       if (!workers_.Touch(req.worker_id(), NowMs())) {
@@ -1755,26 +1793,13 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
       // A caller that has given up waiting would never learn of a lease granted now (its
       // heartbeats would give it back, but only after a heartbeat's delay).
       if (ctx.IsCancelled()) return absl::CancelledError("lease call cancelled by the worker");
-      absl::StatusOr<std::optional<LeaseTable::Grant>> g = table_->Lease(req.worker_id());
-      if (!g.ok()) return g.status();
-      grant = *g;
-      if (grant) {
-        workers_.SetJob(req.worker_id(), grant->job_id);
-        const JobRuntime& rt = runtime_[grant->job_id];
-        job_params = rt.params;
-        world_yaw_rad = rt.world_yaw_rad;
-        tiles_dir = rt.tiles_dir;
-        pass_dir = rt.pass_dir;
-        pass = rt.pass;
-        regions_path = rt.regions_path;
-        scan_root = fs::absolute(folders_.DataDir(rt.tenant_dir)).lexically_normal().string();
-        scan_input = rt.input_path;
-        if (IsSliceTask(grant->chunk)) {
-          const uint32_t index = uint32_t(grant->chunk.y);
-          if (index < rt.slices.size()) slice = rt.slices[index];
-        } else {
-          for (const ScanSlice& s : rt.slices) slice_indices.push_back(s.index);
-        }
+      absl::StatusOr<std::optional<LeaseTable::Grant>> grant = table_->Lease(req.worker_id());
+      if (!grant.ok()) return grant.status();
+      if (*grant) {
+        workers_.SetJob(req.worker_id(), (*grant)->job_id);
+        const JobRuntime& rt = runtime_[(*grant)->job_id];
+        task = CarveTaskOf(
+            **grant, rt, fs::absolute(folders_.DataDir(rt.tenant_dir)).lexically_normal().string());
       } else if (!stopping_) {
         // Parked until work may have been queued (WorkMayBeQueued) or the call's time is up.
         // At most a second at a time: a worker that gives up is noticed within it.
@@ -1783,54 +1808,13 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
         if (left_s > 0) work_cv_.WaitWithTimeout(&mu_, absl::Seconds(std::min(left_s, 1.0)));
       }
     }
-    if (grant) {
-      LogScope log_scope(LeaseLogFields(grant->lease_id, req.worker_id()));
-      pb::Lease& lease = *resp.mutable_lease();
-      lease.set_job_id(grant->job_id);
-      lease.mutable_chunk()->set_x(grant->chunk.x);
-      lease.mutable_chunk()->set_y(grant->chunk.y);
-      lease.mutable_chunk()->set_z(grant->chunk.z);
-      lease.set_lease_id(grant->lease_id);
-      lease.set_generation(grant->generation);
-      lease.set_deadline_unix_ms(grant->deadline_unix_ms);
-      lease.set_attempt(grant->attempt);
-      pb::CarveParams& params = *lease.mutable_params();
-      params.set_resolution_m(job_params.resolution_m);
-      params.set_method(static_cast<pb::CarveMethod>(static_cast<int>(job_params.method)));
-      absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(job_params.resolution_m);
-      params.set_leaf_depth(grid.ok() ? grid->chunk_depth : 0);
-      params.set_tile_dir(tiles_dir);
-      params.set_evaluation(ToProto(job_params.evaluation));
-      params.set_world_yaw_rad(world_yaw_rad);
-      if (IsSliceTask(grant->chunk)) {
-        if (!slice) {
-          return absl::InternalError(absl::StrCat("lease ", grant->lease_id, ": no slice ",
-                                                  grant->chunk.y, " in the job's plan"));
-        }
-        pb::SliceTask& task = *lease.mutable_slice();
-        task.set_index(slice->index);
-        task.set_pass(pass);
-        task.set_scan_root(scan_root);
-        task.set_scan_path(scan_input);
-        for (const ScanReader::RowRange& r : slice->own) {
-          pb::RowRange* o = task.add_own();
-          o->set_begin(r.begin);
-          o->set_end(r.end);
-        }
-        for (const ScanReader::RowRange& r : slice->read) {
-          pb::RowRange* o = task.add_read();
-          o->set_begin(r.begin);
-          o->set_end(r.end);
-        }
-        task.set_own_rays(int64_t(slice->own_rays));
-        task.set_partial_path(SlicePartialPath(pass_dir, slice->index));
-        task.set_regions_path(regions_path);
-      } else {
-        pb::CombineTask& task = *lease.mutable_combine();
-        for (uint32_t k : slice_indices) task.add_partial_paths(SlicePartialPath(pass_dir, k));
-      }
-      spdlog::debug("coordinator: lease {} -> {} (attempt {})", grant->lease_id, req.worker_id(),
-                    grant->attempt);
+    if (task) {
+      if (!task->ok()) return task->status();
+      const LeaseTable::Grant& grant = (*task)->grant;
+      LogScope log_scope(LeaseLogFields(grant.lease_id, req.worker_id()));
+      ToProto(**task, *resp.mutable_lease());
+      spdlog::debug("coordinator: lease {} -> {} (attempt {})", grant.lease_id, req.worker_id(),
+                    grant.attempt);
       return absl::OkStatus();
     }
     if (std::chrono::steady_clock::now() >= deadline || ctx.IsCancelled()) break;
