@@ -195,10 +195,47 @@ void MarkDomains(Cdt& cdt) {
 // when the boundary is not a valid polygon in the plane; the caller keeps the collapsed
 // triangles then.
 bool RetriangulateRegion(const WorkMesh& m, const PlaneFrame& frame,
-                         const std::vector<std::pair<int, int>>& segs, bool quadtree,
+                         const std::vector<std::pair<int, int>>& outline,
+                         std::span<const Eigen::Vector2d> splits, bool quadtree,
                          int min_quadtree_cells, double res,
                          std::vector<std::array<int, 3>>& tris_out,
                          std::vector<Eigen::Vector3d>& steiner_out) {
+  // A step of the region seen edge-on (vertices of its outline one above the other along the
+  // dominant axis, PlaneFrame: the corners of a riser that could not move onto one point) is
+  // a run of outline edges x → a1 → … → ak whose a1 … ak share one point in 2D. The outline is
+  // triangulated with x → ak in their place, and the step gets its own triangles (x, a_i,
+  // a_i+1), which stand across the plane like the riser they replace.
+  std::vector<std::pair<int, int>> segs;
+  std::vector<std::array<int, 3>> steps;
+  {
+    absl::flat_hash_map<int, int> next, prev;
+    for (auto [a, b] : outline) {
+      if (!next.try_emplace(a, b).second) next[a] = -1;  // a vertex the outline passes twice
+      if (!prev.try_emplace(b, a).second) prev[b] = -1;
+    }
+    auto zero = [&](int a, int b) {
+      return (frame.To2(m.pos[a]) - frame.To2(m.pos[b])).norm() < 1e-6 * res;
+    };
+    absl::flat_hash_map<int, int> run_end;   // a1 of each run ➜ ak
+    absl::flat_hash_map<int, char> skipped;  // a1 … ak−1: their outgoing edges go
+    for (auto [x, a1] : outline) {
+      if (zero(x, a1) || next[a1] < 0 || !zero(a1, next[a1])) continue;
+      int a = a1;
+      for (size_t steps_left = outline.size(); next[a] >= 0 && zero(a, next[a]); --steps_left) {
+        if (steps_left == 0 || next[a] == a1) return false;
+        steps.push_back({x, a, next[a]});
+        skipped[a] = 1;
+        a = next[a];
+      }
+      run_end[a1] = a;
+    }
+    for (auto [a, b] : outline) {
+      if (skipped.contains(a)) continue;
+      if (zero(a, b)) return false;  // not part of a run: the outline passes a or b twice
+      auto it = run_end.find(b);
+      segs.push_back({a, it == run_end.end() ? b : it->second});
+    }
+  }
   std::vector<Segment2> segs2;
   for (auto [a, b] : segs) segs2.push_back({frame.To2(m.pos[a]), frame.To2(m.pos[b])});
   Cdt cdt;
@@ -252,6 +289,12 @@ bool RetriangulateRegion(const WorkMesh& m, const PlaneFrame& frame,
         steiner.push_back(vh);
       }
     }
+    for (const Eigen::Vector2d& q : splits) {
+      Cdt::Vertex_handle vh = cdt.insert(K::Point_2(q.x(), q.y()));
+      if (vh->info().used) return false;
+      vh->info().used = true;
+      steiner.push_back(vh);
+    }
   } catch (const std::exception&) {
     return false;  // constraints cross
   }
@@ -286,8 +329,7 @@ bool RetriangulateRegion(const WorkMesh& m, const PlaneFrame& frame,
       } else {
         if (vh->info().out == -1) {
           vh->info().out = next_steiner--;
-          const Eigen::Vector3d x =
-              frame.c + vh->point().x() * frame.e1 + vh->point().y() * frame.e2;
+          const Eigen::Vector3d x = frame.Lift({vh->point().x(), vh->point().y()});
           steiner_pos.push_back(x);
         }
         t[i] = vh->info().out;
@@ -297,11 +339,16 @@ bool RetriangulateRegion(const WorkMesh& m, const PlaneFrame& frame,
   }
   // No sliver between nearly collinear chain vertices (the collapsed triangles are kept then).
   for (const auto& t : tris) {
+    if (t[0] >= 0 && t[1] >= 0 && t[2] >= 0 &&
+        std::find(steps.begin(), steps.end(), t) != steps.end()) {
+      continue;
+    }
     Eigen::Vector3d p[3];
     for (int i = 0; i < 3; ++i) p[i] = t[i] >= 0 ? m.pos[t[i]] : steiner_pos[-t[i] - 2];
     if ((p[1] - p[0]).cross(p[2] - p[0]).norm() <= 2e-6 * res * res) return false;
   }
   // The new triangles must have exactly the region's boundary as their boundary.
+  tris.insert(tris.end(), steps.begin(), steps.end());
   absl::flat_hash_map<uint64_t, int> directed;
   auto key = [](int a, int b) {
     return (uint64_t{static_cast<uint32_t>(a)} << 32) | static_cast<uint32_t>(b);
@@ -310,14 +357,14 @@ bool RetriangulateRegion(const WorkMesh& m, const PlaneFrame& frame,
     for (int i = 0; i < 3; ++i) ++directed[key(t[i], t[(i + 1) % 3])];
   }
   absl::flat_hash_map<uint64_t, char> seg_set;
-  for (auto [a, b] : segs) seg_set[key(a, b)] = 1;
+  for (auto [a, b] : outline) seg_set[key(a, b)] = 1;
   for (const auto& [k, n] : directed) {
     if (n != 1) return false;
     const int a = static_cast<int>(k >> 32), b = static_cast<int>(k & 0xffffffffu);
     const bool reverse = directed.contains(key(b, a));
     if (reverse == seg_set.contains(k)) return false;  // boundary iff a constraint
   }
-  for (auto [a, b] : segs) {
+  for (auto [a, b] : outline) {
     if (!directed.contains(key(a, b))) return false;
   }
   const int base = static_cast<int>(steiner_out.size());
@@ -381,6 +428,37 @@ absl::StatusOr<RegionOutlines> OutlinesOf(const WorkMesh& m, int num_regions) {
   return out;
 }
 
+// Where a region's outline passes a vertex more than once, which outgoing outline edge each
+// fan of its triangles around the vertex starts from and which incoming one it ends at. A
+// re-triangulation must keep these pairs: pairing them otherwise keeps every edge manifold but
+// pinches the surface at the vertex (its triangles then make two separate fans).
+absl::flat_hash_map<uint64_t, int> PinchedFans(std::span<const std::pair<int, int>> outline,
+                                               std::span<const std::array<int, 3>> tris) {
+  absl::flat_hash_map<int, int> passes;
+  for (auto [a, b] : outline) ++passes[a];
+  absl::flat_hash_map<uint64_t, int> next;  // (v, a) ➜ b for each triangle (v, a, b)
+  for (const auto& t : tris) {
+    for (int i = 0; i < 3; ++i) {
+      auto it = passes.find(t[i]);
+      if (it != passes.end() && it->second > 1 && t[(i + 1) % 3] >= 0 && t[(i + 2) % 3] >= 0) {
+        next[EdgeKey(t[i], t[(i + 1) % 3])] = t[(i + 2) % 3];
+      }
+    }
+  }
+  absl::flat_hash_map<uint64_t, int> fans;  // (v, first) ➜ last
+  for (auto [v, b] : outline) {
+    if (passes[v] < 2) continue;
+    int x = b;
+    for (size_t steps = 0; steps <= next.size(); ++steps) {
+      auto it = next.find(EdgeKey(v, x));
+      if (it == next.end()) break;
+      x = it->second;
+    }
+    fans[EdgeKey(v, b)] = x;
+  }
+  return fans;
+}
+
 // How many triangles' edges join each pair of vertices of the simplified mesh, kept current
 // as regions are re-triangulated: a region's new triangulation must not add an edge that
 // another region already has (two regions joining the same two corners would make the mesh
@@ -403,7 +481,8 @@ class EdgeUsers {
   // inner edge is already in use elsewhere; false, and nothing changed, otherwise.
   bool TryReplace(std::span<const std::pair<int, int>> segs,
                   std::span<const std::array<int, 3>> old_tris,
-                  std::span<const std::array<int, 3>> new_tris) {
+                  std::span<const std::array<int, 3>> new_tris,
+                  std::vector<std::pair<int, int>>* conflicts = nullptr) {
     absl::flat_hash_map<uint64_t, char> boundary;
     for (auto [a, b] : segs) boundary[UndirectedKey(a, b)] = 1;
     const auto inner = [&](std::span<const std::array<int, 3>> tris) {
@@ -421,7 +500,13 @@ class EdgeUsers {
     const std::vector<uint64_t> old_inner = inner(old_tris), new_inner = inner(new_tris);
     for (uint64_t e : old_inner) --count_[e];
     bool free = true;
-    for (uint64_t e : new_inner) free = free && count_[e] <= 0;
+    for (uint64_t e : new_inner) {
+      if (count_[e] <= 0) continue;
+      free = false;
+      if (conflicts != nullptr) {
+        conflicts->push_back({static_cast<int>(e >> 32), static_cast<int>(e & 0xffffffffu)});
+      }
+    }
     for (uint64_t e : free ? new_inner : old_inner) ++count_[e];
     return free;
   }
@@ -451,11 +536,29 @@ PlanarMesh Retriangulate(const WorkMesh& m, const std::vector<PlaneFrame>& frame
     for (int t : outlines.tris[r]) old_tris.push_back(m.tri[t]);
     std::vector<std::array<int, 3>> tris;
     std::vector<Eigen::Vector3d> steiner;
-    const bool remeshed =
-        !outlines.segs[r].empty() &&
-        RetriangulateRegion(m, frames[r], outlines.segs[r], options.quadtree_points,
-                            options.min_quadtree_cells, res, tris, steiner) &&
-        users.TryReplace(outlines.segs[r], old_tris, tris);
+    // A new inner edge that another region already has (the two regions meet along two
+    // chains, and both would join the same two corners across): split it by a point at its
+    // middle, which lies inside this region, and triangulate again.
+    bool remeshed = false;
+    std::vector<Eigen::Vector2d> splits;
+    for (int attempt = 0; attempt < 4 && !outlines.segs[r].empty(); ++attempt) {
+      tris.clear();
+      steiner.clear();
+      if (!RetriangulateRegion(m, frames[r], outlines.segs[r], splits, options.quadtree_points,
+                               options.min_quadtree_cells, res, tris, steiner)) {
+        break;
+      }
+      // Steiner points (negative ids) never sit on the outline, so the fans' ends compare.
+      if (PinchedFans(outlines.segs[r], old_tris) != PinchedFans(outlines.segs[r], tris)) break;
+      std::vector<std::pair<int, int>> conflicts;
+      if (users.TryReplace(outlines.segs[r], old_tris, tris, &conflicts)) {
+        remeshed = true;
+        break;
+      }
+      for (auto [a, b] : conflicts) {
+        splits.push_back(0.5 * (frames[r].To2(m.pos[a]) + frames[r].To2(m.pos[b])));
+      }
+    }
     if (!remeshed) {
       tris = std::move(old_tris);
       steiner.clear();

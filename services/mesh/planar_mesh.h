@@ -3,14 +3,18 @@
 // of the planar regions.
 //
 // How: the faces become a closed polygon mesh on the finest lattice (T-junctions of big and
-// small faces split, non-manifold octree edges separated into sheets); vertices where two or
-// more regions meet are placed by eq 4.9 (SVD over the regions' planes with the α rule for
-// nearly parallel planes), the others projected onto their region's plane; edge collapses that
-// keep the mesh a closed manifold then remove region interiors and straight runs of the chains
-// between two regions, so neighbouring regions keep exactly the same boundary vertices; last,
-// each region is re-triangulated in its plane (constrained Delaunay of its boundary plus
-// quadtree points, §4.2.5), or keeps its collapsed triangles when its boundary does not make a
-// valid polygon in the plane.
+// small faces split, non-manifold octree edges separated into sheets). Each region is seen in
+// 2D along its dominant axis (§4.2.5, Fig 4.7a), where its lattice faces do not overlap; the
+// vertices inside a region go onto its plane along that axis, and the vertices where two or
+// more regions meet move from their octree corners towards their eq 4.9 positions (SVD over
+// the regions' planes with the α rule for nearly parallel planes) only as far as no triangle
+// turns over and no region wraps around a vertex in its 2D coordinates. Edge collapses that
+// keep the mesh a closed manifold, under the same two conditions, then remove region
+// interiors and straight runs of the chains between two regions, so neighbouring regions keep
+// exactly the same boundary vertices; last, each region is re-triangulated in its 2D
+// coordinates and lifted onto its plane (constrained Delaunay of its boundary plus quadtree
+// points, §4.2.5), or keeps its collapsed triangles when its boundary does not make a valid
+// polygon there. Those are where self-intersections remain.
 #pragma once
 
 #include <span>
@@ -38,7 +42,7 @@ struct PlanarMeshOptions {
   double alpha_fraction = 0.2;
   // A vertex placed by eq 4.9 moves at most this many grid cells from its octree corner (the
   // move is clamped; §4.2.5: shared vertices are "allowed to be displaced up to a distance
-  // threshold from their original position").
+  // threshold from their original position"), and less where a triangle would turn over.
   double max_displacement_cells = 3.0;
   // A vertex of a chain between two regions is removed only when it lies within this distance
   // (grid cells) of the segment joining its chain neighbours. 0 removes collinear ones only.

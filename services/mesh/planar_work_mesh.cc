@@ -2,14 +2,17 @@
 
 #include <cmath>
 #include <cstdint>
+#include <deque>
 #include <limits>
 #include <utility>
 
 #include <Eigen/SVD>
 
 #include "absl/container/flat_hash_map.h"
+#include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_cat.h"
 #include "services/geometry/sorted_runs.h"
+#include "services/geometry/union_find.h"
 #include "services/mesh/face_surface.h"
 #include "services/mesh/planar_mesh_repair.h"
 
@@ -66,13 +69,81 @@ double DistanceToSegment(const Eigen::Vector3d& x, const Eigen::Vector3d& a,
 
 double SignedArea(const WorkMesh& m, const std::vector<PlaneFrame>& frames, int region, int a,
                   int b, int c) {
-  return 0.5 * frames[region].n.dot((m.pos[b] - m.pos[a]).cross(m.pos[c] - m.pos[a]));
+  return 0.5 * frames[region].Area2(m.pos[a], m.pos[b], m.pos[c]);
 }
 
-// Collapses u into v when that keeps the surface a manifold and no triangle gets worse than
-// `min_area` in its region's plane (§4.2.5: the chains stay where the regions meet).
-bool TryCollapse(WorkMesh& m, const std::vector<PlaneFrame>& frames, int u, int v,
-                 double min_area) {
+// Whether the triangles of one region around w turn more than once around it in the region's
+// 2D coordinates: each triangle has a positive area, yet together they overlap (a vertex on
+// the region's border moved or collapsed so far that its fan wraps past itself), and the
+// region's outline crosses itself there. Neighbours the region sees on w's point (a riser
+// seen edge-on) count as w: the angles of their triangles are summed with w's, and triangles
+// with two vertices on the point, or without area, add nothing.
+bool Overwound(WorkMesh& m, const std::vector<PlaneFrame>& frames, int w, double min_area2) {
+  absl::InlinedVector<int, 4> regions;
+  for (int t : m.Tris(w)) {
+    if (std::find(regions.begin(), regions.end(), m.tri_region[t]) == regions.end()) {
+      regions.push_back(m.tri_region[t]);
+    }
+  }
+  for (int r : regions) {
+    const PlaneFrame& f = frames[r];
+    const Eigen::Vector2d p = f.To2(m.pos[w]);
+    const double eps2 = 1e-3 * min_area2;  // (2D distance)² on the point
+    auto on_point = [&](int v) { return (f.To2(m.pos[v]) - p).squaredNorm() <= eps2; };
+    absl::InlinedVector<int, 4> cluster = {w};
+    for (int t : m.Tris(w)) {
+      if (m.tri_region[t] != r) continue;
+      for (int v : m.tri[t]) {
+        if (v != w && on_point(v) &&
+            std::find(cluster.begin(), cluster.end(), v) == cluster.end()) {
+          cluster.push_back(v);
+        }
+      }
+    }
+    absl::InlinedVector<int, 16> tris;
+    for (int c : cluster) {
+      for (int t : m.Tris(c)) {
+        if (m.tri_region[t] == r) tris.push_back(t);
+      }
+    }
+    std::sort(tris.begin(), tris.end());
+    tris.erase(std::unique(tris.begin(), tris.end()), tris.end());
+    double sum = 0;
+    for (int t : tris) {
+      const auto& x = m.tri[t];
+      int k = -1, on = 0;
+      for (int i = 0; i < 3; ++i) {
+        if (on_point(x[i])) ++on, k = i;
+      }
+      if (on != 1) continue;
+      const Eigen::Vector2d a = f.To2(m.pos[x[(k + 1) % 3]]) - p;
+      const Eigen::Vector2d b = f.To2(m.pos[x[(k + 2) % 3]]) - p;
+      const double cross = a.x() * b.y() - a.y() * b.x();
+      if (cross < min_area2) continue;
+      sum += std::atan2(cross, a.dot(b));
+    }
+    if (sum > 2 * M_PI + 1e-9) return true;
+  }
+  return false;
+}
+
+// The vertices of the triangles around each of `vs`.
+std::vector<int> Around(WorkMesh& m, std::span<const int> vs) {
+  std::vector<int> out;
+  for (int v : vs) {
+    for (int t : m.Tris(v))
+      for (int w : m.tri[t]) out.push_back(w);
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+// Collapses u into v when that keeps the surface a manifold, no triangle gets worse than
+// `min_area` in its region's plane (§4.2.5: the chains stay where the regions meet) and no
+// region wraps around a vertex (Overwound).
+bool TryCollapse(WorkMesh& m, const std::vector<PlaneFrame>& frames, int u, int v, double min_area,
+                 double res) {
   const WorkMesh::TriList tu = m.Tris(u);
   std::vector<int> shared, moved;
   for (int t : tu) {
@@ -116,6 +187,15 @@ bool TryCollapse(WorkMesh& m, const std::vector<PlaneFrame>& frames, int u, int 
     const double after = SignedArea(m, frames, m.tri_region[t], x[0], x[1], x[2]);
     if (after < min_area && after < before) return false;
   }
+  const int uv[2] = {u, v};
+  const std::vector<int> near = Around(m, uv);
+  // Triangles below a millionth of a cell do not count in the winding (as a flat triangle
+  // would not), whatever area this collapse asks for.
+  const double min_area2 = 2e-6 * res * res;
+  std::vector<char> wound_before(near.size());
+  for (size_t i = 0; i < near.size(); ++i)
+    wound_before[i] = Overwound(m, frames, near[i], min_area2);
+  const WorkMesh::TriList u_incident = m.incident[u];
   for (int t : shared) m.alive[t] = 0;
   for (int t : moved) {
     for (int& w : m.tri[t])
@@ -124,6 +204,22 @@ bool TryCollapse(WorkMesh& m, const std::vector<PlaneFrame>& frames, int u, int 
   }
   m.vertex_alive[u] = 0;
   m.incident[u].clear();
+  // No region may wrap around a vertex it did not wrap around before (its outline would cross
+  // itself, and the re-triangulation would fail): undone then.
+  for (size_t i = 0; i < near.size(); ++i) {
+    if (near[i] == u || wound_before[i] || !Overwound(m, frames, near[i], min_area2)) continue;
+    for (int t : shared) {
+      m.alive[t] = 1;  // and back in the lists Tris() compacted meanwhile
+      for (int w : m.tri[t]) m.incident[w].push_back(t);
+    }
+    for (int t : moved) {
+      for (int& w : m.tri[t])
+        if (w == v) w = u;
+    }
+    m.vertex_alive[u] = 1;
+    m.incident[u] = u_incident;
+    return false;
+  }
   return true;
 }
 
@@ -189,17 +285,262 @@ bool FlipLongestEdge(WorkMesh& m, const std::vector<PlaneFrame>& frames, int t, 
   return true;
 }
 
+// A vertex where regions meet, at its octree corner, and the regions it touches.
+struct SharedVertex {
+  int v;
+  absl::InlinedVector<int, 4> regions;
+};
+
+// Moves the vertices where regions meet from their octree corners to their eq 4.9 positions
+// as far as no triangle folds over in its region's 2D coordinates (§4.2.5: "to limit
+// self-intersections in the final surface, the vertices shared by multiple regions are
+// allowed to be displaced up to a distance threshold from their original position"; here the
+// threshold is also per vertex, where its triangles would turn over). With every shared
+// vertex at its corner and the others on their plane along the dominant axis (PlaneFrame), no
+// triangle has a negative area in its region's coordinates: the regions' outlines are simple
+// polygons that the re-triangulation can fill.
+//
+// Shared vertices joined by an edge that a region sees edge-on (the corners of a step or riser
+// of the region, one above the other along its axis) move as one: to the eq 4.9 point of all
+// their regions, from each corner the same fraction of the way, so that the region keeps
+// seeing them as one point and the riser's triangles (no area in its coordinates) stay flat
+// rather than turning over; so do the vertices of one region such a region sees on their
+// point (the top of a riser whose foot is on a chain). All vertices move at once; then each
+// triangle that lost area it needs (below `min_area2` and below its area at the corners) sends
+// the groups of its moved vertices a quarter of the way back, until none does, and so does
+// each vertex a region wraps around (Overwound) for the groups around it. A group goes back at
+// most four times, and with all at their corners nothing is folded, so this ends; the order of
+// the work is fixed. The moves are kept in m.moves, where ResumeMoves goes on from.
+void MoveWithoutFolds(WorkMesh& m, const std::vector<PlaneFrame>& frames,
+                      const std::vector<SharedVertex>& shared, const PlanarRegionSet& regions,
+                      const PlanarMeshOptions& options, double res) {
+  const double min_area2 = 2e-6 * res * res;
+  const double rounding = 1e-12 * res * res;
+  const int num_tris = static_cast<int>(m.tri.size());
+  auto area2 = [&](int t) {
+    const auto& x = m.tri[t];
+    return frames[m.tri_region[t]].Area2(m.pos[x[0]], m.pos[x[1]], m.pos[x[2]]);
+  };
+  std::vector<double> at_corners(num_tris);
+  for (int t = 0; t < num_tris; ++t) at_corners[t] = area2(t);
+  // The moving vertices: the shared ones, and vertices of one region that such a region sees
+  // on the same point as a shared one (the top of a riser whose foot is on a chain), which
+  // must stay on that point.
+  std::vector<SharedVertex> nodes = shared;
+  absl::flat_hash_map<int, int> index;  // vertex → its entry in `nodes`
+  for (int i = 0; i < static_cast<int>(nodes.size()); ++i) index[nodes[i].v] = i;
+  std::vector<std::pair<int, int>> edge_on;  // pairs of entries seen on one point
+  for (int t = 0; t < num_tris; ++t) {
+    const auto& x = m.tri[t];
+    const PlaneFrame& frame = frames[m.tri_region[t]];
+    for (int k = 0; k < 3; ++k) {
+      const int u = x[k], w = x[(k + 1) % 3];
+      if ((frame.To2(m.pos[u]) - frame.To2(m.pos[w])).norm() > 1e-6 * res) continue;
+      const bool su = index.contains(u), sw = index.contains(w);
+      if (!su && !sw) continue;
+      for (int y : {u, w}) {
+        if (index.contains(y)) continue;
+        index[y] = static_cast<int>(nodes.size());
+        nodes.push_back({y, {m.tri_region[t]}});
+      }
+      edge_on.push_back({index[u], index[w]});
+    }
+  }
+  const int n = static_cast<int>(nodes.size());
+  UnionFind<int> groups(n);
+  for (auto [a, b] : edge_on) groups.Union(a, b);
+  // Per group (by its root): the mean of its corners and the union of its regions.
+  absl::flat_hash_map<int, std::pair<Eigen::Vector3d, int>> mean;
+  absl::flat_hash_map<int, std::vector<int>> group_regions;
+  for (int i = 0; i < n; ++i) {
+    const int g = groups.Find(i);
+    auto& [sum, count] = mean.try_emplace(g, Eigen::Vector3d::Zero(), 0).first->second;
+    sum += m.pos[nodes[i].v];
+    ++count;
+    std::vector<int>& regs = group_regions[g];
+    regs.insert(regs.end(), nodes[i].regions.begin(), nodes[i].regions.end());
+  }
+  absl::flat_hash_map<int, Eigen::Vector3d> target;
+  for (int i = 0; i < n; ++i) {
+    const int g = groups.Find(i);
+    if (target.contains(g)) continue;
+    std::vector<int>& regs = group_regions[g];
+    std::sort(regs.begin(), regs.end());
+    regs.erase(std::unique(regs.begin(), regs.end()), regs.end());
+    const auto& [sum, count] = mean[g];
+    target[g] = PlaceVertex(sum / count, regs, regions, options, res);
+  }
+  // Vertices a region already wraps around at the corners (a region that overlaps itself
+  // along its axis): their winding is no move's fault.
+  absl::flat_hash_set<int> wound_at_corners;
+  {
+    std::vector<int> all;
+    for (const SharedVertex& s : nodes) all.push_back(s.v);
+    for (int w : Around(m, all)) {
+      if (Overwound(m, frames, w, min_area2)) wound_at_corners.insert(w);
+    }
+  }
+  absl::flat_hash_map<int, int> group_id;  // root ➜ index in m.group_target
+  std::vector<std::vector<int>> members;
+  std::vector<Eigen::Vector3d> corner(n);
+  for (int i = 0; i < n; ++i) {
+    const int root = groups.Find(i);
+    auto [it, added] = group_id.try_emplace(root, static_cast<int>(m.group_target.size()));
+    if (added) {
+      m.group_target.push_back(target[root]);
+      members.emplace_back();
+    }
+    members[it->second].push_back(i);
+    corner[i] = m.pos[nodes[i].v];
+    m.pos[nodes[i].v] = target[root];
+  }
+  std::vector<int> group_of(n);
+  for (int g = 0; g < static_cast<int>(members.size()); ++g) {
+    for (int i : members[g]) group_of[i] = g;
+  }
+  m.group_quarters.assign(members.size(), 4);
+  std::deque<int> work;
+  std::vector<char> queued(num_tris, 1);
+  for (int t = 0; t < num_tris; ++t) work.push_back(t);
+  // Sends vertex v's group (if it moves) a quarter of the way back.
+  auto step_back = [&](int v) {
+    auto it = index.find(v);
+    if (it == index.end()) return;
+    const int g = group_of[it->second];
+    int& q = m.group_quarters[g];
+    if (q == 0) return;
+    --q;
+    for (int i : members[g]) {
+      const int w = nodes[i].v;
+      m.pos[w] = corner[i] + 0.25 * q * (m.group_target[g] - corner[i]);
+      for (int u : m.incident[w]) {
+        if (!queued[u]) queued[u] = 1, work.push_back(u);
+      }
+    }
+  };
+  for (int pass = 0; pass < 64; ++pass) {
+    while (!work.empty()) {
+      const int t = work.front();
+      work.pop_front();
+      queued[t] = 0;
+      const double a = area2(t);
+      if (a >= min_area2 || a >= at_corners[t] - rounding) continue;
+      for (int v : m.tri[t]) step_back(v);
+    }
+    // Then no region may wrap around a vertex (Overwound; with all at their corners, none
+    // does): the moving vertices around one that is wrapped go back a quarter.
+    std::vector<int> moving;
+    for (int i = 0; i < n; ++i) {
+      if (m.group_quarters[group_of[i]] > 0) moving.push_back(nodes[i].v);
+    }
+    bool wound = false;
+    for (int w : Around(m, moving)) {
+      if (wound_at_corners.contains(w) || !Overwound(m, frames, w, min_area2)) continue;
+      wound = true;
+      const int one[1] = {w};
+      for (int v : Around(m, one)) step_back(v);
+    }
+    if (!wound) break;
+  }
+  for (int i = 0; i < n; ++i) {
+    m.moves.push_back({nodes[i].v, group_of[i], corner[i]});
+  }
+}
+
+// The alive members of each group of moved vertices (entries of m.moves).
+std::vector<std::vector<int>> GroupMembers(const WorkMesh& m) {
+  std::vector<std::vector<int>> members(m.group_target.size());
+  for (int i = 0; i < static_cast<int>(m.moves.size()); ++i) {
+    if (m.vertex_alive[m.moves[i].v]) members[m.moves[i].group].push_back(i);
+  }
+  return members;
+}
+
+// Puts group g (its alive `members`) at the first of `quarters` (of the way from their corners
+// to the group's eq 4.9 position) at which none of their triangles loses area it needs (below
+// 2e-6 cells² and below what it had) and no region wraps around a vertex it did not wrap
+// around before (Overwound). Returns whether it moved; if not, nothing changed.
+bool TryGroupAt(WorkMesh& m, const std::vector<PlaneFrame>& frames, int g,
+                const std::vector<int>& members, std::span<const int> quarters, double res) {
+  const double min_area2 = 2e-6 * res * res;
+  const double rounding = 1e-12 * res * res;
+  auto area2 = [&](int t) {
+    const auto& x = m.tri[t];
+    return frames[m.tri_region[t]].Area2(m.pos[x[0]], m.pos[x[1]], m.pos[x[2]]);
+  };
+  std::vector<int> tris, vs;
+  std::vector<Eigen::Vector3d> saved;
+  for (int i : members) {
+    const int v = m.moves[i].v;
+    vs.push_back(v);
+    saved.push_back(m.pos[v]);
+    for (int t : m.Tris(v)) tris.push_back(t);
+  }
+  std::sort(tris.begin(), tris.end());
+  tris.erase(std::unique(tris.begin(), tris.end()), tris.end());
+  std::vector<double> before(tris.size());
+  for (size_t k = 0; k < tris.size(); ++k) before[k] = area2(tris[k]);
+  const std::vector<int> near = Around(m, vs);
+  std::vector<char> wound_before(near.size());
+  for (size_t k = 0; k < near.size(); ++k) {
+    wound_before[k] = Overwound(m, frames, near[k], min_area2);
+  }
+  for (int to : quarters) {
+    for (int i : members) {
+      const WorkMesh::Move& mv = m.moves[i];
+      m.pos[mv.v] = mv.corner + 0.25 * to * (m.group_target[g] - mv.corner);
+    }
+    bool ok = true;
+    for (size_t k = 0; k < tris.size() && ok; ++k) {
+      const double a = area2(tris[k]);
+      ok = a >= min_area2 || a >= before[k] - rounding;
+    }
+    for (size_t k = 0; k < near.size() && ok; ++k) {
+      ok = wound_before[k] || !Overwound(m, frames, near[k], min_area2);
+    }
+    if (ok) {
+      m.group_quarters[g] = to;
+      return true;
+    }
+    for (size_t j = 0; j < members.size(); ++j) m.pos[m.moves[members[j]].v] = saved[j];
+  }
+  return false;
+}
+
+// The moves MoveWithoutFolds left short, tried again on the simplified mesh, whose bigger
+// triangles let a vertex go farther before one turns over: each group, in order, goes as far
+// towards its eq 4.9 position as TryGroupAt allows. Returns how many groups moved.
+int ResumeMoves(WorkMesh& m, const std::vector<PlaneFrame>& frames, double res) {
+  const std::vector<std::vector<int>> members = GroupMembers(m);
+  int moved = 0;
+  for (int sweep = 0; sweep < 4; ++sweep) {
+    int changed = 0;
+    for (int g = 0; g < static_cast<int>(members.size()); ++g) {
+      const int q = m.group_quarters[g];
+      if (q == 4 || members[g].empty()) continue;
+      std::vector<int> quarters;
+      for (int to = 4; to > q; --to) quarters.push_back(to);
+      changed += TryGroupAt(m, frames, g, members[g], quarters, res);
+    }
+    moved += changed;
+    if (changed == 0) break;
+  }
+  return moved;
+}
+
 }  // namespace
 
 PlaneFrame FrameOf(const PlanarRegion& region) {
   PlaneFrame f;
   f.c = region.centroid;
   f.n = region.normal.normalized();
-  int least = 0;
+  f.axis = 0;
   for (int a = 1; a < 3; ++a)
-    if (std::abs(f.n[a]) < std::abs(f.n[least])) least = a;
-  f.e1 = Eigen::Vector3d::Unit(least).cross(f.n).normalized();
-  f.e2 = f.n.cross(f.e1);
+    if (std::abs(f.n[a]) > std::abs(f.n[f.axis])) f.axis = a;
+  const bool positive = f.n[f.axis] > 0;
+  f.up = Eigen::Vector3d::Unit(f.axis) * (positive ? 1.0 : -1.0);
+  f.a1 = (f.axis + (positive ? 1 : 2)) % 3;
+  f.a2 = (f.axis + (positive ? 2 : 1)) % 3;
   return f;
 }
 
@@ -225,6 +566,9 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces,
     if (region_of_corner(c) != region_of_corner(s.twin[c])) ++out_count[s.corner_tv[c]];
   }
   WorkMesh m;
+  // Vertices where regions meet start at their octree corner and are moved to their eq 4.9
+  // position afterwards (MoveWithoutFolds).
+  std::vector<SharedVertex> shared;
   // About one vertex per lattice vertex and two triangles per face (a few more where faces
   // of different sizes meet): made at their size, as the work mesh is this stage's peak.
   m.Reserve(s.num_tv, 2 * faces.size());
@@ -236,7 +580,8 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces,
     } else {
       const WorkMesh::Kind k =
           regs.size() == 2 && out_count[v] == 2 ? WorkMesh::kChain : WorkMesh::kAnchor;
-      m.AddVertex(PlaceVertex(x0, regs, regions, options, res), k);
+      const int v = m.AddVertex(x0, k);
+      shared.push_back({v, {regs.begin(), regs.end()}});
     }
   }
   std::vector<std::vector<int>>().swap(tv_regions);
@@ -277,9 +622,13 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces,
     std::vector<int> regs{region_of_corner(c), region_of_corner(s.twin[c])};
     std::sort(regs.begin(), regs.end());
     regs.erase(std::unique(regs.begin(), regs.end()), regs.end());
-    const int v = regs.size() == 1
-                      ? m.AddVertex(frames[regs[0]].Project(x0), WorkMesh::kInterior)
-                      : m.AddVertex(PlaceVertex(x0, regs, regions, options, res), WorkMesh::kChain);
+    int v;
+    if (regs.size() == 1) {
+      v = m.AddVertex(frames[regs[0]].Project(x0), WorkMesh::kInterior);
+    } else {
+      v = m.AddVertex(x0, WorkMesh::kChain);
+      shared.push_back({v, {regs.begin(), regs.end()}});
+    }
     midpoint[k] = v;
     return v;
   };
@@ -300,6 +649,7 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces,
       for (int i = 0; i < n; ++i) m.AddTriangle(center, poly[i], poly[(i + 1) % n], r);
     }
   }
+  MoveWithoutFolds(m, frames, shared, regions, options, res);
   return m;
 }
 
@@ -323,7 +673,7 @@ void Simplify(WorkMesh& m, const std::vector<PlaneFrame>& frames, double toleran
         // merge them, which changes no geometry.
         for (int v : nbrs) {
           if ((m.pos[v] - m.pos[u]).norm() < kCoincidentCells * res &&
-              TryCollapse(m, frames, u, v, min_area)) {
+              TryCollapse(m, frames, u, v, min_area, res)) {
             ++collapsed;
             break;
           }
@@ -337,7 +687,7 @@ void Simplify(WorkMesh& m, const std::vector<PlaneFrame>& frames, double toleran
         for (int i = 0; i < 2; ++i) {
           const int v = chain[i], w = chain[1 - i];
           if (DistanceToSegment(m.pos[u], m.pos[w], m.pos[v]) > tolerance_m) continue;
-          if (TryCollapse(m, frames, u, v, min_area)) {
+          if (TryCollapse(m, frames, u, v, min_area, res)) {
             ++collapsed;
             break;
           }
@@ -347,7 +697,7 @@ void Simplify(WorkMesh& m, const std::vector<PlaneFrame>& frames, double toleran
           return (m.pos[a] - m.pos[u]).squaredNorm() < (m.pos[b] - m.pos[u]).squaredNorm();
         });
         for (int v : nbrs) {
-          if (TryCollapse(m, frames, u, v, min_area)) {
+          if (TryCollapse(m, frames, u, v, min_area, res)) {
             ++collapsed;
             break;
           }
@@ -356,21 +706,28 @@ void Simplify(WorkMesh& m, const std::vector<PlaneFrame>& frames, double toleran
     }
     return collapsed;
   };
-  for (int round = 0; round < 32; ++round) {
-    int changed = 0;
-    changed += pass(WorkMesh::kAnchor);
-    for (int i = 0; i < 8; ++i) {
-      const int n = pass(WorkMesh::kChain);
-      changed += n;
-      if (n == 0) break;
+  auto rounds = [&] {
+    for (int round = 0; round < 32; ++round) {
+      int changed = 0;
+      changed += pass(WorkMesh::kAnchor);
+      for (int i = 0; i < 8; ++i) {
+        const int n = pass(WorkMesh::kChain);
+        changed += n;
+        if (n == 0) break;
+      }
+      for (int i = 0; i < 8; ++i) {
+        const int n = pass(WorkMesh::kInterior);
+        changed += n;
+        if (n == 0) break;
+      }
+      if (changed == 0) break;
     }
-    for (int i = 0; i < 8; ++i) {
-      const int n = pass(WorkMesh::kInterior);
-      changed += n;
-      if (n == 0) break;
-    }
-    if (changed == 0) break;
-  }
+  };
+  rounds();
+  // Vertices that could not reach their eq 4.9 position on the fine mesh try again on the
+  // coarser one, which may then simplify further.
+  for (int i = 0; i < 4 && ResumeMoves(m, frames, res) > 0; ++i) rounds();
+  std::vector<WorkMesh::Move>().swap(m.moves);
   // Last resort for triangles left without area (their vertices were placed onto one line or
   // point): collapse one of their edges whatever the vertices' kinds, which moves a region
   // border by at most that edge.
@@ -386,15 +743,17 @@ void Simplify(WorkMesh& m, const std::vector<PlaneFrame>& frames, double toleran
       }
       for (int i = 0; i < 3 && m.alive[t]; ++i) {
         const int a = x[i], b = x[(i + 1) % 3];
-        if (TryCollapse(m, frames, a, b, min_area) || TryCollapse(m, frames, b, a, min_area))
+        if (TryCollapse(m, frames, a, b, min_area, res) ||
+            TryCollapse(m, frames, b, a, min_area, res))
           ++fixed;
       }
     }
     if (fixed == 0) break;
   }
   // Still flat (a vertex wedged between two others on one line, with a chain on each side):
-  // collapse the shortest edge on topology alone. The triangles around it are about as small
-  // as the flat one, so any fold this leaves is of that size.
+  // collapse the shortest edge even where a triangle around it then loses its area, but not
+  // by more than a thousandth of a cell (a fold of that size can cross a neighbour) and not
+  // where a region would wrap around a vertex.
   for (int round = 0; round < 8; ++round) {
     int fixed = 0;
     for (int t = 0; t < static_cast<int>(m.tri.size()); ++t) {
@@ -408,8 +767,9 @@ void Simplify(WorkMesh& m, const std::vector<PlaneFrame>& frames, double toleran
       });
       for (int i : order) {
         const int a = x[i], b = x[(i + 1) % 3];
-        const double no_check = -std::numeric_limits<double>::infinity();
-        if (TryCollapse(m, frames, a, b, no_check) || TryCollapse(m, frames, b, a, no_check)) {
+        const double hardly = -1e-3 * res * res;
+        if (TryCollapse(m, frames, a, b, hardly, res) ||
+            TryCollapse(m, frames, b, a, hardly, res)) {
           ++fixed;
           break;
         }
@@ -438,7 +798,7 @@ void Simplify(WorkMesh& m, const std::vector<PlaneFrame>& frames, double toleran
         if (w != pick) mid += m.pos[w], ++n;
     }
     Eigen::Vector3d dir = n > 0 ? Eigen::Vector3d(mid / n - m.pos[pick]) : Eigen::Vector3d::Zero();
-    if (dir.norm() < 1e-9) dir = frames[m.tri_region[t]].e1;
+    if (dir.norm() < 1e-9) dir = Eigen::Vector3d::Unit(frames[m.tri_region[t]].a1);
     m.pos[pick] += 0.01 * res * dir.normalized();
   }
   // Tiny closed pieces that still have a flat or folded triangle, or enclose less than one grid

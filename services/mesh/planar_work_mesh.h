@@ -19,15 +19,34 @@
 
 namespace carvemap::planar_mesh_internal {
 
-// The plane of a region with a right-handed basis: e1 × e2 = n, so counter-clockwise in 2D is
-// counter-clockwise seen from free space.
+// The plane of a region and its 2D coordinates. §4.2.5 (Fig 4.7a): the region is projected
+// along its dominant axis (the coordinate axis nearest its normal) onto an axis-aligned plane,
+// triangulated there, and the triangulation is projected back onto the region's plane along
+// that axis. Along the axis, the lattice faces of a region never overlap: its dominant faces
+// project to squares, and the risers and steps it absorbed (up to ~105° from its normal,
+// planar_regions.h) to lines. Orthogonal projection onto the plane would turn every riser
+// that faces a little away from the normal into a reversed sliver, a fold of the region over
+// itself. (a1, a2) are the other two axes ordered so that e_a1 × e_a2 = `up` = ±e_axis, the
+// side of the normal: counter-clockwise in 2D is counter-clockwise seen from free space.
 struct PlaneFrame {
-  Eigen::Vector3d c, n, e1, e2;
+  Eigen::Vector3d c, n, up;
+  int axis = 2, a1 = 0, a2 = 1;
   [[nodiscard]] Eigen::Vector2d To2(const Eigen::Vector3d& x) const {
-    return {(x - c).dot(e1), (x - c).dot(e2)};
+    return {x[a1] - c[a1], x[a2] - c[a2]};
   }
-  [[nodiscard]] Eigen::Vector3d Project(const Eigen::Vector3d& x) const {
-    return x - n * n.dot(x - c);
+  // The point of the plane with x's 2D coordinates (x moved along the dominant axis).
+  [[nodiscard]] Eigen::Vector3d Project(const Eigen::Vector3d& x) const { return Lift(To2(x)); }
+  [[nodiscard]] Eigen::Vector3d Lift(const Eigen::Vector2d& q) const {
+    Eigen::Vector3d x = c;
+    x[a1] += q.x();
+    x[a2] += q.y();
+    x[axis] -= (n[a1] * q.x() + n[a2] * q.y()) / n[axis];
+    return x;
+  }
+  // Twice the signed area of (a, b, c) in the 2D coordinates.
+  [[nodiscard]] double Area2(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                             const Eigen::Vector3d& c3) const {
+    return up.dot((b - a).cross(c3 - a));
   }
 };
 
@@ -47,6 +66,17 @@ struct WorkMesh {
   // per vertex would be the largest part of the work mesh.
   using TriList = absl::InlinedVector<int, 6>;
   std::vector<TriList> incident;  // may hold stale entries; see Tris()
+  // The vertices BuildWorkMesh moved from their octree corners towards their eq 4.9 positions
+  // (only as far as no triangle folds over), each with its corner and its group (vertices
+  // that move together); Simplify takes the moves left short farther on the coarser mesh.
+  struct Move {
+    int v;
+    int group;
+    Eigen::Vector3d corner;
+  };
+  std::vector<Move> moves;
+  std::vector<Eigen::Vector3d> group_target;  // per group: its eq 4.9 position
+  std::vector<int> group_quarters;            // per group: how far it is, in quarters of the way
 
   // Alive triangles around v (compacts the list).
   const TriList& Tris(int v) {
