@@ -79,8 +79,9 @@ double SignedArea(const WorkMesh& m, const std::vector<PlaneFrame>& frames, int 
 // seen edge-on) count as w: the angles of their triangles are summed with w's, and triangles
 // with two vertices on the point, or without area, add nothing.
 bool Overwound(WorkMesh& m, const std::vector<PlaneFrame>& frames, int w, double min_area2) {
+  const WorkMesh::TriList around = m.Tris(w);
   absl::InlinedVector<int, 4> regions;
-  for (int t : m.Tris(w)) {
+  for (int t : around) {
     if (std::find(regions.begin(), regions.end(), m.tri_region[t]) == regions.end()) {
       regions.push_back(m.tri_region[t]);
     }
@@ -91,8 +92,10 @@ bool Overwound(WorkMesh& m, const std::vector<PlaneFrame>& frames, int w, double
     const double eps2 = 1e-3 * min_area2;  // (2D distance)² on the point
     auto on_point = [&](int v) { return (f.To2(m.pos[v]) - p).squaredNorm() <= eps2; };
     absl::InlinedVector<int, 4> cluster = {w};
-    for (int t : m.Tris(w)) {
+    absl::InlinedVector<int, 16> tris;
+    for (int t : around) {
       if (m.tri_region[t] != r) continue;
+      tris.push_back(t);
       for (int v : m.tri[t]) {
         if (v != w && on_point(v) &&
             std::find(cluster.begin(), cluster.end(), v) == cluster.end()) {
@@ -100,14 +103,17 @@ bool Overwound(WorkMesh& m, const std::vector<PlaneFrame>& frames, int w, double
         }
       }
     }
-    absl::InlinedVector<int, 16> tris;
-    for (int c : cluster) {
-      for (int t : m.Tris(c)) {
-        if (m.tri_region[t] == r) tris.push_back(t);
+    if (cluster.size() > 1) {
+      for (size_t c = 1; c < cluster.size(); ++c) {
+        for (int t : m.Tris(cluster[c])) {
+          if (m.tri_region[t] == r) tris.push_back(t);
+        }
       }
+      std::sort(tris.begin(), tris.end());
+      tris.erase(std::unique(tris.begin(), tris.end()), tris.end());
     }
-    std::sort(tris.begin(), tris.end());
-    tris.erase(std::unique(tris.begin(), tris.end()), tris.end());
+    // Each triangle's angle is below π: fewer than three cannot turn past 2π.
+    if (tris.size() < 3) continue;
     double sum = 0;
     for (int t : tris) {
       const auto& x = m.tri[t];
@@ -192,22 +198,18 @@ bool TryCollapse(WorkMesh& m, const std::vector<PlaneFrame>& frames, int u, int 
   // Triangles below a millionth of a cell do not count in the winding (as a flat triangle
   // would not), whatever area this collapse asks for.
   const double min_area2 = 2e-6 * res * res;
-  std::vector<char> wound_before(near.size());
-  for (size_t i = 0; i < near.size(); ++i)
-    wound_before[i] = Overwound(m, frames, near[i], min_area2);
   const WorkMesh::TriList u_incident = m.incident[u];
-  for (int t : shared) m.alive[t] = 0;
-  for (int t : moved) {
-    for (int& w : m.tri[t])
-      if (w == u) w = v;
-    m.incident[v].push_back(t);
-  }
-  m.vertex_alive[u] = 0;
-  m.incident[u].clear();
-  // No region may wrap around a vertex it did not wrap around before (its outline would cross
-  // itself, and the re-triangulation would fail): undone then.
-  for (size_t i = 0; i < near.size(); ++i) {
-    if (near[i] == u || wound_before[i] || !Overwound(m, frames, near[i], min_area2)) continue;
+  auto apply = [&] {
+    for (int t : shared) m.alive[t] = 0;
+    for (int t : moved) {
+      for (int& w : m.tri[t])
+        if (w == u) w = v;
+      m.incident[v].push_back(t);
+    }
+    m.vertex_alive[u] = 0;
+    m.incident[u].clear();
+  };
+  auto undo = [&] {
     for (int t : shared) {
       m.alive[t] = 1;  // and back in the lists Tris() compacted meanwhile
       for (int w : m.tri[t]) m.incident[w].push_back(t);
@@ -218,8 +220,21 @@ bool TryCollapse(WorkMesh& m, const std::vector<PlaneFrame>& frames, int u, int 
     }
     m.vertex_alive[u] = 1;
     m.incident[u] = u_incident;
-    return false;
+  };
+  apply();
+  // No region may wrap around a vertex it did not wrap around before (its outline would cross
+  // itself, and the re-triangulation would fail). Checked after the collapse first, as a
+  // vertex is rarely wrapped around at all.
+  std::vector<int> wound;
+  for (int w : near) {
+    if (w != u && Overwound(m, frames, w, min_area2)) wound.push_back(w);
   }
+  if (wound.empty()) return true;
+  undo();
+  for (int w : wound) {
+    if (!Overwound(m, frames, w, min_area2)) return false;
+  }
+  apply();
   return true;
 }
 
@@ -481,28 +496,39 @@ bool TryGroupAt(WorkMesh& m, const std::vector<PlaneFrame>& frames, int g,
   std::vector<double> before(tris.size());
   for (size_t k = 0; k < tris.size(); ++k) before[k] = area2(tris[k]);
   const std::vector<int> near = Around(m, vs);
-  std::vector<char> wound_before(near.size());
-  for (size_t k = 0; k < near.size(); ++k) {
-    wound_before[k] = Overwound(m, frames, near[k], min_area2);
-  }
-  for (int to : quarters) {
+  // Whether a region wraps around near[k] where the members were: found only when it does
+  // where they are tried (rare).
+  std::vector<signed char> wound_before(near.size(), -1);
+  auto place = [&](int to) {
     for (int i : members) {
       const WorkMesh::Move& mv = m.moves[i];
       m.pos[mv.v] = mv.corner + 0.25 * to * (m.group_target[g] - mv.corner);
     }
+  };
+  auto restore = [&] {
+    for (size_t j = 0; j < members.size(); ++j) m.pos[m.moves[members[j]].v] = saved[j];
+  };
+  for (int to : quarters) {
+    place(to);
     bool ok = true;
     for (size_t k = 0; k < tris.size() && ok; ++k) {
       const double a = area2(tris[k]);
       ok = a >= min_area2 || a >= before[k] - rounding;
     }
     for (size_t k = 0; k < near.size() && ok; ++k) {
-      ok = wound_before[k] || !Overwound(m, frames, near[k], min_area2);
+      if (!Overwound(m, frames, near[k], min_area2)) continue;
+      if (wound_before[k] < 0) {
+        restore();
+        wound_before[k] = Overwound(m, frames, near[k], min_area2);
+        place(to);
+      }
+      ok = wound_before[k] == 1;
     }
     if (ok) {
       m.group_quarters[g] = to;
       return true;
     }
-    for (size_t j = 0; j < members.size(); ++j) m.pos[m.moves[members[j]].v] = saved[j];
+    restore();
   }
   return false;
 }
