@@ -407,12 +407,21 @@ class JobClient:
         start = pb.StartUploadRequest(name=name or os.path.basename(path),
                                       size_bytes=os.path.getsize(path),
                                       sha256_hex=digest.hexdigest())
-        idle, wait_s = 0, 0.5
+        # Until the server has answered once, an error is the answer (a wrong address, a
+        # server that is down); after that, wait_for_ready rides out a reconnect.
+        idle, wait_s, answered = 0, 0.5, False
         while True:
             begin, sent, short = None, [0], [False]
             try:
-                state = self._stub.StartUpload(start, metadata=self._metadata,
-                                               timeout=self.timeout_s, wait_for_ready=True)
+                try:
+                    state = self._stub.StartUpload(start, metadata=self._metadata,
+                                                   timeout=self.timeout_s,
+                                                   wait_for_ready=answered)
+                except grpc.RpcError as e:
+                    if not answered:
+                        raise JobError.from_rpc(e) from None
+                    raise
+                answered = True
                 if on_progress:
                     on_progress(state.received_bytes, state.size_bytes)
                 if state.complete:

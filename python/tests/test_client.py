@@ -6,6 +6,7 @@ code; a scan uploaded from here through a broken stream, resumed, and run. Then 
 import filecmp
 import os
 import subprocess
+import time
 
 import pytest
 
@@ -203,6 +204,17 @@ def test_upload_resumed_and_submitted(cluster, tmp_path):
         job = client.submit(upload_id=up.upload_id, output_name="sent")
         assert job.input_path == "uploads/sent.h5"
         assert client.wait(job.job_id, timeout_s=240).state == "SUCCEEDED", cluster.log_tails()
+
+
+def test_upload_to_no_server_fails_at_once(tmp_path):
+    local = tmp_path / "x.h5"
+    local.write_bytes(b"0123456789")
+    start = time.monotonic()
+    with JobClient("127.0.0.1:1", token=TOKEN) as client:
+        with pytest.raises(JobError) as e:
+            client.upload(local)
+    assert e.value.code == "UNAVAILABLE"
+    assert time.monotonic() - start < 20  # no resuming before the server ever answered
 
 
 def test_tls(tmp_path_factory, carvemap_bin):

@@ -281,6 +281,9 @@ absl::StatusOr<UploadInfo> JobClient::Upload(const std::string& path,
   int idle_attempts = 0;
   double wait_s = 0.5;
   absl::Status last;
+  // Until the server has answered once, an error is the answer: a wrong address or a server
+  // that is down should not look like a connection to ride out.
+  bool answered = false;
   while (true) {
     if (!last.ok()) {
       if (!Resumable(last) || ++idle_attempts >= options.max_attempts) return last;
@@ -288,12 +291,14 @@ absl::StatusOr<UploadInfo> JobClient::Upload(const std::string& path,
       std::this_thread::sleep_for(std::chrono::duration<double>(wait_s));
       wait_s = std::min(wait_s * 2, 8.0);
     }
-    // Where the server stands; wait_for_ready rides out a reconnect.
+    // Where the server stands; once it has answered, wait_for_ready rides out a reconnect.
     pb::Upload state;
-    auto ctx = impl_->Context(60);
-    ctx->set_wait_for_ready(true);
+    auto ctx = impl_->Context(answered ? 60 : 30);
+    ctx->set_wait_for_ready(answered);
     last = FromGrpcStatus(impl_->stub->StartUpload(ctx.get(), start, &state));
+    if (!last.ok() && !answered) return last;
     if (!last.ok()) continue;
+    answered = true;
     if (options.on_progress) options.on_progress(state.received_bytes(), state.size_bytes());
     if (state.complete()) return FromProto(state);
     const int64_t from = state.received_bytes();

@@ -167,6 +167,19 @@ def main():
         if left != [f".uploads/{upload_id}.json", "uploads/big.h5"]:
             raise TestFailure(f"the tenant's folder holds {left}")
 
+        # No server at all: the CLI says so at once instead of resuming (nothing answered yet).
+        closed = socket.socket()
+        closed.bind(("127.0.0.1", 0))
+        t0 = time.monotonic()
+        nobody = subprocess.run([args.carvemap, "upload", local, "--server",
+                                 f"127.0.0.1:{closed.getsockname()[1]}", "--token-file",
+                                 token_file, "-q"], capture_output=True, text=True, timeout=120)
+        closed.close()
+        if nobody.returncode == 0 or time.monotonic() - t0 > 40 or "resuming" in nobody.stderr:
+            raise TestFailure(f"an upload to no server: exit {nobody.returncode} after "
+                              f"{time.monotonic() - t0:.1f} s: {nobody.stderr}")
+        log(f"  no server: refused in {time.monotonic() - t0:.1f} s: {nobody.stderr.strip()}")
+
         pb, pb_grpc, grpc = stubs()
         channel = grpc.insecure_channel(address)
         api = pb_grpc.JobServiceStub(channel)
