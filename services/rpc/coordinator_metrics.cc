@@ -88,7 +88,7 @@ CoordinatorMetrics::CoordinatorMetrics()
       rpc_seconds_(BuildHistogram()
                        .Name("carvemap_rpc_duration_seconds")
                        .Help("Time from an RPC's start to its status (whole stream for "
-                             "WatchJob and FetchArtifact), by method and status code")
+                             "WatchJob, FetchArtifact and UploadScan), by method and status code")
                        .Register(*registry_)) {
   // Every label value a counter can take exists from the start at 0, so that increase() and
   // rate() see the first job finish (a series born at 1 has no earlier sample to compare).
