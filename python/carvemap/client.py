@@ -429,11 +429,15 @@ class JobClient:
                 begin = sent[0] = state.received_bytes
 
                 def messages():
+                    # At least one message, empty when the server holds every byte already
+                    # (it stopped before it could check and place the file).
                     with open(path, "rb") as f:
                         f.seek(begin)
-                        while sent[0] < state.size_bytes:
-                            data = f.read(chunk_size_bytes)
-                            if not data:
+                        first = True
+                        while sent[0] < state.size_bytes or first:
+                            first = False
+                            data = f.read(chunk_size_bytes) if sent[0] < state.size_bytes else b""
+                            if not data and sent[0] < state.size_bytes:
                                 short[0] = True
                                 return
                             yield pb.UploadScanRequest(upload_id=state.upload_id,

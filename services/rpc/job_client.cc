@@ -315,9 +315,12 @@ absl::StatusOr<UploadInfo> JobClient::Upload(const std::string& path,
     msg.set_upload_id(state.upload_id());
     int64_t offset = from;
     bool short_file = false;
-    while (offset < state.size_bytes()) {
-      const size_t n = std::fread(buf.data(), 1, buf.size(), f.get());
-      if (n == 0) {
+    // At least one message, empty when the server holds every byte already (it stopped before
+    // it could check and place the file): the stream's end makes it finish.
+    for (bool first = true; offset < state.size_bytes() || first; first = false) {
+      const size_t n =
+          offset < state.size_bytes() ? std::fread(buf.data(), 1, buf.size(), f.get()) : 0;
+      if (n == 0 && offset < state.size_bytes()) {
         short_file = true;
         break;
       }

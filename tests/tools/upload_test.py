@@ -15,6 +15,7 @@ Usage: upload_test.py --carvemap BIN --work DIR [--size-mb 1024]
 """
 import argparse
 import hashlib
+import json
 import os
 import shutil
 import socket
@@ -166,6 +167,29 @@ def main():
                       for f in files)
         if left != [f".uploads/{upload_id}.json", "uploads/big.h5"]:
             raise TestFailure(f"the tenant's folder holds {left}")
+
+        # A coordinator that stopped with every byte received but before it checked and placed
+        # the file (made here on disk, as docs/RPC.md lays it out): the next upload of the same
+        # file finishes it without sending the bytes again.
+        held = os.path.join(work, "held.bin")
+        with open(held, "wb") as f:
+            f.write(os.urandom(100000))
+        held_sha = sha256_file(held)
+        held_id = "u-" + hashlib.sha256(f"held.h5\n100000\n{held_sha}".encode()).hexdigest()[:24]
+        work_dir = os.path.join(data_root, "alice", ".uploads")
+        shutil.copy(held, os.path.join(work_dir, held_id + ".partial"))
+        with open(os.path.join(work_dir, held_id + ".json"), "w") as f:
+            json.dump({"name": "held.h5", "size_bytes": 100000, "sha256_hex": held_sha,
+                       "complete": False}, f)
+        finish = subprocess.run([args.carvemap, "upload", held, "--name", "held.h5", "--server",
+                                 address, "--token-file", token_file, "-q"],
+                                capture_output=True, text=True, timeout=120)
+        placed_held = os.path.join(data_root, "alice", "uploads", "held.h5")
+        if finish.returncode != 0 or finish.stdout.split() != [held_id, "uploads/held.h5"] or \
+                sha256_file(placed_held) != held_sha:
+            raise TestFailure(f"an upload held whole but unfinished: {finish.returncode} "
+                              f"{finish.stdout!r} {finish.stderr}")
+        log("  every byte held but not placed: finished by the next upload, no byte sent")
 
         # No server at all: the CLI says so at once instead of resuming (nothing answered yet).
         closed = socket.socket()
