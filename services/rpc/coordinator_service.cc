@@ -32,6 +32,7 @@
 #include "coordinator/job_plan.h"
 #include "coordinator/job_runner.h"
 #include "coordinator/job_runtime.h"
+#include "coordinator/job_submit.h"
 #include "coordinator/lease_id.h"
 #include "coordinator/lease_table.h"
 #include "coordinator/rate_window.h"
@@ -118,11 +119,6 @@ absl::StatusOr<std::string> JobOfLease(absl::string_view lease_id) {
   return std::move(id->job_id);
 }
 
-bool ValidOutputName(const std::string& name) {
-  static const std::regex kName("[A-Za-z0-9._-]{1,128}");
-  return name != "." && name != ".." && std::regex_match(name, kName);
-}
-
 bool ValidRelativePath(const std::string& path) {
   if (path.empty() || path.front() == '/') return false;
   for (const auto& part : fs::path(path)) {
@@ -147,22 +143,6 @@ std::string NewJobId() {
   char day[16];
   std::strftime(day, sizeof(day), "%Y%m%d", &tm);
   return absl::StrCat("j-", day, "-", RandomHex(6));
-}
-
-// Creates `dir` and checks we can write files into it: a job whose outputs cannot be written
-// must fail at submit, not after an hour of carving.
-absl::Status CheckWritableDir(const fs::path& dir, absl::string_view what) {
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec) {
-    return absl::FailedPreconditionError(
-        absl::StrCat(what, " ", dir.string(), ": cannot create: ", ec.message()));
-  }
-  if (::access(dir.c_str(), W_OK | X_OK) != 0) {
-    return absl::FailedPreconditionError(
-        absl::StrCat(what, " ", dir.string(), ": not writable: ", std::strerror(errno)));
-  }
-  return absl::OkStatus();
 }
 
 void ToProto(const CarveTask& t, pb::Lease& lease) {
@@ -1283,7 +1263,12 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
                                                 const pb::SubmitJobRequest& req,
                                                 pb::SubmitJobResponse& resp) {
   if (stopping_) return absl::UnavailableError("coordinator shutting down");
-  std::string input = req.input_path();
+  SubmitRequest submit{.tenant = caller.tenant,
+                       .tenant_dir = caller.tenant_dir,
+                       .input_path = req.input_path(),
+                       .output_name = req.output_name(),
+                       .params = FromProto(req.params()),
+                       .idempotency_key = req.idempotency_key()};
   if (req.input_case() == pb::SubmitJobRequest::kUploadId) {
     absl::StatusOr<UploadState> upload =
         uploads_->Find(folders_.DataDir(caller.tenant_dir), req.upload_id());
@@ -1293,111 +1278,27 @@ absl::Status CoordinatorServer::Impl::SubmitJob(const Caller& caller,
           absl::StrCat("upload ", upload->id, " holds ", upload->received_bytes, " of ",
                        upload->size_bytes, " bytes: finish it first"));
     }
-    input = upload->input_path;
+    submit.input_path = upload->input_path;
   }
-  // Text first (INVALID_ARGUMENT, nothing on disk looked at), the file after the parameters.
-  if (absl::Status s = CheckConfinedPathText(input, "input_path"); !s.ok()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(s.message(), " (input paths are relative to the data root)"));
-  }
-  if (*fs::path(input).lexically_normal().begin() == ".uploads") {
-    return absl::InvalidArgumentError(
-        "input_path: .uploads/ holds unfinished uploads; submit the upload_id once it is "
-        "complete (or uploads/<name>)");
-  }
-  absl::StatusOr<JobParams> params = ResolveJobParams(FromProto(req.params()));
-  if (!params.ok()) return params.status();
-  if (!req.output_name().empty() && !ValidOutputName(req.output_name())) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "output_name '", req.output_name(), "': must match [A-Za-z0-9._-]{1,128}"));
-  }
-  if (req.idempotency_key().size() > 128) {
-    return absl::InvalidArgumentError("idempotency_key longer than 128 bytes");
-  }
-  if (!req.idempotency_key().empty()) {
-    absl::StatusOr<std::optional<JobRecord>> found =
-        store_->FindJobByIdempotencyKey(caller.tenant, req.idempotency_key());
-    if (!found.ok()) return found.status();
-    if (found->has_value()) {
-      const JobRecord& j = **found;
-      if (j.input_path != input || j.params_json != params->ToJson() ||
-          (!req.output_name().empty() && j.output_name != req.output_name())) {
-        return absl::AlreadyExistsError(absl::StrCat(
-            "idempotency_key '", req.idempotency_key(), "' was used for job ", j.id,
-            " with a different request"));
-      }
-      ToProto(j, *resp.mutable_job());
-      resp.set_deduplicated(true);
-      return absl::OkStatus();
-    }
-  }
-
-  // The scan, resolved under the tenant's folder: PERMISSION_DENIED if a symlink leads out,
-  // NOT_FOUND if missing or unreadable (storage/confined_path.h); the same answers whatever
-  // lies outside.
-  if (absl::StatusOr<ConfinedFile> scan =
-          ConfinedFile::Open(folders_.DataDir(caller.tenant_dir), input, "input_path");
-      !scan.ok()) {
-    return scan.status();
-  }
-
-  JobRecord job;
-  // A keyed submit gets an id derived from its tenant and key (unique per tenant, like the
-  // key): tiles record their job id, so two runs submitted with the same key (`carvemap run`
-  // with 1 and with 2 workers) give byte-identical tiles, and two tenants using the same key
-  // get different jobs.
-  job.id = req.idempotency_key().empty()
-               ? NewJobId()
-               : absl::StrCat("j-", Sha256Hex(absl::StrCat(caller.tenant, "\n",
-                                                           req.idempotency_key()))
-                                        .substr(0, 16));
-  job.tenant = caller.tenant;
-  job.tenant_dir = caller.tenant_dir;
-  job.input_path = input;
-  job.output_name = req.output_name().empty() ? job.id : req.output_name();
-  job.params_json = params->ToJson();
-  job.idempotency_key = req.idempotency_key();
-  job.created_unix_ms = job.updated_unix_ms = NowMs();
-  // The output folder must not already be a link out of the tenant's output folder (one
-  // planted there would have the merge write elsewhere).
-  const std::string output_root = folders_.OutputRoot(job.tenant_dir);
-  if (absl::Status s = CheckWritableDir(output_root, "output root"); !s.ok()) {
-    spdlog::error("coordinator: {}", s.ToString());
-    return absl::FailedPreconditionError("the output root is not writable");
-  }
-  if (absl::StatusOr<std::string> out = ResolveConfinedPath(output_root, job.output_name,
-                                                            "output_name");
-      !out.ok() && !absl::IsNotFound(out.status())) {
-    return out.status();
-  }
-  std::error_code ec;
-  const bool output_existed = fs::exists(folders_.OutputDir(job), ec);
-  if (absl::Status s = CheckWritableDir(folders_.OutputDir(job), "output"); !s.ok()) {
-    spdlog::error("coordinator: job {}: {}", job.id, s.ToString());
-    return absl::FailedPreconditionError(
-        absl::StrCat("output_name '", job.output_name, "': the output folder cannot be written"));
-  }
-  if (absl::Status s = CheckWritableDir(folders_.TilesDir(job), "tiles dir"); !s.ok()) return s;
-  if (absl::Status s = store_->CreateJob(job, spec_.max_jobs_per_tenant); !s.ok()) {
-    if (!output_existed) {
-      // A refused submit leaves nothing behind: the folders made above, if still empty
-      // (fs::remove does not remove a folder with anything in it).
-      fs::remove(folders_.TilesDir(job), ec);
-      fs::remove(folders_.OutputDir(job), ec);
-    }
-    if (absl::IsAlreadyExists(s)) {
-      return absl::AlreadyExistsError(
-          absl::StrCat("output_name '", job.output_name, "' is used by another job"));
-    }
-    return s;
+  absl::StatusOr<SubmitOutcome> outcome = carvemap::SubmitJob(
+      submit,
+      {.store = store_.get(),
+       .folders = folders_,
+       .max_jobs_per_tenant = spec_.max_jobs_per_tenant,
+       .now_unix_ms = NowMs(),
+       .new_job_id = NewJobId,
+       .server_note = [](const std::string& note) { spdlog::error("coordinator: {}", note); }});
+  if (!outcome.ok()) return outcome.status();
+  const JobRecord& job = outcome->job;
+  ToProto(job, *resp.mutable_job());
+  if (outcome->deduplicated) {
+    resp.set_deduplicated(true);
+    return absl::OkStatus();
   }
   LogScope log_scope({{"job", job.id}, {"tenant", job.tenant}});
   spdlog::info("coordinator: job {} of tenant {} submitted: {} -> {} (resolution {} m)", job.id,
-               job.tenant, (fs::path(folders_.DataDir(job.tenant_dir)) / input).string(),
-               folders_.OutputDir(job), params->resolution_m);
-  absl::StatusOr<JobRecord> stored = store_->GetJob(job.id);
-  if (!stored.ok()) return stored.status();
-  ToProto(*stored, *resp.mutable_job());
+               job.tenant, (fs::path(folders_.DataDir(job.tenant_dir)) / job.input_path).string(),
+               folders_.OutputDir(job), JobParams::FromJson(job.params_json).resolution_m);
   metrics_.JobSubmitted();
   StartJobThread(job.id);
   return absl::OkStatus();
