@@ -159,26 +159,27 @@ absl::StatusOr<UploadState> UploadStore::Find(const std::string& dir, const std:
   return s;
 }
 
-absl::Status UploadStore::RemoveExpired(const std::string& dir, int64_t now_ms) {
+std::vector<UploadState> UploadStore::UnfinishedUploads(const std::string& dir, int64_t now_ms) {
+  std::vector<UploadState> kept;
   std::error_code ec;
-  std::vector<std::string> expired;
   for (fs::directory_iterator it(fs::path(dir) / kWorkDir, ec), end; !ec && it != end;
        it.increment(ec)) {
     const std::string file = it->path().filename().string();
     if (!absl::EndsWith(file, ".json")) continue;
-    const std::string id = file.substr(0, file.size() - 5);
-    absl::StatusOr<UploadState> s = ReadRecord(dir, id);
+    absl::StatusOr<UploadState> s = ReadRecord(dir, file.substr(0, file.size() - 5));
     if (!s.ok() || s->complete) continue;
-    const int64_t partial_ms = MtimeMs(WorkPath(dir, id, ".partial"));
-    const int64_t last_ms = std::max(partial_ms, MtimeMs(it->path().string()));
-    if (last_ms >= 0 && now_ms - last_ms > options_.expire_after_ms) expired.push_back(id);
+    const std::string partial = WorkPath(dir, s->id, ".partial");
+    const int64_t last_ms = std::max(MtimeMs(partial), MtimeMs(it->path().string()));
+    if (last_ms >= 0 && now_ms - last_ms > options_.expire_after_ms &&
+        writing_.count(absl::StrCat(dir, "\n", s->id)) == 0) {
+      std::error_code rm;
+      fs::remove(partial, rm);
+      fs::remove(it->path(), rm);
+      continue;
+    }
+    kept.push_back(*std::move(s));
   }
-  for (const std::string& id : expired) {
-    if (writing_.count(absl::StrCat(dir, "\n", id)) > 0) continue;
-    fs::remove(WorkPath(dir, id, ".partial"), ec);
-    fs::remove(WorkPath(dir, id, ".json"), ec);
-  }
-  return absl::OkStatus();
+  return kept;
 }
 
 absl::StatusOr<UploadState> UploadStore::Start(const std::string& dir, const UploadRequest& r,
@@ -199,7 +200,7 @@ absl::StatusOr<UploadState> UploadStore::Start(const std::string& dir, const Upl
   for (const char* sub : {kFinalDir, kWorkDir}) {
     if (absl::Status s = EnsurePlainFolder(dir, sub); !s.ok()) return s;
   }
-  if (absl::Status s = RemoveExpired(dir, now_ms); !s.ok()) return s;
+  const std::vector<UploadState> unfinished = UnfinishedUploads(dir, now_ms);
   const std::string id = UploadId(r);
   std::error_code ec;
   if (FileSize(WorkPath(dir, id, ".json")) >= 0) {
@@ -221,19 +222,14 @@ absl::StatusOr<UploadState> UploadStore::Start(const std::string& dir, const Upl
        it.increment(ec)) {
     if (it->is_regular_file(ec)) used += std::max<int64_t>(FileSize(it->path().string()), 0);
   }
-  for (fs::directory_iterator it(fs::path(dir) / kWorkDir, ec), end; !ec && it != end;
-       it.increment(ec)) {
-    const std::string file = it->path().filename().string();
-    if (!absl::EndsWith(file, ".json")) continue;
-    absl::StatusOr<UploadState> other = ReadRecord(dir, file.substr(0, file.size() - 5));
-    if (!other.ok() || other->complete) continue;
-    if (other->name == r.name) {
+  for (const UploadState& other : unfinished) {
+    if (other.name == r.name) {
       return absl::AlreadyExistsError(
           absl::StrCat("an upload of ", r.name, " with another size or SHA-256 is unfinished (",
-                       other->id, "); it expires after ", options_.expire_after_ms / 3600000,
+                       other.id, "); it expires after ", options_.expire_after_ms / 3600000,
                        " h without data, or choose another name"));
     }
-    used += other->size_bytes;
+    used += other.size_bytes;
   }
   if (options_.quota_bytes > 0 && used + r.size_bytes > options_.quota_bytes) {
     return absl::ResourceExhaustedError(absl::StrCat(

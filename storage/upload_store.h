@@ -15,6 +15,7 @@
 #include <memory>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "absl/base/thread_annotations.h"
 #include "absl/status/statusor.h"
@@ -104,7 +105,9 @@ class UploadStore {
  private:
   friend class UploadWriter;
   void Release(const std::string& key);
-  absl::Status RemoveExpired(const std::string& dir, int64_t now_ms)
+  // The unfinished uploads of `dir`, each record read once; those without data for longer
+  // than expire_after_ms (and not being written) are removed instead.
+  std::vector<UploadState> UnfinishedUploads(const std::string& dir, int64_t now_ms)
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
 
   const Options options_;
