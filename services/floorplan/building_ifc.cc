@@ -19,6 +19,7 @@
 #include "services/floorplan/floorplan_dxf.h"
 #include "services/floorplan/room_polygons.h"
 #include "storage/atomic_file.h"
+#include "storage/file_hash.h"
 
 namespace carvemap {
 namespace {
@@ -27,58 +28,42 @@ using Eigen::Vector2d;
 
 // --- GlobalIds -------------------------------------------------------------------------------
 
-uint64_t Mix64(uint64_t z) {  // splitmix64's finalizer: every input bit moves every output bit
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
-}
-
-// FNV-1a over bytes, for the building's key.
-struct Hasher {
-  uint64_t h = 0xcbf29ce484222325ULL;
-  void Bytes(const void* p, size_t n) {
-    const auto* c = static_cast<const unsigned char*>(p);
-    for (size_t i = 0; i < n; ++i) h = (h ^ c[i]) * 0x100000001b3ULL;
-  }
-  void Double(double v) {
+// The building's key: SHA-256 of what the plans hold (levels, vertices, triangles, rooms and
+// their heights), so the same plans give the same ids and other buildings other ids.
+std::string BuildingKey(std::span<const std::pair<Level, FloorPlan>> plans) {
+  std::string bytes;
+  const auto put = [&bytes](const void* p, size_t n) {
+    bytes.append(static_cast<const char*>(p), n);
+  };
+  const auto real = [&put](double v) {
     if (v == 0) v = 0;  // −0 and +0 alike
-    Bytes(&v, sizeof v);
-  }
-  void Int(int64_t v) { Bytes(&v, sizeof v); }
-};
-
-uint64_t BuildingKey(std::span<const std::pair<Level, FloorPlan>> plans) {
-  Hasher h;
+    put(&v, sizeof v);
+  };
   for (const auto& [level, plan] : plans) {
-    h.Int(level.index);
-    h.Double(level.floor_z);
+    const int64_t index = level.index;
+    put(&index, sizeof index);
+    real(level.floor_z);
     for (const Vector2d& v : plan.vertices) {
-      h.Double(v.x());
-      h.Double(v.y());
+      real(v.x());
+      real(v.y());
     }
-    for (const auto& t : plan.triangles) h.Bytes(t.data(), sizeof(uint32_t) * 3);
-    for (int r : plan.triangle_room) h.Int(r);
+    for (const auto& t : plan.triangles) put(t.data(), sizeof(uint32_t) * 3);
+    for (int r : plan.triangle_room) put(&r, sizeof r);
     for (const FloorPlanRoom& room : plan.rooms) {
-      h.Double(room.floor_z);
-      h.Double(room.ceiling_z);
+      real(room.floor_z);
+      real(room.ceiling_z);
     }
   }
-  return Mix64(h.h);
+  return Sha256Hex(bytes);
 }
 
-// IfcGloballyUniqueId: 128 bits in IFC's base 64 (the buildingSMART compression of a GUID:
-// its first byte in 2 characters, then 5 groups of 3 bytes in 4 characters each).
-std::string GlobalId(uint64_t key, absl::string_view role) {
-  uint64_t a = Mix64(key ^ 0x9e3779b97f4a7c15ULL), b = Mix64(key + 0x632be59bd9b4e019ULL);
-  for (unsigned char c : role) {
-    a = Mix64(a ^ c);
-    b = Mix64(b + c + 0x100);
-  }
-  std::array<unsigned char, 16> bytes;
-  for (int i = 0; i < 8; ++i) {
-    bytes[i] = static_cast<unsigned char>(a >> (56 - 8 * i));
-    bytes[8 + i] = static_cast<unsigned char>(b >> (56 - 8 * i));
-  }
+// IfcGloballyUniqueId: the first 128 bits of SHA-256(key, role) in IFC's base 64 (the
+// buildingSMART compression of a GUID: its first byte in 2 characters, then 5 groups of 3
+// bytes in 4 characters each).
+std::string GlobalId(const std::string& key, absl::string_view role) {
+  const std::string hex = Sha256Hex(absl::StrCat(key, "\n", role));
+  std::array<uint32_t, 16> bytes;
+  for (int i = 0; i < 16; ++i) bytes[i] = std::stoul(hex.substr(2 * i, 2), nullptr, 16);
   static constexpr char kChars[] =
       "0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz_$";
   std::string out;
@@ -316,8 +301,8 @@ absl::StatusOr<BuildingIfcCounts> WriteBuildingIfc(
     if (!g.ok()) return g.status();
     geometry.push_back(*std::move(g));
   }
-  const uint64_t key = BuildingKey(plans);
-  const auto guid = [key](absl::string_view role) { return Str(GlobalId(key, role)); };
+  const std::string key = BuildingKey(plans);
+  const auto guid = [&key](absl::string_view role) { return Str(GlobalId(key, role)); };
   const double t = options.wall_thickness_m;
 
   StepData d;
