@@ -18,9 +18,9 @@
 // Coordinates are the plans' (x, y in metres, z up); the model's y is what the job calls north
 // (IfcGeometricRepresentationContext.TrueNorth is left at its default, +y).
 //
-// GlobalIds are derived from the SHA-256 of the plans and each entity's role ("level 2 room 5"), so
-// the same plans give the same bytes and other buildings other ids; the header's time stamp is
-// fixed for the same reason.
+// GlobalIds are derived from the SHA-256 of the plans and each entity's role ("level 2 room
+// 5"), so the same plans give the same bytes and other buildings other ids; the header's time
+// stamp is fixed for the same reason.
 //
 // Plain function over plain data: no logging.
 #pragma once
