@@ -1443,46 +1443,42 @@ absl::Status CoordinatorServer::Impl::WatchJob(const Caller& caller, grpc::Serve
 }
 
 bool CoordinatorServer::Impl::WriteProgress(grpc::ServerWriter<pb::JobEvent>& writer,
-                                            pb::JobEvent e, const JobRecord& job_record,
+                                            pb::JobEvent e, const JobRecord& job,
                                             JobState state,
                                             std::chrono::steady_clock::time_point now) {
-  const JobRecord* job = &job_record;
+  auto* p = e.mutable_progress();
+  auto* c = p->mutable_chunks();
+  c->set_chunks_total(job.counters.chunks_total);
+  c->set_chunks_done(job.counters.chunks_done);
+  c->set_chunks_leased(job.counters.chunks_leased);
+  c->set_chunk_retries(job.counters.chunk_retries);
   {
-    auto* p = e.mutable_progress();
-    auto* c = p->mutable_chunks();
-    c->set_chunks_total(job->counters.chunks_total);
-    c->set_chunks_done(job->counters.chunks_done);
-    c->set_chunks_leased(job->counters.chunks_leased);
-    c->set_chunk_retries(job->counters.chunk_retries);
-    {
-      absl::MutexLock lock(&mu_);
-      auto rt = runtime_.find(job->id);
-      if (rt != runtime_.end()) {
-        const JobProgress progress = ProgressOf(rt->second, job->counters, state, now);
-        p->set_rays_done(progress.rays_done);
-        p->set_rays_total(progress.rays_total);
-        p->set_rays_per_s(progress.rays_per_s);
-        p->set_eta_s(progress.eta_s);
-        p->set_stage_done(progress.stage_done);
-        p->set_stage_total(progress.stage_total);
-        for (const StageTimes::Stage& stage : progress.stages) {
-          auto* st = p->add_stages();
-          st->set_stage(stage.name);
-          st->set_elapsed_s(stage.elapsed_s);
-          st->set_finished(stage.finished);
-        }
+    absl::MutexLock lock(&mu_);
+    if (auto rt = runtime_.find(job.id); rt != runtime_.end()) {
+      const JobProgress progress = ProgressOf(rt->second, job.counters, state, now);
+      p->set_rays_done(progress.rays_done);
+      p->set_rays_total(progress.rays_total);
+      p->set_rays_per_s(progress.rays_per_s);
+      p->set_eta_s(progress.eta_s);
+      p->set_stage_done(progress.stage_done);
+      p->set_stage_total(progress.stage_total);
+      for (const StageTimes::Stage& stage : progress.stages) {
+        auto* st = p->add_stages();
+        st->set_stage(stage.name);
+        st->set_elapsed_s(stage.elapsed_s);
+        st->set_finished(stage.finished);
       }
-      std::set<std::string> active;
-      for (const std::string& worker : workers_.Ids()) {
-        for (const std::string& lease : table_->LeasesOf(worker)) {
-          absl::StatusOr<LeaseId> id = LeaseId::Parse(lease);
-          if (id.ok() && id->job_id == job->id) active.insert(worker);
-        }
-      }
-      p->set_active_workers(static_cast<int32_t>(active.size()));
     }
-    return writer.Write(e);
+    std::set<std::string> active;
+    for (const std::string& worker : workers_.Ids()) {
+      for (const std::string& lease : table_->LeasesOf(worker)) {
+        absl::StatusOr<LeaseId> id = LeaseId::Parse(lease);
+        if (id.ok() && id->job_id == job.id) active.insert(worker);
+      }
+    }
+    p->set_active_workers(static_cast<int32_t>(active.size()));
   }
+  return writer.Write(e);
 }
 
 absl::Status CoordinatorServer::Impl::FetchArtifact(const Caller& caller,
