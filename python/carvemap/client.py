@@ -163,6 +163,15 @@ class Upload:
                    u.complete)
 
 
+def _sha256_of(path):
+    """hashlib's SHA-256 object over the file at `path` (to be continued or read)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest
+
+
 # What a broken connection or a restarting server answers: worth resuming an upload after.
 _RESUMABLE = ("UNAVAILABLE", "ABORTED", "DEADLINE_EXCEEDED", "INTERNAL", "UNKNOWN", "CANCELLED")
 
@@ -400,10 +409,7 @@ class JobClient:
         that moved no byte. JobError: ALREADY_EXISTS (the name is taken by another file),
         RESOURCE_EXHAUSTED (quota, disk), DATA_LOSS (the file changed while it was sent)."""
         path = os.fspath(path)
-        digest = hashlib.sha256()
-        with open(path, "rb") as f:
-            for block in iter(lambda: f.read(1 << 20), b""):
-                digest.update(block)
+        digest = _sha256_of(path)
         start = pb.StartUploadRequest(name=name or os.path.basename(path),
                                       size_bytes=os.path.getsize(path),
                                       sha256_hex=digest.hexdigest())
@@ -475,11 +481,7 @@ class JobClient:
         partial = dest + ".partial"
         os.makedirs(os.path.dirname(os.path.abspath(dest)), exist_ok=True)
         offset = os.path.getsize(partial) if os.path.exists(partial) else 0
-        digest = hashlib.sha256()
-        if offset:
-            with open(partial, "rb") as f:
-                for block in iter(lambda: f.read(1 << 20), b""):
-                    digest.update(block)
+        digest = _sha256_of(partial) if offset else hashlib.sha256()
         req = pb.FetchArtifactRequest(job_id=job_id, name=name, offset=offset,
                                       chunk_size_bytes=chunk_size_bytes)
         sha, total, done = "", None, False
