@@ -1443,8 +1443,7 @@ absl::Status CoordinatorServer::Impl::WatchJob(const Caller& caller, grpc::Serve
 }
 
 bool CoordinatorServer::Impl::WriteProgress(grpc::ServerWriter<pb::JobEvent>& writer,
-                                            pb::JobEvent e, const JobRecord& job,
-                                            JobState state,
+                                            pb::JobEvent e, const JobRecord& job, JobState state,
                                             std::chrono::steady_clock::time_point now) {
   auto* p = e.mutable_progress();
   auto* c = p->mutable_chunks();
