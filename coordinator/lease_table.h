@@ -11,14 +11,15 @@
 #ifndef CARVEMAP_COORDINATOR_LEASE_TABLE_H_
 #define CARVEMAP_COORDINATOR_LEASE_TABLE_H_
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <map>
-#include <utility>
 #include <optional>
 #include <set>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -47,6 +48,11 @@ class LeaseTable {
    public:
     virtual ~Clock() = default;
     virtual int64_t NowUnixMs() = 0;
+    // Monotonic time, for rates and stage timings (the wall clock may jump). A fake that
+    // measures them overrides it.
+    virtual std::chrono::steady_clock::time_point SteadyNow() {
+      return std::chrono::steady_clock::now();
+    }
     // The system clock (std::chrono::system_clock).
     static Clock& System();
   };
