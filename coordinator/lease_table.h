@@ -6,8 +6,8 @@
 // restarts rebuilds the same table with LoadJob (DONE chunks stay done, LEASED ones are
 // requeued). The rules are written out in docs/RPC.md ("Leases").
 //
-// Thread-compatible: one LeaseTable is used under the caller's lock (the carve-task service
-// holds an absl::Mutex around every call).
+// Thread-compatible: one LeaseTable is used under the caller's lock (coordinator/
+// coordinator_core.h holds its mutex around every call).
 #ifndef CARVEMAP_COORDINATOR_LEASE_TABLE_H_
 #define CARVEMAP_COORDINATOR_LEASE_TABLE_H_
 

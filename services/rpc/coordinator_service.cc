@@ -11,8 +11,6 @@
 #include <map>
 #include <optional>
 #include <random>
-#include <regex>
-#include <set>
 #include <thread>
 #include <vector>
 
@@ -27,6 +25,7 @@
 #include "absl/synchronization/mutex.h"
 #include "absl/synchronization/notification.h"
 #include "coordinator/carve_task.h"
+#include "coordinator/coordinator_core.h"
 #include "coordinator/job_folders.h"
 #include "coordinator/job_params.h"
 #include "coordinator/job_plan.h"
@@ -35,10 +34,8 @@
 #include "coordinator/job_submit.h"
 #include "coordinator/lease_id.h"
 #include "coordinator/lease_table.h"
-#include "coordinator/rate_window.h"
 #include "coordinator/scan_north.h"
 #include "coordinator/scan_slices.h"
-#include "coordinator/worker_registry.h"
 #include "proto/carvemap/v1/carve.grpc.pb.h"
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
 #include "services/geometry/octree_keys.h"
@@ -292,9 +289,8 @@ class CoordinatorServer::Impl final : public JobStages {
   absl::Status WatchJob(const Caller& caller, grpc::ServerContext& ctx,
                         const pb::WatchJobRequest& req, grpc::ServerWriter<pb::JobEvent>& writer);
   // One Progress event of WatchJob; false when the client is gone.
-  bool WriteProgress(grpc::ServerWriter<pb::JobEvent>& writer, pb::JobEvent e,
-                     const JobRecord& job, JobState state,
-                     std::chrono::steady_clock::time_point now);
+  bool WriteProgress(grpc::ServerWriter<pb::JobEvent>& writer, pb::JobEvent e, const JobRecord& job,
+                     JobState state);
   absl::Status CancelJob(const Caller& caller, const pb::CancelJobRequest& req,
                          pb::CancelJobResponse& resp);
   absl::Status ListJobs(const Caller& caller, const pb::ListJobsRequest& req,
@@ -326,18 +322,18 @@ class CoordinatorServer::Impl final : public JobStages {
   // to the coordinator's shutdown: each kept one would hold its stack's mappings for ever.
   void StartJobThread(const std::string& job_id) {
     ReapJobThreads();
-    absl::MutexLock lock(&mu_);
+    absl::MutexLock lock(&threads_mu_);
     const uint64_t key = ++job_thread_seq_;
     job_threads_.emplace(key, std::thread([this, job_id, key] {
                            RunJob(job_id);
-                           absl::MutexLock done_lock(&mu_);
+                           absl::MutexLock done_lock(&threads_mu_);
                            ended_job_threads_.push_back(key);
                          }));
   }
   void ReapJobThreads() {
     std::vector<std::thread> ended;
     {
-      absl::MutexLock lock(&mu_);
+      absl::MutexLock lock(&threads_mu_);
       for (uint64_t key : ended_job_threads_) {
         auto it = job_threads_.find(key);
         if (it == job_threads_.end()) continue;
@@ -356,8 +352,7 @@ class CoordinatorServer::Impl final : public JobStages {
   absl::Status Merge(const JobRecord& job) override { return MergeStage(job); }
   void EnterStage(const std::string& job_id, const std::string& stage) override;
   std::string TenantView(const std::string& job_id, const std::string& text) override {
-    absl::MutexLock lock(&mu_);
-    return TenantViewLocked(job_id, text);
+    return core_->TenantView(job_id, text);
   }
   void Moved(const std::string& job_id, JobState from, JobState to,
              const std::string& reason) override;
@@ -377,9 +372,6 @@ class CoordinatorServer::Impl final : public JobStages {
   // Removes the partial sums in `dir` once nothing will read them (the files; with
   // files_only false the folder and its subfolders too), unless the coordinator keeps them.
   void RemovePartials(const std::string& job_id, const std::string& dir, bool files_only);
-  // Waits until every task of a job loaded in the lease table is committed (or, with
-  // except_held, every task not held). Cancelled as CarveStage.
-  absl::Status WaitForChunks(const std::string& job_id, bool except_held = false);
   // The chunks the pass's slices carved into, from their partial sums' indexes.
   absl::StatusOr<std::vector<ChunkCoord>> ChunksOfPass(const std::string& job_id);
   // §5.6.1, called by the merge: `chunks` leased to the workers once more, at `resolution_m`,
@@ -387,31 +379,14 @@ class CoordinatorServer::Impl final : public JobStages {
   absl::StatusOr<std::string> RecarveStage(const std::string& job_id,
                                            const std::vector<RecarveChunk>& chunks,
                                            double resolution_m);
-  // Job.error as the tenant may read it (coordinator/job_folders.h TenantView). A job no
-  // longer running has no runtime entry (CleanUp drops it) and none is made for it here: its
-  // text still has the work folder hidden.
-  std::string TenantViewLocked(const std::string& job_id, std::string text) const
-      ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
-    static const JobRuntime kEnded;
-    const auto it = runtime_.find(job_id);
-    const JobRuntime& rt = it != runtime_.end() ? it->second : kEnded;
-    return carvemap::TenantView(std::move(text),
-                                JobFolders{rt.output_dir, rt.tiles_dir, rt.partials_dir},
-                                folders_.work_dir);
-  }
-  void Sweep();
+  // The sweeper's thread: a sweep every sweep_interval_s until the coordinator stops.
+  void SweepLoop();
   // The job must exist and not be terminal; shared by CompleteChunk and FailChunk, which check
   // the store before the lease table (the table has forgotten cancelled jobs).
   absl::Status CheckLeaseJob(absl::string_view lease_id);
-  // Wakes the parked LeaseChunk calls: tasks may have been queued (added, requeued, released,
-  // given back by a worker, expired or lost with their worker), or the coordinator stops.
-  void WorkMayBeQueued() { work_cv_.SignalAll(); }
-  // Wakes the job threads waiting for their tasks (WaitForChunks): tasks were done, failed or
-  // dropped, or the coordinator stops.
-  void TasksChanged() { done_cv_.SignalAll(); }
   // Wakes the WatchJob streams: a job's state may have changed (a transition, a job failed by
   // the lease table), or the coordinator stops. Not on every task: watchers report progress at
-  // their own interval. Takes watch_mu_ only, so it may be called under mu_.
+  // their own interval.
   void JobsChanged() {
     absl::MutexLock lock(&watch_mu_);
     ++job_events_;
@@ -429,24 +404,20 @@ class CoordinatorServer::Impl final : public JobStages {
   CoordinatorMetrics metrics_;
   MetricsEndpoint metrics_endpoint_;  // spec_.metrics_listen_address
   std::atomic<bool> stopping_{false};
+  absl::Notification stop_sweeper_;  // wakes the sweeper's wait between sweeps
   absl::Notification shutdown_done_;
   std::thread sweeper_;
 
-  absl::Mutex mu_;
-  // Parked LeaseChunk calls wait on it; signalled wherever tasks may have been queued.
-  absl::CondVar work_cv_;
-  absl::CondVar done_cv_;  // TasksChanged
-  // JobsChanged; never held while taking mu_.
-  absl::Mutex watch_mu_ ABSL_ACQUIRED_AFTER(mu_);
+  // The lease table, the workers and the running jobs' runtimes (coordinator/
+  // coordinator_core.h); made by Start.
+  std::unique_ptr<CoordinatorCore> core_;
+  absl::Mutex watch_mu_;  // JobsChanged
   absl::CondVar watch_cv_;
   uint64_t job_events_ ABSL_GUARDED_BY(watch_mu_) = 0;
-  std::unique_ptr<LeaseTable> table_ ABSL_GUARDED_BY(mu_);
-  // Its instance (random) tells this coordinator's worker ids from a previous one's.
-  WorkerRegistry workers_ ABSL_GUARDED_BY(mu_){RandomHex(4)};
-  std::map<std::string, JobRuntime> runtime_ ABSL_GUARDED_BY(mu_);
-  std::map<uint64_t, std::thread> job_threads_ ABSL_GUARDED_BY(mu_);
-  std::vector<uint64_t> ended_job_threads_ ABSL_GUARDED_BY(mu_);  // to join
-  uint64_t job_thread_seq_ ABSL_GUARDED_BY(mu_) = 0;
+  absl::Mutex threads_mu_;
+  std::map<uint64_t, std::thread> job_threads_ ABSL_GUARDED_BY(threads_mu_);
+  std::vector<uint64_t> ended_job_threads_ ABSL_GUARDED_BY(threads_mu_);  // to join
+  uint64_t job_thread_seq_ ABSL_GUARDED_BY(threads_mu_) = 0;
   absl::Mutex shutdown_mu_;
   // HDF5 (scan reading when planning, the in-process merge) is not thread-safe in the Debian
   // build: one job at a time uses it in this process (and each call takes Hdf5Lock()).
@@ -605,13 +576,14 @@ absl::Status CoordinatorServer::Impl::Start() {
   store_ = *std::move(store);
   uploads_ =
       std::make_unique<UploadStore>(UploadStore::Options{.quota_bytes = spec_.upload_quota_bytes});
-  {
-    absl::MutexLock lock(&mu_);
-    LeaseTableOptions options;
-    options.lease_timeout_ms = static_cast<int64_t>(spec_.lease_timeout_s * 1000);
-    options.max_attempts = spec_.max_attempts;
-    table_ = std::make_unique<LeaseTable>(*store_, LeaseTable::Clock::System(), options);
-  }
+  CoordinatorCoreOptions core;
+  core.leases.lease_timeout_ms = static_cast<int64_t>(spec_.lease_timeout_s * 1000);
+  core.leases.max_attempts = spec_.max_attempts;
+  core.worker_timeout_ms = static_cast<int64_t>(spec_.worker_timeout_s * 1000);
+  core.folders = folders_;
+  // Random: tells this coordinator's worker ids from a previous one's.
+  core.instance = RandomHex(4);
+  core_ = std::make_unique<CoordinatorCore>(*store_, LeaseTable::Clock::System(), std::move(core));
 
   job_service_ = std::make_unique<JobServiceAdapter>(*this);
   carve_service_ = std::make_unique<CarveServiceAdapter>(*this);
@@ -657,7 +629,7 @@ absl::Status CoordinatorServer::Impl::Start() {
     spdlog::warn("coordinator: plaintext on {}: tokens and data cross the network unencrypted "
                  "(give --tls-cert/--tls-key)", spec_.listen_address);
   }
-  sweeper_ = std::thread([this] { Sweep(); });
+  sweeper_ = std::thread([this] { SweepLoop(); });
 
   // Resume what a previous coordinator left unfinished: the store is the truth.
   for (JobState state : {JobState::kQueued, JobState::kIngesting, JobState::kCarving,
@@ -682,15 +654,15 @@ void CoordinatorServer::Impl::Shutdown() {
   absl::MutexLock shutdown_lock(&shutdown_mu_);
   if (shutdown_done_.HasBeenNotified()) return;
   stopping_ = true;
-  WorkMayBeQueued();
-  TasksChanged();
+  if (core_) core_->Stop();
   JobsChanged();
+  stop_sweeper_.Notify();
   // Streams and long polls see stopping_ within a poll interval; the deadline bounds the wait.
   servers_.Shutdown(std::chrono::milliseconds(500));
   if (sweeper_.joinable()) sweeper_.join();
   std::map<uint64_t, std::thread> threads;
   {
-    absl::MutexLock lock(&mu_);
+    absl::MutexLock lock(&threads_mu_);
     threads.swap(job_threads_);
     ended_job_threads_.clear();
   }
@@ -700,57 +672,29 @@ void CoordinatorServer::Impl::Shutdown() {
   shutdown_done_.Notify();
 }
 
-void CoordinatorServer::Impl::Sweep() {
-  const int64_t interval_ms = static_cast<int64_t>(spec_.sweep_interval_s * 1000);
+void CoordinatorServer::Impl::SweepLoop() {
+  const absl::Duration interval = absl::Seconds(spec_.sweep_interval_s);
   while (!stopping_) {
-    const int64_t due = NowMs() + interval_ms;
-    std::this_thread::sleep_for(std::chrono::duration<double>(spec_.sweep_interval_s));
+    const int64_t due = NowMs() + absl::ToInt64Milliseconds(interval);
+    if (stop_sweeper_.WaitForNotificationWithTimeout(interval)) break;
     ReapJobThreads();
-    absl::MutexLock lock(&mu_);
-    // Time this sweep ran late, waiting for the lock or for a core, is time the coordinator
-    // could not hear heartbeats either (their handlers wait for the same lock; a job-store
-    // fsync behind the writeback of a freshly written scan held it for seconds): it does not
-    // count against the workers or their leases.
-    if (const int64_t late = NowMs() - due; late > 0) {
-      workers_.CreditLateness(late, NowMs());
-      if (late > 1000) {
-        for (const std::string& id : workers_.Ids()) (void)table_->Heartbeat(id);
-      }
+    const CoordinatorCore::SweepReport sweep = core_->Sweep(due);
+    if (!sweep.expired.ok()) {
+      spdlog::error("coordinator: expiring leases: {}", sweep.expired.status().ToString());
+    } else if (*sweep.expired > 0) {
+      spdlog::warn("coordinator: {} lease(s) expired and were requeued", *sweep.expired);
+      metrics_.LeasesExpired(*sweep.expired);
+      JobsChanged();  // a task out of attempts fails its job
     }
-    absl::StatusOr<int> expired = table_->ExpireLeases();
-    if (!expired.ok()) {
-      spdlog::error("coordinator: expiring leases: {}", expired.status().ToString());
-    } else if (*expired > 0) {
-      spdlog::warn("coordinator: {} lease(s) expired and were requeued", *expired);
-      metrics_.LeasesExpired(*expired);
-      WorkMayBeQueued();
-      TasksChanged();  // a task out of attempts fails its job
-      JobsChanged();
-    }
-    const int64_t now = NowMs();
-    const int64_t timeout_ms = static_cast<int64_t>(spec_.worker_timeout_s * 1000);
-    for (const auto& [id, silent_ms] : workers_.RemoveSilent(now, timeout_ms)) {
-      LogScope log_scope({{"worker", id}});
-      absl::StatusOr<int> lost = table_->WorkerLost(id);
+    for (const CoordinatorCore::SweepReport::LostWorker& lost : sweep.lost) {
+      LogScope log_scope({{"worker", lost.worker_id}});
       spdlog::warn("coordinator: worker {} lost (no heartbeat for {:.1f} s); {} lease(s) requeued",
-                   id, silent_ms / 1000.0, lost.ok() ? *lost : -1);
-      metrics_.WorkerLost(lost.ok() ? *lost : 0);
-      WorkMayBeQueued();
-      TasksChanged();
+                   lost.worker_id, lost.silent_ms / 1000.0, lost.leases.ok() ? *lost.leases : -1);
+      metrics_.WorkerLost(lost.leases.ok() ? *lost.leases : 0);
     }
-    // Gauges: the chunks of every job in the lease table, workers, running jobs.
-    int64_t queued = 0, leased = 0, done = 0, active = 0;
-    for (const auto& [job_id, rt] : runtime_) {
-      if (!rt.stages.running().empty()) ++active;
-      absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
-      if (!p.ok()) continue;
-      queued += p->chunks_queued;
-      leased += p->chunks_leased;
-      done += p->chunks_done;
-    }
-    metrics_.SetChunks(queued, leased, done);
-    metrics_.SetWorkers(static_cast<int64_t>(workers_.size()));
-    metrics_.SetActiveJobs(active);
+    metrics_.SetChunks(sweep.tasks_queued, sweep.tasks_leased, sweep.tasks_done);
+    metrics_.SetWorkers(sweep.workers);
+    metrics_.SetActiveJobs(sweep.active_jobs);
     metrics_.UpdateRate(std::chrono::steady_clock::now());
   }
 }
@@ -810,8 +754,7 @@ absl::StatusOr<JobRecord> CoordinatorServer::Impl::OwnJob(const Caller& caller,
 // ---- the job pipeline
 
 void CoordinatorServer::Impl::EnterStage(const std::string& job_id, const std::string& stage) {
-  absl::MutexLock lock(&mu_);
-  runtime_[job_id].stages.Enter(stage, std::chrono::steady_clock::now());
+  core_->EnterStage(job_id, stage);
 }
 
 void CoordinatorServer::Impl::Moved(const std::string& job_id, JobState from, JobState to,
@@ -838,13 +781,9 @@ void CoordinatorServer::Impl::CleanUp(const std::string& job_id, bool succeeded)
   if (absl::StatusOr<JobRecord> job = store_->GetJob(job_id); job.ok() && IsTerminal(job->state)) {
     metrics_.JobFinished(JobStateName(job->state));
   }
-  std::string tiles, partials;
-  {
-    absl::MutexLock lock(&mu_);
-    table_->DropJob(job_id);
-    tiles = runtime_[job_id].tiles_dir;
-    partials = runtime_[job_id].partials_dir;
-  }
+  core_->DropTasks(job_id);
+  const auto [tiles, partials] = core_->WithRuntime(
+      job_id, [](const JobRuntime& rt) { return std::pair(rt.tiles_dir, rt.partials_dir); });
   std::error_code ec;
   if (!spec_.keep_partials && !partials.empty()) {
     fs::remove_all(fs::path(partials).parent_path(), ec);
@@ -856,14 +795,12 @@ void CoordinatorServer::Impl::CleanUp(const std::string& job_id, bool succeeded)
   }
   // The job's plan, stage times and counts are in its job.json now (and it no longer counts as
   // active): a coordinator that runs for months must not keep them for every job it ran.
-  absl::MutexLock lock(&mu_);
-  runtime_.erase(job_id);
+  core_->EraseRuntime(job_id);
 }
 
 absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
-  {
-    absl::MutexLock lock(&mu_);
-    if (!runtime_[job.id].slices.empty()) return absl::OkStatus();
+  if (core_->WithRuntime(job.id, [](const JobRuntime& rt) { return !rt.slices.empty(); })) {
+    return absl::OkStatus();
   }
   // Checked again (the submit's check was then), through the descriptor opened here, so a
   // symlink swapped meanwhile cannot point the plan elsewhere, and errors name the path as the
@@ -886,23 +823,19 @@ absl::Status CoordinatorServer::Impl::EnsurePlan(const JobRecord& job) {
                  north.decision.yaw_rad * 180 / std::numbers::pi,
                  north.place ? "true" : "magnetic");
   }
-  absl::MutexLock lock(&mu_);
-  JobRuntime& rt = runtime_[job.id];
-  rt.world_yaw_rad = north.decision.yaw_rad;
-  rt.north = NorthJson(north);
-  rt.slices = std::move(plan->slices.slices);
-  rt.slice_s = plan->slices.slice_s;
-  rt.rays_to_carve = int64_t(plan->slices.rays);  // the slices' own rows partition every frame
+  core_->WithRuntime(job.id, [&](JobRuntime& rt) {
+    rt.world_yaw_rad = north.decision.yaw_rad;
+    rt.north = NorthJson(north);
+    rt.slices = std::move(plan->slices.slices);
+    rt.slice_s = plan->slices.slice_s;
+    rt.rays_to_carve = int64_t(plan->slices.rays);  // the slices' own rows partition every frame
+  });
   return absl::OkStatus();
 }
 
 absl::Status CoordinatorServer::Impl::PlanStage(const JobRecord& job) {
-  std::string partials, tiles;
-  {
-    absl::MutexLock lock(&mu_);
-    partials = runtime_[job.id].partials_dir;
-    tiles = runtime_[job.id].tiles_dir;
-  }
+  const auto [partials, tiles] = core_->WithRuntime(
+      job.id, [](const JobRuntime& rt) { return std::pair(rt.partials_dir, rt.tiles_dir); });
   // Planning starts from scratch (also after a restart): an earlier attempt's partial sums and
   // tiles must not mix with this run's.
   std::error_code ec;
@@ -918,25 +851,21 @@ absl::Status CoordinatorServer::Impl::PlanStage(const JobRecord& job) {
   absl::StatusOr<JobRecord> now = store_->GetJob(job.id);
   if (!now.ok()) return now.status();
   if (IsTerminal(now->state)) return absl::CancelledError("job ended while planned");
-  std::vector<ChunkRecord> records;
-  {
-    absl::MutexLock lock(&mu_);
-    const JobRuntime& rt = runtime_[job.id];
-    records = SliceTasks(job.id, rt.slices, 0);
-    spdlog::info("coordinator: job {}: {} rays in {} slices of {:.1f} s", job.id,
-                 rt.rays_to_carve, rt.slices.size(), rt.slice_s);
-  }
+  const std::vector<ChunkRecord> records = core_->WithRuntime(job.id, [&](const JobRuntime& rt) {
+    spdlog::info("coordinator: job {}: {} rays in {} slices of {:.1f} s", job.id, rt.rays_to_carve,
+                 rt.slices.size(), rt.slice_s);
+    return SliceTasks(job.id, rt.slices, 0);
+  });
   return store_->AddChunks(job.id, records);
 }
 
 absl::StatusOr<std::vector<ChunkCoord>> CoordinatorServer::Impl::ChunksOfPass(
     const std::string& job_id) {
-  std::vector<std::string> paths;
-  {
-    absl::MutexLock lock(&mu_);
-    const JobRuntime& rt = runtime_[job_id];
-    for (const ScanSlice& s : rt.slices) paths.push_back(SlicePartialPath(rt.pass_dir, s.index));
-  }
+  const std::vector<std::string> paths = core_->WithRuntime(job_id, [](const JobRuntime& rt) {
+    std::vector<std::string> out;
+    for (const ScanSlice& s : rt.slices) out.push_back(SlicePartialPath(rt.pass_dir, s.index));
+    return out;
+  });
   return ChunksOfPartials(paths);
 }
 
@@ -944,22 +873,22 @@ absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
   absl::StatusOr<JobRecord> job = store_->GetJob(job_id);
   if (!job.ok()) return job.status();
   if (absl::Status s = EnsurePlan(*job); !s.ok()) return s;
-  bool combines = false;
-  {
-    absl::MutexLock lock(&mu_);
-    JobRuntime& rt = runtime_[job_id];
+  const auto [tiles_dir, partials_dir] = core_->WithRuntime(job_id, [](JobRuntime& rt) {
     rt.pass = 0;
     rt.pass_dir = rt.partials_dir;
     rt.regions_path.clear();
-    // A restarted coordinator may find the chunks to combine stored already.
-    if (absl::StatusOr<std::vector<ChunkRecord>> chunks = store_->ListChunks(job_id); chunks.ok()) {
-      for (const ChunkRecord& c : *chunks) combines |= !IsSliceTask(c.key);
-    }
+    return std::pair(rt.tiles_dir, rt.partials_dir);
+  });
+  // A restarted coordinator may find the chunks to combine stored already.
+  bool combines = false;
+  if (absl::StatusOr<std::vector<ChunkRecord>> chunks = store_->ListChunks(job_id); chunks.ok()) {
+    for (const ChunkRecord& c : *chunks) combines |= !IsSliceTask(c.key);
+  }
+  {
     // What a restart finds done is trusted only if its file is there whole (docs/JOB_STORE.md,
     // "Durability"): a missing or short tile is combined again. A slice's partial sums are
     // checked only while no chunk is combined from them yet (a slice carved again then would
     // race the combines queued beside it); later a bad one fails its combine by its CRCs.
-    const std::string tiles_dir = rt.tiles_dir, partials_dir = rt.partials_dir;
     const auto check = [&](const ChunkRecord& c) -> std::string {
       const bool slice = IsSliceTask(c.key);
       if (slice && combines) return "";
@@ -979,13 +908,10 @@ absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
       }
       return why;
     };
-    if (absl::Status s = table_->LoadJob(job_id, check); !s.ok() && !absl::IsAlreadyExists(s)) {
-      return s;
-    }
-    WorkMayBeQueued();
+    if (absl::Status s = core_->LoadTasks(job_id, check); !s.ok()) return s;
   }
   // The slices (and any chunks stored already).
-  if (absl::Status s = WaitForChunks(job_id); !s.ok()) return s;
+  if (absl::Status s = core_->WaitForTasks(job_id); !s.ok()) return s;
   if (!combines) {
     absl::StatusOr<std::vector<ChunkCoord>> chunks = ChunksOfPass(job_id);
     if (!chunks.ok()) return chunks.status();
@@ -996,24 +922,15 @@ absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
       r.key = c;
       records.push_back(std::move(r));
     }
-    {
-      absl::MutexLock lock(&mu_);
-      if (absl::Status s = table_->Add(job_id, records); !s.ok()) return s;
-      WorkMayBeQueued();
-    }
+    if (absl::Status s = core_->AddTasks(job_id, records); !s.ok()) return s;
     spdlog::info("coordinator: job {}: slices carved; combining {} chunks", job_id,
                  records.size());
-    if (absl::Status s = WaitForChunks(job_id); !s.ok()) return s;
+    if (absl::Status s = core_->WaitForTasks(job_id); !s.ok()) return s;
   }
-  std::string partials;
-  {
-    absl::MutexLock lock(&mu_);
-    table_->DropJob(job_id);
-    partials = runtime_[job_id].partials_dir;
-  }
+  core_->DropTasks(job_id);
   // Every chunk is combined: nothing reads these sums again (a re-carve pass writes its own,
   // a restart in MERGING does not carve), so the scratch space goes now, not at the job's end.
-  RemovePartials(job_id, partials, /*files_only=*/true);
+  RemovePartials(job_id, partials_dir, /*files_only=*/true);
   return absl::OkStatus();
 }
 
@@ -1043,19 +960,6 @@ void CoordinatorServer::Impl::RemovePartials(const std::string& job_id, const st
                double(bytes) * 1e-6);
 }
 
-absl::Status CoordinatorServer::Impl::WaitForChunks(const std::string& job_id,
-                                                    bool except_held) {
-  absl::MutexLock lock(&mu_);
-  while (!stopping_) {
-    absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
-    if (!p.ok() || p->failed) return absl::CancelledError("job ended while carving");
-    if (table_->AllDone(job_id, except_held)) return absl::OkStatus();
-    // Woken when tasks change (TasksChanged); at least once a second in any case.
-    done_cv_.WaitWithTimeout(&mu_, absl::Seconds(1));
-  }
-  return absl::CancelledError("coordinator stopping");
-}
-
 absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
     const std::string& job_id, const std::vector<RecarveChunk>& chunks, double resolution_m) {
   absl::StatusOr<OctreeGrid> grid = OctreeGrid::FromResolution(resolution_m);
@@ -1063,14 +967,11 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
   absl::StatusOr<JobRecord> job = store_->GetJob(job_id);
   if (!job.ok()) return job.status();
   if (absl::Status s = EnsurePlan(*job); !s.ok()) return s;
-  JobRuntime saved;
   int pass = 0;
-  {
-    absl::MutexLock lock(&mu_);
-    JobRuntime& rt = runtime_[job_id];
-    saved = rt;
+  const JobRuntime saved = core_->WithRuntime(job_id, [&](JobRuntime& rt) {
     pass = ++rt.passes;
-  }
+    return rt;  // as it was before this pass
+  });
   const std::string dir = ObjectTilesDir(saved.tiles_dir);
   // A pass's partial sums go to a folder of their own (a merge asking again, after a restart
   // too, gets fresh files: a worker caches the indexes of the files it combines).
@@ -1083,87 +984,25 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
   if (ec) {
     return absl::FailedPreconditionError(absl::StrCat(dir, ": cannot create: ", ec.message()));
   }
-  std::vector<ChunkCoord> keys;
-  for (const RecarveChunk& c : chunks) keys.push_back({c.chunk.x(), c.chunk.y(), c.chunk.z()});
-  const std::string regions_path = (fs::path(pass_dir) / "regions.bin").string();
-  if (absl::Status s = WriteRegionsFile(regions_path, chunks); !s.ok()) return s;
-  const auto restore = [&] {
-    absl::MutexLock lock(&mu_);
-    JobRuntime& rt = runtime_[job_id];
-    rt.params = saved.params;
-    rt.tiles_dir = saved.tiles_dir;
-    rt.rays_carved = saved.rays_carved;
-    rt.rays_to_carve = saved.rays_to_carve;
-    rt.carve_rate = saved.carve_rate;
-    rt.task_rate = saved.task_rate;
-    rt.pass = 0;
-    rt.pass_dir = saved.partials_dir;
-    rt.regions_path.clear();
-    rt.pass_chunks.clear();
-  };
-  {
-    absl::MutexLock lock(&mu_);
-    if (absl::Status s = table_->LoadJob(job_id); !s.ok() && !absl::IsAlreadyExists(s)) return s;
-    JobRuntime& rt = runtime_[job_id];
-    // Leases of this pass carry the finer grid, read the regions and write into `dir`
-    // (LeaseChunk reads these).
-    rt.params.resolution_m = grid->resolution_m();
-    rt.tiles_dir = dir;
-    rt.pass = pass;
-    rt.pass_dir = pass_dir;
-    rt.regions_path = regions_path;
-    rt.pass_chunks = keys;
-    rt.rays_carved = 0;
-    rt.carve_rate = RateWindow();
-    rt.task_rate = RateWindow();
-    // The pass's slices: tasks of their own, or those of an earlier pass of this number (a
-    // merge retried) put back in the queue.
-    std::vector<ChunkRecord> fresh;
-    std::vector<ChunkCoord> again;
-    absl::StatusOr<std::vector<ChunkRecord>> stored = store_->ListChunks(job_id);
-    std::set<ChunkCoord> existing;
-    if (stored.ok()) {
-      for (const ChunkRecord& c : *stored) existing.insert(c.key);
-    }
-    for (ChunkRecord& r : SliceTasks(job_id, rt.slices, pass)) {
-      if (existing.count(r.key)) {
-        again.push_back(r.key);
-      } else {
-        fresh.push_back(std::move(r));
-      }
-    }
-    absl::Status s = table_->Add(job_id, fresh);
-    if (s.ok() && !again.empty()) {
-      s = table_->Requeue(job_id, again, absl::StrCat("queued again: re-carve pass ", pass));
-    }
-    // The chunks, combined from this pass's sums into `dir` once the slices are carved: held
-    // until then, but counted now, so the pass never looks done in between.
-    if (s.ok()) {
-      s = table_->Requeue(job_id, keys,
-                          absl::StrCat("queued again: objects at ", resolution_m, " m (§5.6.1)"),
-                          /*held=*/true);
-    }
-    if (!s.ok()) {
-      table_->DropJob(job_id);
-      rt.pass = 0;
-      return s;
-    }
-    WorkMayBeQueued();
+  CoordinatorCore::RecarvePass recarve{
+      .pass = pass,
+      .resolution_m = resolution_m,
+      .grid_resolution_m = grid->resolution_m(),
+      .tiles_dir = dir,
+      .pass_dir = pass_dir,
+      .regions_path = (fs::path(pass_dir) / "regions.bin").string(),
+      .chunks = {}};
+  for (const RecarveChunk& c : chunks) {
+    recarve.chunks.push_back({c.chunk.x(), c.chunk.y(), c.chunk.z()});
   }
+  if (absl::Status s = WriteRegionsFile(recarve.regions_path, chunks); !s.ok()) return s;
+  if (absl::Status s = core_->StartRecarve(job_id, recarve); !s.ok()) return s;
   spdlog::info("coordinator: job {}: carving {} object chunks again at {} m (pass {})", job_id,
                chunks.size(), resolution_m, pass);
-  absl::Status s = WaitForChunks(job_id, /*except_held=*/true);
-  if (s.ok()) {
-    absl::MutexLock lock(&mu_);
-    s = table_->Release(job_id, keys);
-    WorkMayBeQueued();
-  }
-  if (s.ok()) s = WaitForChunks(job_id);
-  {
-    absl::MutexLock lock(&mu_);
-    table_->DropJob(job_id);
-  }
-  restore();
+  absl::Status s = core_->WaitForTasks(job_id, /*except_held=*/true);
+  if (s.ok()) s = core_->ReleaseTasks(job_id, recarve.chunks);
+  if (s.ok()) s = core_->WaitForTasks(job_id);
+  core_->EndRecarve(job_id, saved);
   if (!s.ok()) return s;
   RemovePartials(job_id, pass_dir, /*files_only=*/false);  // the pass's chunks are combined
   return dir;
@@ -1176,9 +1015,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
     spdlog::error("coordinator: job {}: {}", job_id, job.status().ToString());
     return;
   }
-  {
-    absl::MutexLock lock(&mu_);
-    JobRuntime& rt = runtime_[job_id];
+  core_->WithRuntime(job_id, [&](JobRuntime& rt) {
     rt.tiles_dir = fs::absolute(folders_.TilesDir(*job)).lexically_normal().string();
     rt.partials_dir = fs::absolute(folders_.PartialsDir(*job)).lexically_normal().string();
     rt.pass_dir = rt.partials_dir;
@@ -1186,7 +1023,7 @@ void CoordinatorServer::Impl::RunJob(const std::string& job_id) {
     rt.input_path = job->input_path;
     rt.output_dir = fs::absolute(folders_.OutputDir(*job)).lexically_normal().string();
     rt.params = JobParams::FromJson(job->params_json);
-  }
+  });
   absl::StatusOr<JobState> ended =
       carvemap::RunJob(job_id, *store_, *this, LeaseTable::Clock::System());
   if (!ended.ok()) spdlog::error("coordinator: job {}: {}", job_id, ended.status().ToString());
@@ -1197,18 +1034,17 @@ absl::Status CoordinatorServer::Impl::MergeStage(const JobRecord& job) {
   // After a restart in MERGING the plan and the turn to north are made again from the scan.
   if (absl::Status s = EnsurePlan(job); !s.ok()) return s;
   MergeJobRequest req;
-  {
-    absl::MutexLock lock(&mu_);
-    const JobRuntime& rt = runtime_[job_id];
+  const absl::StatusOr<JobRecord> stored = store_->GetJob(job_id);  // its counters now
+  core_->WithRuntime(job_id, [&](const JobRuntime& rt) {
     req.job_id = job_id;
     req.tiles_dir = rt.tiles_dir;
     req.output_dir = rt.output_dir;
     // Filled in below, through a confined descriptor as in the ingest.
     req.params = rt.params.merge_params(rt.world_yaw_rad);
-    absl::StatusOr<JobRecord> now = store_->GetJob(job_id);
     req.job_json =
-        MergeJobDocument(job, now.ok() ? std::optional(now->counters) : std::nullopt, rt).dump();
-  }
+        MergeJobDocument(job, stored.ok() ? std::optional(stored->counters) : std::nullopt, rt)
+            .dump();
+  });
   // Merge stages show as "merge/<stage>" in the job's stage timings (WatchJob); a cancelled
   // job or a stopping coordinator stops the merge at its next progress call.
   std::string merge_stage;
@@ -1219,12 +1055,10 @@ absl::Status CoordinatorServer::Impl::MergeStage(const JobRecord& job) {
       merge_stage = stage;
       EnterStage(job_id, "merge/" + stage);
     }
-    {
-      absl::MutexLock lock(&mu_);
-      JobRuntime& rt = runtime_[job_id];
+    core_->WithRuntime(job_id, [&](JobRuntime& rt) {
       rt.merge_done = done;
       rt.merge_total = total;
-    }
+    });
     if (stopping_) return false;
     const auto now = std::chrono::steady_clock::now();
     if (now - last_check > std::chrono::milliseconds(500)) {
@@ -1331,9 +1165,7 @@ absl::Status CoordinatorServer::Impl::CancelJob(const Caller& caller,
     // A race with the job reaching a terminal state on its own: report what it is now.
     if (!s.ok() && !absl::IsFailedPrecondition(s)) return s;
     if (s.ok()) spdlog::info("coordinator: job {} cancelled", job->id);
-    absl::MutexLock lock(&mu_);
-    table_->DropJob(job->id);
-    TasksChanged();
+    core_->DropTasks(job->id);
     JobsChanged();
   }
   absl::StatusOr<JobRecord> now = store_->GetJob(req.job_id());
@@ -1425,7 +1257,7 @@ absl::Status CoordinatorServer::Impl::WatchJob(const Caller& caller, grpc::Serve
     // A state change is preceded by fresh counters, so a client never shows the new state with
     // old counts, and the terminal state change stays the last event.
     if (changed || std::chrono::duration<double>(now - last_progress).count() >= min_interval_s) {
-      if (!WriteProgress(writer, event(), *job, state, now)) {
+      if (!WriteProgress(writer, event(), *job, state)) {
         return absl::OkStatus();
       }
       last_progress = now;
@@ -1443,40 +1275,29 @@ absl::Status CoordinatorServer::Impl::WatchJob(const Caller& caller, grpc::Serve
 }
 
 bool CoordinatorServer::Impl::WriteProgress(grpc::ServerWriter<pb::JobEvent>& writer,
-                                            pb::JobEvent e, const JobRecord& job, JobState state,
-                                            std::chrono::steady_clock::time_point now) {
+                                            pb::JobEvent e, const JobRecord& job, JobState state) {
   auto* p = e.mutable_progress();
   auto* c = p->mutable_chunks();
   c->set_chunks_total(job.counters.chunks_total);
   c->set_chunks_done(job.counters.chunks_done);
   c->set_chunks_leased(job.counters.chunks_leased);
   c->set_chunk_retries(job.counters.chunk_retries);
-  {
-    absl::MutexLock lock(&mu_);
-    if (auto rt = runtime_.find(job.id); rt != runtime_.end()) {
-      const JobProgress progress = ProgressOf(rt->second, job.counters, state, now);
-      p->set_rays_done(progress.rays_done);
-      p->set_rays_total(progress.rays_total);
-      p->set_rays_per_s(progress.rays_per_s);
-      p->set_eta_s(progress.eta_s);
-      p->set_stage_done(progress.stage_done);
-      p->set_stage_total(progress.stage_total);
-      for (const StageTimes::Stage& stage : progress.stages) {
-        auto* st = p->add_stages();
-        st->set_stage(stage.name);
-        st->set_elapsed_s(stage.elapsed_s);
-        st->set_finished(stage.finished);
-      }
+  const CoordinatorCore::WatchSnapshot snapshot = core_->Watch(job.id, job.counters, state);
+  if (const std::optional<JobProgress>& progress = snapshot.progress) {
+    p->set_rays_done(progress->rays_done);
+    p->set_rays_total(progress->rays_total);
+    p->set_rays_per_s(progress->rays_per_s);
+    p->set_eta_s(progress->eta_s);
+    p->set_stage_done(progress->stage_done);
+    p->set_stage_total(progress->stage_total);
+    for (const StageTimes::Stage& stage : progress->stages) {
+      auto* st = p->add_stages();
+      st->set_stage(stage.name);
+      st->set_elapsed_s(stage.elapsed_s);
+      st->set_finished(stage.finished);
     }
-    std::set<std::string> active;
-    for (const std::string& worker : workers_.Ids()) {
-      for (const std::string& lease : table_->LeasesOf(worker)) {
-        absl::StatusOr<LeaseId> id = LeaseId::Parse(lease);
-        if (id.ok() && id->job_id == job.id) active.insert(worker);
-      }
-    }
-    p->set_active_workers(static_cast<int32_t>(active.size()));
   }
+  p->set_active_workers(snapshot.active_workers);
   return writer.Write(e);
 }
 
@@ -1610,11 +1431,7 @@ absl::Status CoordinatorServer::Impl::RegisterWorker(grpc::ServerContext& ctx,
                                                      const pb::RegisterWorkerRequest& req,
                                                      pb::RegisterWorkerResponse& resp) {
   if (stopping_) return absl::UnavailableError("coordinator shutting down");
-  std::string id;
-  {
-    absl::MutexLock lock(&mu_);
-    id = workers_.Register(NowMs());
-  }
+  const std::string id = core_->RegisterWorker();
   LogScope log_scope({{"worker", id}});
   spdlog::info("coordinator: worker {} registered (host {}, {} thread(s), peer {})", id,
                req.hostname(), req.threads(), ctx.peer());
@@ -1626,47 +1443,16 @@ absl::Status CoordinatorServer::Impl::RegisterWorker(grpc::ServerContext& ctx,
 
 absl::Status CoordinatorServer::Impl::Heartbeat(const pb::HeartbeatRequest& req,
                                                 pb::HeartbeatResponse& resp) {
-  if (req.worker_id().empty()) return absl::InvalidArgumentError("empty worker id");
-  absl::MutexLock lock(&mu_);
-  if (!workers_.Touch(req.worker_id(), NowMs())) {
-    return absl::NotFoundError(
-        absl::StrCat("worker ", req.worker_id(), " unknown or lost: register again"));
-  }
-  if (req.rays_carved() > 0) {
-    // The wedges carved since the worker's last heartbeat belong to the job of its latest
-    // lease (a worker carves one job's chunks at a time; a lease finished since is that job's).
-    metrics_.RaysCarvedLive(req.rays_carved());
-    if (const std::string job = workers_.JobOf(req.worker_id()); !job.empty()) {
-      if (auto rt = runtime_.find(job); rt != runtime_.end()) {
-        rt->second.carve_rate.Add(std::chrono::steady_clock::now(),
-                                  double(req.rays_carved()));
-      }
-    }
-  }
-  std::vector<std::string> held = table_->LeasesOf(req.worker_id());
-  const std::set<std::string> reported(req.active_lease_ids().begin(),
-                                       req.active_lease_ids().end());
-  if (req.report_leases()) {
-    // Leases the worker no longer reports are abandoned: give them back now rather than at
-    // the lease deadline.
-    for (const std::string& lease : held) {
-      if (reported.count(lease)) continue;
-      if (absl::StatusOr<LeaseId> id = LeaseId::Parse(lease); id.ok()) {
-        (void)table_->Fail(lease, id->generation,
-                           absl::StrCat("abandoned by worker ", req.worker_id()),
-                           /*retryable=*/true);
-        WorkMayBeQueued();
-        TasksChanged();
-      }
-    }
-    held = table_->LeasesOf(req.worker_id());
-  }
-  const std::set<std::string> held_set(held.begin(), held.end());
-  for (const std::string& lease : reported) {
-    if (!held_set.count(lease)) resp.add_revoked_lease_ids(lease);
-  }
-  if (std::optional<int64_t> deadline = table_->Heartbeat(req.worker_id())) {
-    resp.set_lease_deadline_unix_ms(*deadline);
+  absl::StatusOr<CoordinatorCore::HeartbeatReply> reply = core_->Heartbeat(
+      {.worker_id = req.worker_id(),
+       .rays_carved = req.rays_carved(),
+       .report_leases = req.report_leases(),
+       .active_lease_ids = {req.active_lease_ids().begin(), req.active_lease_ids().end()}});
+  if (!reply.ok()) return reply.status();
+  if (req.rays_carved() > 0) metrics_.RaysCarvedLive(req.rays_carved());
+  for (const std::string& lease : reply->revoked_lease_ids) resp.add_revoked_lease_ids(lease);
+  if (reply->lease_deadline_unix_ms) {
+    resp.set_lease_deadline_unix_ms(*reply->lease_deadline_unix_ms);
   }
   return absl::OkStatus();
 }
@@ -1679,33 +1465,15 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
                         std::chrono::duration<double>(std::clamp(req.wait_s(), 0.0, 30.0));
   while (true) {
     if (stopping_) return absl::UnavailableError("coordinator shutting down");
-    std::optional<absl::StatusOr<CarveTask>> task;
-    {
-      absl::MutexLock lock(&mu_);
-      if (!workers_.Touch(req.worker_id(), NowMs())) {
-        return absl::NotFoundError(
-            absl::StrCat("worker ", req.worker_id(), " unknown or lost: register again"));
-      }
-      // A caller that has given up waiting would never learn of a lease granted now (its
-      // heartbeats would give it back, but only after a heartbeat's delay).
-      if (ctx.IsCancelled()) return absl::CancelledError("lease call cancelled by the worker");
-      absl::StatusOr<std::optional<LeaseTable::Grant>> grant = table_->Lease(req.worker_id());
-      if (!grant.ok()) return grant.status();
-      if (*grant) {
-        workers_.SetJob(req.worker_id(), (*grant)->job_id);
-        const JobRuntime& rt = runtime_[(*grant)->job_id];
-        task = CarveTaskOf(
-            **grant, rt, fs::absolute(folders_.DataDir(rt.tenant_dir)).lexically_normal().string());
-      } else if (!stopping_) {
-        // Parked until work may have been queued (WorkMayBeQueued) or the call's time is up.
-        // At most a second at a time: a worker that gives up is noticed within it.
-        const double left_s =
-            std::chrono::duration<double>(deadline - std::chrono::steady_clock::now()).count();
-        if (left_s > 0) work_cv_.WaitWithTimeout(&mu_, absl::Seconds(std::min(left_s, 1.0)));
-      }
-    }
-    if (task) {
-      if (!task->ok()) return task->status();
+    // Parked in the core until work may have been queued or the call's time is up; at most a
+    // second at a time: a worker that gives up is noticed within it.
+    const double left_s =
+        std::chrono::duration<double>(deadline - std::chrono::steady_clock::now()).count();
+    absl::StatusOr<std::optional<CarveTask>> task =
+        core_->Lease(req.worker_id(), absl::Seconds(std::clamp(left_s, 0.0, 1.0)),
+                     [&ctx] { return ctx.IsCancelled(); });
+    if (!task.ok()) return task.status();
+    if (*task) {
       const LeaseTable::Grant& grant = (*task)->grant;
       LogScope log_scope(LeaseLogFields(grant.lease_id, req.worker_id()));
       ToProto(**task, *resp.mutable_lease());
@@ -1746,38 +1514,29 @@ absl::Status CoordinatorServer::Impl::CompleteChunk(const pb::CompleteChunkReque
     }
     return s;
   }
-  const std::string job_id = *JobOfLease(req.lease_id());
-  absl::MutexLock lock(&mu_);
-  workers_.Touch(req.worker_id(), NowMs());  // an unknown worker: its result still counts
-  LeaseTable::Tile tile{req.tile().path(), req.tile().size_bytes(), req.tile().sha256_hex()};
-  if (absl::Status s = table_->Complete(req.lease_id(), req.generation(), tile); !s.ok()) {
+  const pb::CarveStats& st = req.stats();
+  absl::StatusOr<LeaseTable::Progress> p = core_->Complete(
+      {.worker_id = req.worker_id(),
+       .lease_id = req.lease_id(),
+       .generation = req.generation(),
+       .tile = {req.tile().path(), req.tile().size_bytes(), req.tile().sha256_hex()},
+       .counts = {.frames = st.frames(),
+                  .rays = st.rays(),
+                  .returns = st.returns(),
+                  .wedges = st.wedges(),
+                  .wedge_chunk_pairs = st.wedge_chunk_pairs(),
+                  .leaf_updates = st.leaf_updates(),
+                  .partial_bytes = st.partial_bytes()}});
+  if (!p.ok()) {
     spdlog::info("coordinator: completion of {} by {} rejected: {}", req.lease_id(),
-                 req.worker_id(), s.ToString());
-    return s;
+                 req.worker_id(), p.status().ToString());
+    return p.status();
   }
-  TasksChanged();
-  JobRuntime& rt = runtime_[job_id];
-  rt.rays_carved += req.stats().rays();
-  rt.task_rate.Add(std::chrono::steady_clock::now(), 1);
-  metrics_.ChunkCompleted(req.stats().rays());
-  if (rt.pass == 0 && req.stats().rays() > 0) {
-    // A slice of the job's carve: its counts for job.json "carve".
-    const pb::CarveStats& st = req.stats();
-    for (const auto& [name, value] :
-         {std::pair{"frames", st.frames()}, {"rays", st.rays()}, {"returns", st.returns()},
-          {"wedges", st.wedges()}, {"wedge_chunk_pairs", st.wedge_chunk_pairs()},
-          {"leaf_updates", st.leaf_updates()}, {"partial_bytes", st.partial_bytes()}}) {
-      rt.carve_counts[name] = rt.carve_counts.value(name, int64_t{0}) + value;
-    }
-    ++rt.slices_counted;
-  }
-  absl::StatusOr<LeaseTable::Progress> p = table_->GetProgress(job_id);
-  if (p.ok()) {
-    resp.mutable_progress()->set_chunks_total(p->chunks_total);
-    resp.mutable_progress()->set_chunks_done(p->chunks_done);
-    resp.mutable_progress()->set_chunks_leased(p->chunks_leased);
-    resp.mutable_progress()->set_chunk_retries(p->chunk_retries);
-  }
+  metrics_.ChunkCompleted(st.rays());
+  resp.mutable_progress()->set_chunks_total(p->chunks_total);
+  resp.mutable_progress()->set_chunks_done(p->chunks_done);
+  resp.mutable_progress()->set_chunks_leased(p->chunks_leased);
+  resp.mutable_progress()->set_chunk_retries(p->chunk_retries);
   return absl::OkStatus();
 }
 
@@ -1785,16 +1544,9 @@ absl::Status CoordinatorServer::Impl::FailChunk(const pb::FailChunkRequest& req,
                                                 pb::FailChunkResponse& resp) {
   LogScope log_scope(LeaseLogFields(req.lease_id(), req.worker_id()));
   if (absl::Status s = CheckLeaseJob(req.lease_id()); !s.ok()) return s;
-  absl::MutexLock lock(&mu_);
-  workers_.Touch(req.worker_id(), NowMs());  // an unknown worker: its result still counts
-  const std::string job_id = *JobOfLease(req.lease_id());  // checked by CheckLeaseJob
   absl::StatusOr<bool> requeued =
-      // The table prefixes "worker <id>: " itself; the reason may become the job's error.
-      table_->Fail(req.lease_id(), req.generation(), TenantViewLocked(job_id, req.reason()),
-                   req.retryable());
+      core_->Fail(req.worker_id(), req.lease_id(), req.generation(), req.reason(), req.retryable());
   if (!requeued.ok()) return requeued.status();
-  if (*requeued) WorkMayBeQueued();
-  TasksChanged();  // or the job failed
   if (!*requeued) JobsChanged();
   metrics_.ChunkFailed();
   spdlog::warn("coordinator: worker {} failed {}: {} ({})", req.worker_id(), req.lease_id(),
