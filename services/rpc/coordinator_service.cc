@@ -884,32 +884,30 @@ absl::Status CoordinatorServer::Impl::CarveStage(const std::string& job_id) {
   if (absl::StatusOr<std::vector<ChunkRecord>> chunks = store_->ListChunks(job_id); chunks.ok()) {
     for (const ChunkRecord& c : *chunks) combines |= !IsSliceTask(c.key);
   }
-  {
-    // What a restart finds done is trusted only if its file is there whole (docs/JOB_STORE.md,
-    // "Durability"): a missing or short tile is combined again. A slice's partial sums are
-    // checked only while no chunk is combined from them yet (a slice carved again then would
-    // race the combines queued beside it); later a bad one fails its combine by its CRCs.
-    const auto check = [&](const ChunkRecord& c) -> std::string {
-      const bool slice = IsSliceTask(c.key);
-      if (slice && combines) return "";
-      const fs::path path = fs::path(slice ? partials_dir : tiles_dir) / c.tile_path;
-      std::error_code ec;
-      const auto size = fs::file_size(path, ec);
-      std::string why;
-      if (ec) {
-        why = absl::StrCat(path.string(), ": ", ec.message());
-      } else if (int64_t(size) != c.tile_size_bytes) {
-        why = absl::StrCat(path.string(), ": ", size, " bytes, ", c.tile_size_bytes,
-                           " when it was done");
-      }
-      if (!why.empty()) {
-        spdlog::warn("coordinator: job {}: {}; its {} is carved again", job_id, why,
-                     slice ? "slice" : "chunk");
-      }
-      return why;
-    };
-    if (absl::Status s = core_->LoadTasks(job_id, check); !s.ok()) return s;
-  }
+  // What a restart finds done is trusted only if its file is there whole (docs/JOB_STORE.md,
+  // "Durability"): a missing or short tile is combined again. A slice's partial sums are
+  // checked only while no chunk is combined from them yet (a slice carved again then would
+  // race the combines queued beside it); later a bad one fails its combine by its CRCs.
+  const auto check = [&](const ChunkRecord& c) -> std::string {
+    const bool slice = IsSliceTask(c.key);
+    if (slice && combines) return "";
+    const fs::path path = fs::path(slice ? partials_dir : tiles_dir) / c.tile_path;
+    std::error_code ec;
+    const auto size = fs::file_size(path, ec);
+    std::string why;
+    if (ec) {
+      why = absl::StrCat(path.string(), ": ", ec.message());
+    } else if (int64_t(size) != c.tile_size_bytes) {
+      why = absl::StrCat(path.string(), ": ", size, " bytes, ", c.tile_size_bytes,
+                         " when it was done");
+    }
+    if (!why.empty()) {
+      spdlog::warn("coordinator: job {}: {}; its {} is carved again", job_id, why,
+                   slice ? "slice" : "chunk");
+    }
+    return why;
+  };
+  if (absl::Status s = core_->LoadTasks(job_id, check); !s.ok()) return s;
   // The slices (and any chunks stored already).
   if (absl::Status s = core_->WaitForTasks(job_id); !s.ok()) return s;
   if (!combines) {
@@ -969,8 +967,9 @@ absl::StatusOr<std::string> CoordinatorServer::Impl::RecarveStage(
   if (absl::Status s = EnsurePlan(*job); !s.ok()) return s;
   int pass = 0;
   const JobRuntime saved = core_->WithRuntime(job_id, [&](JobRuntime& rt) {
+    JobRuntime before = rt;
     pass = ++rt.passes;
-    return rt;  // as it was before this pass
+    return before;
   });
   const std::string dir = ObjectTilesDir(saved.tiles_dir);
   // A pass's partial sums go to a folder of their own (a merge asking again, after a restart
