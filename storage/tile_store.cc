@@ -1,12 +1,16 @@
 #include "storage/tile_store.h"
 
 #include <hdf5.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <mutex>
+#include <string_view>
 #include <system_error>
 
 #include "absl/strings/str_cat.h"
@@ -70,6 +74,24 @@ std::array<ColumnSpec, 9> ColumnSpecs() {
       {"points", H5T_STD_U32LE, H5T_NATIVE_UINT32, true},
   }};
 }
+// Each column's name and element size, usable without HDF5 (ColumnSpecs' types need its lock).
+struct ColumnLayout {
+  const char* name;
+  size_t element_bytes;
+};
+constexpr std::array<ColumnLayout, 9> kColumnLayouts = {{{"key", 8},
+                                                         {"depth", 1},
+                                                         {"p", 4},
+                                                         {"weight", 8},
+                                                         {"variance", 4},
+                                                         {"count", 4},
+                                                         {"sum_wp", 8},
+                                                         {"sum_wp2", 8},
+                                                         {"points", 4}}};
+// The stored chunks are copied to and from the columns as bytes: the file's little-endian
+// types must be the host's.
+static_assert(std::endian::native == std::endian::little);
+
 std::array<void*, 9> ColumnData(Columns& c) {
   return {c.key.data(),      c.depth.data(), c.p.data(),      c.weight.data(),
           c.variance.data(), c.count.data(), c.sum_wp.data(), c.sum_wp2.data(),
@@ -89,6 +111,80 @@ void ResizeColumns(Columns& c, size_t n) {
 
 bool ValidGrid(const OctreeGrid& grid) {
   return grid.chunk_depth >= kMinChunkDepth && grid.chunk_depth <= kMaxChunkDepth;
+}
+
+// ---- HDF5's shuffle and deflate filters, outside the HDF5 lock ------------------------------
+// The same filters as HDF5's own (H5Zshuffle.c: byte j of element i goes to j·n + i, for
+// elements wider than a byte in chunks of more than one; H5Zdeflate.c: zlib's compress2 at the
+// dataset's level, in the zlib format), applied to each stored chunk on the caller's thread;
+// the file takes and gives the chunks as stored (H5Dwrite_chunk, H5Dread_chunk). The files are
+// those HDF5's filters write, and read either way (tile_store_test).
+
+bool Shuffles(size_t chunk_rows, size_t element_bytes) {
+  return element_bytes > 1 && chunk_rows > 1;
+}
+
+// One stored chunk of a column: `rows` elements at `data`, padded with zeros (the dataset's
+// fill) to `chunk_rows`.
+absl::StatusOr<std::string> ShuffleDeflate(const unsigned char* data, size_t rows,
+                                           size_t chunk_rows, size_t element_bytes) {
+  const size_t bytes = chunk_rows * element_bytes;
+  std::vector<unsigned char> plain(bytes, 0);
+  if (Shuffles(chunk_rows, element_bytes)) {
+    for (size_t i = 0; i < rows; ++i) {
+      for (size_t j = 0; j < element_bytes; ++j) {
+        plain[j * chunk_rows + i] = data[i * element_bytes + j];
+      }
+    }
+  } else {
+    std::memcpy(plain.data(), data, rows * element_bytes);
+  }
+  uLongf stored_bytes = compressBound(bytes);
+  std::string stored(stored_bytes, '\0');
+  const int rc = compress2(reinterpret_cast<Bytef*>(stored.data()), &stored_bytes, plain.data(),
+                           bytes, kDeflateLevel);
+  if (rc != Z_OK) return absl::InternalError(absl::StrCat("zlib compress2 failed (", rc, ")"));
+  stored.resize(stored_bytes);
+  return stored;
+}
+
+// The first `rows` elements of a stored chunk into `out`. `mask` is the chunk's filter mask
+// (bit 0: not shuffled, bit 1: not deflated).
+absl::Status InflateUnshuffle(std::string_view stored, uint32_t mask, size_t chunk_rows,
+                              size_t element_bytes, size_t rows, unsigned char* out) {
+  const size_t bytes = chunk_rows * element_bytes;
+  std::vector<unsigned char> plain;
+  std::string_view shuffled = stored;
+  if ((mask & 2u) == 0) {
+    plain.resize(bytes);
+    uLongf got = bytes;
+    const int rc = uncompress(plain.data(), &got, reinterpret_cast<const Bytef*>(stored.data()),
+                              stored.size());
+    if (rc == Z_BUF_ERROR && got == bytes) {
+      return absl::DataLossError(
+          absl::StrCat("inflates to more than the chunk's ", bytes, " bytes"));
+    }
+    if (rc != Z_OK)
+      return absl::DataLossError(absl::StrCat("cannot inflate (zlib error ", rc, ")"));
+    if (got != bytes) {
+      return absl::DataLossError(
+          absl::StrCat("inflates to ", got, " bytes, the chunk holds ", bytes));
+    }
+    shuffled = std::string_view(reinterpret_cast<const char*>(plain.data()), bytes);
+  } else if (stored.size() != bytes) {
+    return absl::DataLossError(
+        absl::StrCat("stores ", stored.size(), " bytes, the chunk holds ", bytes));
+  }
+  const auto* in = reinterpret_cast<const unsigned char*>(shuffled.data());
+  if ((mask & 1u) == 0 && Shuffles(chunk_rows, element_bytes)) {
+    for (size_t j = 0; j < element_bytes; ++j) {
+      const unsigned char* plane = in + j * chunk_rows;
+      for (size_t i = 0; i < rows; ++i) out[i * element_bytes + j] = plane[i];
+    }
+  } else {
+    std::memcpy(out, in, rows * element_bytes);
+  }
+  return absl::OkStatus();
 }
 
 // ---- Writing ------------------------------------------------------------------------------
@@ -147,7 +243,7 @@ absl::Status WriteInt64sAttr(hid_t obj, const char* name, const std::vector<int6
                      absl::StrCat("cannot write attribute '", name, "'"));
 }
 
-absl::Status WriteAttributes(hid_t root, const TileData& tile) {
+absl::Status WriteAttributes(hid_t root, const TileData& tile, uint64_t num_leaves) {
   absl::Status s = h5::WriteStringAttr(root, "format", kTileFormat);
   if (s.ok()) s = h5::WriteIntAttr(root, "version", kTileVersion);
   if (s.ok()) s = WriteInt64sAttr(root, "chunk", {tile.chunk.x(), tile.chunk.y(), tile.chunk.z()});
@@ -158,11 +254,13 @@ absl::Status WriteAttributes(hid_t root, const TileData& tile) {
   if (s.ok()) s = h5::WriteDoubleAttr(root, "hull_sigmas", tile.params.hull_sigmas);
   if (s.ok()) s = h5::WriteDoubleAttr(root, "min_weight", tile.params.min_weight);
   if (s.ok()) s = h5::WriteIntAttr(root, "simplified", tile.params.simplified ? 1 : 0);
-  if (s.ok()) s = h5::WriteIntAttr(root, "num_leaves", static_cast<int64_t>(tile.leaves.size()));
+  if (s.ok()) s = h5::WriteIntAttr(root, "num_leaves", static_cast<int64_t>(num_leaves));
   return s;
 }
 
-absl::Status WriteColumn(hid_t group, const ColumnSpec& spec, hsize_t n, const void* data) {
+// A column of `n` rows from its stored chunks (EncodeTile), each `chunk_rows` long.
+absl::Status WriteColumn(hid_t group, const ColumnSpec& spec, hsize_t n, hsize_t chunk_rows,
+                         const std::vector<std::string>& chunks) {
   const hsize_t dims[1] = {n};
   Hid space(H5Screate_simple(1, dims, nullptr));
   Hid dcpl(H5Pcreate(H5P_DATASET_CREATE));
@@ -173,7 +271,7 @@ absl::Status WriteColumn(hid_t group, const ColumnSpec& spec, hsize_t n, const v
   if (n > 0) {
     // An empty column stays contiguous: a chunked dataset needs a chunk no larger than its
     // fixed extent, and there is nothing to compress.
-    const hsize_t chunk[1] = {std::min(n, kChunkRows)};
+    const hsize_t chunk[1] = {chunk_rows};
     H5Pset_chunk(dcpl.get(), 1, chunk);
     H5Pset_shuffle(dcpl.get());  // byte planes compress far better for floats and codes
     H5Pset_deflate(dcpl.get(), kDeflateLevel);
@@ -182,44 +280,32 @@ absl::Status WriteColumn(hid_t group, const ColumnSpec& spec, hsize_t n, const v
       H5Dcreate2(group, spec.name, spec.file_type, space.get(), H5P_DEFAULT, dcpl.get(), H5P_DEFAULT),
       absl::StrCat("cannot create dataset '/leaves/", spec.name, "'"));
   if (!dataset.ok()) return dataset.status();
-  if (n == 0) return absl::OkStatus();
-  return h5::CheckRc(H5Dwrite(dataset->get(), spec.mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data),
-                     absl::StrCat("cannot write dataset '/leaves/", spec.name, "'"));
+  for (size_t k = 0; k < chunks.size(); ++k) {
+    const hsize_t offset[1] = {k * chunk_rows};
+    absl::Status s = h5::CheckRc(H5Dwrite_chunk(dataset->get(), H5P_DEFAULT, /*filters=*/0, offset,
+                                                chunks[k].size(), chunks[k].data()),
+                                 absl::StrCat("cannot write dataset '/leaves/", spec.name, "'"));
+    if (!s.ok()) return s;
+  }
+  return absl::OkStatus();
 }
 
-absl::Status WriteFile(const std::string& path, const TileData& tile,
-                       const std::vector<TileLeaf>& leaves) {
-  Columns c;
-  ResizeColumns(c, leaves.size());
-  for (size_t i = 0; i < leaves.size(); ++i) {
-    const LeafStats& s = leaves[i].stats;
-    c.key[i] = MortonCode(leaves[i].node.local);
-    c.depth[i] = static_cast<uint8_t>(leaves[i].node.depth);
-    c.p[i] = static_cast<float>(s.p());
-    c.weight[i] = s.sum_w;
-    c.variance[i] = static_cast<float>(s.variance());
-    c.count[i] = s.count;
-    c.sum_wp[i] = s.sum_wp;
-    c.sum_wp2[i] = s.sum_wp2;
-    c.points[i] = s.points;
-  }
-
+absl::Status WriteFile(const std::string& path, const EncodedTile& tile) {
   Hid fcpl(H5Pcreate(H5P_FILE_CREATE));
   H5Pset_obj_track_times(fcpl.get(), 0);  // the root group too
   auto file = h5::CheckId(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, fcpl.get(), H5P_DEFAULT),
                           "cannot create file");
   if (!file.ok()) return file.status();
   Hid root(H5Gopen2(file->get(), "/", H5P_DEFAULT));
-  absl::Status s = WriteAttributes(root.get(), tile);
+  absl::Status s = WriteAttributes(root.get(), tile.header, tile.num_leaves);
   if (!s.ok()) return s;
   Hid gcpl = h5::GroupCreatePlist(/*track_link_order=*/false);
   auto group = h5::CheckId(H5Gcreate2(file->get(), kLeavesGroup, H5P_DEFAULT, gcpl.get(), H5P_DEFAULT),
                            "cannot create group '/leaves'");
   if (!group.ok()) return group.status();
   const auto specs = ColumnSpecs();
-  const auto data = ColumnData(c);
   for (size_t j = 0; j < specs.size(); ++j) {
-    s = WriteColumn(group->get(), specs[j], leaves.size(), data[j]);
+    s = WriteColumn(group->get(), specs[j], tile.num_leaves, tile.chunk_rows, tile.columns[j]);
     if (!s.ok()) return s;
   }
   group->Reset();
@@ -287,10 +373,18 @@ absl::Status ReadAttributes(hid_t root, TileData& tile, int64_t& version_out) {
   return absl::OkStatus();
 }
 
-// Reads /leaves/<spec.name> (rank 1, numeric) into `out`, which is resized to its length when
-// `n` is unknown (SIZE_MAX) and otherwise must match `n`.
-absl::StatusOr<size_t> ReadColumn(hid_t group, const ColumnSpec& spec, size_t n, Columns& c,
-                                  size_t index) {
+// The id of filter `index` of a dataset's pipeline, or -1.
+H5Z_filter_t FilterAt(hid_t dcpl, unsigned index) {
+  unsigned flags = 0, config = 0;
+  size_t cd_count = 0;
+  return H5Pget_filter2(dcpl, index, &flags, &cd_count, nullptr, 0, nullptr, &config);
+}
+
+// Reads /leaves/<spec.name> (rank 1, numeric) into `out`: its stored chunks when it is laid
+// out as WriteColumn lays it out, else its values through HDF5. `n` is the rows it must have
+// (SIZE_MAX: not known yet). Returns its rows.
+absl::StatusOr<size_t> ReadColumn(hid_t group, const ColumnSpec& spec, size_t element_bytes,
+                                  size_t n, RawTile::Column& out) {
   const std::string where = absl::StrCat("/leaves/", spec.name);
   if (H5Lexists(group, spec.name, H5P_DEFAULT) <= 0) {
     H5Eclear2(H5E_DEFAULT);
@@ -317,12 +411,44 @@ absl::StatusOr<size_t> ReadColumn(hid_t group, const ColumnSpec& spec, size_t n,
   if (absl::Status s = h5::CheckDataStored(dataset->get()); !s.ok()) {
     return Corrupt(absl::StrCat(where, ": ", s.message()));
   }
-  if (index == 0) ResizeColumns(c, rows);
-  if (rows > 0) {
-    absl::Status s = h5::CheckRc(H5Dread(dataset->get(), spec.mem_type, H5S_ALL, H5S_ALL,
-                                         H5P_DEFAULT, ColumnData(c)[index]),
-                                 absl::StrCat(where, ": cannot read"));
+  out.element_bytes = element_bytes;
+  if (rows == 0) return rows;
+  Hid dcpl(H5Dget_create_plist(dataset->get()));
+  hsize_t chunk_rows = 0;
+  const bool as_written =
+      H5Pget_layout(dcpl.get()) == H5D_CHUNKED && H5Pget_chunk(dcpl.get(), 1, &chunk_rows) == 1 &&
+      chunk_rows >= 1 && chunk_rows <= kChunkRows && H5Pget_nfilters(dcpl.get()) == 2 &&
+      FilterAt(dcpl.get(), 0) == H5Z_FILTER_SHUFFLE &&
+      FilterAt(dcpl.get(), 1) == H5Z_FILTER_DEFLATE && H5Tequal(type.get(), spec.file_type) > 0;
+  H5Eclear2(H5E_DEFAULT);
+  if (!as_written) {
+    out.decoded.resize(rows * element_bytes);
+    absl::Status s = h5::CheckRc(
+        H5Dread(dataset->get(), spec.mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.decoded.data()),
+        absl::StrCat(where, ": cannot read"));
     if (!s.ok()) return s;
+    return rows;
+  }
+  out.chunk_rows = chunk_rows;
+  const size_t num_chunks = (rows + chunk_rows - 1) / chunk_rows;
+  // A stored chunk is at most what deflate makes of incompressible bytes.
+  const uint64_t max_stored = compressBound(chunk_rows * element_bytes);
+  out.chunks.resize(num_chunks);
+  out.masks.resize(num_chunks);
+  for (size_t k = 0; k < num_chunks; ++k) {
+    const hsize_t offset[1] = {k * chunk_rows};
+    hsize_t stored = 0;
+    if (H5Dget_chunk_storage_size(dataset->get(), offset, &stored) < 0 || stored == 0 ||
+        stored > max_stored) {
+      H5Eclear2(H5E_DEFAULT);
+      return Corrupt(absl::StrCat(where, ": the chunk at row ", offset[0], " stores ", stored,
+                                  " bytes (1 to ", max_stored, " expected)"));
+    }
+    out.chunks[k].resize(stored);
+    absl::Status s = h5::CheckRc(
+        H5Dread_chunk(dataset->get(), H5P_DEFAULT, offset, &out.masks[k], out.chunks[k].data()),
+        absl::StrCat(where, ": cannot read the chunk at row ", offset[0]));
+    if (!s.ok()) return Corrupt(s.message());
   }
   return rows;
 }
@@ -379,7 +505,7 @@ absl::Status ValidateRows(const Columns& c, TileData& tile) {
   return absl::OkStatus();
 }
 
-absl::StatusOr<TileData> ReadFile(const std::string& path) {
+absl::StatusOr<RawTile> ReadRawFile(const std::string& path) {
   const htri_t is_hdf5 = H5Fis_hdf5(path.c_str());
   if (is_hdf5 <= 0) return h5::Error(absl::StatusCode::kDataLoss, "not a readable HDF5 file");
   auto file = h5::CheckId(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT),
@@ -387,20 +513,21 @@ absl::StatusOr<TileData> ReadFile(const std::string& path) {
   if (!file.ok()) return file.status();
   Hid root(H5Gopen2(file->get(), "/", H5P_DEFAULT));
   if (!root.valid()) return h5::Error(absl::StatusCode::kDataLoss, "cannot open the root group");
-  TileData tile;
-  int64_t version = 0;
-  absl::Status s = ReadAttributes(root.get(), tile, version);
+  RawTile raw;
+  raw.path = path;
+  absl::Status s = ReadAttributes(root.get(), raw.header, raw.version);
   if (!s.ok()) return s;
   if (!h5::Exists(file->get(), "/leaves")) return Corrupt("/leaves: missing group");
   auto group = h5::CheckId(H5Gopen2(file->get(), kLeavesGroup, H5P_DEFAULT),
                            "/leaves: cannot open group");
   if (!group.ok()) return group.status();
-  Columns c;
   size_t n = SIZE_MAX;
   const auto specs = ColumnSpecs();
-  const size_t num_columns = version >= 2 ? specs.size() : specs.size() - 1;
+  const size_t num_columns = raw.version >= 2 ? specs.size() : specs.size() - 1;
+  raw.columns.resize(num_columns);
   for (size_t j = 0; j < num_columns; ++j) {
-    auto rows = ReadColumn(group->get(), specs[j], n, c, j);
+    auto rows =
+        ReadColumn(group->get(), specs[j], kColumnLayouts[j].element_bytes, n, raw.columns[j]);
     if (!rows.ok()) return rows.status();
     n = *rows;
   }
@@ -409,9 +536,44 @@ absl::StatusOr<TileData> ReadFile(const std::string& path) {
   if (*num_leaves != static_cast<int64_t>(n)) {
     return Corrupt(absl::StrCat("/: num_leaves ", *num_leaves, " but the columns hold ", n, " rows"));
   }
-  s = ValidateRows(c, tile);
-  if (!s.ok()) return s;
-  return tile;
+  raw.rows = n;
+  return raw;
+}
+
+// The leaves' columns out of `raw`'s stored chunks or HDF5-read values.
+absl::Status DecodeColumns(const RawTile& raw, Columns& c) {
+  ResizeColumns(c, raw.rows);
+  const auto data = ColumnData(c);
+  for (size_t j = 0; j < raw.columns.size() && j < data.size(); ++j) {
+    const RawTile::Column& col = raw.columns[j];
+    const size_t eb = kColumnLayouts[j].element_bytes;
+    auto* out = static_cast<unsigned char*>(data[j]);
+    if (col.chunks.empty()) {
+      if (col.decoded.size() != raw.rows * eb) {
+        return Corrupt(absl::StrCat("/leaves/", kColumnLayouts[j].name, ": ", col.decoded.size(),
+                                    " bytes read for ", raw.rows, " rows"));
+      }
+      if (raw.rows > 0) std::memcpy(out, col.decoded.data(), col.decoded.size());
+      continue;
+    }
+    if (col.element_bytes != eb || col.chunk_rows == 0 ||
+        col.chunks.size() != (raw.rows + col.chunk_rows - 1) / col.chunk_rows ||
+        col.masks.size() != col.chunks.size()) {
+      return Corrupt(absl::StrCat("/leaves/", kColumnLayouts[j].name, ": chunks do not cover ",
+                                  raw.rows, " rows"));
+    }
+    for (size_t k = 0; k < col.chunks.size(); ++k) {
+      const size_t first = k * col.chunk_rows;
+      const size_t rows = std::min<size_t>(col.chunk_rows, raw.rows - first);
+      absl::Status s =
+          InflateUnshuffle(col.chunks[k], col.masks[k], col.chunk_rows, eb, rows, out + first * eb);
+      if (!s.ok()) {
+        return Corrupt(absl::StrCat("/leaves/", kColumnLayouts[j].name, ": the chunk at row ",
+                                    first, " ", s.message()));
+      }
+    }
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace
@@ -438,21 +600,58 @@ std::string TileFileName(const ChunkKey& chunk) {
   return absl::StrCat("c_", chunk.x(), "_", chunk.y(), "_", chunk.z(), ".h5");
 }
 
-absl::StatusOr<std::string> WriteTile(const std::string& dir, const TileData& tile) {
-  const std::string path = (std::filesystem::path(dir) / TileFileName(tile.chunk)).string();
-  const std::string partial = path + ".partial";
+absl::StatusOr<EncodedTile> EncodeTile(const std::string& dir, const TileData& tile) {
+  EncodedTile out;
+  out.path = (std::filesystem::path(dir) / TileFileName(tile.chunk)).string();
   std::vector<TileLeaf> leaves = tile.leaves;
   if (ValidGrid(tile.grid)) SortTileLeaves(tile.grid, leaves);
   TileData sorted_view{tile.chunk, tile.grid, tile.params, {}};
   sorted_view.leaves = std::move(leaves);
   absl::Status valid = ValidateForWrite(sorted_view);
-  if (!valid.ok()) return h5::Prefixed(path, valid);
+  if (!valid.ok()) return h5::Prefixed(out.path, valid);
+  const std::vector<TileLeaf>& sorted = sorted_view.leaves;
+  const size_t n = sorted.size();
+  Columns c;
+  ResizeColumns(c, n);
+  for (size_t i = 0; i < n; ++i) {
+    const LeafStats& s = sorted[i].stats;
+    c.key[i] = MortonCode(sorted[i].node.local);
+    c.depth[i] = static_cast<uint8_t>(sorted[i].node.depth);
+    c.p[i] = static_cast<float>(s.p());
+    c.weight[i] = s.sum_w;
+    c.variance[i] = static_cast<float>(s.variance());
+    c.count[i] = s.count;
+    c.sum_wp[i] = s.sum_wp;
+    c.sum_wp2[i] = s.sum_wp2;
+    c.points[i] = s.points;
+  }
+  out.header = TileData{tile.chunk, tile.grid, tile.params, {}};
+  out.num_leaves = n;
+  out.chunk_rows = std::min<uint64_t>(n, kChunkRows);
+  const auto data = ColumnData(c);
+  out.columns.resize(data.size());
+  for (size_t j = 0; j < data.size() && n > 0; ++j) {
+    const size_t eb = kColumnLayouts[j].element_bytes;
+    const auto* column = static_cast<const unsigned char*>(data[j]);
+    for (size_t first = 0; first < n; first += out.chunk_rows) {
+      const size_t rows = std::min<size_t>(out.chunk_rows, n - first);
+      absl::StatusOr<std::string> stored =
+          ShuffleDeflate(column + first * eb, rows, out.chunk_rows, eb);
+      if (!stored.ok()) return h5::Prefixed(out.path, stored.status());
+      out.columns[j].push_back(*std::move(stored));
+    }
+  }
+  return out;
+}
 
+absl::StatusOr<std::string> WriteEncodedTile(const EncodedTile& tile) {
+  const std::string& path = tile.path;
+  const std::string partial = path + ".partial";
   absl::Status s;
   {
     std::lock_guard<std::mutex> lock(TileMutex());
     h5::Init();
-    s = WriteFile(partial, sorted_view, sorted_view.leaves);
+    s = WriteFile(partial, tile);
   }
   // The fsyncs below run outside the HDF5 lock: other threads' reads need not wait for the disk.
   std::error_code error;
@@ -469,19 +668,43 @@ absl::StatusOr<std::string> WriteTile(const std::string& dir, const TileData& ti
   return path;
 }
 
-absl::StatusOr<TileData> ReadTile(const std::string& path) {
+absl::StatusOr<std::string> WriteTile(const std::string& dir, const TileData& tile) {
+  absl::StatusOr<EncodedTile> encoded = EncodeTile(dir, tile);
+  if (!encoded.ok()) return encoded.status();
+  return WriteEncodedTile(*encoded);
+}
+
+absl::StatusOr<RawTile> ReadRawTile(const std::string& path) {
   std::error_code error;
   if (!std::filesystem::is_regular_file(path, error)) {
     return absl::NotFoundError(absl::StrCat(path, ": no such tile"));
   }
   std::lock_guard<std::mutex> lock(TileMutex());
   h5::Init();
-  auto tile = ReadFile(path);
-  if (!tile.ok()) {
+  auto raw = ReadRawFile(path);
+  if (!raw.ok()) {
     H5Eclear2(H5E_DEFAULT);
-    return absl::Status(tile.status().code(), absl::StrCat(path, ": ", tile.status().message()));
+    return absl::Status(raw.status().code(), absl::StrCat(path, ": ", raw.status().message()));
   }
+  return raw;
+}
+
+absl::StatusOr<TileData> DecodeTile(RawTile raw) {
+  Columns c;
+  TileData tile = std::move(raw.header);
+  absl::Status s = DecodeColumns(raw, c);
+  if (s.ok()) {
+    raw.columns.clear();  // the stored chunks are not needed past here
+    s = ValidateRows(c, tile);
+  }
+  if (!s.ok()) return absl::Status(s.code(), absl::StrCat(raw.path, ": ", s.message()));
   return tile;
+}
+
+absl::StatusOr<TileData> ReadTile(const std::string& path) {
+  absl::StatusOr<RawTile> raw = ReadRawTile(path);
+  if (!raw.ok()) return raw.status();
+  return DecodeTile(*std::move(raw));
 }
 
 }  // namespace carvemap

@@ -69,4 +69,39 @@ absl::StatusOr<std::string> WriteTile(const std::string& dir, const TileData& ti
 // tile.
 absl::StatusOr<TileData> ReadTile(const std::string& path);
 
+// The same in two steps, for callers that handle many tiles on several threads: the
+// compression is most of a tile's cost, and here it runs outside the process's HDF5 lock.
+// WriteTile is EncodeTile (sorts, validates and compresses each column's stored chunks, on any
+// thread) then WriteEncodedTile (the file, under the lock); ReadTile is ReadRawTile (the
+// attributes and the stored chunks, under the lock) then DecodeTile (decompresses and
+// validates, on any thread). Each step's errors are those of WriteTile or ReadTile.
+struct EncodedTile {
+  std::string path;  // where WriteEncodedTile puts it
+  TileData header;   // chunk, grid and params; no leaves
+  uint64_t num_leaves = 0;
+  uint64_t chunk_rows = 0;
+  // Per column (TILE_FORMAT.md's order), each stored chunk's bytes as HDF5's filters make them.
+  std::vector<std::vector<std::string>> columns;
+};
+absl::StatusOr<EncodedTile> EncodeTile(const std::string& dir, const TileData& tile);
+absl::StatusOr<std::string> WriteEncodedTile(const EncodedTile& tile);
+
+struct RawTile {
+  std::string path;
+  TileData header;  // chunk, grid and params; no leaves
+  int64_t version = 0;
+  uint64_t rows = 0;
+  struct Column {
+    uint64_t chunk_rows = 0;
+    uint64_t element_bytes = 0;
+    std::vector<std::string> chunks;  // stored bytes, still filtered
+    std::vector<uint32_t> masks;      // HDF5's filter mask of each: bit i = filter i skipped
+    // A column another writer stored with other filters or layout: read whole through HDF5.
+    std::vector<unsigned char> decoded;
+  };
+  std::vector<Column> columns;
+};
+absl::StatusOr<RawTile> ReadRawTile(const std::string& path);
+absl::StatusOr<TileData> DecodeTile(RawTile raw);
+
 }  // namespace carvemap

@@ -85,6 +85,13 @@ std::string ReadBytes(const std::string& path) {
   return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
+void EditTile(const std::string& path, const std::function<void(hid_t)>& edit) {
+  hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  edit(file);
+  H5Fclose(file);
+}
+
 TEST_F(TileStoreTest, FileNameKeepsNegativeKeys) {
   EXPECT_EQ(TileFileName(ChunkKey(-3, 7, -1)), "c_-3_7_-1.h5");
   EXPECT_EQ(TileFileName(ChunkKey(0, 0, 0)), "c_0_0_0.h5");
@@ -179,6 +186,144 @@ TEST_F(TileStoreTest, CompressesColumns) {
   EXPECT_LT(std::filesystem::file_size(*path), 400000u);
 }
 
+// A tile over several HDF5 chunks (16384 rows each) with a partial last one.
+TileData MakeBigTile(uint64_t leaves) {
+  TileData big;
+  big.chunk = ChunkKey(-3, 7, -1);
+  big.grid.chunk_depth = 6;
+  for (uint64_t code = 0; code < leaves; ++code) {
+    TileLeaf leaf;
+    leaf.node.local = MortonDecode(code * 13 % (uint64_t{1} << 18));
+    leaf.node.depth = 6;
+    leaf.stats.Add(0.25 + 0.5 * double(code % 7) / 7.0, 0.5 + double(code % 5));
+    leaf.stats.points = static_cast<uint32_t>(code % 3);
+    big.leaves.push_back(leaf);
+  }
+  return big;
+}
+
+void ExpectSameLeaves(const TileData& read, TileData expected) {
+  SortTileLeaves(expected.grid, expected.leaves);
+  ASSERT_EQ(read.leaves.size(), expected.leaves.size());
+  for (size_t i = 0; i < expected.leaves.size(); ++i) {
+    SCOPED_TRACE(i);
+    ASSERT_EQ(read.leaves[i].node.local, expected.leaves[i].node.local);
+    ASSERT_EQ(read.leaves[i].node.depth, expected.leaves[i].node.depth);
+    ASSERT_EQ(read.leaves[i].stats.sum_w, expected.leaves[i].stats.sum_w);
+    ASSERT_EQ(read.leaves[i].stats.sum_wp, expected.leaves[i].stats.sum_wp);
+    ASSERT_EQ(read.leaves[i].stats.sum_wp2, expected.leaves[i].stats.sum_wp2);
+    ASSERT_EQ(read.leaves[i].stats.count, expected.leaves[i].stats.count);
+    ASSERT_EQ(read.leaves[i].stats.points, expected.leaves[i].stats.points);
+  }
+}
+
+// The writer compresses each stored chunk itself (outside HDF5's lock): HDF5 must read back
+// what its own filters would, and the reader must read what HDF5's filters and other layouts
+// write, so tiles of other writers still load.
+TEST_F(TileStoreTest, ChunksAreThoseOfHdf5sOwnFilters) {
+  const TileData tile = MakeBigTile(40000);  // three chunks, the last partial
+  auto path = WriteTile(Dir(), tile);
+  ASSERT_TRUE(path.ok()) << path.status();
+  std::vector<TileLeaf> sorted = tile.leaves;
+  SortTileLeaves(tile.grid, sorted);
+
+  // HDF5 reads our chunks through its filters.
+  hid_t file = H5Fopen(path->c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  std::vector<double> weight(sorted.size());
+  std::vector<uint64_t> key(sorted.size());
+  hid_t d = H5Dopen2(file, "/leaves/weight", H5P_DEFAULT);
+  ASSERT_GE(H5Dread(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, weight.data()), 0);
+  H5Dclose(d);
+  d = H5Dopen2(file, "/leaves/key", H5P_DEFAULT);
+  ASSERT_GE(H5Dread(d, H5T_NATIVE_UINT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, key.data()), 0);
+  H5Dclose(d);
+  H5Fclose(file);
+  for (size_t i = 0; i < sorted.size(); ++i) {
+    ASSERT_EQ(weight[i], sorted[i].stats.sum_w) << i;
+    ASSERT_EQ(key[i], MortonCode(sorted[i].node.local)) << i;
+  }
+
+  // Columns rewritten by HDF5 itself: weight through its shuffle and deflate filters at
+  // another level and chunk size, count contiguous and unfiltered, sum_wp big-endian.
+  EditTile(*path, [&](hid_t f) {
+    const hsize_t n = sorted.size(), chunk = 5000;
+    std::vector<uint32_t> count(n);
+    std::vector<double> sum_wp(n);
+    for (size_t i = 0; i < n; ++i) {
+      count[i] = sorted[i].stats.count;
+      sum_wp[i] = sorted[i].stats.sum_wp;
+    }
+    hid_t space = H5Screate_simple(1, &n, nullptr);
+    const auto rewrite = [&](const char* name, hid_t file_type, hid_t mem_type, const void* v,
+                             bool filtered) {
+      ASSERT_GE(H5Ldelete(f, name, H5P_DEFAULT), 0);
+      hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+      if (filtered) {
+        H5Pset_chunk(dcpl, 1, &chunk);
+        H5Pset_shuffle(dcpl);
+        H5Pset_deflate(dcpl, 9);
+      }
+      hid_t ds = H5Dcreate2(f, name, file_type, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+      ASSERT_GE(ds, 0);
+      ASSERT_GE(H5Dwrite(ds, mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, v), 0);
+      H5Dclose(ds);
+      H5Pclose(dcpl);
+    };
+    rewrite("/leaves/weight", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, weight.data(), true);
+    rewrite("/leaves/count", H5T_STD_U32LE, H5T_NATIVE_UINT32, count.data(), false);
+    rewrite("/leaves/sum_wp", H5T_IEEE_F64BE, H5T_NATIVE_DOUBLE, sum_wp.data(), true);
+    H5Sclose(space);
+  });
+  auto read = ReadTile(*path);
+  ASSERT_TRUE(read.ok()) << read.status();
+  ExpectSameLeaves(*read, tile);
+}
+
+TEST_F(TileStoreTest, EncodedAndRawStepsAreWriteTileAndReadTile) {
+  const TileData tile = MakeBigTile(20000);
+  auto encoded = EncodeTile(Dir("a"), tile);
+  ASSERT_TRUE(encoded.ok()) << encoded.status();
+  auto a = WriteEncodedTile(*encoded);
+  auto b = WriteTile(Dir("b"), tile);
+  ASSERT_TRUE(a.ok() && b.ok()) << a.status() << b.status();
+  EXPECT_TRUE(ReadBytes(*a) == ReadBytes(*b));
+  auto raw = ReadRawTile(*a);
+  ASSERT_TRUE(raw.ok()) << raw.status();
+  EXPECT_EQ(raw->rows, 20000u);
+  auto decoded = DecodeTile(*std::move(raw));
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  ExpectSameLeaves(*decoded, tile);
+
+  TileData bad = tile;
+  bad.leaves[3].node.depth = 9;
+  auto refused = EncodeTile(Dir("c"), bad);
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(refused.status().message(), HasSubstr("c_-3_7_-1.h5"));
+}
+
+// A damaged stored chunk is found when it is decompressed, naming the file, the column and
+// the chunk; so is one whose stream inflates to the wrong size.
+TEST_F(TileStoreTest, DamagedChunkIsDataLossNamingColumnAndRow) {
+  auto path = WriteTile(Dir(), MakeBigTile(40000));
+  ASSERT_TRUE(path.ok()) << path.status();
+  for (const std::string& bytes :
+       {std::string(300, '\x5a'), std::string("\x78\x9c\x03\x00\x00\x00\x00\x01")}) {
+    EditTile(*path, [&](hid_t f) {
+      hid_t d = H5Dopen2(f, "/leaves/sum_wp2", H5P_DEFAULT);
+      ASSERT_GE(d, 0);
+      const hsize_t offset[1] = {16384};
+      ASSERT_GE(H5Dwrite_chunk(d, H5P_DEFAULT, 0, offset, bytes.size(), bytes.data()), 0);
+      H5Dclose(d);
+    });
+    auto read = ReadTile(*path);
+    ASSERT_FALSE(read.ok());
+    EXPECT_EQ(read.status().code(), absl::StatusCode::kDataLoss);
+    EXPECT_THAT(read.status().message(), HasSubstr("c_-3_7_-1.h5"));
+    EXPECT_THAT(read.status().message(), HasSubstr("/leaves/sum_wp2: the chunk at row 16384"));
+  }
+}
+
 TEST_F(TileStoreTest, TruncatedTileIsDataLossNamingTheFile) {
   auto path = WriteTile(Dir(), MakeTile(400, 4));
   ASSERT_TRUE(path.ok()) << path.status();
@@ -203,13 +348,6 @@ TEST_F(TileStoreTest, MissingTileIsNotFound) {
 }
 
 // Opens a written tile for editing with the C API, as a damaged or foreign writer would.
-void EditTile(const std::string& path, const std::function<void(hid_t)>& edit) {
-  hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
-  ASSERT_GE(file, 0);
-  edit(file);
-  H5Fclose(file);
-}
-
 TEST_F(TileStoreTest, MissingColumnNamesFileAndDataset) {
   auto path = WriteTile(Dir(), MakeTile(100, 5));
   ASSERT_TRUE(path.ok()) << path.status();
