@@ -1,7 +1,8 @@
 // Per-chunk merge stages on every core: the tiles of each chunk's neighbourhood are read on the
-// calling thread (HDF5 is not thread-safe, storage/tile_store.h), a batch of a few chunks per
-// thread at a time; the per-chunk work runs on `threads` threads; the results are handed on in
-// chunk order, on the calling thread, so they do not depend on the thread count.
+// calling thread (HDF5 is not thread-safe, storage/tile_store.h) and decompressed on `threads`
+// threads, a batch of a few chunks per thread at a time; the per-chunk work runs on `threads`
+// threads; the results are handed on in chunk order, on the calling thread, so they do not
+// depend on the thread count.
 #pragma once
 
 #include <algorithm>
@@ -35,6 +36,20 @@ absl::Status ForEachChunk(TileSet& tiles, std::span<const ChunkKey> chunks, bool
   std::vector<std::optional<absl::StatusOr<Result>>> results(batch);
   for (size_t first = 0; first < chunks.size(); first += batch) {
     const size_t n = std::min(batch, chunks.size() - first);
+    if (threads > 1) {
+      std::vector<ChunkKey> needed;
+      for (size_t k = 0; k < n; ++k) {
+        for (int dz = -1; dz <= 1; ++dz) {
+          for (int dy = -1; dy <= 1; ++dy) {
+            for (int dx = -1; dx <= 1; ++dx) {
+              if (low_only && (dx > 0 || dy > 0 || dz > 0)) continue;
+              needed.push_back(chunks[first + k] + ChunkKey(dx, dy, dz));
+            }
+          }
+        }
+      }
+      if (absl::Status s = tiles.Prefetch(needed, threads); !s.ok()) return s;
+    }
     for (size_t k = 0; k < n; ++k) {
       absl::StatusOr<ChunkNeighbourhood> hood =
           FetchNeighbourhood(tiles, chunks[first + k], low_only, hold[k]);

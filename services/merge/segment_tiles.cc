@@ -1,6 +1,7 @@
 #include "services/merge/segment_tiles.h"
 
 #include <filesystem>
+#include <optional>
 
 #include "absl/strings/str_cat.h"
 #include "services/merge/for_each_chunk.h"
@@ -21,25 +22,49 @@ absl::StatusOr<SegmentTilesResult> SegmentTiles(TileSet& tiles, const PlanVolume
   }
   SegmentTilesResult result;
   const ChunkRegion none;
-  absl::Status s = ForEachChunk<SegmentedChunk>(
+  // The tiles are compressed on the per-chunk threads; only their files are written in order.
+  struct Encoded {
+    SegmentedChunk counts;  // its tiles' leaves moved out
+    std::optional<EncodedTile> building, objects;
+  };
+  const auto encode = [&](absl::StatusOr<SegmentedChunk> seg) -> absl::StatusOr<Encoded> {
+    if (!seg.ok()) return seg.status();
+    Encoded e;
+    if (!building_dir.empty()) {
+      absl::StatusOr<EncodedTile> b = EncodeTile(building_dir, seg->building);
+      if (!b.ok()) return b.status();
+      e.building = *std::move(b);
+    }
+    if (seg->object_cells > 0) {
+      absl::StatusOr<EncodedTile> o = EncodeTile(objects_dir, seg->objects);
+      if (!o.ok()) return o.status();
+      e.objects = *std::move(o);
+    }
+    e.counts = *std::move(seg);
+    e.counts.building.leaves = {};
+    e.counts.objects.leaves = {};
+    return e;
+  };
+  absl::Status s = ForEachChunk<Encoded>(
       tiles, tiles.chunks(), /*low_only=*/false, threads,
-      [&](const ChunkNeighbourhood& hood) -> absl::StatusOr<SegmentedChunk> {
-        if (only_in == nullptr) return SegmentChunk(hood, plan, options, nullptr);
+      [&](const ChunkNeighbourhood& hood) -> absl::StatusOr<Encoded> {
+        if (only_in == nullptr) return encode(SegmentChunk(hood, plan, options, nullptr));
         auto it = only_in->find(hood.chunk);
-        if (it == only_in->end()) return SegmentChunk(hood, plan, options, &none);
+        if (it == only_in->end()) return encode(SegmentChunk(hood, plan, options, &none));
         absl::StatusOr<ChunkRegion> region = it->second.Decode();
         if (!region.ok()) return region.status();
-        return SegmentChunk(hood, plan, options, &*region);
+        return encode(SegmentChunk(hood, plan, options, &*region));
       },
-      [&](SegmentedChunk&& seg) -> absl::Status {
-        if (!building_dir.empty()) {
-          if (absl::StatusOr<std::string> w = WriteTile(building_dir, seg.building); !w.ok()) {
+      [&](Encoded&& e) -> absl::Status {
+        const SegmentedChunk& seg = e.counts;
+        if (e.building) {
+          if (absl::StatusOr<std::string> w = WriteEncodedTile(*e.building); !w.ok()) {
             return w.status();
           }
           ++result.building_tiles;
         }
-        if (seg.object_cells > 0) {
-          if (absl::StatusOr<std::string> w = WriteTile(objects_dir, seg.objects); !w.ok()) {
+        if (e.objects) {
+          if (absl::StatusOr<std::string> w = WriteEncodedTile(*e.objects); !w.ok()) {
             return w.status();
           }
           ++result.object_tiles;

@@ -1,9 +1,12 @@
 #include "services/merge/tile_set.h"
 
 #include <algorithm>
+#include <atomic>
 #include <charconv>
 #include <filesystem>
+#include <optional>
 #include <system_error>
+#include <thread>
 
 #include "absl/strings/str_cat.h"
 
@@ -102,6 +105,40 @@ absl::StatusOr<std::shared_ptr<const TileData>> TileSet::Get(const ChunkKey& chu
   if (!tile.ok()) return tile.status();
   if (absl::Status s = Insert(chunk, *std::move(tile)); !s.ok()) return s;
   return cache_.at(chunk).tile;
+}
+
+absl::Status TileSet::Prefetch(std::span<const ChunkKey> chunks, int threads) {
+  std::vector<ChunkKey> missing;
+  for (const ChunkKey& c : chunks) {
+    if (Contains(c) && !cache_.contains(c) &&
+        std::find(missing.begin(), missing.end(), c) == missing.end()) {
+      missing.push_back(c);
+    }
+  }
+  std::vector<absl::StatusOr<RawTile>> raw;
+  raw.reserve(missing.size());
+  for (const ChunkKey& c : missing) {
+    raw.push_back(ReadRawTile(PathOf(c)));
+    if (!raw.back().ok()) return raw.back().status();
+  }
+  std::vector<std::optional<absl::StatusOr<TileData>>> decoded(missing.size());
+  std::atomic<size_t> next{0};
+  const auto work = [&] {
+    for (size_t k; (k = next.fetch_add(1)) < missing.size();) {
+      decoded[k].emplace(DecodeTile(*std::move(raw[k])));
+    }
+  };
+  {
+    std::vector<std::jthread> pool;
+    for (int t = 1; t < threads && size_t(t) < missing.size(); ++t) pool.emplace_back(work);
+    work();
+  }
+  for (size_t k = 0; k < missing.size(); ++k) {
+    if (!decoded[k]->ok()) return decoded[k]->status();
+    ++tile_reads_;
+    if (absl::Status s = Insert(missing[k], **std::move(decoded[k])); !s.ok()) return s;
+  }
+  return absl::OkStatus();
 }
 
 void TileSet::ReleaseCache() {

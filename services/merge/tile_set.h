@@ -6,6 +6,7 @@
 #include <list>
 #include <map>
 #include <memory>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -57,6 +58,11 @@ class TileSet {
   // after eviction.
   absl::StatusOr<std::shared_ptr<const TileData>> Get(const ChunkKey& chunk);
 
+  // Reads into the cache the tiles of `chunks` that have one and are not cached, as Get
+  // would one at a time, but decompressing them on `threads` threads (the files are read on
+  // this one: HDF5 is not thread-safe). The per-chunk stages call it for each batch, so that
+  // decompressing tiles does not hold up their other cores.
+  absl::Status Prefetch(std::span<const ChunkKey> chunks, int threads);
   // The stored leaf covering `x_world`; chunks without a tile answer `stored = false`.
   absl::StatusOr<LeafQuery> Query(const Eigen::Vector3d& x_world);
 
