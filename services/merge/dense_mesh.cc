@@ -134,8 +134,12 @@ void ColumnSelfIntersections::CountNext() {
       window.triangles.push_back(lt);
     }
   }
-  const SelfIntersections s =
-      CountSelfIntersections(window, threads_, kSelfIntersectionTrianglesPerSlab, lo, hi);
+  // A window is one slab's worth or less: cut into one slab per thread, so that the count,
+  // which the slabs do not change, is not left to one core.
+  const size_t per_slab =
+      std::clamp<size_t>(window.triangles.size() / size_t(std::max(threads_, 1)) + 1,
+                         size_t{1} << 14, kSelfIntersectionTrianglesPerSlab);
+  const SelfIntersections s = CountSelfIntersections(window, threads_, per_slab, lo, hi);
   seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   total_.pairs += s.pairs;
   total_.unchecked += s.unchecked;
