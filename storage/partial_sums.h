@@ -25,11 +25,13 @@ struct PartialSection {
   ChunkKey chunk = ChunkKey::Zero();
   uint64_t wedges = 0;  // wedges carved into these sums (for the tile's num_wedges)
   uint64_t leaves = 0;
-  uint64_t offset = 0;  // of its first leaf record in the file
-  uint32_t crc = 0;     // CRC-32C of its leaf records
+  uint64_t offset = 0;        // of its first stored byte in the file
+  uint64_t stored_bytes = 0;  // its bytes in the file (compressed from version 2)
+  uint32_t crc = 0;           // CRC-32C of its stored bytes
 };
 
 struct PartialSumsIndex {
+  uint32_t version = 0;
   int chunk_depth = 0;
   uint32_t slice = 0;
   std::vector<PartialSection> sections;  // in file order

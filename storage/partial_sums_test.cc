@@ -1,12 +1,13 @@
 #include "storage/partial_sums.h"
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <set>
-#include <tuple>
 #include <random>
+#include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <gmock/gmock.h>
@@ -92,6 +93,112 @@ TEST(PartialSumsTest, SectionsComeBackBitForBitSortedByPlace) {
       }
     }
   }
+}
+
+// Version 1 files (leaf records as they are, before sections were compressed) still read:
+// one written here byte by byte from PARTIAL_FORMAT.md's layout, two sections.
+TEST(PartialSumsTest, VersionOneFilesStillRead) {
+  std::string file;
+  const auto u32 = [](std::string& out, uint32_t v) {
+    for (int i = 0; i < 4; ++i) out.push_back(char(v >> (8 * i)));
+  };
+  const auto u64 = [](std::string& out, uint64_t v) {
+    for (int i = 0; i < 8; ++i) out.push_back(char(v >> (8 * i)));
+  };
+  const auto f64 = [&](std::string& out, double v) {
+    uint64_t bits;
+    std::memcpy(&bits, &v, 8);
+    u64(out, bits);
+  };
+  file = "CMPARTL1";
+  u32(file, 1);  // version
+  u32(file, 4);  // chunk depth
+  u32(file, 9);  // slice
+  file.append(8, '\0');
+  u32(file, Crc32c(file));
+  struct Leaf {
+    int x, y, z;
+    uint32_t count, points;
+    double w, wp, wp2;
+  };
+  const std::vector<std::vector<Leaf>> sections = {
+      {{1, 0, 0, 3, 1, 0.5, 0.25, 0.125}, {2, 3, 1, 7, 0, 1.5, 1.0, 0.75}},
+      {{15, 15, 15, 1, 2, 2, 1, 0.5}}};
+  std::string index;
+  for (size_t k = 0; k < sections.size(); ++k) {
+    std::string records;
+    for (const Leaf& l : sections[k]) {
+      u32(records, uint32_t(l.x) | uint32_t(l.y) << 10 | uint32_t(l.z) << 20);
+      u32(records, l.count);
+      u32(records, l.points);
+      f64(records, l.w);
+      f64(records, l.wp);
+      f64(records, l.wp2);
+    }
+    for (int a : {int(k), -2, 5}) u32(index, uint32_t(a));
+    u64(index, 10 + k);              // wedges
+    u64(index, sections[k].size());  // leaves
+    u64(index, file.size());         // offset
+    u32(index, Crc32c(records));
+    file += records;
+  }
+  std::string trailer;
+  u64(trailer, file.size());
+  u64(trailer, sections.size());
+  u32(trailer, Crc32c(index));
+  u32(trailer, Crc32c(trailer));
+  file += index + trailer;
+  const std::string path = TempPath("v1.part");
+  std::ofstream(path, std::ios::binary) << file;
+
+  absl::StatusOr<PartialSumsIndex> read = ReadPartialIndex(path);
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(read->version, 1u);
+  EXPECT_EQ(read->slice, 9u);
+  ASSERT_EQ(read->sections.size(), 2u);
+  for (size_t k = 0; k < 2; ++k) {
+    EXPECT_EQ(read->sections[k].chunk, ChunkKey(int(k), -2, 5));
+    EXPECT_EQ(read->sections[k].wedges, 10 + k);
+    std::vector<TileLeaf> leaves;
+    ASSERT_TRUE(ReadPartialSection(path, *read, read->sections[k], leaves).ok());
+    ASSERT_EQ(leaves.size(), sections[k].size());
+    for (size_t i = 0; i < leaves.size(); ++i) {
+      const Leaf& l = sections[k][i];
+      EXPECT_EQ(leaves[i].node.local, Eigen::Vector3i(l.x, l.y, l.z));
+      EXPECT_EQ(leaves[i].node.depth, 4);
+      EXPECT_EQ(leaves[i].stats.count, l.count);
+      EXPECT_EQ(leaves[i].stats.points, l.points);
+      EXPECT_EQ(leaves[i].stats.sum_w, l.w);
+      EXPECT_EQ(leaves[i].stats.sum_wp, l.wp);
+      EXPECT_EQ(leaves[i].stats.sum_wp2, l.wp2);
+    }
+  }
+}
+
+// Sections are stored compressed: a file of many leaves takes fewer bytes than their records.
+TEST(PartialSumsTest, SectionsAreStoredCompressed) {
+  std::mt19937 rng(5);
+  const std::string path = TempPath("slice_2.part");
+  auto w = PartialSumsWriter::Create(path, 6, 2);
+  ASSERT_TRUE(w.ok()) << w.status();
+  // Sums of a few votes of equal weight, as a slice's free space mostly holds.
+  std::vector<TileLeaf> leaves = RandomLeaves(rng, 6, 5000);
+  for (TileLeaf& l : leaves) {
+    l.stats.count = 1 + l.stats.count % 4;
+    l.stats.sum_w = 0.5 * l.stats.count;
+    l.stats.sum_wp = 0.05 * l.stats.count;
+    l.stats.sum_wp2 = 0.005 * l.stats.count;
+  }
+  ASSERT_TRUE((*w)->AddSection(ChunkKey(0, 0, 0), 1, leaves).ok());
+  absl::StatusOr<uint64_t> bytes = (*w)->Finish();
+  ASSERT_TRUE(bytes.ok()) << bytes.status();
+  EXPECT_LT(*bytes, 5000u * 36 / 4);
+  absl::StatusOr<PartialSumsIndex> index = ReadPartialIndex(path);
+  ASSERT_TRUE(index.ok()) << index.status();
+  EXPECT_EQ(index->version, 2u);
+  std::vector<TileLeaf> got;
+  ASSERT_TRUE(ReadPartialSection(path, *index, index->sections[0], got).ok());
+  EXPECT_EQ(got.size(), leaves.size());
 }
 
 TEST(PartialSumsTest, DamageIsDetectedAndNamesTheFile) {
