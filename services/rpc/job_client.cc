@@ -15,8 +15,8 @@
 #include "absl/strings/str_format.h"
 #include "absl/synchronization/mutex.h"
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
-#include "services/grpc_status.h"
 #include "services/rpc/grpc_security.h"
+#include "services/rpc/grpc_status.h"
 #include "storage/atomic_file.h"
 #include "storage/file_hash.h"
 

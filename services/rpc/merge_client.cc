@@ -18,8 +18,8 @@
 #include "absl/synchronization/notification.h"
 #include "absl/time/time.h"
 #include "proto/carvemap/v1/merge.grpc.pb.h"
-#include "services/grpc_status.h"
 #include "services/rpc/grpc_security.h"
+#include "services/rpc/grpc_status.h"
 #include "services/rpc/merge_params_proto.h"
 
 namespace carvemap {

@@ -1,4 +1,4 @@
-#include "services/grpc_server_common.h"
+#include "services/rpc/grpc_server_common.h"
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>

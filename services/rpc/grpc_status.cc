@@ -1,4 +1,4 @@
-#include "services/grpc_status.h"
+#include "services/rpc/grpc_status.h"
 
 #include <string>
 

@@ -1,7 +1,7 @@
 // Starts a real server on localhost:0 with the health service and reflection on, and talks to
 // it with a generic (untyped) client: Debian 12 ships neither the health nor the reflection
 // .proto stubs, so the requests and answers are encoded by hand (both are a few bytes).
-#include "services/grpc_server_common.h"
+#include "services/rpc/grpc_server_common.h"
 
 #include <grpcpp/create_channel.h>
 #include <grpcpp/generic/generic_stub.h>
@@ -16,7 +16,7 @@
 
 #include "proto/carvemap/v1/carve.grpc.pb.h"
 #include "proto/carvemap/v1/jobs.grpc.pb.h"
-#include "services/grpc_status.h"
+#include "services/rpc/grpc_status.h"
 
 namespace carvemap {
 namespace {
