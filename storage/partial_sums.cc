@@ -15,6 +15,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "storage/atomic_file.h"
+#include "storage/byte_shuffle.h"
 #include "storage/crc32c.h"
 
 namespace carvemap {
@@ -132,9 +133,8 @@ constexpr uint64_t kMaxInflation = 1024;
 absl::StatusOr<std::string> PackRecords(const std::vector<char>& records) {
   const size_t n = records.size() / kLeafBytes;
   std::vector<char> planes(records.size());
-  for (size_t i = 0; i < n; ++i) {
-    for (size_t j = 0; j < kLeafBytes; ++j) planes[j * n + i] = records[i * kLeafBytes + j];
-  }
+  ShuffleBytes(reinterpret_cast<const unsigned char*>(records.data()), n, kLeafBytes, n,
+               reinterpret_cast<unsigned char*>(planes.data()));
   std::string stored(ZSTD_compressBound(planes.size()), '\0');
   const size_t got =
       ZSTD_compress(stored.data(), stored.size(), planes.data(), planes.size(), kZstdLevel);
@@ -161,10 +161,8 @@ absl::StatusOr<std::vector<char>> UnpackRecords(const std::vector<char>& stored,
                                             ")"));
   }
   std::vector<char> records(bytes);
-  const size_t n = size_t(leaves);
-  for (size_t j = 0; j < kLeafBytes; ++j) {
-    for (size_t i = 0; i < n; ++i) records[i * kLeafBytes + j] = planes[j * n + i];
-  }
+  UnshuffleBytes(reinterpret_cast<const unsigned char*>(planes.data()), size_t(leaves), kLeafBytes,
+                 size_t(leaves), reinterpret_cast<unsigned char*>(records.data()));
   return records;
 }
 
@@ -323,9 +321,7 @@ absl::StatusOr<PartialSumsIndex> ReadPartialIndex(const std::string& path) {
   out.version = GetU32(header + 8);
   if (out.version < 1 || out.version > kVersion) {
     return Corrupt(path, absl::StrCat("unsupported version ", out.version,
-                                      " (this build "
-                                      "reads 1 to ",
-                                      kVersion, ")"));
+                                      " (this build reads 1 to ", kVersion, ")"));
   }
   out.chunk_depth = int(GetU32(header + 12));
   out.slice = GetU32(header + 16);

@@ -15,6 +15,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "storage/atomic_file.h"
+#include "storage/byte_shuffle.h"
 #include "storage/h5_util.h"
 #include "storage/hdf5_lock.h"
 
@@ -131,11 +132,7 @@ absl::StatusOr<std::string> ShuffleDeflate(const unsigned char* data, size_t row
   const size_t bytes = chunk_rows * element_bytes;
   std::vector<unsigned char> plain(bytes, 0);
   if (Shuffles(chunk_rows, element_bytes)) {
-    for (size_t i = 0; i < rows; ++i) {
-      for (size_t j = 0; j < element_bytes; ++j) {
-        plain[j * chunk_rows + i] = data[i * element_bytes + j];
-      }
-    }
+    ShuffleBytes(data, rows, element_bytes, chunk_rows, plain.data());
   } else {
     std::memcpy(plain.data(), data, rows * element_bytes);
   }
@@ -177,10 +174,7 @@ absl::Status InflateUnshuffle(std::string_view stored, uint32_t mask, size_t chu
   }
   const auto* in = reinterpret_cast<const unsigned char*>(shuffled.data());
   if ((mask & 1u) == 0 && Shuffles(chunk_rows, element_bytes)) {
-    for (size_t j = 0; j < element_bytes; ++j) {
-      const unsigned char* plane = in + j * chunk_rows;
-      for (size_t i = 0; i < rows; ++i) out[i * element_bytes + j] = plane[i];
-    }
+    UnshuffleBytes(in, rows, element_bytes, chunk_rows, out);
   } else {
     std::memcpy(out, in, rows * element_bytes);
   }
@@ -411,7 +405,6 @@ absl::StatusOr<size_t> ReadColumn(hid_t group, const ColumnSpec& spec, size_t el
   if (absl::Status s = h5::CheckDataStored(dataset->get()); !s.ok()) {
     return Corrupt(absl::StrCat(where, ": ", s.message()));
   }
-  out.element_bytes = element_bytes;
   if (rows == 0) return rows;
   Hid dcpl(H5Dget_create_plist(dataset->get()));
   hsize_t chunk_rows = 0;
@@ -515,7 +508,8 @@ absl::StatusOr<RawTile> ReadRawFile(const std::string& path) {
   if (!root.valid()) return h5::Error(absl::StatusCode::kDataLoss, "cannot open the root group");
   RawTile raw;
   raw.path = path;
-  absl::Status s = ReadAttributes(root.get(), raw.header, raw.version);
+  int64_t version = 0;
+  absl::Status s = ReadAttributes(root.get(), raw.header, version);
   if (!s.ok()) return s;
   if (!h5::Exists(file->get(), "/leaves")) return Corrupt("/leaves: missing group");
   auto group = h5::CheckId(H5Gopen2(file->get(), kLeavesGroup, H5P_DEFAULT),
@@ -523,7 +517,7 @@ absl::StatusOr<RawTile> ReadRawFile(const std::string& path) {
   if (!group.ok()) return group.status();
   size_t n = SIZE_MAX;
   const auto specs = ColumnSpecs();
-  const size_t num_columns = raw.version >= 2 ? specs.size() : specs.size() - 1;
+  const size_t num_columns = version >= 2 ? specs.size() : specs.size() - 1;
   raw.columns.resize(num_columns);
   for (size_t j = 0; j < num_columns; ++j) {
     auto rows =
@@ -556,7 +550,7 @@ absl::Status DecodeColumns(const RawTile& raw, Columns& c) {
       if (raw.rows > 0) std::memcpy(out, col.decoded.data(), col.decoded.size());
       continue;
     }
-    if (col.element_bytes != eb || col.chunk_rows == 0 ||
+    if (col.chunk_rows == 0 ||
         col.chunks.size() != (raw.rows + col.chunk_rows - 1) / col.chunk_rows ||
         col.masks.size() != col.chunks.size()) {
       return Corrupt(absl::StrCat("/leaves/", kColumnLayouts[j].name, ": chunks do not cover ",

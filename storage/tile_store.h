@@ -89,17 +89,15 @@ absl::StatusOr<std::string> WriteEncodedTile(const EncodedTile& tile);
 struct RawTile {
   std::string path;
   TileData header;  // chunk, grid and params; no leaves
-  int64_t version = 0;
   uint64_t rows = 0;
   struct Column {
     uint64_t chunk_rows = 0;
-    uint64_t element_bytes = 0;
     std::vector<std::string> chunks;  // stored bytes, still filtered
     std::vector<uint32_t> masks;      // HDF5's filter mask of each: bit i = filter i skipped
     // A column another writer stored with other filters or layout: read whole through HDF5.
     std::vector<unsigned char> decoded;
   };
-  std::vector<Column> columns;
+  std::vector<Column> columns;  // TILE_FORMAT.md's order; version 1 tiles have no points
 };
 absl::StatusOr<RawTile> ReadRawTile(const std::string& path);
 absl::StatusOr<TileData> DecodeTile(RawTile raw);
