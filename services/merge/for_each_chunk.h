@@ -7,11 +7,9 @@
 
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <memory>
 #include <optional>
 #include <span>
-#include <thread>
 #include <type_traits>
 #include <vector>
 
@@ -19,6 +17,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/str_cat.h"
 #include "services/merge/dense_mesh.h"
+#include "services/merge/parallel_for.h"
 
 namespace carvemap {
 
@@ -56,15 +55,7 @@ absl::Status ForEachChunk(TileSet& tiles, std::span<const ChunkKey> chunks, bool
       if (!hood.ok()) return hood.status();
       hoods[k] = *hood;
     }
-    std::atomic<size_t> next{0};
-    const auto work = [&] {
-      for (size_t k; (k = next.fetch_add(1)) < n;) results[k].emplace(compute(hoods[k]));
-    };
-    {
-      std::vector<std::jthread> pool;
-      for (size_t t = 1; t < std::min(size_t(threads), n); ++t) pool.emplace_back(work);
-      work();
-    }
+    ParallelFor(n, threads, [&](size_t k) { results[k].emplace(compute(hoods[k])); });
     for (size_t k = 0; k < n; ++k) {
       absl::StatusOr<Result>& r = *results[k];
       if (!r.ok()) return r.status();

@@ -1,15 +1,14 @@
 #include "services/merge/object_files.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cerrno>
 #include <cstring>
 #include <limits>
 #include <system_error>
-#include <thread>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "services/merge/parallel_for.h"
 #include "storage/atomic_file.h"
 
 namespace carvemap {
@@ -124,26 +123,18 @@ absl::StatusOr<ObjectFilesResult> WriteObjectFiles(
       return absl::CancelledError("merge cancelled during object_files");
     }
     const size_t count = std::min(batch, n - first);
-    std::atomic<size_t> next{0};
-    const auto work = [&] {
-      for (size_t i; (i = next.fetch_add(1)) < count;) {
-        const size_t id = first + i;
-        absl::StatusOr<TriangleMesh> mesh = pieces.Read(layout.pieces[id]);
-        if (!mesh.ok()) {
-          status[i] = mesh.status();
-          continue;
-        }
-        status[i] =
-            WritePly((objects_dir / absl::StrCat(layout.objects[id].id, ".ply")).string(), *mesh);
-        if (status[i].ok()) result.crossings[id] = CountSelfIntersections(*mesh);
-        meshes[i] = *std::move(mesh);
+    ParallelFor(count, threads, [&](size_t i) {
+      const size_t id = first + i;
+      absl::StatusOr<TriangleMesh> mesh = pieces.Read(layout.pieces[id]);
+      if (!mesh.ok()) {
+        status[i] = mesh.status();
+        return;
       }
-    };
-    {
-      std::vector<std::jthread> pool;
-      for (int t = 1; t < threads; ++t) pool.emplace_back(work);
-      work();
-    }
+      status[i] =
+          WritePly((objects_dir / absl::StrCat(layout.objects[id].id, ".ply")).string(), *mesh);
+      if (status[i].ok()) result.crossings[id] = CountSelfIntersections(*mesh);
+      meshes[i] = *std::move(mesh);
+    });
     for (size_t i = 0; i < count; ++i) {
       if (!status[i].ok()) return status[i];
       const int id = layout.objects[first + i].id;

@@ -1,14 +1,13 @@
 #include "services/merge/tile_set.h"
 
 #include <algorithm>
-#include <atomic>
 #include <charconv>
 #include <filesystem>
 #include <optional>
 #include <system_error>
-#include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "services/merge/parallel_for.h"
 
 namespace carvemap {
 namespace {
@@ -122,17 +121,8 @@ absl::Status TileSet::Prefetch(std::span<const ChunkKey> chunks, int threads) {
     if (!raw.back().ok()) return raw.back().status();
   }
   std::vector<std::optional<absl::StatusOr<TileData>>> decoded(missing.size());
-  std::atomic<size_t> next{0};
-  const auto work = [&] {
-    for (size_t k; (k = next.fetch_add(1)) < missing.size();) {
-      decoded[k].emplace(DecodeTile(*std::move(raw[k])));
-    }
-  };
-  {
-    std::vector<std::jthread> pool;
-    for (int t = 1; t < threads && size_t(t) < missing.size(); ++t) pool.emplace_back(work);
-    work();
-  }
+  ParallelFor(missing.size(), threads,
+              [&](size_t k) { decoded[k].emplace(DecodeTile(*std::move(raw[k]))); });
   for (size_t k = 0; k < missing.size(); ++k) {
     if (!decoded[k]->ok()) return decoded[k]->status();
     ++tile_reads_;
