@@ -8,23 +8,13 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "coordinator/fake_clock.h"
 
 namespace carvemap {
 namespace {
 
 using ::testing::ElementsAre;
 using ::testing::HasSubstr;
-
-// Wall and monotonic time move together, by hand.
-class FakeClock final : public LeaseTable::Clock {
- public:
-  int64_t NowUnixMs() override { return now_ms; }
-  std::chrono::steady_clock::time_point SteadyNow() override {
-    return std::chrono::steady_clock::time_point{} + std::chrono::milliseconds(now_ms);
-  }
-  void AdvanceMs(int64_t ms) { now_ms += ms; }
-  int64_t now_ms = 1'700'000'000'000;
-};
 
 // The service's defaults: a worker is lost before its leases expire.
 constexpr int64_t kLeaseTimeoutMs = 30'000;

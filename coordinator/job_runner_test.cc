@@ -10,18 +10,13 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_replace.h"
+#include "coordinator/fake_clock.h"
 
 namespace carvemap {
 namespace {
 
 using ::testing::ElementsAre;
 using ::testing::IsEmpty;
-
-class FakeClock final : public LeaseTable::Clock {
- public:
-  int64_t NowUnixMs() override { return now_ms; }
-  int64_t now_ms = 1'700'000'000'000;
-};
 
 // Records what the runner asks; each stage does what the test sets (default: OK, and Ingest
 // stores `tasks` tasks as a real plan would).

@@ -10,19 +10,13 @@
 #include <set>
 
 #include "absl/strings/str_cat.h"
+#include "coordinator/fake_clock.h"
 
 namespace carvemap {
 namespace {
 
 using ::testing::ElementsAre;
 using ::testing::HasSubstr;
-
-class FakeClock final : public LeaseTable::Clock {
- public:
-  int64_t NowUnixMs() override { return now_ms; }
-  void AdvanceMs(int64_t ms) { now_ms += ms; }
-  int64_t now_ms = 1'700'000'000'000;
-};
 
 constexpr int64_t kTimeoutMs = 30'000;
 
