@@ -266,17 +266,6 @@ absl::Status CoordinatorCore::StartRecarve(const std::string& job_id, const Reca
   absl::MutexLock lock(&mu_);
   if (absl::Status s = table_.LoadJob(job_id); !s.ok() && !absl::IsAlreadyExists(s)) return s;
   JobRuntime& rt = runtime_[job_id];
-  // Leases of this pass carry the finer grid, read the regions and write into the pass's
-  // tiles folder (Lease reads these).
-  rt.params.resolution_m = pass.grid_resolution_m;
-  rt.tiles_dir = pass.tiles_dir;
-  rt.pass = pass.pass;
-  rt.pass_dir = pass.pass_dir;
-  rt.regions_path = pass.regions_path;
-  rt.pass_chunks = pass.chunks;
-  rt.rays_carved = 0;
-  rt.carve_rate = RateWindow();
-  rt.task_rate = RateWindow();
   // The pass's slices: tasks of their own, or those of an earlier pass of this number (a
   // merge retried) put back in the queue.
   std::vector<ChunkRecord> fresh;
@@ -305,9 +294,21 @@ absl::Status CoordinatorCore::StartRecarve(const std::string& job_id, const Reca
   }
   if (!s.ok()) {
     table_.DropJob(job_id);
-    rt.pass = 0;
     return s;
   }
+  // Leases of this pass carry the finer grid, read the regions and write into the pass's
+  // tiles folder (Lease reads these; none is handed out before the lock is released). Set
+  // only once the pass is queued, so that a pass that could not start leaves the runtime as
+  // it was.
+  rt.params.resolution_m = pass.grid_resolution_m;
+  rt.tiles_dir = pass.tiles_dir;
+  rt.pass = pass.pass;
+  rt.pass_dir = pass.pass_dir;
+  rt.regions_path = pass.regions_path;
+  rt.pass_chunks = pass.chunks;
+  rt.rays_carved = 0;
+  rt.carve_rate = RateWindow();
+  rt.task_rate = RateWindow();
   WorkMayBeQueued();
   return absl::OkStatus();
 }

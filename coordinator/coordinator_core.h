@@ -162,8 +162,8 @@ class CoordinatorCore {
   };
   // Loads the job's tasks, points its runtime at the pass (the leases read it) and queues the
   // pass's slices (new tasks, or an earlier pass of this number's again), with its chunks
-  // held until ReleaseTasks. On an error the job leaves the lease table and the runtime's pass
-  // is 0.
+  // held until ReleaseTasks. On an error the job leaves the lease table and its runtime is as
+  // it was.
   absl::Status StartRecarve(const std::string& job_id, const RecarvePass& pass);
   // The job leaves the lease table and its runtime is `saved`'s again (the job's own carve,
   // its parameters, rays and rates), keeping what changed since (stages, merge counts, passes).
