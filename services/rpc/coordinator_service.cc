@@ -381,9 +381,11 @@ class CoordinatorServer::Impl final : public JobStages {
                                            double resolution_m);
   // The sweeper's thread: a sweep every sweep_interval_s until the coordinator stops.
   void SweepLoop();
-  // The job must exist and not be terminal; shared by CompleteChunk and FailChunk, which check
-  // the store before the lease table (the table has forgotten cancelled jobs).
-  absl::Status CheckLeaseJob(absl::string_view lease_id);
+  // The job a lease's id names, which must exist and not be terminal (FailedPrecondition
+  // otherwise, with the job, so that a caller can clean up after it); shared by CompleteChunk
+  // and FailChunk, which check the store before the lease table (the table has forgotten
+  // cancelled jobs).
+  absl::Status CheckLeaseJob(absl::string_view lease_id, JobRecord* job = nullptr);
   // Wakes the WatchJob streams: a job's state may have changed (a transition, a job failed by
   // the lease table), or the coordinator stops. Not on every task: watchers report progress at
   // their own interval.
@@ -1486,11 +1488,12 @@ absl::Status CoordinatorServer::Impl::LeaseChunk(grpc::ServerContext& ctx,
   return absl::OkStatus();
 }
 
-absl::Status CoordinatorServer::Impl::CheckLeaseJob(absl::string_view lease_id) {
+absl::Status CoordinatorServer::Impl::CheckLeaseJob(absl::string_view lease_id, JobRecord* out) {
   absl::StatusOr<std::string> job_id = JobOfLease(lease_id);
   if (!job_id.ok()) return job_id.status();
   absl::StatusOr<JobRecord> job = store_->GetJob(*job_id);
   if (!job.ok()) return job.status();
+  if (out != nullptr) *out = *job;
   if (IsTerminal(job->state)) {
     return absl::FailedPreconditionError(absl::StrCat("lease ", lease_id, ": job ", job->id,
                                                       " is ", JobStateName(job->state)));
@@ -1501,15 +1504,14 @@ absl::Status CoordinatorServer::Impl::CheckLeaseJob(absl::string_view lease_id) 
 absl::Status CoordinatorServer::Impl::CompleteChunk(const pb::CompleteChunkRequest& req,
                                                     pb::CompleteChunkResponse& resp) {
   LogScope log_scope(LeaseLogFields(req.lease_id(), req.worker_id()));
-  if (absl::Status s = CheckLeaseJob(req.lease_id()); !s.ok()) {
+  JobRecord job;
+  if (absl::Status s = CheckLeaseJob(req.lease_id(), &job); !s.ok()) {
     // A tile finished after its job failed or was cancelled: the job's cleanup has already
     // run, so remove the late tile here, or it would sit in a tiles dir that looks partial.
-    absl::StatusOr<std::string> id = JobOfLease(req.lease_id());
-    absl::StatusOr<JobRecord> job = id.ok() ? store_->GetJob(*id) : id.status();
-    if (job.ok() && (job->state == JobState::kFailed || job->state == JobState::kCancelled) &&
+    if ((job.state == JobState::kFailed || job.state == JobState::kCancelled) &&
         ValidRelativePath(req.tile().path())) {
       std::error_code ec;
-      fs::remove(fs::path(folders_.TilesDir(*job)) / req.tile().path(), ec);
+      fs::remove(fs::path(folders_.TilesDir(job)) / req.tile().path(), ec);
     }
     return s;
   }
