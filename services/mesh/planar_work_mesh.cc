@@ -1,8 +1,6 @@
 #include "services/mesh/planar_work_mesh.h"
 
-#include <array>
 #include <cmath>
-#include <complex>
 #include <cstdint>
 #include <deque>
 #include <limits>
@@ -74,14 +72,6 @@ double SignedArea(const WorkMesh& m, const std::vector<PlaneFrame>& frames, int 
   return 0.5 * frames[region].Area2(m.pos[a], m.pos[b], m.pos[c]);
 }
 
-// A number in [0, 4) that grows with z's angle in [0, 2π) (its "diamond angle"): enough to tell
-// whether a turn of less than π went past the +x axis, without a trigonometric call.
-double PseudoAngle(std::complex<double> z) {
-  const double x = z.real(), y = z.imag();
-  if (y >= 0) return x >= 0 ? y / (x + y) : 1 - x / (-x + y);
-  return x < 0 ? 2 - y / (-x - y) : 3 + x / (x - y);
-}
-
 // Whether the triangles of one region around w turn more than once around it in the region's
 // 2D coordinates: each triangle has a positive area, yet together they overlap (a vertex on
 // the region's border moved or collapsed so far that its fan wraps past itself), and the
@@ -124,33 +114,21 @@ bool Overwound(WorkMesh& m, const std::vector<PlaneFrame>& frames, int w, double
     }
     // Each triangle's angle is below π: fewer than three cannot turn past 2π.
     if (tris.size() < 3) continue;
-    // The angles are summed as a product of complex numbers (dot + i·cross, each turning by
-    // its triangle's angle, in (0, π)), counting the turns past the +x axis; one atan2 for
-    // what is left. An atan2 per triangle made this the planar mesh's costliest test.
-    std::complex<double> z = 1.0;
-    int turns = 0;
+    double sum = 0;
     for (int t : tris) {
       const auto& x = m.tri[t];
-      std::array<Eigen::Vector2d, 3> q;
       int k = -1, on = 0;
       for (int i = 0; i < 3; ++i) {
-        q[i] = f.To2(m.pos[x[i]]) - p;
-        if (q[i].squaredNorm() <= eps2) ++on, k = i;
+        if (on_point(x[i])) ++on, k = i;
       }
       if (on != 1) continue;
-      const Eigen::Vector2d& a = q[(k + 1) % 3];
-      const Eigen::Vector2d& b = q[(k + 2) % 3];
+      const Eigen::Vector2d a = f.To2(m.pos[x[(k + 1) % 3]]) - p;
+      const Eigen::Vector2d b = f.To2(m.pos[x[(k + 2) % 3]]) - p;
       const double cross = a.x() * b.y() - a.y() * b.x();
       if (cross < min_area2) continue;
-      const double before = PseudoAngle(z);
-      z *= std::complex<double>(a.dot(b), cross);
-      // Unit length, so no overflow over many triangles (std::norm would call hypot).
-      z /= std::sqrt(z.real() * z.real() + z.imag() * z.imag());
-      if (PseudoAngle(z) < before) ++turns;
+      sum += std::atan2(cross, a.dot(b));
     }
-    double rest = std::atan2(z.imag(), z.real());
-    if (rest < 0) rest += 2 * M_PI;
-    if (turns * 2 * M_PI + rest > 2 * M_PI + 1e-9) return true;
+    if (sum > 2 * M_PI + 1e-9) return true;
   }
   return false;
 }
