@@ -203,25 +203,21 @@ struct CarveBuffers {
   std::vector<float> row_w, row_p;
 };
 
-// Whether a multi-ray wedge's hull may reach a cell of `region`: its points' bounding box,
-// widened by the thickness a flat or collinear hull gets (wedge_geometry.cc: ≤ 1 mm), meets one.
-// A leaf the hull touches lies in the hull's bounding box, so a wedge this rejects would give
-// no runs in the region: skipping it changes no bit of the carve, and saves building its hull
-// (most wedges of a re-carved chunk pass far from its objects).
+// Whether a multi-ray wedge's hull may reach a cell of `region`: the box WedgePointsBox puts
+// around its hull meets one. A leaf the hull touches lies in that box, so a wedge this rejects
+// would give no runs in the region: skipping it changes no bit of the carve, and saves building
+// its hull (most wedges of a re-carved chunk pass far from its objects).
 bool MayTouchRegion(const ChunkRegion& region, const Eigen::Vector3d& chunk_origin,
                     std::pair<const Eigen::Vector3d*, const Eigen::Vector3d*> points,
                     const WedgeRef& ref) {
-  constexpr double kMargin = 2e-3;  // m: above wedge_geometry.cc's kMinHalfThicknessM
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
-  Eigen::Vector3d hi = -lo;
+  std::array<Eigen::Vector3d, 4> s, e;
   for (int r = 0; r < ref.num_rays; ++r) {
-    for (const Eigen::Vector3d& x : {points.first[ref.ray[r]], points.second[ref.ray[r]]}) {
-      lo = lo.cwiseMin(x);
-      hi = hi.cwiseMax(x);
-    }
+    s[r] = points.first[ref.ray[r]];
+    e[r] = points.second[ref.ray[r]];
   }
-  return region.IntersectsBox(lo - chunk_origin - Eigen::Vector3d::Constant(kMargin),
-                              hi - chunk_origin + Eigen::Vector3d::Constant(kMargin));
+  const Eigen::AlignedBox3d box =
+      WedgePointsBox({s.data(), ref.num_rays}, {e.data(), ref.num_rays});
+  return region.IntersectsBox(box.min() - chunk_origin, box.max() - chunk_origin);
 }
 
 // The fast path's votes of one ray in the leaves of its merged runs (sorted, along `axis`):

@@ -171,6 +171,29 @@ struct SliceCarver::Impl {
     }
     return &decoded.emplace(chunk, *std::move(region)).first->second;
   }
+  // Whether `box` meets the region of a chunk of the pass (regions set). A box across more
+  // chunks than kMaxBoxChunks is taken to: looking them all up would cost more than the hull.
+  absl::StatusOr<bool> MayReachRegions(const Eigen::AlignedBox3d& box) {
+    constexpr int kMaxBoxChunks = 8;
+    const Eigen::Vector3i lo = (box.min() / kChunkSizeM).array().floor().cast<int>();
+    const Eigen::Vector3i hi = (box.max() / kChunkSizeM).array().floor().cast<int>();
+    if ((hi - lo + Eigen::Vector3i::Ones()).prod() > kMaxBoxChunks) return true;
+    for (int z = lo.z(); z <= hi.z(); ++z) {
+      for (int y = lo.y(); y <= hi.y(); ++y) {
+        for (int x = lo.x(); x <= hi.x(); ++x) {
+          const ChunkKey c(x, y, z);
+          absl::StatusOr<const ChunkRegion*> region = RegionOf(c);
+          if (!region.ok()) return region.status();
+          const Eigen::Vector3d origin = c.cast<double>() * kChunkSizeM;
+          if (*region != nullptr &&
+              (*region)->IntersectsBox(box.min() - origin, box.max() - origin)) {
+            return true;
+          }
+        }
+      }
+    }
+    return false;
+  }
   absl::Status OnWedge(const Wedge& wedge, std::span<const RayId> ids);
   absl::Status CarveBatch(Batch& batch);
   absl::Status Flush();
@@ -231,14 +254,30 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
       if (i == 0) far_ends[r] = batch.far_ends[id];
     }
   }
+  auto extend_bounds = [&] {
+    for (int r = 0; r < wedge.num_rays; ++r) {
+      if (!Owned(ids[r].sensor, ids[r].frame)) continue;
+      stats.bounds.extend(wedge.rays[r].sensor_mean.cast<double>());
+      stats.bounds.extend(wedge.rays[r].point_mean.cast<double>());
+    }
+  };
+  for (int r = 0; r < wedge.num_rays; ++r) {
+    sensor_means[r] = wedge.rays[r].sensor_mean.cast<double>();
+  }
+  if (options.regions != nullptr && wedge.num_rays > 1) {
+    absl::StatusOr<bool> may = MayReachRegions(WedgePointsBox(
+        {sensor_means.data(), size_t(wedge.num_rays)}, {far_ends.data(), size_t(wedge.num_rays)}));
+    if (!may.ok()) return may.status();
+    if (!*may) {  // in no region of the pass: no chunk to carve, so no hull to build
+      extend_bounds();
+      return absl::OkStatus();
+    }
+  }
   uint64_t facets = 0;  // the hull's facets: the carve rebuilds it from them, without a search
   WedgeHull hull;
   if (wedge.num_rays == 1) {
     hull = MakeWedgeHull(wedge, kWedgeHullSigmas, &facets);
   } else {
-    for (int r = 0; r < wedge.num_rays; ++r) {
-      sensor_means[r] = wedge.rays[r].sensor_mean.cast<double>();
-    }
     // As MakeWedgeHull, from the same points.
     hull = HullOfWedgePoints({sensor_means.data(), size_t(wedge.num_rays)},
                              {far_ends.data(), size_t(wedge.num_rays)}, &facets);
@@ -258,11 +297,7 @@ absl::Status SliceCarver::Impl::OnWedge(const Wedge& wedge, std::span<const RayI
     }
     chunks.resize(kept);
   }
-  for (int r = 0; r < wedge.num_rays; ++r) {
-    if (!Owned(ids[r].sensor, ids[r].frame)) continue;
-    stats.bounds.extend(wedge.rays[r].sensor_mean.cast<double>());
-    stats.bounds.extend(wedge.rays[r].point_mean.cast<double>());
-  }
+  extend_bounds();
   if (chunks.empty()) return absl::OkStatus();
   for (int i = 0; i < nb; ++i) {
     absl::StatusOr<Batch*> opened = OpenBatch(batches[i]);

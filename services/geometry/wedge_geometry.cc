@@ -355,6 +355,17 @@ WedgeHull HullOfWedgePoints(std::span<const Vector3d> sensor_means,
   return hull;
 }
 
+Eigen::AlignedBox3d WedgePointsBox(std::span<const Vector3d> sensor_means,
+                                   std::span<const Vector3d> far_ends) {
+  Eigen::AlignedBox3d box;
+  for (const Vector3d& x : sensor_means) box.extend(x);
+  for (const Vector3d& x : far_ends) box.extend(x);
+  // HullOfWedgePoints' box is the points' widened by at most kMinHalfThicknessM along each of
+  // three orthonormal axes (≤ √3 of it per coordinate) and kSlackM.
+  const Vector3d widen = Vector3d::Constant(2 * kMinHalfThicknessM);
+  return Eigen::AlignedBox3d(box.min() - widen, box.max() + widen);
+}
+
 Vector3d ExtendedPointMean(const RayModel& ray, double sigmas) {
   const Vector3d d = RayDirection(ray);
   if (d.isZero()) return ray.point_mean.cast<double>();

@@ -39,6 +39,11 @@ struct WedgeHull {
 [[nodiscard]] WedgeHull HullOfWedgePoints(std::span<const Eigen::Vector3d> sensor_means,
                                           std::span<const Eigen::Vector3d> far_ends,
                                           uint64_t* facets = nullptr);
+// A box that contains HullOfWedgePoints' hull of the same points (its bounding box, however
+// thin the points are), without building the hull: where the box meets nothing of interest,
+// neither does the hull.
+[[nodiscard]] Eigen::AlignedBox3d WedgePointsBox(std::span<const Eigen::Vector3d> sensor_means,
+                                                 std::span<const Eigen::Vector3d> far_ends);
 
 // Conservative: true whenever the hull and the box intersect (it may also say true for a box
 // that only comes near the hull, never false for one that touches it).

@@ -1,5 +1,6 @@
 #include "services/geometry/wedge_geometry.h"
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -280,6 +281,29 @@ TEST_P(WedgeHullFuzzTest, MonotoneInTheBox) {
         ASSERT_TRUE(HullIntersectsBox(h, big));
       }
     }
+  }
+}
+
+// The re-carve skips a wedge whose points' box meets no region, without building its hull:
+// that box must hold the hull's, flat and collinear hulls (widened 1 mm) included.
+TEST_P(WedgeHullFuzzTest, PointsBoxHoldsTheHull) {
+  if (GetParam() == Kind::kSingle) GTEST_SKIP() << "single rays are widened by their σ";
+  std::mt19937_64 rng(31 + int(GetParam()));
+  for (int iter = 0; iter < 300; ++iter) {
+    const Wedge w = RandomWedge(rng, GetParam());
+    std::array<Vector3d, 4> s, e;
+    for (int r = 0; r < w.num_rays; ++r) {
+      s[r] = w.rays[r].sensor_mean.cast<double>();
+      e[r] = ExtendedPointMean(w.rays[r], 3.0);
+    }
+    const size_t n = size_t(w.num_rays);
+    const WedgeHull h = HullOfWedgePoints({s.data(), n}, {e.data(), n});
+    const Eigen::AlignedBox3d box = WedgePointsBox({s.data(), n}, {e.data(), n});
+    ASSERT_TRUE(box.contains(h.box)) << iter;
+    // Not much larger: 2 mm around the points.
+    Eigen::AlignedBox3d points;
+    for (size_t r = 0; r < n; ++r) points.extend(s[r]).extend(e[r]);
+    EXPECT_LE((box.max() - points.max()).maxCoeff(), 2.001e-3);
   }
 }
 
