@@ -73,7 +73,8 @@ class Rasterizer {
   }
 
  private:
-  // Per axis, the leaves whose boxes overlap the hull's box, with NodeBox's arithmetic.
+  // Per axis, the leaves whose boxes overlap the hull's box, with NodeBox's arithmetic (and,
+  // in a region read row by row, its cells' bounding box).
   bool BoxRanges() {
     for (int d = 0; d < 3; ++d) {
       const double mn = hull_.box.min()[d], mx = hull_.box.max()[d];
@@ -83,6 +84,11 @@ class Rasterizer {
       int i0 = int(std::max(lo, 0.0)), i1 = int(std::min(hi, double(n_ - 1)));
       while (i0 <= i1 && origin_[d] + i0 * s_ + s_ < mn) ++i0;  // hi < min: apart
       while (i1 >= i0 && origin_[d] + i1 * s_ > mx) --i1;       // lo > max: apart
+      if (region_shift_ >= 0) {
+        // No leaf outside the region's cells is listed: rows beyond them need no visit.
+        i0 = std::max(i0, region_->cells_lo()[d] << region_shift_);
+        i1 = std::min(i1, ((region_->cells_hi()[d] + 1) << region_shift_) - 1);
+      }
       if (i0 > i1) return false;
       lo_[d] = i0;
       hi_[d] = i1;

@@ -51,6 +51,9 @@ class ChunkRegion {
     uint16_t first, last;
   };
   [[nodiscard]] std::span<const CellRun> RowRuns(int axis, int u, int v) const;
+  // The set cells' bounding box, inclusive cell indices at depth(); lo > hi when empty.
+  [[nodiscard]] const Eigen::Vector3i& cells_lo() const { return lo_; }
+  [[nodiscard]] const Eigen::Vector3i& cells_hi() const { return hi_; }
   // The cells as bits, x fastest, then y, then z; bit i is bit (i % 8) of byte i / 8.
   [[nodiscard]] std::string Encode() const;
   // InvalidArgument for a depth outside [0, kMaxDepth] or a size that is not (2^depth)³ / 8
