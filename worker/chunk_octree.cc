@@ -457,7 +457,7 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
           s[r] = sensor_means[ref.ray[r]];
           e[r] = far_ends[ref.ray[r]];
         }
-        uint64_t facets = ref.facets;  // the coordinator's: no search for facets
+        uint64_t facets = ref.facets;  // the binning's: no search for facets
         hull = HullOfWedgePoints({s.data(), ref.num_rays}, {e.data(), ref.num_rays}, &facets);
       }
       bool counted = false;
