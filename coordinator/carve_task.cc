@@ -2,7 +2,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "coordinator/job_plan.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/octree_keys.h"
 
 namespace carvemap {
 

@@ -5,9 +5,9 @@
 
 #include <vector>
 
-#include "services/geometry/carving_types.h"
-#include "services/geometry/octree_keys.h"
-#include "services/geometry/wedge_geometry.h"
+#include "geometry/carving_types.h"
+#include "geometry/octree_keys.h"
+#include "geometry/wedge_geometry.h"
 
 namespace carvemap {
 

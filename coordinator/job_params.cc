@@ -5,8 +5,8 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "geometry/octree_keys.h"
 #include "services/floorplan/floorplan_pipeline.h"  // FloorPlanMethod names
-#include "services/geometry/octree_keys.h"
 
 namespace carvemap {
 

@@ -7,8 +7,8 @@
 #include <string>
 
 #include "absl/status/statusor.h"
-#include "services/geometry/carving_types.h"  // CarveEvaluation
-#include "services/geometry/north_alignment.h"  // NorthMode
+#include "geometry/carving_types.h"  // CarveEvaluation
+#include "geometry/north_alignment.h"  // NorthMode
 #include "services/merge/merge_params.h"
 
 namespace carvemap {

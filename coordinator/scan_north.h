@@ -13,7 +13,7 @@
 #include <string_view>
 
 #include "absl/status/statusor.h"
-#include "services/geometry/north_alignment.h"
+#include "geometry/north_alignment.h"
 #include "storage/scan_reader.h"
 
 namespace carvemap {

@@ -24,9 +24,9 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/carving_types.h"
-#include "services/geometry/noise_model.h"
-#include "services/geometry/pose.h"
+#include "geometry/carving_types.h"
+#include "geometry/noise_model.h"
+#include "geometry/pose.h"
 #include "storage/scan_reader.h"
 #include "storage/scan_types.h"
 

@@ -7,7 +7,7 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config
   ccache  # cmake/ccache.cmake: a rebuild, or a fresh clone's build, reuses what was compiled
   liboctomap-dev octomap-tools libeigen3-dev libcgal-dev
-  libspectra-dev  # services/floorplan/eigencrust.cc: generalized sparse eigensolver (§3.2.2)
+  libspectra-dev  # services/floorplan/eigencrust/eigencrust.cc: generalized sparse eigensolver (§3.2.2)
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libhdf5-dev hdf5-tools libspdlog-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
@@ -16,7 +16,7 @@ PACKAGES=(
   libbz2-dev  # storage/import/decompress.cc: bz2 chunks of ROS 1 bags
   libzstd-dev liblz4-dev  # storage/import/decompress.cc: lz4 and zstd chunks of ROS bags and MCAP
   libpugixml-dev  # storage/import/e57_reader.cc: the XML section of E57 files
-  libdxflib-dev  # services/floorplan/floorplan_dxf.cc: floorplan.dxf
+  libdxflib-dev  # services/floorplan/export/floorplan_dxf.cc: floorplan.dxf
   python3-ezdxf  # tests/tools/check_outputs.py: an independent reader of floorplan.dxf
   python3-pil  # tests/tools/check_outputs.py: an independent reader of occupancy.pgm
   libtinygltf-dev  # storage/glb_writer_test.cc: an independent reader of mesh/model.glb

@@ -53,7 +53,7 @@ enum class ChunkState : int {
 };
 [[nodiscard]] absl::string_view ChunkStateName(ChunkState state);
 
-// A 2 m chunk: floor(x / 2 m) per axis (services/geometry/octree_keys.h ChunkKey, kept
+// A 2 m chunk: floor(x / 2 m) per axis (geometry/octree_keys.h ChunkKey, kept
 // independent of Eigen here). Ordered x, then y, then z: the lease order.
 struct ChunkCoord {
   int32_t x = 0;

@@ -13,8 +13,8 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/chunk_region.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/chunk_region.h"
+#include "geometry/octree_keys.h"
 #include "storage/tile_store.h"
 
 namespace carvemap {

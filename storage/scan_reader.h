@@ -16,7 +16,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/pose.h"
+#include "geometry/pose.h"
 #include "storage/scan_types.h"
 
 namespace carvemap {
@@ -44,7 +44,7 @@ class ScanReader {
     std::vector<RowRange> frame_rows;
     // The turn about the vertical through the scan frame's origin (x = y = 0) applied to every
     // pose, covariance and position the reader returns, radians counter-clockwise seen from
-    // above: the §2.3 north alignment (services/geometry/north_alignment.h). 0 = the file's
+    // above: the §2.3 north alignment (geometry/north_alignment.h). 0 = the file's
     // frame, untouched bit for bit.
     double world_yaw_rad = 0;
   };

@@ -13,8 +13,8 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/carving_types.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/carving_types.h"
+#include "geometry/octree_keys.h"
 
 namespace carvemap {
 

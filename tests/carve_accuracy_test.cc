@@ -35,9 +35,9 @@
 #include <gtest/gtest.h>
 
 #include "absl/container/flat_hash_map.h"
+#include "geometry/octree_keys.h"
 #include "services/building/building.h"
 #include "services/building/building_presets.h"
-#include "services/geometry/octree_keys.h"
 #include "services/sim/simulator.h"
 #include "storage/tile_store.h"
 #include "worker/scan_carver.h"

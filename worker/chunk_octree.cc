@@ -13,9 +13,9 @@
 
 #include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_cat.h"
-#include "services/geometry/carve_map.h"
-#include "services/geometry/carve_map_float.h"
-#include "services/geometry/wedge_geometry.h"
+#include "geometry/carve_map.h"
+#include "geometry/carve_map_float.h"
+#include "geometry/wedge_geometry.h"
 #include "worker/hull_raster.h"
 
 namespace carvemap {

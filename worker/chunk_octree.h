@@ -21,9 +21,9 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/status/status.h"
-#include "services/geometry/carving_types.h"
-#include "services/geometry/chunk_region.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/carving_types.h"
+#include "geometry/chunk_region.h"
+#include "geometry/octree_keys.h"
 #include "storage/tile_store.h"
 
 namespace carvemap {

@@ -13,8 +13,8 @@
 
 #include <gtest/gtest.h>
 
-#include "services/geometry/carve_map.h"
-#include "services/geometry/wedge_geometry.h"
+#include "geometry/carve_map.h"
+#include "geometry/wedge_geometry.h"
 
 namespace carvemap {
 namespace {

@@ -1,7 +1,7 @@
 // The finest leaves of one chunk that a wedge hull touches (§4.3.2: "the locations ... that
 // are intersected by at least one scan wedge"), listed as runs of leaves along one axis.
 //
-// A leaf is touched iff HullIntersectsBox(hull, its box) (services/geometry/wedge_geometry.h),
+// A leaf is touched iff HullIntersectsBox(hull, its box) (geometry/wedge_geometry.h),
 // the test the coordinator bins wedges into chunks with. Runs make the listing cost about the
 // number of rows a wedge crosses rather than the number of leaves, and let the carver evaluate
 // a ray along a run with a fixed step (eq 4.7 is affine in the leaf index along a row up to the
@@ -13,9 +13,9 @@
 
 #include <Eigen/Core>
 
-#include "services/geometry/chunk_region.h"
-#include "services/geometry/octree_keys.h"
-#include "services/geometry/wedge_geometry.h"
+#include "geometry/chunk_region.h"
+#include "geometry/octree_keys.h"
+#include "geometry/wedge_geometry.h"
 
 namespace carvemap {
 

@@ -17,8 +17,8 @@
 #include "absl/status/statusor.h"
 #include "coordinator/scan_slices.h"
 #include "coordinator/wedge_builder.h"
-#include "services/geometry/chunk_region.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/chunk_region.h"
+#include "geometry/octree_keys.h"
 #include "worker/chunk_octree.h"
 
 namespace carvemap {

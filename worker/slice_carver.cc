@@ -11,7 +11,7 @@
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
 #include "coordinator/chunk_binning.h"
-#include "services/geometry/wedge_geometry.h"
+#include "geometry/wedge_geometry.h"
 #include "storage/hdf5_lock.h"
 #include "storage/partial_sums.h"
 

@@ -22,7 +22,7 @@
 #include "absl/container/flat_hash_map.h"
 #include "coordinator/chunk_binning.h"
 #include "coordinator/wedge_builder.h"
-#include "services/geometry/wedge_geometry.h"
+#include "geometry/wedge_geometry.h"
 #include "services/sim/simulator.h"
 #include "storage/partial_sums.h"
 #include "storage/tile_store.h"

@@ -47,7 +47,7 @@ struct RunFlags {
   bool trimmed_points = false;
   double min_object_volume_m3 = 0;  // 0 = the merge's default
   std::string evaluation = "fast";  // eq 4.7 in the workers
-  NorthFlags north;                 // §2.3 (services/geometry/north_alignment.h)
+  NorthFlags north;                 // §2.3 (geometry/north_alignment.h)
   std::string storage_root;
   // Short defaults on one machine: a killed worker's chunks come back within seconds.
   double heartbeat_interval_s = 1.0;

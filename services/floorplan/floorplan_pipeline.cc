@@ -5,7 +5,7 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
-#include "services/floorplan/extrusion.h"
+#include "services/floorplan/model/extrusion.h"
 
 namespace carvemap {
 namespace {

@@ -18,11 +18,11 @@
 #include <string_view>
 
 #include "absl/status/statusor.h"
-#include "services/floorplan/eigencrust_floorplan.h"
+#include "services/floorplan/eigencrust/eigencrust_floorplan.h"
 #include "services/floorplan/floor_plan.h"
-#include "services/floorplan/floorplan_simplify.h"
-#include "services/floorplan/room_labeling.h"
-#include "services/floorplan/room_polygons.h"
+#include "services/floorplan/model/floorplan_simplify.h"
+#include "services/floorplan/model/room_polygons.h"
+#include "services/floorplan/rooms/room_labeling.h"
 #include "services/floorplan/wall_samples.h"
 #include "storage/ply_io.h"
 

@@ -26,7 +26,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/octree_keys.h"
 #include "services/levels/level_split.h"
 #include "services/mesh/boundary_faces.h"
 #include "services/mesh/planar_regions.h"

@@ -7,7 +7,7 @@
 #include <system_error>
 
 #include "absl/strings/str_cat.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/octree_keys.h"
 #include "services/merge/octomap_writer.h"
 #include "services/merge/tile_set.h"
 #include "services/merge/topdown_map.h"

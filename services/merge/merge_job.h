@@ -40,7 +40,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/chunk_region.h"
+#include "geometry/chunk_region.h"
 #include "services/merge/first_outputs.h"
 #include "services/merge/merge_params.h"
 

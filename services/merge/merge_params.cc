@@ -4,8 +4,8 @@
 
 #include "absl/status/statusor.h"
 #include "absl/strings/str_cat.h"
+#include "geometry/octree_keys.h"
 #include "services/floorplan/floorplan_pipeline.h"
-#include "services/geometry/octree_keys.h"
 
 namespace carvemap {
 

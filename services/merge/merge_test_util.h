@@ -8,8 +8,8 @@
 
 #include <gtest/gtest.h>
 
-#include "services/geometry/carving_types.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/carving_types.h"
+#include "geometry/octree_keys.h"
 #include "storage/tile_store.h"
 
 namespace carvemap::testing {

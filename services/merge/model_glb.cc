@@ -3,7 +3,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
-#include "services/floorplan/extrusion.h"
+#include "services/floorplan/model/extrusion.h"
 
 namespace carvemap {
 namespace {

@@ -4,7 +4,7 @@
 //              labels of §4.3.2);
 //   octree.ot  "# Octomap OcTree file": each node's occupancy as log-odds, from eq 4.8's p
 //              (the full probabilities, for users who threshold or update the map themselves).
-// Written out of core: chunks are OctoMap nodes at depth 16 − k (services/geometry/
+// Written out of core: chunks are OctoMap nodes at depth 16 − k (geometry/
 // octree_keys.h), so the tree is streamed in OctoMap's depth-first child order one tile at a
 // time; only the open path of ≤ 16 nodes and the current tile are held.
 //
@@ -27,7 +27,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/carving_types.h"
+#include "geometry/carving_types.h"
 #include "services/merge/tile_set.h"
 #include "storage/tile_store.h"
 

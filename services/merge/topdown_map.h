@@ -17,7 +17,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/octree_keys.h"
 #include "storage/png_io.h"
 #include "storage/tile_store.h"
 

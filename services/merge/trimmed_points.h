@@ -14,7 +14,7 @@
 #include <string>
 
 #include "absl/status/statusor.h"
-#include "services/floorplan/pointcloud_wall_samples.h"
+#include "services/floorplan/samples/pointcloud_wall_samples.h"
 #include "services/segment/plan_volume.h"
 
 namespace carvemap {

@@ -14,8 +14,8 @@
 #include <Eigen/Core>
 
 #include "absl/status/statusor.h"
-#include "services/geometry/carving_types.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/carving_types.h"
+#include "geometry/octree_keys.h"
 #include "storage/tile_store.h"
 
 namespace carvemap {

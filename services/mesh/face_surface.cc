@@ -8,8 +8,8 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
-#include "services/geometry/sorted_runs.h"
-#include "services/geometry/union_find.h"
+#include "geometry/sorted_runs.h"
+#include "geometry/union_find.h"
 
 namespace carvemap {
 namespace {

@@ -20,7 +20,7 @@
 #include <Eigen/Core>
 
 #include "absl/status/statusor.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/octree_keys.h"
 #include "services/mesh/boundary_faces.h"
 
 namespace carvemap {

@@ -6,8 +6,8 @@
 #include <map>
 #include <random>
 
-#include "services/geometry/carving_types.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/carving_types.h"
+#include "geometry/octree_keys.h"
 #include "services/mesh/boundary_faces.h"
 #include "storage/tile_store.h"
 

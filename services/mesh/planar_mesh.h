@@ -21,7 +21,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/octree_keys.h"
 #include "services/mesh/boundary_faces.h"
 #include "services/mesh/planar_regions.h"
 #include "storage/ply_io.h"

@@ -6,8 +6,8 @@
 #include <utility>
 
 #include "absl/container/flat_hash_map.h"
-#include "services/geometry/sorted_runs.h"
-#include "services/geometry/union_find.h"
+#include "geometry/sorted_runs.h"
+#include "geometry/union_find.h"
 
 namespace carvemap {
 

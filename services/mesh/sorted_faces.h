@@ -15,7 +15,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/octree_keys.h"
 #include "services/mesh/boundary_faces.h"
 
 namespace carvemap {

@@ -16,7 +16,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/chunk_region.h"
+#include "geometry/chunk_region.h"
 #include "services/rpc/bearer_tokens.h"
 #include "services/rpc/merge_request.h"
 

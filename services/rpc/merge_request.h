@@ -15,7 +15,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/chunk_region.h"
+#include "geometry/chunk_region.h"
 #include "services/merge/merge_params.h"
 
 namespace carvemap {

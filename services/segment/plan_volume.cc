@@ -5,7 +5,7 @@
 #include <limits>
 
 #include "absl/strings/str_cat.h"
-#include "services/floorplan/room_scoring.h"
+#include "services/floorplan/eval/room_scoring.h"
 
 namespace carvemap {
 namespace {

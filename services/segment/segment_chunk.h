@@ -43,8 +43,8 @@
 #include <cstdint>
 
 #include "absl/status/statusor.h"
-#include "services/geometry/chunk_region.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/chunk_region.h"
+#include "geometry/octree_keys.h"
 #include "services/mesh/boundary_faces.h"
 #include "services/segment/plan_volume.h"
 #include "storage/tile_store.h"

@@ -6,8 +6,8 @@
 
 #include <Eigen/Core>
 
+#include "geometry/octree_keys.h"
 #include "services/floorplan/floor_plan.h"
-#include "services/geometry/octree_keys.h"
 #include "storage/tile_store.h"
 
 namespace carvemap::testing {

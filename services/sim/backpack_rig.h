@@ -12,7 +12,7 @@
 #include <Eigen/Core>
 
 #include "absl/status/status.h"
-#include "services/geometry/pose.h"
+#include "geometry/pose.h"
 
 namespace carvemap {
 

@@ -14,7 +14,7 @@
 #include <Eigen/Core>
 
 #include "absl/status/status.h"
-#include "services/geometry/pose.h"
+#include "geometry/pose.h"
 #include "storage/scan_types.h"
 
 namespace carvemap {

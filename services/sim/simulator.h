@@ -12,8 +12,8 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "geometry/pose.h"
 #include "services/building/building.h"
-#include "services/geometry/pose.h"
 #include "services/sim/backpack_rig.h"
 #include "services/sim/localization_drift.h"
 #include "services/sim/scan_sink.h"

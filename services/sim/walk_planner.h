@@ -10,8 +10,8 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "geometry/pose.h"
 #include "services/building/building.h"
-#include "services/geometry/pose.h"
 
 namespace carvemap {
 

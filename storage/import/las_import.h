@@ -28,7 +28,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "services/geometry/pose.h"
+#include "geometry/pose.h"
 #include "storage/import/scan_import.h"
 
 namespace carvemap {

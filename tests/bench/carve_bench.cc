@@ -27,12 +27,12 @@
 #include <octomap/OcTree.h>
 
 #include "coordinator/scan_slices.h"
-#include "services/geometry/carve_map.h"
+#include "geometry/carve_map.h"
 #include "services/sim/simulator.h"
-#include "tests/support/tile_agreement.h"
-#include "storage/scan_reader.h"
 #include "storage/partial_sums.h"
+#include "storage/scan_reader.h"
 #include "storage/tile_store.h"
+#include "tests/support/tile_agreement.h"
 #include "worker/chunk_combiner.h"
 #include "worker/chunk_octree.h"
 #include "worker/slice_carver.h"

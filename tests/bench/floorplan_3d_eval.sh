@@ -2,7 +2,7 @@
 # The floor plan's 3D route on the real floor maps : for each map of
 # tests/data/floormaps, `carvemap simulate --floormap … [--furniture …] --rooms …`, then
 # `carvemap run SCAN -o OUT`, then OUT/level_0/floorplan.geojson scored against the map's
-# *_gt_segmentation.png by build/tests/bench/floorplan_score (services/floorplan/room_scoring.h:
+# *_gt_segmentation.png by build/tests/bench/floorplan_score (services/floorplan/eval/room_scoring.h:
 # room F1 at IoU > 0.5 one-to-one, Bormann et al. recall / precision, room counts). Prints one
 # Markdown table with a row per map and variant and the means per variant.
 #

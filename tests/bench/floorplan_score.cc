@@ -1,7 +1,7 @@
 // Scores a floor plan the 3D route wrote (OUT/level_<k>/floorplan.geojson, docs/DESIGN.md §7)
 // against a real map's ground-truth rooms (tests/data/floormaps/*_gt_segmentation.png,
 // SOURCES.md), with the same metrics as the 2D route's evaluation
-// (services/floorplan/room_scoring.h: room F1 at IoU > 0.5, one-to-one; Bormann et al.'s overlap
+// (services/floorplan/eval/room_scoring.h: room F1 at IoU > 0.5, one-to-one; Bormann et al.'s overlap
 // recall / precision). Used by tests/bench/floorplan_3d_eval.sh.
 //
 //   floorplan_score --geojson OUT/level_0/floorplan.geojson --gt MAP_gt_segmentation.png
@@ -37,7 +37,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/str_cat.h"
 #include "nlohmann/json.hpp"
-#include "services/floorplan/room_scoring.h"
+#include "services/floorplan/eval/room_scoring.h"
 #include "storage/png_io.h"
 #include "storage/scan_reader.h"
 

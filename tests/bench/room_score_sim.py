@@ -6,7 +6,7 @@
 For each level of the truth, the rooms the walk entered (gt/building.json "entered",
 docs/DESIGN.md §4) and the rooms of OUT/level_<k>/floorplan.geojson (§7) are rasterised at
 10 cm; a truth room is matched when a predicted room overlaps it at IoU > 0.5 (which makes the
-match one-to-one), as services/floorplan/room_scoring.h scores the real maps. Prints per level
+match one-to-one), as services/floorplan/eval/room_scoring.h scores the real maps. Prints per level
 and per job: truth rooms, predicted rooms, matched, precision, recall, F1. numpy only.
 """
 import collections

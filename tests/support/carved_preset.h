@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "services/geometry/chunk_region.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/chunk_region.h"
+#include "geometry/octree_keys.h"
 #include "services/sim/simulator.h"
 #include "worker/scan_carver.h"
 

@@ -17,7 +17,7 @@
 #include <vector>
 
 #include "absl/container/flat_hash_map.h"
-#include "services/geometry/octree_keys.h"
+#include "geometry/octree_keys.h"
 #include "storage/tile_store.h"
 
 namespace carvemap::testing {
