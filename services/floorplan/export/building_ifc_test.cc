@@ -15,8 +15,8 @@
 #include <gtest/gtest.h>
 
 #include "services/floorplan/export/floorplan_dxf.h"
-#include "services/floorplan/export/test_plans.h"
 #include "services/floorplan/model/room_polygons.h"
+#include "services/floorplan/test_plans.h"
 #include "storage/atomic_file.h"
 
 namespace carvemap {

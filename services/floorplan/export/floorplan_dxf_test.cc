@@ -9,8 +9,8 @@
 #include <dxflib/dl_dxf.h>
 #include <gtest/gtest.h>
 
-#include "services/floorplan/export/test_plans.h"
 #include "services/floorplan/model/room_polygons.h"
+#include "services/floorplan/test_plans.h"
 #include "storage/atomic_file.h"
 
 namespace carvemap {

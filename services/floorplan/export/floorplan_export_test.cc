@@ -13,35 +13,11 @@
 
 #include "services/floorplan/model/extrusion.h"
 #include "services/floorplan/model/floorplan_simplify.h"
+#include "services/floorplan/test_plans.h"
 #include "services/mesh/mesh_checks.h"
 
 namespace carvemap {
 namespace {
-
-FloorPlan GridPlan(int nx, int ny, double cell_m, const std::function<int(int, int)>& label,
-                   int rooms) {
-  FloorPlan plan;
-  for (int j = 0; j <= ny; ++j) {
-    for (int i = 0; i <= nx; ++i) {
-      plan.vertices.emplace_back(i * cell_m, j * cell_m);
-      plan.vertex_floor_z.push_back(0);
-      plan.vertex_ceiling_z.push_back(3);
-    }
-  }
-  auto v = [&](int i, int j) { return static_cast<uint32_t>(j * (nx + 1) + i); };
-  for (int j = 0; j < ny; ++j) {
-    for (int i = 0; i < nx; ++i) {
-      const int r = label(i, j);
-      if (r < 0) continue;
-      plan.triangles.push_back({v(i, j), v(i + 1, j), v(i + 1, j + 1)});
-      plan.triangles.push_back({v(i, j), v(i + 1, j + 1), v(i, j + 1)});
-      plan.triangle_room.push_back(r);
-      plan.triangle_room.push_back(r);
-    }
-  }
-  plan.rooms.resize(rooms);
-  return plan;
-}
 
 // 6 × 4 m: room 0 (x < 3) around a 1 m column at (1..2, 1..2), area 11; room 1 (x ≥ 3, y < 2),
 // area 6; room 2 in two pieces, (3..4, 2..4) and (5..6, 2..4), area 4, with (4..5, 2..4) outside.

@@ -8,38 +8,12 @@
 #include <random>
 
 #include "services/floorplan/model/floorplan_simplify.h"
+#include "services/floorplan/test_plans.h"
 #include "services/mesh/mesh_checks.h"
 #include "services/mesh/self_intersections.h"
 
 namespace carvemap {
 namespace {
-
-// A plan on a grid of square cells, two CCW triangles per cell, room = label(i, j) or -1.
-// Cell sizes that are powers of two keep every coordinate exact in float.
-FloorPlan GridPlan(int nx, int ny, double cell_m, const std::function<int(int, int)>& label,
-                   int rooms) {
-  FloorPlan plan;
-  for (int j = 0; j <= ny; ++j) {
-    for (int i = 0; i <= nx; ++i) {
-      plan.vertices.emplace_back(i * cell_m, j * cell_m);
-      plan.vertex_floor_z.push_back(0);
-      plan.vertex_ceiling_z.push_back(3);
-    }
-  }
-  auto v = [&](int i, int j) { return static_cast<uint32_t>(j * (nx + 1) + i); };
-  for (int j = 0; j < ny; ++j) {
-    for (int i = 0; i < nx; ++i) {
-      const int r = label(i, j);
-      if (r < 0) continue;
-      plan.triangles.push_back({v(i, j), v(i + 1, j), v(i + 1, j + 1)});
-      plan.triangles.push_back({v(i, j), v(i + 1, j + 1), v(i, j + 1)});
-      plan.triangle_room.push_back(r);
-      plan.triangle_room.push_back(r);
-    }
-  }
-  plan.rooms.resize(rooms);
-  return plan;
-}
 
 // Σ over rooms of area × height, from the plan's triangles.
 double ExpectedVolume(const FloorPlan& plan) {

@@ -13,35 +13,18 @@
 #include <utility>
 
 #include "services/floorplan/model/room_polygons.h"
+#include "services/floorplan/test_plans.h"
 
 namespace carvemap {
 namespace {
 
-// A plan on a grid of square cells, two CCW triangles per cell, room = label(i, j) or -1.
-FloorPlan GridPlan(int nx, int ny, double cell_m, const std::function<int(int, int)>& label,
-                   int rooms) {
-  FloorPlan plan;
-  for (int j = 0; j <= ny; ++j) {
-    for (int i = 0; i <= nx; ++i) {
-      plan.vertices.emplace_back(i * cell_m, j * cell_m);
-      plan.vertex_floor_z.push_back(0);
-      plan.vertex_ceiling_z.push_back(3);
-    }
-  }
-  auto v = [&](int i, int j) { return static_cast<uint32_t>(j * (nx + 1) + i); };
-  for (int j = 0; j < ny; ++j) {
-    for (int i = 0; i < nx; ++i) {
-      const int r = label(i, j);
-      if (r < 0) continue;
-      plan.triangles.push_back({v(i, j), v(i + 1, j), v(i + 1, j + 1)});
-      plan.triangles.push_back({v(i, j), v(i + 1, j + 1), v(i, j + 1)});
-      plan.triangle_room.push_back(r);
-      plan.triangle_room.push_back(r);
-    }
-  }
-  plan.rooms.resize(rooms);
-  for (size_t t = 0; t < plan.triangles.size(); ++t)
+// GridPlan (test_plans.h) with each room seeded at its last triangle.
+FloorPlan SeededGridPlan(int nx, int ny, double cell_m, const std::function<int(int, int)>& label,
+                         int rooms) {
+  FloorPlan plan = GridPlan(nx, ny, cell_m, label, rooms);
+  for (size_t t = 0; t < plan.triangles.size(); ++t) {
     plan.rooms[plan.triangle_room[t]].seed_triangle = t;
+  }
   return plan;
 }
 
@@ -118,7 +101,7 @@ void ExpectAllCcw(const FloorPlan& plan) {
 
 TEST(FloorPlanSimplifyTest, NoisyStraightWallCollapsesToFewVertices) {
   // A 2 × 0.5 m room sampled every 5 cm; the bottom wall has ±1 cm noise.
-  FloorPlan plan = GridPlan(
+  FloorPlan plan = SeededGridPlan(
       40, 10, 0.05, [](int, int) { return 0; }, 1);
   AddNoise(plan, 0.01, 7,
            [](const Eigen::Vector2d& p) { return p.y() == 0 && p.x() > 0.01 && p.x() < 1.99; });
@@ -152,7 +135,7 @@ TEST(FloorPlanSimplifyTest, NoisyStraightWallCollapsesToFewVertices) {
 TEST(FloorPlanSimplifyTest, DoorwayKeepsItsVertices) {
   // Rooms 0 (x < 1) and 1 (x > 1.05) with a 5 cm wall between them (no triangles) except a
   // 20 cm doorway (cells of room 0) at 0.4 ≤ y < 0.6.
-  FloorPlan plan = GridPlan(
+  FloorPlan plan = SeededGridPlan(
       41, 20, 0.05,
       [](int i, int j) {
         if (i < 20) return 0;
@@ -195,7 +178,7 @@ TEST(FloorPlanSimplifyTest, RandomNoisyPlanHasNoFlippedTriangles) {
   std::mt19937 rng(301);
   std::set<std::pair<int, int>> holes;
   for (int k = 0; k < 6; ++k) holes.emplace(1 + rng() % 13, 1 + rng() % 8);
-  FloorPlan plan = GridPlan(
+  FloorPlan plan = SeededGridPlan(
       60, 40, 0.05,
       [&](int i, int j) {
         if (holes.contains({i / 4, j / 4})) return -1;
@@ -233,7 +216,7 @@ TEST(FloorPlanSimplifyTest, RandomNoisyPlanHasNoFlippedTriangles) {
 TEST(FloorPlanSimplifyTest, WallStepSurvives) {
   // 2 × 1 m room whose bottom wall steps up by 30 cm at x = 1 (a notch), ±1 cm noise on the
   // walls.
-  FloorPlan plan = GridPlan(
+  FloorPlan plan = SeededGridPlan(
       40, 20, 0.05, [](int i, int j) { return i >= 20 && j < 6 ? -1 : 0; }, 1);
   const std::set<uint32_t> boundary = BoundaryVertices(plan);
   AddNoise(plan, 0.01, 5, [&](const Eigen::Vector2d& p) {
@@ -335,7 +318,7 @@ TEST(FloorPlanSimplifyTest, DelaunayOfNoisyWallSamples) {
 }
 
 TEST(FloorPlanSimplifyTest, RejectsMissingErrorBound) {
-  FloorPlan plan = GridPlan(
+  FloorPlan plan = SeededGridPlan(
       2, 2, 1.0, [](int, int) { return 0; }, 1);
   EXPECT_EQ(SimplifyFloorPlan(plan, {}).code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(SimplifyFloorPlan(plan, {.max_error_m = std::nan("")}).code(),
@@ -349,7 +332,7 @@ TEST(FloorPlanSimplifyTest, RejectsMissingErrorBound) {
 }
 
 TEST(FloorPlanSimplifyTest, SixtyThousandTrianglesIsFast) {
-  FloorPlan plan = GridPlan(
+  FloorPlan plan = SeededGridPlan(
       200, 150, 0.05, [](int i, int j) { return (i / 100) + 2 * (j / 75); }, 4);
   AddNoise(plan, 0.01, 3, [](const Eigen::Vector2d&) { return true; });
   ASSERT_EQ(plan.triangles.size(), 60000u);

@@ -5,35 +5,10 @@
 #include <cmath>
 #include <functional>
 
+#include "services/floorplan/test_plans.h"
+
 namespace carvemap {
 namespace {
-
-// A plan on a grid of square cells, two CCW triangles per cell, room = label(i, j) or -1 for
-// none. Cells' vertices are shared, so the triangulation is manifold.
-FloorPlan GridPlan(int nx, int ny, double cell_m, const std::function<int(int, int)>& label,
-                   int rooms) {
-  FloorPlan plan;
-  for (int j = 0; j <= ny; ++j) {
-    for (int i = 0; i <= nx; ++i) {
-      plan.vertices.emplace_back(i * cell_m, j * cell_m);
-      plan.vertex_floor_z.push_back(0);
-      plan.vertex_ceiling_z.push_back(3);
-    }
-  }
-  auto v = [&](int i, int j) { return static_cast<uint32_t>(j * (nx + 1) + i); };
-  for (int j = 0; j < ny; ++j) {
-    for (int i = 0; i < nx; ++i) {
-      const int r = label(i, j);
-      if (r < 0) continue;
-      plan.triangles.push_back({v(i, j), v(i + 1, j), v(i + 1, j + 1)});
-      plan.triangles.push_back({v(i, j), v(i + 1, j + 1), v(i, j + 1)});
-      plan.triangle_room.push_back(r);
-      plan.triangle_room.push_back(r);
-    }
-  }
-  plan.rooms.resize(rooms);
-  return plan;
-}
 
 TEST(RoomPolygonsTest, TwoRoomsAndWalls) {
   // 4 × 2 m, split at x = 2 into rooms 0 and 1.

@@ -1,8 +1,9 @@
-// Small hand-made floor plans for the tests of the floor-plan writers (DXF, IFC): plain data
-// with known rooms, borders and heights.
+// Small hand-made floor plans for the floor-plan parts' tests (simplification, polygons,
+// extrusion, the writers): plain data with known rooms, borders and heights.
 #pragma once
 
 #include <cstdint>
+#include <functional>
 
 #include "services/floorplan/floor_plan.h"
 
@@ -16,6 +17,35 @@ inline void SetPlanHeights(FloorPlan& plan, double floor_z, double ceiling_z) {
     room.floor_z = floor_z;
     room.ceiling_z = ceiling_z;
   }
+}
+
+// A plan on a grid of nx × ny square cells of cell_m, two CCW triangles per cell, room =
+// label(i, j) or -1 for none (`rooms` rooms, no seeds); floor at 0, ceiling at 3 m. Cells'
+// vertices are shared, so the triangulation is manifold; cell sizes that are powers of two
+// keep every coordinate exact in float.
+inline FloorPlan GridPlan(int nx, int ny, double cell_m, const std::function<int(int, int)>& label,
+                          int rooms) {
+  FloorPlan plan;
+  for (int j = 0; j <= ny; ++j) {
+    for (int i = 0; i <= nx; ++i) {
+      plan.vertices.emplace_back(i * cell_m, j * cell_m);
+      plan.vertex_floor_z.push_back(0);
+      plan.vertex_ceiling_z.push_back(3);
+    }
+  }
+  auto v = [&](int i, int j) { return static_cast<uint32_t>(j * (nx + 1) + i); };
+  for (int j = 0; j < ny; ++j) {
+    for (int i = 0; i < nx; ++i) {
+      const int r = label(i, j);
+      if (r < 0) continue;
+      plan.triangles.push_back({v(i, j), v(i + 1, j), v(i + 1, j + 1)});
+      plan.triangles.push_back({v(i, j), v(i + 1, j + 1), v(i, j + 1)});
+      plan.triangle_room.push_back(r);
+      plan.triangle_room.push_back(r);
+    }
+  }
+  plan.rooms.resize(rooms);
+  return plan;
 }
 
 // A 2 × 1 m strip cut into two rooms by the line x = 1 (one open border: a doorway).
