@@ -1,5 +1,6 @@
 #include "storage/ply_io.h"
 
+#include <algorithm>
 #include <bit>
 #include <cerrno>
 #include <cstring>
@@ -19,7 +20,11 @@ namespace carvemap {
 void TriangleMesh::Append(const TriangleMesh& other) {
   const int offset = static_cast<int>(vertices.size());
   vertices.insert(vertices.end(), other.vertices.begin(), other.vertices.end());
-  triangles.reserve(triangles.size() + other.triangles.size());
+  // Geometric growth, as insert gives the vertices: reserving the exact size on every call made
+  // an object of many pieces, appended one by one, quadratic.
+  if (const size_t need = triangles.size() + other.triangles.size(); need > triangles.capacity()) {
+    triangles.reserve(std::max(need, 2 * triangles.capacity()));
+  }
   for (const Eigen::Vector3i& t : other.triangles) triangles.push_back(t.array() + offset);
 }
 
