@@ -177,7 +177,8 @@ struct SliceCarver::Impl {
     constexpr int kMaxBoxChunks = 8;
     const Eigen::Vector3i lo = (box.min() / kChunkSizeM).array().floor().cast<int>();
     const Eigen::Vector3i hi = (box.max() / kChunkSizeM).array().floor().cast<int>();
-    if ((hi - lo + Eigen::Vector3i::Ones()).prod() > kMaxBoxChunks) return true;
+    // In 64 bits: world coordinates reach ±1e6 m (kMaxWorldCoordinateM), 1e6 chunks a side.
+    if ((hi - lo + Eigen::Vector3i::Ones()).cast<int64_t>().prod() > kMaxBoxChunks) return true;
     for (int z = lo.z(); z <= hi.z(); ++z) {
       for (int y = lo.y(); y <= hi.y(); ++y) {
         for (int x = lo.x(); x <= hi.x(); ++x) {
