@@ -33,9 +33,9 @@ struct WedgeHull {
 // The same hull from a multi-ray wedge's points, for callers that computed them once per ray:
 // the rays' sensor means and their ExtendedPointMean (same order, 2 to 4 rays). `facets`, if
 // given, is a hint in and out: in, a nonzero hint from an earlier call on the same points
-// (the coordinator's, sent with the wedge) skips the search for facets and gives the same
-// hull bit for bit (a hint naming a non-facet is ignored; one missing a facet would give a
-// larger hull); out, the hint for this hull.
+// (the binning's, kept with the wedge for its chunks) skips the search for facets and gives
+// the same hull bit for bit (a hint naming a non-facet is ignored; one missing a facet would
+// give a larger hull); out, the hint for this hull.
 [[nodiscard]] WedgeHull HullOfWedgePoints(std::span<const Eigen::Vector3d> sensor_means,
                                           std::span<const Eigen::Vector3d> far_ends,
                                           uint64_t* facets = nullptr);

@@ -175,8 +175,7 @@ struct SliceCarver::Impl {
   // chunks than kMaxBoxChunks is taken to: looking them all up would cost more than the hull.
   absl::StatusOr<bool> MayReachRegions(const Eigen::AlignedBox3d& box) {
     constexpr int kMaxBoxChunks = 8;
-    const Eigen::Vector3i lo = (box.min() / kChunkSizeM).array().floor().cast<int>();
-    const Eigen::Vector3i hi = (box.max() / kChunkSizeM).array().floor().cast<int>();
+    const ChunkKey lo = ChunkOf(box.min()), hi = ChunkOf(box.max());
     // In 64 bits: world coordinates reach ±1e6 m (kMaxWorldCoordinateM), 1e6 chunks a side.
     if ((hi - lo + Eigen::Vector3i::Ones()).cast<int64_t>().prod() > kMaxBoxChunks) return true;
     for (int z = lo.z(); z <= hi.z(); ++z) {
