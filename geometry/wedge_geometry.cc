@@ -77,18 +77,22 @@ struct LateralSpread {
   double sigma[2];
 };
 LateralSpread LateralSigmas(const RayModel& ray, const Vector3d& d) {
-  const Eigen::Matrix3d p = Eigen::Matrix3d::Identity() - d * d.transpose();
   const Eigen::Matrix3d cp = ToMatrix(ray.point_cov);
   const Eigen::Matrix3d cs = ToMatrix(ray.sensor_cov);
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(p * cp * p);
-  // The eigenvector of the smallest eigenvalue is d itself (P d = 0); the other two span ⊥ d.
-  // An isotropic (or zero) lateral spread leaves them arbitrary: any orthonormal pair ⊥ d.
-  Vector3d a = eig.eigenvectors().col(2);
-  if (std::abs(a.dot(d)) > 1e-6 || !a.allFinite()) a = d.unitOrthogonal();
-  a = (a - a.dot(d) * d).normalized();
+  // P C_p P restricted to the plane ⊥ d is the 2×2 [[a, b], [b, c]] in any orthonormal pair of
+  // that plane; its larger eigenvector is at angle ½·atan2(2b, a − c) from the pair's first.
+  // Closed form rather than a 3×3 eigensolver: this runs for every single-ray hull, in the
+  // binning and again in each chunk it reaches. The box holds the ellipses along any pair of
+  // axes (the half-widths below are the supports along them), so rounding in the angle only
+  // changes how tight it is. An isotropic (or zero) spread gives angle 0: the pair itself.
+  const Vector3d e1 = d.unitOrthogonal();
+  const Vector3d e2 = d.cross(e1);
+  const Vector3d c1 = cp * e1;
+  const double a = e1.dot(c1), b = e2.dot(c1), c = e2.dot(cp * e2);
+  const double angle = 0.5 * std::atan2(2 * b, a - c);
   LateralSpread out;
-  out.axis[0] = a;
-  out.axis[1] = d.cross(a);
+  out.axis[0] = (std::cos(angle) * e1 + std::sin(angle) * e2).normalized();
+  out.axis[1] = d.cross(out.axis[0]);
   for (int i = 0; i < 2; ++i) {
     const Vector3d& e = out.axis[i];
     out.sigma[i] = std::sqrt(std::max({0.0, e.dot(cp * e), e.dot(cs * e)}));

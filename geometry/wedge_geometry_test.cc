@@ -169,6 +169,34 @@ TEST(WedgeHullTest, SingleRayIsSegmentWidenedByOneSigmaPerLateralAxis) {
   EXPECT_FALSE(HullContainsPoint(wide, {1.31, 2, 8}));
 }
 
+TEST(WedgeHullTest, SingleRayBoxFollowsATiltedSpread) {
+  // A ray along z whose point spread across it has its axes at 30° from x and y: σ 0.2 along
+  // the first, 0.05 along the second. The box turns with them, however the ray points.
+  const double c = std::cos(M_PI / 6), s = std::sin(M_PI / 6);
+  const Vector3d major(c, s, 0), minor(-s, c, 0);
+  for (const Vector3d& dir : {Vector3d(0, 0, 1), Vector3d(0, 0, -1)}) {
+    const Vector3d from(1, 2, 5), to = from + 4 * dir;
+    const Eigen::Matrix3d cov = 0.04 * major * major.transpose() +
+                                0.0025 * minor * minor.transpose() +
+                                1e-6 * Eigen::Matrix3d::Identity();
+    RayModel r = Ray(from, to);
+    r.point_cov = ToSymCov(cov);
+    Wedge w;
+    w.rays[0] = r;
+    w.num_rays = 1;
+    const WedgeHull h = MakeWedgeHull(w);
+    const Vector3d mid = from + 2 * dir;
+    for (double sign : {-1.0, 1.0}) {
+      EXPECT_TRUE(HullContainsPoint(h, mid + sign * (0.198 * major + 0.049 * minor)));
+      EXPECT_FALSE(HullContainsPoint(h, mid + sign * 0.21 * major));
+      EXPECT_FALSE(HullContainsPoint(h, mid + sign * 0.06 * minor));
+    }
+    // 0.16 along x is inside the spread's axis-aligned box (half-width 0.175 in x) but 0.08
+    // off the minor axis: outside the turned one.
+    EXPECT_FALSE(HullContainsPoint(h, mid + Vector3d(0.16, 0, 0)));
+  }
+}
+
 TEST(WedgeHullTest, GrazingSingleRayStaysBelowTheSlabAboveIt) {
   // A horizontal scanner 1.85 m up whose ray, pitched 1.5° by pose noise, meets a ceiling at
   // 2.61 m 28 m away: the point covariance of the simulated Freiburg101 walk (σ 9.5 cm along x,
