@@ -165,8 +165,9 @@ bool BruteForceHull(const PointSet& s, double extent, WedgeHull& hull, double& t
           continue;
         }
         // Sides first with the unnormalized normal (distances scaled by |n|): most triples
-        // are not facets, and they need no square root.
-        {
+        // are not facets, and they need no square root. A replay's triples were facets of
+        // these very points: the pass below checks them on its own.
+        if (only == 0) {
           const double o = n.dot(s.p[i]), tol2 = tol * tol * len2;
           bool above = false, below = false;
           for (int m = 0; m < s.n && !(above && below); ++m) {
@@ -188,6 +189,7 @@ bool BruteForceHull(const PointSet& s, double extent, WedgeHull& hull, double& t
           hi = std::max(hi, dist);
         }
         const bool below = lo < -tol;
+        if (only != 0 && below && hi > tol) return false;  // a plane through the hull
         thinnest = std::min(thinnest, hi - lo);
         if (found != nullptr) *found |= uint64_t{1} << t;
         // Outward: away from the points. The offset is the points' exact support.
