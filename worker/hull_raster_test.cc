@@ -163,6 +163,55 @@ TEST(HullRasterTest, RegionsOfEveryDepthKeepOnlyTheirLeaves) {
   EXPECT_GT(total, 300u);
 }
 
+// Hulls whose faces are parallel, or nearly, to the rows (a ray along an axis, tilted by up
+// to 1e−2): the row bounds of such faces come from divisions by their tiny slopes, where
+// rounding is largest. Points and sensors on leaf boundaries too.
+TEST(HullRasterTest, AxisAlignedAndNearlyAlignedHullsAreExact) {
+  OctreeGrid grid;
+  const ChunkKey chunk(0, -1, 1);
+  const Eigen::Vector3d base = chunk.cast<double>() * kChunkSizeM;
+  size_t total = 0;
+  int trial = 0;
+  for (const double tilt : {0.0, 1e-12, 1e-7, 1e-4, 9e-4, 1.1e-3, 1e-2}) {
+    for (int depth : {3, 5}) {
+      grid.chunk_depth = depth;
+      const double s = grid.resolution_m();
+      for (int along = 0; along < 3; ++along) {
+        ++trial;
+        Eigen::Vector3d dir = Eigen::Vector3d::Zero();
+        dir[along] = 1;
+        dir[(along + 1) % 3] = tilt;
+        dir[(along + 2) % 3] = trial % 2 ? -tilt / 3 : 0;
+        // On a leaf corner, or a third of a leaf off it.
+        const Eigen::Vector3d s0 = base + Eigen::Vector3d(3, 5, 7) * s +
+                                   (trial % 3 == 0 ? Eigen::Vector3d::Constant(s / 3)
+                                                   : Eigen::Vector3d::Zero());
+        Eigen::Vector3d du = Eigen::Vector3d::Zero(), dv = du;
+        du[(along + 1) % 3] = 2 * s;
+        dv[(along + 2) % 3] = s;
+        const Eigen::Vector3d p = s0 + 1.5 * dir.normalized();
+        Wedge w;
+        w.rays = {Ray(s0, p, 0.002f), Ray(s0, p + du, 0.002f), Ray(s0 + dv * 0.1, p + dv, 0.002f),
+                  Ray(s0 + dv * 0.1, p + du + dv, 0.002f)};
+        for (int num_rays : {1, 4}) {
+          w.num_rays = num_rays;
+          const WedgeHull hull = MakeWedgeHull(w, 3.0);
+          const auto expected = BruteForce(hull, grid, chunk, nullptr);
+          for (int axis = 0; axis < 3; ++axis) {
+            std::vector<LeafRun> runs;
+            EXPECT_EQ(RasterizeHull(hull, grid, chunk, axis, nullptr, runs), expected.size());
+            EXPECT_EQ(FromRuns(runs, axis), expected)
+                << "tilt " << tilt << " depth " << depth << " along " << along << " rays "
+                << num_rays << " axis " << axis;
+          }
+          total += expected.size();
+        }
+      }
+    }
+  }
+  EXPECT_GT(total, 1000u);
+}
+
 TEST(HullRasterTest, HullOutsideTheChunkListsNothing) {
   std::mt19937 rng(11);
   OctreeGrid grid;
