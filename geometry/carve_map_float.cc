@@ -9,6 +9,8 @@
 #include <emmintrin.h>
 #endif
 
+#include "geometry/float_lanes.h"
+
 namespace carvemap {
 namespace {
 
@@ -16,6 +18,7 @@ namespace {
 // so both give the same bits.
 #if defined(__SSE2__)
 struct F4 {
+  static constexpr int kLanes = 4;
   __m128 v;
   static F4 Set(float x) { return {_mm_set1_ps(x)}; }
   static F4 Iota(float t) { return {_mm_add_ps(_mm_set1_ps(t), _mm_set_ps(3, 2, 1, 0))}; }
@@ -42,6 +45,7 @@ struct F4 {
 };
 #else
 struct F4 {
+  static constexpr int kLanes = 4;
   float v[4];
   template <typename Op>
   static F4 Map(F4 a, F4 b, Op op) {
@@ -97,46 +101,6 @@ struct F4 {
 };
 #endif
 
-// e^−x for x in [0, 87], as ExpNegFloat.
-inline __attribute__((always_inline)) F4 ExpNeg4(F4 x) {
-  constexpr float kLog2e = 1.44269504088896341f;
-  constexpr float kC1 = 0.693359375f, kC2 = -2.12194440e-4f;  // ln 2 = C1 + C2, C1 exact
-  F4 kf, scale;
-  F4::TruncScale(x * F4::Set(kLog2e) + F4::Set(0.5f), &kf, &scale);  // k = round(x / ln 2)
-  // s = −(x − k ln 2) ∈ [−ln2/2, ln2/2]; e^−x = 2^−k e^s.
-  const F4 s = (kf * F4::Set(kC1) - x) + kf * F4::Set(kC2);
-  const F4 z = s * s;
-  F4 y = F4::Set(1.9875691500e-4f);
-  y = y * s + F4::Set(1.3981999507e-3f);
-  y = y * s + F4::Set(8.3334519073e-3f);
-  y = y * s + F4::Set(4.1665795894e-2f);
-  y = y * s + F4::Set(1.6666665459e-1f);
-  y = y * s + F4::Set(5.0000001201e-1f);
-  y = (y * z + s) + F4::Set(1.0f);
-  return y * scale;
-}
-
-// 0.5·erfc(z) for any z: Abramowitz & Stegun 7.1.26 on |z| (absolute error < 1.5e−7),
-// reflected for z < 0.
-inline __attribute__((always_inline)) F4 HalfErfc4(F4 z) {
-  const F4 zero = F4::Set(0.0f);
-  const F4 neg = Greater(zero, z);
-  const F4 az = Select(neg, zero - z, z);
-  const F4 t = F4::Set(1.0f) / (F4::Set(1.0f) + F4::Set(0.3275911f) * az);
-  F4 poly = F4::Set(1.061405429f);
-  for (float c : {-1.453152027f, 1.421413741f, -0.284496736f, 0.254829592f}) {
-    poly = poly * t + F4::Set(c);
-  }
-  // erfc(|z|) = t·poly·e^−z² (z² ≤ 87: erfc(9.3) is 0 in float anyway).
-  const F4 e = (t * poly) * ExpNeg4(Min(az * az, F4::Set(87.0f)));
-  return F4::Set(0.5f) * Select(neg, F4::Set(2.0f) - e, e);
-}
-
-// Past this f_⊥ < 1.2e−17: no weight (as carve_map.h's kNoWeightExponent).
-constexpr float kNoWeightExponent = 39.0f;
-// erfc's argument at or below which 0.5·erfc is 1 in double (carve_map.h skips it there too).
-constexpr float kErfcSaturated = -6.0f;
-
 // L with L Lᵀ = adj(M) for M = (m11 m12; m12 m22) positive definite: adj(M) = (m22 −m12;
 // −m12 m11), Cholesky (l11 0; l21 l22). False when M is not positive definite.
 bool AdjCholesky(double m11, double m12, double m22, double* l11, double* l21, double* l22,
@@ -153,14 +117,27 @@ bool AdjCholesky(double m11, double m12, double m22, double* l11, double* l21, d
 
 float ExpNegFloat(float x) {
   float out[4];
-  ExpNeg4(F4::Set(x)).Store(out);
+  float_lanes::ExpNeg(F4::Set(x)).Store(out);
   return out[0];
 }
 
 float ErfcFloat(float z) {
   float out[4];
-  HalfErfc4(F4::Set(z)).Store(out);
+  float_lanes::HalfErfc(F4::Set(z)).Store(out);
   return 2.0f * out[0];
+}
+
+#if defined(CARVEMAP_AVX2_LANES)
+// Here, not in the AVX2 unit: it runs on every CPU.
+bool float_lanes::Avx2Available() { return __builtin_cpu_supports("avx2"); }
+#endif
+
+bool EightFloatLanesAvailable() {
+#if defined(CARVEMAP_AVX2_LANES)
+  return float_lanes::Avx2Available();
+#else
+  return false;
+#endif
 }
 
 std::optional<FloatRay> FloatRay::Make(const PreparedRay& ray,
@@ -204,51 +181,34 @@ std::optional<FloatRay> FloatRay::Make(const PreparedRay& ray,
   return r;
 }
 
-void FloatRay::EvaluateRow(int u, int v, int lo, int hi, float* w, float* d) const {
+void FloatRay::EvaluateRow(int u, int v, int lo, int hi, float* w, float* d,
+                           FloatLanes lanes) const {
+  using float_lanes::RowInputs;
+  static_assert(int(kPar) == int(RowInputs::kPar) && int(kA1) == int(RowInputs::kA1) &&
+                int(kA2) == int(RowInputs::kA2) && int(kC1) == int(RowInputs::kC1) &&
+                int(kC2) == int(RowInputs::kC2) && int(kZp) == int(RowInputs::kZp) &&
+                int(kInputs) == int(RowInputs::kInputs));
   if (hi < lo) return;
-  F4 base[kInputs], step[kInputs];
+  RowInputs in;
   for (int k = 0; k < kInputs; ++k) {
-    base[k] = F4::Set(float(y0_[k] + double(u) * yu_[k] + double(v) * yv_[k] + double(lo) * yt_[k]));
-    step[k] = F4::Set(float(yt_[k]));
+    in.base[k] = float(y0_[k] + double(u) * yu_[k] + double(v) * yv_[k] + double(lo) * yt_[k]);
+    in.step[k] = float(yt_[k]);
   }
-  const F4 zero = F4::Set(0.0f), one = F4::Set(1.0f), half = F4::Set(0.5f);
-  const F4 inv_len = F4::Set(inv_length_), det_a = F4::Set(det_a_), det_c = F4::Set(det_c_);
-  const F4 mix = F4::Set(mix_), cut = F4::Set(kNoWeightExponent);
-  const F4 saturated = F4::Set(kErfcSaturated), neg_is = F4::Set(-inv_sqrt2_sigma_s_);
-  float wl[4], dl[4];
-  for (int t = lo; t <= hi; t += 4) {
-    const F4 k = F4::Iota(float(t - lo));
-    const F4 par = base[kPar] + k * step[kPar];
-    const F4 ua1 = base[kA1] + k * step[kA1], ua2 = base[kA2] + k * step[kA2];
-    const F4 uc1 = base[kC1] + k * step[kC1], uc2 = base[kC2] + k * step[kC2];
-    const F4 f = Min(Max(par * inv_len, zero), one);
-    const F4 g = one - f;
-    const F4 num = g * (ua1 * ua1 + ua2 * ua2) + f * (uc1 * uc1 + uc2 * uc2);
-    const F4 den = g * (g * det_a + f * mix) + f * f * det_c;
-    const F4 e = half * (num / den);
-    const F4 weighted = LessEqual(e, cut);  // false for NaN too
-    const F4 fw = Select(weighted, ExpNeg4(Min(e, cut)), zero);
-    // Φ terms: F_s = 0.5 erfc(−x_∥/(σ_s√2)), 1 − F_p = 0.5 erfc(z_p); 1 where saturated.
-    const F4 zs = par * neg_is;
-    const F4 zp = base[kZp] + k * step[kZp];
-    const F4 s_open = Greater(zs, saturated), p_open = Greater(zp, saturated);
-    const F4 fs = Any(s_open) ? Select(s_open, HalfErfc4(zs), one) : one;
-    const F4 fp = Any(p_open) ? Select(p_open, HalfErfc4(zp), one) : one;
-    // p − 0.5 = f_⊥ (F_s (1 − F_p) − 0.5): kept apart from 0.5, so that a vote of weight 1e−15
-    // (a leaf deep in a wide wedge) still says "interior" (p = 0.5 + ~1e−15, which float's
-    // 0.5 + x would round to 0.5 exactly).
-    const F4 dv = fw * ((fs * fp) - half);
-    const int n = std::min(4, hi - t + 1);
-    if (n == 4) {
-      fw.Store(w + (t - lo));
-      dv.Store(d + (t - lo));
-    } else {
-      fw.Store(wl);
-      dv.Store(dl);
-      std::copy(wl, wl + n, w + (t - lo));
-      std::copy(dl, dl + n, d + (t - lo));
-    }
+  in.det_a = det_a_;
+  in.det_c = det_c_;
+  in.mix = mix_;
+  in.inv_length = inv_length_;
+  in.inv_sqrt2_sigma_s = inv_sqrt2_sigma_s_;
+  const int n = hi - lo + 1;
+#if defined(CARVEMAP_AVX2_LANES)
+  // Eight lanes pay from five leaves on (a row of up to four is one pass of four lanes).
+  static const bool avx2 = float_lanes::Avx2Available();
+  if (avx2 && (lanes == FloatLanes::kEight || (lanes == FloatLanes::kAuto && n > 4))) {
+    float_lanes::EvaluateRowAvx2(in, n, w, d);
+    return;
   }
+#endif
+  float_lanes::EvaluateRow<F4>(in, n, w, d);
 }
 
 }  // namespace carvemap

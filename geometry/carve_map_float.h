@@ -17,8 +17,9 @@
 // spread.)
 //
 // Determinism: only IEEE-exact operations (add, mul, div, compare, conversions) in a fixed
-// order, SSE2 on x86-64 (baseline, every CPU the workers run on) and the same operations lane
-// by lane elsewhere; no FMA contraction, no libm. Tiles are bit-identical on any worker.
+// order, the same for every leaf whatever the width of the lanes: eight with AVX2 where the
+// CPU has it, four with SSE2 on other x86-64 CPUs (the baseline), the same operations lane by
+// lane elsewhere; no FMA contraction, no libm. Tiles are bit-identical on any worker.
 #pragma once
 
 #include <optional>
@@ -28,6 +29,12 @@
 #include "geometry/carve_map.h"
 
 namespace carvemap {
+
+// Which lanes FloatRay::EvaluateRow uses: kAuto picks eight where the CPU has them and the row
+// is longer than four leaves; the others are for tests (kEight falls back to four without).
+enum class FloatLanes { kAuto, kFour, kEight };
+// Whether this CPU has the eight lanes (AVX2; x86-64 builds only).
+[[nodiscard]] bool EightFloatLanesAvailable();
 
 class FloatRay {
  public:
@@ -44,7 +51,8 @@ class FloatRay {
   // of eq 4.7 is affine in (t, u, v): it is computed in double at (lo, u, v), where the row's
   // values are (the ray's hull reaches there), then stepped in float along the row, so
   // nothing large cancels. REQUIRES: 0 ≤ lo ≤ hi, lattice coordinates below 2^20.
-  void EvaluateRow(int u, int v, int lo, int hi, float* w, float* d) const;
+  void EvaluateRow(int u, int v, int lo, int hi, float* w, float* d,
+                   FloatLanes lanes = FloatLanes::kAuto) const;
 
  private:
   FloatRay() = default;

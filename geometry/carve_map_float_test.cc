@@ -2,7 +2,9 @@
 #include "geometry/carve_map_float.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <random>
 #include <vector>
@@ -109,6 +111,52 @@ TEST(CarveMapFloatTest, RowsAgreeWithTheDoublePath) {
   EXPECT_LT(worst_w, 5e-6);
   EXPECT_LT(worst_p, 5e-6);
   // Not vacuous: a good share of the rows lies within the rays' weight.
+  EXPECT_GT(weighted, compared / 5);
+}
+
+// Eight lanes and four give the same bits for every leaf (tiles must not depend on the CPU a
+// worker runs on), whatever the row's length and where it lies against the ray.
+TEST(CarveMapFloatTest, EightLanesGiveTheBitsOfFour) {
+  if (!EightFloatLanesAvailable()) GTEST_SKIP() << "this CPU has no AVX2";
+  std::mt19937 rng(13);
+  std::uniform_real_distribution<double> u(-1, 1), len(0.2, 25);
+  const double leaf = 0.03125;
+  size_t compared = 0, weighted = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    RayModel m;
+    const Vector3d s(u(rng) * 50, u(rng) * 50, u(rng) * 5);
+    const Vector3d d = Vector3d(u(rng), u(rng), u(rng) * 0.5).normalized();
+    m.sensor_mean = s.cast<float>();
+    m.point_mean = (s + d * len(rng)).cast<float>();
+    m.sensor_cov = ToSymCov(Covariance(rng, trial % 4, d));
+    m.point_cov = ToSymCov(Covariance(rng, (trial / 4) % 4, d));
+    absl::StatusOr<PreparedRay> ref = PreparedRay::Make(m);
+    ASSERT_TRUE(ref.ok());
+    const int axis = trial % 3;
+    const Vector3d lattice = ref->origin() - Vector3d(40.3, 39.7, 41.1) * leaf;
+    std::optional<FloatRay> fast = FloatRay::Make(*ref, lattice, leaf, axis);
+    ASSERT_TRUE(fast.has_value()) << trial;
+    for (int k = 0; k < 16; ++k) {
+      // Rows of 1 to 40 leaves through points along the ray and a little across it.
+      const Vector3d x = ref->origin() + ref->direction() * (k / 15.0) * (ref->length() + 0.3) +
+                         Vector3d(u(rng), u(rng), u(rng)) * 3 * leaf - lattice;
+      const int t0 = std::max(0, int(x[axis] / leaf) - 20);
+      const int ru = std::max(0, int(x[(axis + 1) % 3] / leaf));
+      const int rv = std::max(0, int(x[(axis + 2) % 3] / leaf));
+      const int n = 1 + (trial * 16 + k) % 40;
+      std::vector<float> w4(n), d4(n), w8(n), d8(n);
+      fast->EvaluateRow(ru, rv, t0, t0 + n - 1, w4.data(), d4.data(), FloatLanes::kFour);
+      fast->EvaluateRow(ru, rv, t0, t0 + n - 1, w8.data(), d8.data(), FloatLanes::kEight);
+      for (int i = 0; i < n; ++i) {
+        ASSERT_EQ(std::bit_cast<uint32_t>(w4[i]), std::bit_cast<uint32_t>(w8[i]))
+            << trial << " " << k << " " << i;
+        ASSERT_EQ(std::bit_cast<uint32_t>(d4[i]), std::bit_cast<uint32_t>(d8[i]))
+            << trial << " " << k << " " << i;
+        weighted += w4[i] > 1e-12f;
+        ++compared;
+      }
+    }
+  }
   EXPECT_GT(weighted, compared / 5);
 }
 
