@@ -196,12 +196,28 @@ struct CarveBuffers {
   std::vector<uint8_t> axes_needed;
   std::vector<std::array<std::vector<LeafRun>, 3>> runs;
   std::vector<std::vector<LeafRun>> pool;
-  std::vector<LeafRun> merged;
-  std::vector<std::pair<const LeafRun*, const LeafRun*>> heads;
+  std::vector<LeafRun> merged, merging;
   std::vector<double> par, lat_a, lat_b, vote_p, vote_w;
   std::vector<LeafStats*> cells;
   std::vector<float> row_w, row_p;
 };
+
+// out = the merge of sorted a and b, with no branch per element: which list's head is smaller
+// is a coin toss that a branch predictor loses (a ray's wedges' runs interleave row by row).
+void MergeSortedRuns(std::span<const LeafRun> a, std::span<const LeafRun> b,
+                     std::vector<LeafRun>& out) {
+  out.resize(a.size() + b.size());
+  const LeafRun *x = a.data(), *x_end = x + a.size(), *y = b.data(), *y_end = y + b.size();
+  LeafRun* o = out.data();
+  while (x != x_end && y != y_end) {
+    const bool from_b = *y < *x;
+    *o++ = from_b ? *y : *x;
+    y += from_b;
+    x += !from_b;
+  }
+  o = std::copy(x, x_end, o);
+  std::copy(y, y_end, o);
+}
 
 // Whether a multi-ray wedge's hull may reach a cell of `region`: the box WedgePointsBox puts
 // around its hull meets one. A leaf the hull touches lies in that box, so a wedge this rejects
@@ -420,7 +436,7 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   runs.resize(num_wedges);
   auto& pool = buf.pool;  // emptied run lists, reused
   auto& merged = buf.merged;
-  auto& heads = buf.heads;
+  auto& merging = buf.merging;
   // One ray's leaves: their projections on the ray, their sums, and its votes.
   auto& par = buf.par;
   auto& lat_a = buf.lat_a;
@@ -478,25 +494,15 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
       const int a = axis[r], u = (a + 1) % 3, v = (a + 2) % 3;
       // The union of the ray's wedges' runs, sorted: a merge of their sorted lists.
       merged.clear();
-      heads.clear();
       for (uint32_t rw : ray_wedges.Row(r)) {
         const std::vector<LeafRun>& list = runs[rw][a];
-        if (!list.empty()) heads.push_back({list.data(), list.data() + list.size()});
-      }
-      if (heads.size() == 1) {
-        merged.assign(heads[0].first, heads[0].second);
-      } else {
-        while (!heads.empty()) {
-          size_t best = 0;
-          for (size_t h = 1; h < heads.size(); ++h) {
-            if (*heads[h].first < *heads[best].first) best = h;
-          }
-          merged.push_back(*heads[best].first++);
-          if (heads[best].first == heads[best].second) {
-            heads[best] = heads.back();
-            heads.pop_back();
-          }
+        if (list.empty()) continue;
+        if (merged.empty()) {
+          merged.assign(list.begin(), list.end());
+          continue;
         }
+        MergeSortedRuns(merged, list, merging);
+        merged.swap(merging);
       }
       if (merged.empty()) continue;  // no leaf of the chunk (or of the region)
       const absl::StatusOr<PreparedRay> prepared = PreparedRay::Make(in.rays[r]);

@@ -51,18 +51,16 @@ class Rasterizer {
     const double slack = 1e-6;  // index units, against rounding of the row bounds
     for (int v = lo_[v_]; v <= hi_[v_]; ++v) {
       double ulo = lo_[u_], uhi = hi_[u_];
-      bool empty = false;
-      for (const RowBound& h : row_bounds_) {
-        const double rhs = h.c0 - h.cv * v;
-        if (h.cu > 0) {
-          uhi = std::min(uhi, rhs * h.inv_cu);
-        } else if (h.cu < 0) {
-          ulo = std::max(ulo, rhs * h.inv_cu);
-        } else if (rhs < -slack) {
-          empty = true;
-          break;
-        }
+      const RowBound* h = row_bounds_.data();
+      const size_t n = row_bounds_.size(), lower = upper_bounds_, flat = lower + lower_bounds_;
+      for (size_t i = 0; i < lower; ++i) {
+        uhi = std::min(uhi, (h[i].c0 - h[i].cv * v) * h[i].inv_cu);
       }
+      for (size_t i = lower; i < flat; ++i) {
+        ulo = std::max(ulo, (h[i].c0 - h[i].cv * v) * h[i].inv_cu);
+      }
+      bool empty = false;
+      for (size_t i = flat; i < n; ++i) empty |= h[i].c0 - h[i].cv * v < -slack;
       if (empty || !(ulo <= uhi + 2)) continue;
       // One row of margin either way: Row settles each one exactly.
       const int u0 = std::max(lo_[u_], int(std::ceil(std::max(ulo, lo_[u_] - 1.0))) - 1);
@@ -117,6 +115,13 @@ class Rasterizer {
       if ((p.g - least) * s_ < -kAmbiguousM) return false;  // holds for none
       planes_.push_back(p);
     }
+    // Upper bounds on t first, then lower ones, then the planes along the rows: the loops over
+    // them (Row, ProjectOnRows) need no branch per plane, whose sign no predictor guesses.
+    auto lower =
+        std::partition(planes_.begin(), planes_.end(), [](const IndexPlane& p) { return p.a > 0; });
+    auto flat = std::partition(lower, planes_.end(), [](const IndexPlane& p) { return p.a < 0; });
+    upper_planes_ = size_t(lower - planes_.begin());
+    lower_planes_ = size_t(flat - lower);
     double a_min = std::numeric_limits<double>::infinity();
     for (const IndexPlane& p : planes_) {
       if (p.a != 0) a_min = std::min(a_min, std::abs(p.a));
@@ -134,26 +139,31 @@ class Rasterizer {
   void ProjectOnRows() {
     row_bounds_.clear();
     const double t0 = lo_[a_], t1 = hi_[a_];
-    for (const IndexPlane& p : planes_) {
-      if (p.a == 0) {
-        AddRowBound(p.b, p.c, p.g);
-        continue;
-      }
-      // t ≤ or ≥ h(u, v) = (g − b·u − c·v)/a.
+    const std::span<const IndexPlane> upper(planes_.data(), upper_planes_);
+    const std::span<const IndexPlane> lower(planes_.data() + upper_planes_, lower_planes_);
+    const std::span<const IndexPlane> flat(lower.data() + lower.size(),
+                                           planes_.size() - upper.size() - lower.size());
+    // t ≤ or ≥ h(u, v) = (g − b·u − c·v)/a.
+    for (const IndexPlane& q : upper) {
+      AddRowBound(q.b * q.inv_a, q.c * q.inv_a, q.g * q.inv_a - t0);  // h ≥ t0
+    }
+    for (const IndexPlane& p : lower) {
       const double hb = p.b * p.inv_a, hc = p.c * p.inv_a, h0 = p.g * p.inv_a;
-      if (p.a > 0) {
-        AddRowBound(hb, hc, h0 - t0);  // h ≥ t0
-      } else {
-        AddRowBound(-hb, -hc, t1 - h0);  // h ≤ t1
-      }
-      if (p.a >= 0) continue;
-      for (const IndexPlane& q : planes_) {
-        if (q.a <= 0) continue;
+      AddRowBound(-hb, -hc, t1 - h0);  // h ≤ t1
+      for (const IndexPlane& q : upper) {
         // lower h_p ≤ upper h_q
         const double qb = q.b * q.inv_a, qc = q.c * q.inv_a, q0 = q.g * q.inv_a;
         AddRowBound(qb - hb, qc - hc, q0 - h0);
       }
     }
+    for (const IndexPlane& p : flat) AddRowBound(p.b, p.c, p.g);
+    // As the planes: bounds on u from above, from below, then those on v alone.
+    auto below = std::partition(row_bounds_.begin(), row_bounds_.end(),
+                                [](const RowBound& h) { return h.cu > 0; });
+    auto rest =
+        std::partition(below, row_bounds_.end(), [](const RowBound& h) { return h.cu < 0; });
+    upper_bounds_ = size_t(below - row_bounds_.begin());
+    lower_bounds_ = size_t(rest - below);
   }
 
   [[nodiscard]] double MinMargin(int t, int u, int v) const {
@@ -190,16 +200,15 @@ class Rasterizer {
       if (region_runs.empty()) return;
     }
     double lo = -std::numeric_limits<double>::infinity(), hi = -lo, flat = hi;
-    for (const IndexPlane& p : planes_) {
-      const double w = p.g - p.b * u - p.c * v;
-      if (p.a > 0) {
-        hi = std::min(hi, w * p.inv_a);
-      } else if (p.a < 0) {
-        lo = std::max(lo, w * p.inv_a);
-      } else {
-        flat = std::min(flat, w);
-      }
+    const IndexPlane* p = planes_.data();
+    const size_t n = planes_.size(), lower = upper_planes_, along = lower + lower_planes_;
+    for (size_t i = 0; i < lower; ++i) {
+      hi = std::min(hi, (p[i].g - p[i].b * u - p[i].c * v) * p[i].inv_a);
     }
+    for (size_t i = lower; i < along; ++i) {
+      lo = std::max(lo, (p[i].g - p[i].b * u - p[i].c * v) * p[i].inv_a);
+    }
+    for (size_t i = along; i < n; ++i) flat = std::min(flat, p[i].g - p[i].b * u - p[i].c * v);
     if (flat * s_ < -kAmbiguousM || !(lo <= hi + 1)) return;  // also NaN
     // The analytic interval, inside the box range (exact already).
     int t0 = std::max(lo_[a_], int(std::ceil(std::max(lo, lo_[a_] - 1.0))));
@@ -271,9 +280,11 @@ class Rasterizer {
   int n_ = 0;
   std::array<int, 3> lo_{}, hi_{};
   // Inline: one rasterizer per wedge and chunk, so no allocation in the common case.
-  absl::InlinedVector<IndexPlane, 16> planes_;
+  absl::InlinedVector<IndexPlane, 16> planes_;  // a > 0, then a < 0, then a = 0
+  size_t upper_planes_ = 0, lower_planes_ = 0;
   double tol_ = 0;  // index units: closer than this to a plane's bound, the test decides
-  absl::InlinedVector<RowBound, 48> row_bounds_;
+  absl::InlinedVector<RowBound, 48> row_bounds_;  // cu > 0, then cu < 0, then cu = 0
+  size_t upper_bounds_ = 0, lower_bounds_ = 0;
   size_t count_ = 0;
 };
 
