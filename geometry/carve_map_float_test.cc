@@ -55,24 +55,31 @@ Matrix3d Covariance(std::mt19937& rng, int kind, const Vector3d& d) {
   }
 }
 
+// A ray from a random place (mostly horizontal, 0.2–25 m long) with covariances of the kinds
+// above, the kinds chosen by `trial`.
+RayModel RandomRay(std::mt19937& rng, int trial) {
+  std::uniform_real_distribution<double> u(-1, 1), len(0.2, 25);
+  RayModel m;
+  const Vector3d s(u(rng) * 50, u(rng) * 50, u(rng) * 5);
+  const Vector3d d = Vector3d(u(rng), u(rng), u(rng) * 0.5).normalized();
+  m.sensor_mean = s.cast<float>();
+  m.point_mean = (s + d * len(rng)).cast<float>();
+  m.sensor_cov = ToSymCov(Covariance(rng, trial % 4, d));
+  m.point_cov = ToSymCov(Covariance(rng, (trial / 4) % 4, d));
+  return m;
+}
+
 // Rows of leaves around random rays, at every distance from the sensor to past the point and
 // up to several σ across: w and p within 5e−6 of the double path (absolute), and a vote with
 // weight in one exactly where the other has one, but at the edge of the cut (f_⊥ ≈ 1e−17).
 TEST(CarveMapFloatTest, RowsAgreeWithTheDoublePath) {
   std::mt19937 rng(7);
-  std::uniform_real_distribution<double> u(-1, 1), len(0.2, 25);
+  std::uniform_real_distribution<double> u(-1, 1);
   const double leaf = 0.0625;
   size_t compared = 0, weighted = 0;
   double worst_w = 0, worst_p = 0;
   for (int trial = 0; trial < 400; ++trial) {
-    RayModel m;
-    const Vector3d s(u(rng) * 50, u(rng) * 50, u(rng) * 5);
-    const Vector3d d = Vector3d(u(rng), u(rng), u(rng) * 0.5).normalized();
-    m.sensor_mean = s.cast<float>();
-    m.point_mean = (s + d * len(rng)).cast<float>();
-    m.sensor_cov = ToSymCov(Covariance(rng, trial % 4, d));
-    m.point_cov = ToSymCov(Covariance(rng, (trial / 4) % 4, d));
-    absl::StatusOr<PreparedRay> ref = PreparedRay::Make(m);
+    absl::StatusOr<PreparedRay> ref = PreparedRay::Make(RandomRay(rng, trial));
     ASSERT_TRUE(ref.ok());
     const int axis = trial % 3;
     const Eigen::Vector3d lattice = ref->origin() - Vector3d(20.3, 19.7, 21.1) * leaf;
@@ -119,18 +126,11 @@ TEST(CarveMapFloatTest, RowsAgreeWithTheDoublePath) {
 TEST(CarveMapFloatTest, EightLanesGiveTheBitsOfFour) {
   if (!EightFloatLanesAvailable()) GTEST_SKIP() << "this CPU has no AVX2";
   std::mt19937 rng(13);
-  std::uniform_real_distribution<double> u(-1, 1), len(0.2, 25);
+  std::uniform_real_distribution<double> u(-1, 1);
   const double leaf = 0.03125;
   size_t compared = 0, weighted = 0;
   for (int trial = 0; trial < 300; ++trial) {
-    RayModel m;
-    const Vector3d s(u(rng) * 50, u(rng) * 50, u(rng) * 5);
-    const Vector3d d = Vector3d(u(rng), u(rng), u(rng) * 0.5).normalized();
-    m.sensor_mean = s.cast<float>();
-    m.point_mean = (s + d * len(rng)).cast<float>();
-    m.sensor_cov = ToSymCov(Covariance(rng, trial % 4, d));
-    m.point_cov = ToSymCov(Covariance(rng, (trial / 4) % 4, d));
-    absl::StatusOr<PreparedRay> ref = PreparedRay::Make(m);
+    absl::StatusOr<PreparedRay> ref = PreparedRay::Make(RandomRay(rng, trial));
     ASSERT_TRUE(ref.ok());
     const int axis = trial % 3;
     const Vector3d lattice = ref->origin() - Vector3d(40.3, 39.7, 41.1) * leaf;
