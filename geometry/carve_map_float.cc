@@ -127,14 +127,10 @@ float ErfcFloat(float z) {
   return 2.0f * out[0];
 }
 
-#if defined(CARVEMAP_AVX2_LANES)
 // Here, not in the AVX2 unit: it runs on every CPU.
-bool float_lanes::Avx2Available() { return __builtin_cpu_supports("avx2"); }
-#endif
-
 bool EightFloatLanesAvailable() {
 #if defined(CARVEMAP_AVX2_LANES)
-  return float_lanes::Avx2Available();
+  return __builtin_cpu_supports("avx2");
 #else
   return false;
 #endif
@@ -202,7 +198,7 @@ void FloatRay::EvaluateRow(int u, int v, int lo, int hi, float* w, float* d,
   const int n = hi - lo + 1;
 #if defined(CARVEMAP_AVX2_LANES)
   // Eight lanes pay from five leaves on (a row of up to four is one pass of four lanes).
-  static const bool avx2 = float_lanes::Avx2Available();
+  static const bool avx2 = EightFloatLanesAvailable();
   if (avx2 && (lanes == FloatLanes::kEight || (lanes == FloatLanes::kAuto && n > 4))) {
     float_lanes::EvaluateRowAvx2(in, n, w, d);
     return;

@@ -117,8 +117,7 @@ inline __attribute__((always_inline)) void EvaluateRow(const RowInputs& in, int 
 }
 
 // Eight lanes with AVX2 (carve_map_float_avx2.cc, built only on x86-64). REQUIRES: the CPU
-// has AVX2 (Avx2Available()).
+// has AVX2 (EightFloatLanesAvailable(), carve_map_float.h).
 void EvaluateRowAvx2(const RowInputs& in, int n, float* w, float* d);
-bool Avx2Available();
 
 }  // namespace carvemap::float_lanes
