@@ -28,6 +28,7 @@
 #include "services/merge/memory_budget.h"
 #include "services/merge/model_glb.h"
 #include "services/merge/object_files.h"
+#include "services/merge/pocket_tiles.h"
 #include "services/merge/segment_tiles.h"
 #include "services/merge/tile_set.h"
 #include "services/merge/trimmed_points.h"
@@ -494,6 +495,16 @@ absl::Status SegmentRecarvedObjects(const MergeOptions& options,
   absl::StatusOr<std::unique_ptr<TileSet>> tiles =
       TileSet::Open(pass.recarved_dir, res, options.cache_budget_bytes);
   if (!tiles.ok()) return tiles.status();
+  if (options.fill_pockets) {  // as the job's tiles (RunMerge)
+    const fs::path filled_dir = work / "finer_pockets";
+    absl::StatusOr<PocketTilesResult> pockets =
+        FillPocketTiles(**tiles, pass.recarved_dir, filled_dir.string(), PocketFillOptions{},
+                        StageProgress(progress, "recarve_pocket_fill"), MergeThreads(options));
+    if (!pockets.ok()) return pockets.status();
+    counts["recarved_pocket_cells"] = pockets->filled_cells;
+    tiles = TileSet::Open(filled_dir.string(), res, options.cache_budget_bytes);
+    if (!tiles.ok()) return tiles.status();
+  }
   SegmentOptions seg;
   seg.plan_tolerance_m = grid.resolution_m();
   absl::StatusOr<PlanVolume> volume =
@@ -819,8 +830,6 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   absl::StatusOr<std::unique_ptr<TileSet>> opened =
       TileSet::Open(options.tiles_dir, options.resolution_m, options.cache_budget_bytes);
   if (!opened.ok()) return opened.status();
-  TileSet& tiles = **opened;
-  const OctreeGrid grid = tiles.grid();
   const fs::path out(options.output_dir);
   std::error_code ec;
   fs::create_directories(out / "mesh", ec);
@@ -835,6 +844,30 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   std::vector<std::string> outputs;
   std::vector<std::string> warnings;
 
+  // Thin unobserved pockets filled as free for every stage below (fill_pockets.h); the first
+  // outputs (octree.bt, the top-down maps) read the job's own tiles, as carved.
+  Clock::time_point t0 = Clock::now();
+  const fs::path pocket_dir = out / ".pockets";
+  fs::remove_all(pocket_dir, ec);  // an earlier merge's
+  absl::Cleanup remove_pockets = [&pocket_dir] {
+    std::error_code ignored;
+    fs::remove_all(pocket_dir, ignored);
+  };
+  if (options.fill_pockets) {
+    absl::StatusOr<PocketTilesResult> pockets =
+        FillPocketTiles(**opened, options.tiles_dir, pocket_dir.string(), PocketFillOptions{},
+                        StageProgress(progress, "pocket_fill"), MergeThreads(options));
+    if (!pockets.ok()) return InStage("pocket_fill", pockets.status());
+    counts["pocket_cells"] = pockets->filled_cells;
+    counts["pocket_chunks"] = pockets->filled_tiles;
+    const double resolution_m = (*opened)->grid().resolution_m();
+    opened = TileSet::Open(pocket_dir.string(), resolution_m, options.cache_budget_bytes);
+    if (!opened.ok()) return InStage("pocket_fill", opened.status());
+    timings["merge.pocket_fill"] = SecondsSince(t0);
+  }
+  TileSet& tiles = **opened;
+  const OctreeGrid grid = tiles.grid();
+
   // boundary faces (stage 1), sorted by height into a scratch file that the stages below read
   // a slab or a level at a time (face_store.h)
   const fs::path scratch = out / ".faces";
@@ -847,7 +880,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
     std::error_code ignored;
     fs::remove_all(scratch, ignored);
   };
-  Clock::time_point t0 = Clock::now();
+  t0 = Clock::now();
   absl::StatusOr<std::unique_ptr<FaceStore>> faces =
       StoreBoundaryFaces(tiles, (scratch / "job.faces").string(),
                          StageProgress(progress, "boundary_faces"), MergeThreads(options));

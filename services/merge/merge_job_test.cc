@@ -81,7 +81,7 @@ TEST(RunMerge, MemoryBudgetTooSmallFailsBeforeThePlanarRegions) {
             std::string::npos)
       << m;
   EXPECT_NE(m.find("over its memory budget of 1 MiB"), std::string::npos) << m;
-  EXPECT_EQ(stages, std::vector<std::string>{"boundary_faces"});
+  EXPECT_EQ(stages, (std::vector<std::string>{"pocket_fill", "boundary_faces"}));
   EXPECT_FALSE(fs::exists(options.output_dir + "/job.json"));
 }
 
@@ -98,9 +98,9 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
     return true;
   });
   ASSERT_TRUE(s.ok()) << s.status();
-  EXPECT_EQ(stages, (std::vector<std::string>{"boundary_faces", "planar_regions", "levels",
-                                              "dense_mesh", "planar_mesh", "index", "octree_bt",
-                                              "topdown_png", "job_json"}));
+  EXPECT_EQ(stages, (std::vector<std::string>{"pocket_fill", "boundary_faces", "planar_regions",
+                                              "levels", "dense_mesh", "planar_mesh", "index",
+                                              "octree_bt", "topdown_png", "job_json"}));
   const double res = 0.125;
   // 6 walls of the box: 2(32·24 + 32·20 + 24·20) faces.
   EXPECT_EQ(s->num_boundary_faces, 2u * (32 * 24 + 32 * 20 + 24 * 20));

@@ -84,6 +84,8 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   // 40 Hz / 0.25°; 1° here keeps the carve short).
   o.rate_hz = EnvOr("CARVEMAP_SEG_RATE_HZ", pc.rate_hz);
   o.beam_step_deg = EnvOr("CARVEMAP_SEG_BEAM_DEG", 1.0);
+  // Exploring only: CARVEMAP_SEG_DRIFT=1 (the simulator's localization drift on the path).
+  o.drift = EnvOr("CARVEMAP_SEG_DRIFT", 0) != 0;
   o.threads = 2;
   const std::string root = testing::FreshDir();
   const auto t0 = std::chrono::steady_clock::now();
@@ -110,6 +112,8 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   m.object_resolution_m = EnvOr("CARVEMAP_SEG_OBJECT_RES", pc.object_resolution_m);
   m.recarve = testing::InProcessRecarve(carved->scan_path, root + "/object_tiles", o.threads);
   m.trimmed_points = pc.trimmed_points;  // §5.5 for the point cloud too (checked below)
+  // Exploring only: CARVEMAP_SEG_FILL_POCKETS=0 merges the tiles as carved.
+  m.fill_pockets = EnvOr("CARVEMAP_SEG_FILL_POCKETS", 1) != 0;
   // The stages after the objects' dense mesh, and the objects counted as they are written.
   std::vector<std::string> late_stages;
   std::vector<uint64_t> files_done;
