@@ -188,7 +188,7 @@ void RegisterMerge(CLI::App& app, int& exit_code) {
       "Skip faces, regions, levels and meshes (octree.bt, octree.ot, level_0 and job.json only)");
   cmd->add_flag("!--no-fill-pockets", flags->options.fill_pockets,
                 "Mesh and segment the tiles as carved, without filling thin unobserved pockets "
-                "inside free space as free (docs/DESIGN.md §6 stage 0)");
+                "enclosed by free space as free (docs/DESIGN.md §6 stage 0)");
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress line");
   cmd->callback([flags, &exit_code] { exit_code = ReportStatus("merge", RunMergeCommand(*flags)); });
 }

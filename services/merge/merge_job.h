@@ -69,9 +69,9 @@ struct MergeOptions : MergeParams {
   // False skips the meshing stages (faces, regions, levels, dense and planar meshes), leaving
   // the first outputs.
   bool meshes = true;
-  // The meshing stages read the tiles with their thin unobserved pockets filled as free
-  // (services/segment/fill_pockets.h): no floating surfaces or false ceilings where no scanner
-  // swept. False: they read the job's tiles as carved. The first outputs always do.
+  // The meshing stages read the tiles with their thin unobserved pockets (enclosed by free
+  // space) filled as free (services/segment/fill_pockets.h): no floating surface around air no
+  // scanner swept. False: they read the job's tiles as carved. The first outputs always do.
   bool fill_pockets = true;
   // The job's scan.h5 (docs/DESIGN.md §3), whose /path (poses, small) gives the floor plans
   // their scanner positions (§3.3.1 lines of sight, §3.3.2 unentered rooms), and whose returns

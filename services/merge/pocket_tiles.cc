@@ -1,10 +1,13 @@
 #include "services/merge/pocket_tiles.h"
 
 #include <filesystem>
+#include <map>
 #include <optional>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "services/merge/for_each_chunk.h"
+#include "services/merge/parallel_for.h"
 
 namespace carvemap {
 
@@ -18,55 +21,73 @@ absl::StatusOr<PocketTilesResult> FillPocketTiles(TileSet& tiles, const std::str
   std::error_code ec;
   fs::create_directories(out_dir, ec);
   if (ec) return absl::UnavailableError(absl::StrCat(out_dir, ": cannot create: ", ec.message()));
+  threads = std::max(1, threads);
   PocketTilesResult result;
-  // The tiles are compressed on the per-chunk threads; only their files are written in order.
-  struct Filled {
-    ChunkKey chunk = ChunkKey::Zero();
-    uint64_t cells = 0;
-    std::optional<EncodedTile> tile;  // when cells > 0
-  };
-  absl::Status s = ForEachChunk<Filled>(
+
+  // 1. Every chunk's candidates (its neighbours decoded with it), then the whole pockets.
+  std::vector<PocketCell> candidates;
+  absl::Status s = ForEachChunk<std::vector<PocketCell>>(
       tiles, tiles.chunks(), /*low_only=*/false, threads,
-      [&](const ChunkNeighbourhood& hood) -> absl::StatusOr<Filled> {
-        absl::StatusOr<FilledChunk> filled = FillPockets(hood, options);
-        if (!filled.ok()) return filled.status();
-        Filled f;
-        f.chunk = hood.chunk;
-        f.cells = filled->filled_cells;
-        if (f.cells > 0) {
-          absl::StatusOr<EncodedTile> e = EncodeTile(out_dir, filled->tile);
-          if (!e.ok()) return e.status();
-          f.tile = *std::move(e);
-        }
-        return f;
-      },
-      [&](Filled&& f) -> absl::Status {
-        ++result.chunks;
-        if (f.tile) {
-          if (absl::StatusOr<std::string> w = WriteEncodedTile(*f.tile); !w.ok()) {
-            return w.status();
-          }
-          ++result.filled_tiles;
-          result.filled_cells += f.cells;
-          return absl::OkStatus();
-        }
-        const fs::path from = fs::path(tiles_dir) / TileFileName(f.chunk);
-        const fs::path to = fs::path(out_dir) / TileFileName(f.chunk);
-        std::error_code link_ec;
-        fs::remove(to, link_ec);
-        fs::create_hard_link(from, to, link_ec);
-        if (link_ec) {
-          std::error_code copy_ec;
-          fs::copy_file(from, to, fs::copy_options::overwrite_existing, copy_ec);
-          if (copy_ec) {
-            return absl::UnavailableError(absl::StrCat(to.string(), ": cannot link or copy ",
-                                                       from.string(), ": ", copy_ec.message()));
-          }
-        }
-        return absl::OkStatus();
+      [&](const ChunkNeighbourhood& hood) { return PocketCandidates(hood, options); },
+      [&](std::vector<PocketCell>&& cells) {
+        candidates.insert(candidates.end(), cells.begin(), cells.end());
       },
       progress, "pocket_fill");
   if (!s.ok()) return s;
+  const std::vector<PocketCell> fillable = FillablePocketCells(std::move(candidates));
+  const int k = tiles.grid().chunk_depth;
+  std::map<ChunkKey, std::vector<PocketCell>, ChunkKeyLess> by_chunk;
+  for (const PocketCell& c : fillable) {
+    by_chunk[ChunkKey(c.cell.x() >> k, c.cell.y() >> k, c.cell.z() >> k)].push_back(c);
+  }
+
+  // 2. Each chunk with filled cells as a new tile (built and compressed on `threads` threads,
+  //    written in order), any other as a link to its tile.
+  std::vector<ChunkKey> filled;
+  for (const ChunkKey& chunk : tiles.chunks()) {
+    if (by_chunk.count(chunk)) {
+      filled.push_back(chunk);
+      continue;
+    }
+    const fs::path from = fs::path(tiles_dir) / TileFileName(chunk);
+    const fs::path to = fs::path(out_dir) / TileFileName(chunk);
+    std::error_code link_ec;
+    fs::remove(to, link_ec);
+    fs::create_hard_link(from, to, link_ec);
+    if (link_ec) {
+      std::error_code copy_ec;
+      fs::copy_file(from, to, fs::copy_options::overwrite_existing, copy_ec);
+      if (copy_ec) {
+        return absl::UnavailableError(absl::StrCat(to.string(), ": cannot link or copy ",
+                                                   from.string(), ": ", copy_ec.message()));
+      }
+    }
+  }
+  const size_t batch = 4 * size_t(threads);
+  for (size_t first = 0; first < filled.size(); first += batch) {
+    const size_t n = std::min(batch, filled.size() - first);
+    std::vector<std::shared_ptr<const TileData>> in(n);
+    for (size_t i = 0; i < n; ++i) {
+      absl::StatusOr<std::shared_ptr<const TileData>> tile = tiles.Get(filled[first + i]);
+      if (!tile.ok()) return tile.status();
+      in[i] = *std::move(tile);
+    }
+    std::vector<std::optional<absl::StatusOr<EncodedTile>>> encoded(n);
+    ParallelFor(n, threads, [&](size_t i) {
+      absl::StatusOr<TileData> tile = WithFilledCells(*in[i], by_chunk.at(filled[first + i]));
+      encoded[i].emplace(tile.ok() ? EncodeTile(out_dir, *tile)
+                                   : absl::StatusOr<EncodedTile>(tile.status()));
+    });
+    for (size_t i = 0; i < n; ++i) {
+      if (!encoded[i]->ok()) return encoded[i]->status();
+      if (absl::StatusOr<std::string> w = WriteEncodedTile(**encoded[i]); !w.ok()) {
+        return w.status();
+      }
+      result.filled_cells += by_chunk.at(filled[first + i]).size();
+    }
+  }
+  result.chunks = tiles.chunks().size();
+  result.filled_tiles = filled.size();
   return result;
 }
 

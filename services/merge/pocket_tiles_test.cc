@@ -21,8 +21,8 @@ std::string Bytes(const fs::path& p) {
   return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
-// Chunk `chunk` at 25 cm (8 cells a side): free air, with the global layer z = 3 unobserved
-// (one cell) in chunks at z = 0 when `pocket`, solid floor at z = 0.
+// Chunk `chunk` at 25 cm (8 cells a side): free air over a solid floor (z = 0), with, when
+// `pocket`, the global cells x 2–13, y 2–5, z = 3 unobserved (a pocket across chunks x 0 and 1).
 TileData Chunk(const ChunkKey& chunk, bool pocket) {
   TileData t;
   t.chunk = chunk;
@@ -30,8 +30,8 @@ TileData Chunk(const ChunkKey& chunk, bool pocket) {
   for (int z = 0; z < 8; ++z)
     for (int y = 0; y < 8; ++y)
       for (int x = 0; x < 8; ++x) {
-        const int gz = chunk.z() * 8 + z;
-        if (pocket && gz == 3) continue;
+        const int gx = chunk.x() * 8 + x, gy = chunk.y() * 8 + y, gz = chunk.z() * 8 + z;
+        if (pocket && gz == 3 && gx >= 2 && gx <= 13 && gy >= 2 && gy <= 5) continue;
         LeafStats s;
         s.Add(gz == 0 ? 0.1 : 0.9, 1.0);
         t.leaves.push_back(TileLeaf{ChunkNode{Eigen::Vector3i(x, y, z), 3}, s});
@@ -59,7 +59,7 @@ TEST(FillPocketTiles, FillsThePocketsAndLinksTheRest) {
   const PocketTilesResult one = fill(1, root + "/f1");
   EXPECT_EQ(one.chunks, 3u);
   EXPECT_EQ(one.filled_tiles, 2u);
-  EXPECT_EQ(one.filled_cells, 2u * 8 * 8);
+  EXPECT_EQ(one.filled_cells, 12u * 4);
   for (const ChunkKey& key : {ChunkKey(0, 0, 0), ChunkKey(1, 0, 0)}) {
     absl::StatusOr<TileData> t = ReadTile(root + "/f1/" + TileFileName(key));
     ASSERT_TRUE(t.ok()) << t.status();

@@ -3,9 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <tuple>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "geometry/union_find.h"
 
 namespace carvemap {
 namespace {
@@ -16,7 +18,7 @@ enum CellState : uint8_t { kUnobserved = 0, kFree = 1, kSolid = 2 };
 class PaddedCells {
  public:
   PaddedCells(int n, int pad, const LeafKey& chunk_min)
-      : n_(n), pad_(pad), m_(n + 2 * pad), origin_(chunk_min - LeafKey::Constant(pad)) {
+      : m_(n + 2 * pad), origin_(chunk_min - LeafKey::Constant(pad)) {
     const size_t cells = size_t(m_) * m_ * m_;
     state_.assign(cells, kUnobserved);
     p_.assign(cells, 0.0);
@@ -51,7 +53,7 @@ class PaddedCells {
   }
 
  private:
-  int n_, pad_, m_;
+  int m_;
   LeafKey origin_;
   std::vector<uint8_t> state_;
   std::vector<double> p_;
@@ -67,27 +69,19 @@ absl::Status PocketFillOptions::Validate() const {
   return absl::OkStatus();
 }
 
-absl::StatusOr<FilledChunk> FillPockets(const ChunkNeighbourhood& hood,
-                                        const PocketFillOptions& options) {
+absl::StatusOr<std::vector<PocketCell>> PocketCandidates(const ChunkNeighbourhood& hood,
+                                                         const PocketFillOptions& options) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   const int k = hood.grid.chunk_depth;
   const int n = hood.grid.leaves_per_side();
-  FilledChunk out;
-  const TileData* centre = hood.tiles[ChunkNeighbourhood::Index(0, 0, 0)];
-  if (centre == nullptr) {
-    // All unobserved: a run through it would be longer than the chunk, so nothing to fill.
-    out.tile.chunk = hood.chunk;
-    out.tile.grid = hood.grid;
-    return out;
-  }
-  out.tile = *centre;
-  if (n < 2) return out;
-  // Runs of up to `run` cells; their ends lie within run + 1 cells of the chunk.
+  std::vector<PocketCell> out;
+  if (hood.tiles[ChunkNeighbourhood::Index(0, 0, 0)] == nullptr || n < 4) return out;
+  // Runs of up to `run` cells. The cells within one of the chunk are judged too (a candidate
+  // beside a non-candidate is tainted), and their runs' ends lie within run + 1 beyond them.
   const int run = std::clamp(
-      int(std::floor(options.max_thickness_m / hood.grid.resolution_m() * (1 + 1e-9))), 1, n - 1);
-  const int pad = run + 1;  // ≤ n: inside the 26 neighbours
-  const LeafKey chunk_min = hood.chunk * n;
-  PaddedCells cells(n, pad, chunk_min);
+      int(std::floor(options.max_thickness_m / hood.grid.resolution_m() * (1 + 1e-9))), 1, n - 2);
+  const int pad = run + 2;  // ≤ n: inside the 26 neighbours
+  PaddedCells cells(n, pad, hood.chunk * n);
   for (int dz = -1; dz <= 1; ++dz) {
     for (int dy = -1; dy <= 1; ++dy) {
       for (int dx = -1; dx <= 1; ++dx) {
@@ -117,68 +111,128 @@ absl::StatusOr<FilledChunk> FillPockets(const ChunkNeighbourhood& hood,
     }
   }
 
-  // Along each axis, every line through the chunk: unobserved runs of ≤ `run` cells between
-  // two free cells. A cell filled along several axes takes the lowest p offered.
-  const int m = cells.m();
-  std::vector<double> fill(size_t(n) * n * n, std::numeric_limits<double>::infinity());
-  const auto core = [&](const Eigen::Vector3i& c) {
-    return size_t(c.x() - pad) +
-           size_t(n) * (size_t(c.y() - pad) + size_t(n) * size_t(c.z() - pad));
+  // Along each axis, every line through the zone (the chunk and one cell around it):
+  // unobserved runs of ≤ `run` cells between two free cells. A cell in several takes the lowest
+  // p offered.
+  const int m = cells.m(), lo = pad - 1, zn = n + 2;
+  std::vector<double> best(size_t(zn) * zn * zn, std::numeric_limits<double>::infinity());
+  const auto zone = [&](const Eigen::Vector3i& c) {
+    return size_t(c.x() - lo) + size_t(zn) * (size_t(c.y() - lo) + size_t(zn) * size_t(c.z() - lo));
   };
+  const auto at = [&](const Eigen::Vector3i& c) { return cells.Index(c.x(), c.y(), c.z()); };
   for (int axis = 0; axis < 3; ++axis) {
     const int u = (axis + 1) % 3, v = (axis + 2) % 3;
     Eigen::Vector3i c;
-    for (int j = pad; j < pad + n; ++j) {
-      for (int i = pad; i < pad + n; ++i) {
+    for (int j = lo; j < lo + zn; ++j) {
+      for (int i = lo; i < lo + zn; ++i) {
         c[u] = i;
         c[v] = j;
         int t = 0;
         while (t < m) {
           c[axis] = t;
-          if (cells.state(cells.Index(c.x(), c.y(), c.z())) != kUnobserved) {
+          if (cells.state(at(c)) != kUnobserved) {
             ++t;
             continue;
           }
           const int t0 = t;
           while (t < m) {
             c[axis] = t;
-            if (cells.state(cells.Index(c.x(), c.y(), c.z())) != kUnobserved) break;
+            if (cells.state(at(c)) != kUnobserved) break;
             ++t;
           }
           const int t1 = t - 1;  // the run is [t0, t1]; t is the cell after it (or m)
-          if (t0 == 0 || t == m || t1 - t0 + 1 > run || t1 < pad || t0 >= pad + n) continue;
+          if (t0 == 0 || t == m || t1 - t0 + 1 > run || t1 < lo || t0 >= lo + zn) continue;
           c[axis] = t0 - 1;
-          const size_t before = cells.Index(c.x(), c.y(), c.z());
+          const size_t before = at(c);
           c[axis] = t;
-          const size_t after = cells.Index(c.x(), c.y(), c.z());
+          const size_t after = at(c);
           if (cells.state(before) != kFree || cells.state(after) != kFree) continue;
           const double p = std::min(cells.p(before), cells.p(after));
-          for (int s = std::max(t0, pad); s <= std::min(t1, pad + n - 1); ++s) {
+          for (int s = std::max(t0, lo); s <= std::min(t1, lo + zn - 1); ++s) {
             c[axis] = s;
-            double& f = fill[core(c)];
-            f = std::min(f, p);
+            double& b = best[zone(c)];
+            b = std::min(b, p);
           }
         }
       }
     }
   }
-  for (int z = 0; z < n; ++z) {
-    for (int y = 0; y < n; ++y) {
-      for (int x = 0; x < n; ++x) {
-        const double p = fill[size_t(x) + size_t(n) * (size_t(y) + size_t(n) * size_t(z))];
+  const LeafKey origin = hood.chunk * n - LeafKey::Constant(pad);
+  for (int z = pad; z < pad + n; ++z) {
+    for (int y = pad; y < pad + n; ++y) {
+      for (int x = pad; x < pad + n; ++x) {
+        const Eigen::Vector3i c(x, y, z);
+        const double p = best[zone(c)];
         if (!std::isfinite(p)) continue;
-        TileLeaf leaf;
-        leaf.node = ChunkNode{Eigen::Vector3i(x, y, z), k};
-        leaf.stats.sum_w = 1;
-        leaf.stats.sum_wp = p;
-        leaf.stats.sum_wp2 = p * p;
-        leaf.stats.count = 1;
-        out.tile.leaves.push_back(leaf);
-        ++out.filled_cells;
+        bool tainted = false;
+        for (int d = 0; d < 3 && !tainted; ++d) {
+          for (int step : {-1, 1}) {
+            Eigen::Vector3i q = c;
+            q[d] += step;
+            tainted |= cells.state(at(q)) == kUnobserved && !std::isfinite(best[zone(q)]);
+          }
+        }
+        out.push_back(PocketCell{origin + c, p, tainted});
       }
     }
   }
-  if (out.filled_cells > 0) SortTileLeaves(out.tile.grid, out.tile.leaves);
+  return out;
+}
+
+namespace {
+
+bool CellLess(const LeafKey& a, const LeafKey& b) {
+  return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
+}
+
+}  // namespace
+
+std::vector<PocketCell> FillablePocketCells(std::vector<PocketCell> candidates) {
+  std::sort(candidates.begin(), candidates.end(),
+            [](const PocketCell& a, const PocketCell& b) { return CellLess(a.cell, b.cell); });
+  const auto find = [&](const LeafKey& key) -> int64_t {
+    auto it =
+        std::lower_bound(candidates.begin(), candidates.end(), key,
+                         [](const PocketCell& a, const LeafKey& b) { return CellLess(a.cell, b); });
+    return it != candidates.end() && it->cell == key ? it - candidates.begin() : -1;
+  };
+  UnionFind<int64_t> sets(candidates.size());
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    for (int d = 0; d < 3; ++d) {
+      const int64_t j = find(candidates[i].cell + LeafKey::Unit(d));
+      if (j >= 0) sets.Union(int64_t(i), j);
+    }
+  }
+  std::vector<uint8_t> tainted(candidates.size(), 0);
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    if (candidates[i].tainted) tainted[size_t(sets.Find(int64_t(i)))] = 1;
+  }
+  std::vector<PocketCell> out;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    if (!tainted[size_t(sets.Find(int64_t(i)))]) out.push_back(candidates[i]);
+  }
+  return out;
+}
+
+absl::StatusOr<TileData> WithFilledCells(const TileData& tile, std::span<const PocketCell> cells) {
+  TileData out = tile;
+  const int n = tile.grid.leaves_per_side();
+  for (const PocketCell& c : cells) {
+    const Eigen::Vector3i local = c.cell - tile.chunk * n;
+    if ((local.array() < 0).any() || (local.array() >= n).any()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "pocket fill: cell ", c.cell.x(), ",", c.cell.y(), ",", c.cell.z(), " is not in chunk ",
+          tile.chunk.x(), ",", tile.chunk.y(), ",", tile.chunk.z()));
+    }
+    TileLeaf leaf;
+    leaf.node = ChunkNode{local, tile.grid.chunk_depth};
+    leaf.stats.sum_w = 1;
+    leaf.stats.sum_wp = c.p;
+    leaf.stats.sum_wp2 = c.p * c.p;
+    leaf.stats.count = 1;
+    out.leaves.push_back(leaf);
+  }
+  if (!cells.empty()) SortTileLeaves(out.grid, out.leaves);
   return out;
 }
 

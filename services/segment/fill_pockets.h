@@ -2,25 +2,32 @@
 //
 // §4.3.2 counts unobserved space as exterior. Between the sweeps of a backpack's line scanners
 // some of the room's air is crossed by no wedge: a layer a few cells thick at the height where
-// no scanner's plane reaches, a gap under a ceiling. Bounded on both sides by carved free
-// space, such a pocket is exterior to the octree, so the dense mesh closes it (a floating
-// surface, a false ceiling), the levels and wall samples see a ceiling in mid-air, and the
-// segmentation may take it for an object (a slab at scanner height). Solid surfaces are
-// observed (their wedges reach σ past the points), so a run of unobserved cells with observed
-// free space at both ends, along an axis, is air no ray happened to cross, not the inside of a
-// wall or of furniture (those end at observed solid cells).
+// no scanner's plane reaches, a gap under a ceiling. Bounded by carved free space, such a
+// pocket is exterior to the octree, so the dense mesh closes it (a floating surface, a false
+// ceiling), the levels and wall samples see a ceiling in mid-air, and the segmentation may take
+// it for an object (a slab at scanner height). Solid surfaces are observed (their wedges reach
+// σ past the points), so unobserved space with observed free space on both sides is air no
+// ray happened to cross, not the inside of a wall or of furniture (those end at solid cells).
 //
-// A finest cell is filled when, along some axis, it lies in a run of unobserved cells no longer
-// than max_thickness_m whose two neighbours beyond the run are observed interior (free) cells.
-// It gets one vote of the lower of those two cells' p, so the isosurface beside it sits as
-// beside its neighbours. The job's own tiles keep the pocket unobserved (octree.bt says what
-// the scan saw); the merge meshes and segments a copy with the pockets filled.
+// A finest unobserved cell is a candidate when, along some axis, it lies in a run of unobserved
+// cells no longer than max_thickness_m whose two neighbours beyond the run are observed interior
+// (free) cells. A pocket is a 6-connected set of candidates; it is filled only whole, when no
+// cell of it touches unobserved space that is not a candidate: filling the thin part of a
+// region that thickens would put a surface of our own where the thickness passes the limit (a
+// wall where a ceiling's pocket deepens). A filled cell gets one vote of the lowest p of the
+// free cells ending its runs, so the isosurface beside it sits as beside its neighbours. The
+// job's own tiles keep the pockets unobserved (octree.bt says what the scan saw); the merge
+// meshes and segments a copy with the pockets filled.
 //
-// Plain function over plain data: no files, no logging. Per chunk, with its 26 neighbours for
-// the runs that cross its faces, so it runs out of core.
+// In three steps, so that a pocket may span chunks and the work stays out of core:
+// PocketCandidates per chunk (with its 26 neighbours), FillablePocketCells over all chunks'
+// candidates (a few bytes a candidate), WithFilledCells per chunk. Plain functions over plain
+// data: no files, no logging.
 #pragma once
 
 #include <cstdint>
+#include <span>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "services/mesh/boundary_faces.h"
@@ -30,23 +37,35 @@ namespace carvemap {
 
 struct PocketFillOptions {
   // The thickest pocket filled, m: runs of at most this many cells' length (at least one cell).
-  // The slab left between a backpack's scanner planes at 10 Hz was 0.45 m thick (issue of
-  // objects on real layouts); a room's air between two walls is far wider than this, and a
-  // wall's inside ends at observed solid cells whatever its thickness.
+  // A slab of unswept air left between a backpack's scanner planes at 10 Hz was 0.45 m thick;
+  // a room's air between two walls is far wider than this.
   double max_thickness_m = 0.5;
   // InvalidArgument naming the field.
   [[nodiscard]] absl::Status Validate() const;
 };
 
-struct FilledChunk {
-  TileData tile;              // the chunk's leaves and one finest leaf per filled cell
-  uint64_t filled_cells = 0;  // 0: `tile` has the input's leaves unchanged
+// A candidate cell of a pocket, in global finest-cell coordinates.
+struct PocketCell {
+  LeafKey cell = LeafKey::Zero();
+  double p = 0;          // the vote it gets when filled
+  bool tainted = false;  // a 6-neighbour is unobserved and no candidate
 };
 
-// The chunk `hood.chunk` with its pockets filled. Its tile may be null (all unobserved: such
-// a chunk gets no leaves, filled_cells 0). Errors: InvalidArgument for bad options or a
-// neighbourhood NeighbourhoodIndex::Build rejects.
-[[nodiscard]] absl::StatusOr<FilledChunk> FillPockets(const ChunkNeighbourhood& hood,
-                                                      const PocketFillOptions& options = {});
+// The candidates of `hood.chunk`, sorted by cell (z, then y, then x). A chunk without a tile
+// has none (a run through it would be longer than the chunk). Grids of fewer than 4 cells a
+// side have none (no room for a run and its ends in the 26 neighbours). Errors:
+// InvalidArgument for bad options, a neighbour's tile in the wrong slot or at another depth,
+// or a leaf outside its chunk.
+[[nodiscard]] absl::StatusOr<std::vector<PocketCell>> PocketCandidates(
+    const ChunkNeighbourhood& hood, const PocketFillOptions& options = {});
+
+// Of all chunks' candidates (any order), those whose pocket holds no tainted cell, sorted by
+// cell as PocketCandidates sorts them.
+[[nodiscard]] std::vector<PocketCell> FillablePocketCells(std::vector<PocketCell> candidates);
+
+// `tile` with one finest leaf per cell of `cells` (each in its chunk, unobserved in it):
+// sum_w 1, Σ w p = p, count 1. InvalidArgument for a cell outside the chunk.
+[[nodiscard]] absl::StatusOr<TileData> WithFilledCells(const TileData& tile,
+                                                       std::span<const PocketCell> cells);
 
 }  // namespace carvemap
