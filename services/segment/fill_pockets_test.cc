@@ -10,29 +10,12 @@
 #include <span>
 #include <vector>
 
+#include "services/segment/segment_test_util.h"
+
 namespace carvemap {
 namespace {
 
-// A tile of `chunk` at the finest depth: one leaf per cell with p = p_at(its global cell), or
-// none (unobserved) where p_at is negative.
-TileData Tile(const OctreeGrid& grid, const ChunkKey& chunk,
-              const std::function<double(const LeafKey&)>& p_at) {
-  TileData t;
-  t.chunk = chunk;
-  t.grid = grid;
-  const int n = grid.leaves_per_side();
-  for (int z = 0; z < n; ++z)
-    for (int y = 0; y < n; ++y)
-      for (int x = 0; x < n; ++x) {
-        const double p = p_at(chunk * n + LeafKey(x, y, z));
-        if (p < 0) continue;
-        LeafStats s;
-        s.Add(p, 0.5);
-        s.Add(p, 0.25);
-        t.leaves.push_back(TileLeaf{ChunkNode{Eigen::Vector3i(x, y, z), grid.chunk_depth}, s});
-      }
-  return t;
-}
+using testing::FinestTileOfChunk;
 
 // The cells filled when `chunks` are the whole job: every chunk's candidates, then whole
 // pockets, by global cell (x, y, z) with their p.
@@ -75,7 +58,7 @@ class FillPocketsTest : public ::testing::Test {
 TEST_F(FillPocketsTest, FillsAThinUnobservedSlabInsideFreeSpace) {
   // Free air (p 0.9 below, 0.8 above) around a slab of unobserved cells x, y 2–13, z 6–8
   // (0.375 m thick).
-  const TileData in = Tile(grid_, origin_, [](const LeafKey& c) {
+  const TileData in = FinestTileOfChunk(grid_, origin_, [](const LeafKey& c) {
     if (InSlab(c, 2, 13, 6, 8)) return -1.0;
     return c.z() < 6 ? 0.9 : 0.8;
   });
@@ -96,8 +79,8 @@ TEST_F(FillPocketsTest, FillsAThinUnobservedSlabInsideFreeSpace) {
 
 TEST_F(FillPocketsTest, KeepsPocketsThickerThanTheLimit) {
   // Five cells (0.625 m) thick: more than the default 0.5 m.
-  const TileData in =
-      Tile(grid_, origin_, [](const LeafKey& c) { return InSlab(c, 2, 13, 6, 10) ? -1.0 : 0.9; });
+  const TileData in = FinestTileOfChunk(
+      grid_, origin_, [](const LeafKey& c) { return InSlab(c, 2, 13, 6, 10) ? -1.0 : 0.9; });
   EXPECT_TRUE(Filled(grid_, {&in, 1}, {&origin_, 1}).empty());
   // With a 0.7 m limit (five cells fit) it is filled.
   EXPECT_EQ(Filled(grid_, {&in, 1}, {&origin_, 1}, PocketFillOptions{0.7}).size(), 12u * 12 * 5);
@@ -106,12 +89,12 @@ TEST_F(FillPocketsTest, KeepsPocketsThickerThanTheLimit) {
 TEST_F(FillPocketsTest, FillsOnlyWholePockets) {
   // One unobserved region, two cells thick for x 2–7 and six (0.75 m) for x 8–13: its thin
   // part alone would be a pocket, but filling it would leave a wall of our own at x = 8.
-  const TileData in = Tile(grid_, origin_, [](const LeafKey& c) {
+  const TileData in = FinestTileOfChunk(grid_, origin_, [](const LeafKey& c) {
     return InSlab(c, 2, 7, 6, 7) || InSlab(c, 8, 13, 6, 11) ? -1.0 : 0.9;
   });
   EXPECT_TRUE(Filled(grid_, {&in, 1}, {&origin_, 1}).empty());
   // The thin part with a free column between it and the thick part: a pocket of its own.
-  const TileData apart = Tile(grid_, origin_, [](const LeafKey& c) {
+  const TileData apart = FinestTileOfChunk(grid_, origin_, [](const LeafKey& c) {
     return InSlab(c, 2, 6, 6, 7) || InSlab(c, 8, 13, 6, 11) ? -1.0 : 0.9;
   });
   EXPECT_EQ(Filled(grid_, {&apart, 1}, {&origin_, 1}).size(), 5u * 12 * 2);
@@ -120,7 +103,7 @@ TEST_F(FillPocketsTest, FillsOnlyWholePockets) {
 TEST_F(FillPocketsTest, LeavesSpaceThatEndsAtASolidSurface) {
   // The unobserved inside of a wall three cells thick between its two observed faces (x 4 and
   // 8, p 0.2), and unswept air between its face and free space (x 9–10).
-  const TileData in = Tile(grid_, origin_, [](const LeafKey& c) {
+  const TileData in = FinestTileOfChunk(grid_, origin_, [](const LeafKey& c) {
     if (c.x() == 4 || c.x() == 8) return 0.2;
     if ((c.x() >= 5 && c.x() <= 7) || (c.x() >= 9 && c.x() <= 10)) return -1.0;
     return 0.9;
@@ -131,8 +114,8 @@ TEST_F(FillPocketsTest, LeavesSpaceThatEndsAtASolidSurface) {
 TEST_F(FillPocketsTest, ScanPointsInAPocketKeepItUnobserved) {
   // A two-cell slab with a stored leaf no ray observed (scan points only) inside it: a
   // surface may be there, so the pocket is not filled.
-  TileData in =
-      Tile(grid_, origin_, [](const LeafKey& c) { return InSlab(c, 2, 13, 6, 7) ? -1.0 : 0.9; });
+  TileData in = FinestTileOfChunk(
+      grid_, origin_, [](const LeafKey& c) { return InSlab(c, 2, 13, 6, 7) ? -1.0 : 0.9; });
   EXPECT_EQ(Filled(grid_, {&in, 1}, {&origin_, 1}).size(), 12u * 12 * 2);
   LeafStats points_only;
   points_only.points = 3;
@@ -144,8 +127,8 @@ TEST_F(FillPocketsTest, ScanPointsInAPocketKeepItUnobserved) {
 TEST_F(FillPocketsTest, PocketsSpanChunks) {
   // A slab across the top face of chunk (0, 0, 0): global z 14–16, free around it.
   const auto across_z = [](const LeafKey& c) { return InSlab(c, 2, 13, 14, 16) ? -1.0 : 0.9; };
-  const std::vector<TileData> tiles = {Tile(grid_, ChunkKey(0, 0, 0), across_z),
-                                       Tile(grid_, ChunkKey(0, 0, 1), across_z)};
+  const std::vector<TileData> tiles = {FinestTileOfChunk(grid_, ChunkKey(0, 0, 0), across_z),
+                                       FinestTileOfChunk(grid_, ChunkKey(0, 0, 1), across_z)};
   const std::vector<ChunkKey> both = {ChunkKey(0, 0, 0), ChunkKey(0, 0, 1)};
   EXPECT_EQ(Filled(grid_, tiles, both).size(), 12u * 12 * 3);
   // Without the upper chunk's tile the slab opens on unobserved space: nothing filled.
@@ -157,8 +140,8 @@ TEST_F(FillPocketsTest, PocketsSpanChunks) {
     if (c.x() >= 26) return c.z() >= 6 && c.z() <= 11 ? -1.0 : 0.9;
     return c.z() >= 6 && c.z() <= 7 ? -1.0 : 0.9;
   };
-  const std::vector<TileData> side = {Tile(grid_, ChunkKey(0, 0, 0), across_x),
-                                      Tile(grid_, ChunkKey(1, 0, 0), across_x)};
+  const std::vector<TileData> side = {FinestTileOfChunk(grid_, ChunkKey(0, 0, 0), across_x),
+                                      FinestTileOfChunk(grid_, ChunkKey(1, 0, 0), across_x)};
   const std::vector<ChunkKey> pair = {ChunkKey(0, 0, 0), ChunkKey(1, 0, 0)};
   EXPECT_TRUE(Filled(grid_, side, pair).empty());
 }
@@ -193,7 +176,7 @@ TEST_F(FillPocketsTest, NoTileNoCandidates) {
 }
 
 TEST_F(FillPocketsTest, BadInputIsAnError) {
-  const TileData in = Tile(grid_, origin_, [](const LeafKey&) { return 0.9; });
+  const TileData in = FinestTileOfChunk(grid_, origin_, [](const LeafKey&) { return 0.9; });
   ChunkNeighbourhood hood;
   hood.grid = grid_;
   hood.tiles[ChunkNeighbourhood::Index(0, 0, 0)] = &in;

@@ -41,17 +41,18 @@ inline FloorPlan RectanglePlan(const std::vector<TestRoom>& rooms) {
   return plan;
 }
 
-// The tile of chunk (0, 0, 0) at the finest depth: one leaf per cell with p = p_at(its centre),
+// The tile of `chunk` at the finest depth: one leaf per cell with p = p_at(its global cell),
 // or none (unobserved) where p_at is negative.
-inline TileData FinestTile(const OctreeGrid& grid,
-                           const std::function<double(const Eigen::Vector3d&)>& p_at) {
+inline TileData FinestTileOfChunk(const OctreeGrid& grid, const ChunkKey& chunk,
+                                  const std::function<double(const LeafKey&)>& p_at) {
   TileData t;
+  t.chunk = chunk;
   t.grid = grid;
   const int n = grid.leaves_per_side();
   for (int z = 0; z < n; ++z)
     for (int y = 0; y < n; ++y)
       for (int x = 0; x < n; ++x) {
-        const double p = p_at(LeafCenter(grid, Eigen::Vector3i(x, y, z)));
+        const double p = p_at(chunk * n + LeafKey(x, y, z));
         if (p < 0) continue;
         LeafStats s;
         s.Add(p, 0.5);
@@ -59,6 +60,14 @@ inline TileData FinestTile(const OctreeGrid& grid,
         t.leaves.push_back(TileLeaf{ChunkNode{Eigen::Vector3i(x, y, z), grid.chunk_depth}, s});
       }
   return t;
+}
+
+// The tile of chunk (0, 0, 0) at the finest depth: one leaf per cell with p = p_at(its centre),
+// or none (unobserved) where p_at is negative.
+inline TileData FinestTile(const OctreeGrid& grid,
+                           const std::function<double(const Eigen::Vector3d&)>& p_at) {
+  return FinestTileOfChunk(grid, ChunkKey::Zero(),
+                           [&](const LeafKey& cell) { return p_at(LeafCenter(grid, cell)); });
 }
 
 // Whether `c` lies inside the open box (lo, hi).
