@@ -72,6 +72,11 @@ absl::Status PocketFillOptions::Validate() const {
 absl::StatusOr<std::vector<PocketCell>> PocketCandidates(const ChunkNeighbourhood& hood,
                                                          const PocketFillOptions& options) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
+  // Every tile against its slot (chunk, depth, leaves inside it), as the other per-chunk
+  // stages check them.
+  if (absl::StatusOr<NeighbourhoodIndex> index = NeighbourhoodIndex::Build(hood); !index.ok()) {
+    return index.status();
+  }
   const int k = hood.grid.chunk_depth;
   const int n = hood.grid.leaves_per_side();
   std::vector<PocketCell> out;
@@ -88,24 +93,9 @@ absl::StatusOr<std::vector<PocketCell>> PocketCandidates(const ChunkNeighbourhoo
         const TileData* tile = hood.tiles[ChunkNeighbourhood::Index(dx, dy, dz)];
         if (tile == nullptr) continue;
         const ChunkKey key = hood.chunk + ChunkKey(dx, dy, dz);
-        if (tile->chunk != key || tile->grid.chunk_depth != k) {
-          return absl::InvalidArgumentError(
-              absl::StrCat("pocket fill: chunk ", hood.chunk.x(), ",", hood.chunk.y(), ",",
-                           hood.chunk.z(), ": the neighbour slot ", dx, ",", dy, ",", dz,
-                           " holds the tile of chunk ", tile->chunk.x(), ",", tile->chunk.y(), ",",
-                           tile->chunk.z(), " at depth ", tile->grid.chunk_depth, " (expected ",
-                           key.x(), ",", key.y(), ",", key.z(), " at depth ", k, ")"));
-        }
-        for (size_t i = 0; i < tile->leaves.size(); ++i) {
-          const ChunkNode& node = tile->leaves[i].node;
-          const int size = node.depth >= 0 && node.depth <= k ? 1 << (k - node.depth) : 0;
-          if (size == 0 || (node.local.array() < 0).any() ||
-              (node.local.array() * size >= n).any()) {
-            return absl::InvalidArgumentError(
-                absl::StrCat("pocket fill: chunk ", key.x(), ",", key.y(), ",", key.z(), " leaf ",
-                             i, " lies outside its chunk (depth ", node.depth, ")"));
-          }
-          cells.Add(key * n + node.local * size, size, tile->leaves[i].stats);
+        for (const TileLeaf& leaf : tile->leaves) {
+          const int size = 1 << (k - leaf.node.depth);
+          cells.Add(key * n + leaf.node.local * size, size, leaf.stats);
         }
       }
     }

@@ -54,8 +54,8 @@ struct PocketCell {
 // The candidates of `hood.chunk`, sorted by cell (z, then y, then x). A chunk without a tile
 // has none (a run through it would be longer than the chunk). Grids of fewer than 4 cells a
 // side have none (no room for a run and its ends in the 26 neighbours). Errors:
-// InvalidArgument for bad options, a neighbour's tile in the wrong slot or at another depth,
-// or a leaf outside its chunk.
+// InvalidArgument for bad options or a neighbourhood NeighbourhoodIndex::Build rejects (a tile
+// in the wrong slot or at another depth, a leaf outside its chunk, overlapping leaves).
 [[nodiscard]] absl::StatusOr<std::vector<PocketCell>> PocketCandidates(
     const ChunkNeighbourhood& hood, const PocketFillOptions& options = {});
 

@@ -190,7 +190,7 @@ TEST_F(FillPocketsTest, BadInputIsAnError) {
   hood.tiles[ChunkNeighbourhood::Index(1, 0, 0)] = &in;
   absl::StatusOr<std::vector<PocketCell>> out = PocketCandidates(hood);
   ASSERT_FALSE(out.ok());
-  EXPECT_NE(out.status().message().find("neighbour slot 1,0,0"), std::string::npos) << out.status();
+  EXPECT_NE(out.status().message().find("slot (1, 0, 0)"), std::string::npos) << out.status();
   // A cell outside the tile's chunk.
   const PocketCell outside{LeafKey(16, 0, 0), 0.9, false};
   absl::StatusOr<TileData> with = WithFilledCells(in, {&outside, 1});
