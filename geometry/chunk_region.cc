@@ -106,6 +106,16 @@ std::span<const ChunkRegion::CellRun> ChunkRegion::RowRuns(int axis, int u, int 
   return std::span<const CellRun>(row_runs_[axis]).subspan(start[row], start[row + 1] - start[row]);
 }
 
+size_t ChunkRegion::memory_bytes() const {
+  size_t n = sums_.capacity() * sizeof(uint32_t);
+  for (const std::vector<bool>& bits : any_) n += bits.capacity() / 8;
+  for (int axis = 0; axis < 3; ++axis) {
+    n += row_start_[axis].capacity() * sizeof(uint32_t) +
+         row_runs_[axis].capacity() * sizeof(CellRun);
+  }
+  return n;
+}
+
 bool ChunkRegion::Intersects(const ChunkNode& node) const {
   if (count_ == 0) return false;
   if (node.depth <= depth_) return any_[node.depth][CellIndex(node.local, node.depth)];

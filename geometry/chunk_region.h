@@ -37,6 +37,8 @@ class ChunkRegion {
   [[nodiscard]] int depth() const { return depth_; }
   [[nodiscard]] bool empty() const { return count_ == 0; }
   [[nodiscard]] uint64_t count() const { return count_; }  // cells set at depth()
+  // The heap the region's tables hold (a second pass's carver counts it in its budget).
+  [[nodiscard]] size_t memory_bytes() const;
   // True when some cell of the region lies in `node` (a node of this chunk at any depth).
   [[nodiscard]] bool Intersects(const ChunkNode& node) const;
   // True when some cell of the region meets the closed box [lo, hi] (m, relative to the

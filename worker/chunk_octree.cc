@@ -431,7 +431,7 @@ absl::Status ChunkOctree::CarveIndexed(const IndexedWedges& in) {
   //    whose wedges are all listed votes once in each leaf of the union of their runs (eq 4.8
   //    with S(L) a set), in a fixed order, so the sums depend only on the input.
   const Eigen::Vector3d chunk_origin = chunk_.cast<double>() * kChunkSizeM;
-  const ChunkRegion* region = region_ ? &*region_ : nullptr;
+  const ChunkRegion* region = region_.get();
   auto& runs = buf.runs;  // emptied as their wedges are done: assign only resizes
   runs.resize(num_wedges);
   auto& pool = buf.pool;  // emptied run lists, reused

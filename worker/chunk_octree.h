@@ -12,7 +12,6 @@
 
 #include <cstdint>
 #include <memory>
-#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -64,8 +63,10 @@ class ChunkOctree {
   absl::Status CarveWedges(std::span<const Wedge> wedges);
   absl::Status CarveWedge(const Wedge& wedge) { return CarveWedges({&wedge, 1}); }
   // Later carving touches only the leaves inside `region` (§5.6.1: a second, finer pass over
-  // the nodes that hold objects); the rest of the chunk stays unobserved.
-  void RestrictTo(ChunkRegion region) { region_ = std::move(region); }
+  // the nodes that hold objects); the rest of the chunk stays unobserved. Shared, not copied:
+  // a decoded region's tables are up to ~1 MiB at the finer pass's depth, and the carver that
+  // decoded it counts it once in its memory budget.
+  void RestrictTo(std::shared_ptr<const ChunkRegion> region) { region_ = std::move(region); }
   // For later carving (default kFast).
   void SetEvaluation(CarveEvaluation e) { evaluation_ = e; }
   // The carves into this tree are parts of the chunk's carve (time slices of the scan,
@@ -122,7 +123,7 @@ class ChunkOctree {
   // levels_[d]: observed leaves at depth d. Carving fills levels_[k] only; Simplify moves
   // merged parents up.
   std::vector<Level> levels_;
-  std::optional<ChunkRegion> region_;
+  std::shared_ptr<const ChunkRegion> region_;
   CarveEvaluation evaluation_ = CarveEvaluation::kFast;
   bool partial_ = false;
   bool simplified_ = false;

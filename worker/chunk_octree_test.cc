@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
+#include <memory>
 #include <random>
 #include <tuple>
 #include <vector>
@@ -334,7 +335,7 @@ TEST_P(EvaluationTest, RestrictedCarvingIsTheWholeCarveInsideTheRegion) {
   }());
   ChunkOctree part(grid, ChunkKey(0, 0, 0));
   part.SetEvaluation(GetParam());
-  part.RestrictTo(region);
+  part.RestrictTo(std::make_shared<const ChunkRegion>(region));
   ASSERT_TRUE(part.CarveWedges(wedges).ok());
   std::vector<TileLeaf> expected;
   for (const TileLeaf& leaf : whole.Leaves()) {

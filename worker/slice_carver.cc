@@ -115,9 +115,12 @@ struct SliceCarver::Impl {
   std::deque<Batch> open;  // oldest first
   int64_t carved_up_to = -1;  // batches up to this one are carved
   std::map<ChunkKey, ChunkOctree, ChunkKeyLess> trees;
-  // The pass's regions (options.regions) decoded so far: those of chunks a wedge reached.
-  std::map<ChunkKey, ChunkRegion, ChunkKeyLess> decoded;
-  size_t tree_bytes = 0;  // Σ ChunkOctree::memory_bytes() of `trees`
+  // The pass's regions (options.regions) decoded since the last flush: those of chunks a wedge
+  // reached, shared with their trees. A longer slice reaches more of a building's object
+  // chunks, so they count in the budget with the sums and go with them at a flush.
+  std::map<ChunkKey, std::shared_ptr<const ChunkRegion>, ChunkKeyLess> decoded;
+  size_t tree_bytes = 0;    // Σ ChunkOctree::memory_bytes() of `trees`
+  size_t region_bytes = 0;  // Σ ChunkRegion::memory_bytes() of `decoded`
   // CarveBatch's working memory, kept from one chunk and batch to the next.
   IndexedWedges chunk_wedges;
   std::vector<uint32_t> local_of;    // batch ray id → the chunk's ray index (kNoRay: none yet)
@@ -160,7 +163,7 @@ struct SliceCarver::Impl {
   // is not in the pass.
   absl::StatusOr<const ChunkRegion*> RegionOf(const ChunkKey& chunk) {
     auto it = decoded.find(chunk);
-    if (it != decoded.end()) return &it->second;
+    if (it != decoded.end()) return it->second.get();
     auto encoded = options.regions->find(chunk);
     if (encoded == options.regions->end()) return nullptr;
     absl::StatusOr<ChunkRegion> region = encoded->second.Decode();
@@ -169,7 +172,9 @@ struct SliceCarver::Impl {
                                                      chunk.x(), ",", chunk.y(), ",", chunk.z(),
                                                      ": ", region.status().message()));
     }
-    return &decoded.emplace(chunk, *std::move(region)).first->second;
+    region_bytes += region->memory_bytes();
+    return decoded.emplace(chunk, std::make_shared<const ChunkRegion>(*std::move(region)))
+        .first->second.get();
   }
   // Whether `box` meets the region of a chunk of the pass (regions set). A box across more
   // chunks than kMaxBoxChunks is taken to: looking them all up would cost more than the hull.
@@ -333,7 +338,11 @@ absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
     if (inserted) {
       tree.SetPartial(true);
       tree.SetEvaluation(options.evaluation);
-      if (options.regions != nullptr) tree.RestrictTo(decoded.at(chunk));
+      if (options.regions != nullptr) {
+        // Decoded when the chunk was binned, unless a flush since then let it go.
+        if (absl::StatusOr<const ChunkRegion*> r = RegionOf(chunk); !r.ok()) return r.status();
+        tree.RestrictTo(decoded.at(chunk));
+      }
     }
     IndexedWedges& in = chunk_wedges;
     in.rays.clear();
@@ -364,7 +373,7 @@ absl::Status SliceCarver::Impl::CarveBatch(Batch& batch) {
     wedges = std::vector<uint32_t>();
     // Checked after every chunk, not once per batch: a batch's chunks can add more sums than
     // the whole budget. Each chunk is carved once per batch, so a flush here splits no chunk.
-    if (tree_bytes > options.memory_budget_bytes) {
+    if (tree_bytes + region_bytes > options.memory_budget_bytes) {
       if (absl::Status s = Flush(); !s.ok()) return s;
     }
     if (progress) {
@@ -387,6 +396,8 @@ absl::Status SliceCarver::Impl::Flush() {
   for (const auto& [chunk, tree] : trees) flushed_updates += tree.num_leaf_updates();
   trees.clear();
   tree_bytes = 0;
+  decoded.clear();
+  region_bytes = 0;
   return absl::OkStatus();
 }
 

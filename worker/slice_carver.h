@@ -11,8 +11,8 @@
 // rows, each its own batch, carved as the wedge builder's row order moves past it. What still
 // grows with such a frame is the frame itself and the wedge builder's noise model of each of
 // its rays (~100 B a pixel). The chunks' sums go out as sections
-// (PartialSumsWriter) whenever their hash maps exceed memory_budget_bytes (checked after each
-// chunk is carved), and at the end.
+// (PartialSumsWriter) whenever their hash maps, with a second pass's decoded regions, exceed
+// memory_budget_bytes (checked after each chunk is carved), and at the end.
 //
 // Deterministic: batches, flushes and the order of every sum follow from the slice and the
 // options alone, so the same slice gives the same sections on any worker.
@@ -49,7 +49,8 @@ struct SliceCarveOptions {
   // every chunk, whole. Must outlive the carver.
   const RecarveRegionMap* regions = nullptr;
   uint64_t batch_rays = 500'000;             // own rays per batch of frames
-  // Chunks' sums held before they are flushed: ChunkOctree::memory_bytes(), the maps' real size.
+  // Chunks' sums held before they are flushed: ChunkOctree::memory_bytes(), the maps' real size,
+  // and the regions of the pass decoded since the last flush (ChunkRegion::memory_bytes()).
   size_t memory_budget_bytes = 256u << 20;
   [[nodiscard]] absl::Status Validate() const;
 };

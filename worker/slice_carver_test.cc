@@ -389,6 +389,34 @@ TEST_F(SliceCarverTest, RegionsCarveOnlyThere) {
   }
 }
 
+// A second pass's decoded regions count in the budget with the sums and go at a flush: a
+// long slice reaching many object chunks does not hold every one's tables to its end. With
+// every chunk whole in the pass, the carve is the whole one's, however often it flushed.
+TEST_F(SliceCarverTest, DecodedRegionsCountInTheBudget) {
+  RecarveRegionMap regions;
+  std::vector<Eigen::Vector3i> corners;  // spread over the chunk: the largest tables at depth 5
+  for (int z = 0; z < 32; ++z)
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 32; ++x) corners.emplace_back(x, y, z);
+  const ChunkRegion whole_chunk(5, corners);
+  for (const auto& [chunk, tile] : *reference_) {
+    regions.emplace(chunk, RecarveChunk::Of(chunk, whole_chunk));
+  }
+  ASSERT_GT(regions.size(), 4u);
+  SliceCarveOptions o = Options(CarveEvaluation::kExact);
+  o.batch_rays = uint64_t{1} << 40;
+  o.regions = &regions;
+  const Carved roomy = CarveBySlices("regions_roomy", 1e6, o);
+  EXPECT_EQ(roomy.flushes, 1u);  // only Finish's
+  // Room for about two regions' tables and no sums: a flush after nearly every chunk.
+  o.memory_budget_bytes = 2 * whole_chunk.memory_bytes() + (64u << 10);
+  const Carved tight = CarveBySlices("regions_tight", 1e6, o);
+  EXPECT_EQ(tight.slices, 1u);
+  EXPECT_GE(tight.flushes, regions.size() / 2);
+  ExpectSameTiles(*reference_, roomy.tiles, 1e-12);
+  ExpectSameTiles(*reference_, tight.tiles, 1e-12);
+}
+
 // Grid frames carved through a SliceCarver with `batch_rays`: a wall 3 m ahead seen through
 // ±20° × ±30° (20 × 30 pixels), the scanner turning a little each frame. Returns every leaf's
 // sums over all sections (keyed by chunk and leaf), and the own rays carved as progress had
