@@ -1,6 +1,7 @@
 #include "services/rpc/worker_service.h"
 
 #include <grpcpp/grpcpp.h>
+#include <malloc.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -554,6 +555,13 @@ void WorkerServer::Impl::CarveLoop() {
     metrics_.TaskStarted();
     const auto t0 = std::chrono::steady_clock::now();
     absl::Status carved = Carve(lease, tile, stats);
+#ifdef __GLIBC__
+    // glibc keeps a finished task's freed sums and batches in its arenas, fragmented, and a
+    // later task's resident peak counts them again: with the same heap peak, a worker's
+    // resident memory grew with the slices' length (docs/BENCHMARKS.md "--laps 4"). Returned
+    // to the system between tasks (milliseconds against a task's seconds).
+    malloc_trim(0);
+#endif
     metrics_.TaskFinished(
         lease.has_slice() ? "slice" : "combine", carved.ok(),
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
