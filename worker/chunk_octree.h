@@ -64,7 +64,7 @@ class ChunkOctree {
   absl::Status CarveWedge(const Wedge& wedge) { return CarveWedges({&wedge, 1}); }
   // Later carving touches only the leaves inside `region` (§5.6.1: a second, finer pass over
   // the nodes that hold objects); the rest of the chunk stays unobserved. Shared, not copied:
-  // a decoded region's tables are up to ~1 MiB at the finer pass's depth, and the carver that
+  // a decoded region's tables are up to ~1.2 MB at the finer pass's depth, and the carver that
   // decoded it counts it once in its memory budget.
   void RestrictTo(std::shared_ptr<const ChunkRegion> region) { region_ = std::move(region); }
   // For later carving (default kFast).
