@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <mutex>
 #include <optional>
 #include <span>
 #include <string>
@@ -42,6 +43,7 @@
 #include "services/system/process_memory.h"
 #include "services/system/usable_cpus.h"
 #include "storage/atomic_file.h"
+#include "storage/hdf5_lock.h"
 #include "storage/ply_io.h"
 #include "storage/scan_reader.h"
 
@@ -114,9 +116,11 @@ ChunkProgressFn StageProgress(const MergeProgressCallback& progress, const char*
 }
 
 // The recorded system path of the job's scan (docs/DESIGN.md §3 /path): the scanner positions of
-// the floor plans (§3.3.1), 24 bytes per pose; the poses' other fields are not read.
+// the floor plans (§3.3.1), 24 bytes per pose; the poses' other fields are not read. Under the
+// process's HDF5 lock: the dense mesh reads tiles on another thread meanwhile (RunMerge).
 absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string& scan_path,
                                                                double world_yaw_rad) {
+  std::lock_guard<std::mutex> lock(Hdf5Lock());
   ScanReader::OpenOptions open;
   open.path_rows = ScanReader::PathRows::kNone;
   open.world_yaw_rad = world_yaw_rad;
@@ -793,6 +797,45 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   return result;
 }
 
+// mesh/dense.ply from `tiles_dir` (§4.3.3), welded and checked for self-intersections as it
+// streams (it grows with the building and is not held). It reads its own TileSet, so that it
+// can run on a thread of its own beside the floor plans (RunMerge): it needs the tiles alone.
+// A quarter of the cache budget: it reads the chunks in order, each with its neighbours, so it
+// holds a few columns of them at a time, and the floor plans' own cache is in use meanwhile.
+struct DenseMeshOutput {
+  absl::Status status;
+  DenseMeshStreamResult result;
+  double seconds = 0;
+};
+
+DenseMeshOutput DenseMeshToPly(const MergeOptions& options, const std::string& tiles_dir,
+                               double resolution_m, const fs::path& out,
+                               const ChunkProgressFn& progress) {
+  DenseMeshOutput d;
+  const Clock::time_point t0 = Clock::now();
+  d.status = [&]() -> absl::Status {
+    absl::StatusOr<std::unique_ptr<TileSet>> tiles =
+        TileSet::Open(tiles_dir, resolution_m, options.cache_budget_bytes / 4);
+    if (!tiles.ok()) return tiles.status();
+    absl::StatusOr<std::unique_ptr<PlyStreamWriter>> ply =
+        PlyStreamWriter::Create((out / "mesh" / "dense.ply").string());
+    if (!ply.ok()) return ply.status();
+    DenseMeshSink sink;
+    sink.vertices = [&ply](std::span<const Eigen::Vector3f> v) { return (*ply)->AddVertices(v); };
+    sink.triangles = [&ply](const ChunkKey&, std::span<const Eigen::Vector3i> t) {
+      return (*ply)->AddTriangles(t);
+    };
+    absl::StatusOr<DenseMeshStreamResult> dense =
+        StreamDenseMesh(**tiles, sink, progress, MergeThreads(options));
+    if (!dense.ok()) return dense.status();
+    if (absl::Status s = (*ply)->Finish(); !s.ok()) return s;
+    d.result = *std::move(dense);
+    return absl::OkStatus();
+  }();
+  d.seconds = SecondsSince(t0);
+  return d;
+}
+
 }  // namespace
 
 absl::Status MergeOptions::Validate() const {
@@ -889,6 +932,27 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   counts["boundary_faces"] = (*faces)->size();
   counts["boundary_area_m2"] = (*faces)->area_m2();
   timings["merge.boundary_faces"] = SecondsSince(t0);
+
+  // The dense mesh needs the tiles alone, so it is made on a thread of its own while the
+  // levels and floor plans below (one thread) are made: the cores they leave idle mesh it.
+  // Not beside the faces above, which use every core and hold the most memory of these
+  // stages. It reports no stage of its own and stops when the merge stops (any return below;
+  // its file goes too, as it would not have been made yet); joined before the segmentation,
+  // as if made there.
+  std::atomic<bool> stop_dense{false};
+  DenseMeshOutput dense;
+  bool dense_joined = false;
+  absl::Cleanup remove_dense_ply = [&dense_joined, &out] {
+    std::error_code ignored;
+    if (!dense_joined) fs::remove(out / "mesh" / "dense.ply", ignored);
+  };
+  std::jthread dense_thread(
+      [&, dir = options.fill_pockets ? pocket_dir.string() : options.tiles_dir] {
+        dense = DenseMeshToPly(options, dir, grid.resolution_m(), out,
+                               [&stop_dense](uint64_t, uint64_t) { return !stop_dense.load(); });
+      });
+  absl::Cleanup stop_dense_mesh = [&stop_dense] { stop_dense = true; };
+
   // planar regions (stage 2, §4.2.4) for the levels, fitted a slab of heights at a time
   // (level_regions.h); each level's own are fitted with its floor plan.
   if (absl::Status s = CheckPlanarMemory(options, "the levels' planar regions (a slab of heights)",
@@ -950,31 +1014,20 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   level_regions = std::vector<PlanarRegion>{};
   if (!plans.empty()) *faces = nullptr;
 
-  // dense mesh (§4.3.3) ➜ mesh/dense.ply, written as it is welded and checked for
-  // self-intersections on the way: it grows with the building and is not held.
+  // dense mesh (§4.3.3) ➜ mesh/dense.ply, made beside the stages above
   t0 = Clock::now();
-  uint64_t dense_triangles = 0;
-  {
-    absl::StatusOr<std::unique_ptr<PlyStreamWriter>> ply =
-        PlyStreamWriter::Create((out / "mesh" / "dense.ply").string());
-    if (!ply.ok()) return InStage("dense_mesh", ply.status());
-    DenseMeshSink sink;
-    sink.vertices = [&ply](std::span<const Eigen::Vector3f> v) { return (*ply)->AddVertices(v); };
-    sink.triangles = [&ply](const ChunkKey&, std::span<const Eigen::Vector3i> t) {
-      return (*ply)->AddTriangles(t);
-    };
-    absl::StatusOr<DenseMeshStreamResult> dense =
-        StreamDenseMesh(tiles, sink, StageProgress(progress, "dense_mesh"), MergeThreads(options));
-    if (!dense.ok()) return InStage("dense_mesh", dense.status());
-    if (absl::Status s = (*ply)->Finish(); !s.ok()) return InStage("dense_mesh", s);
-    dense_triangles = dense->triangles;
-    counts["dense_vertices"] = dense->vertices;
-    counts["dense_triangles"] = dense_triangles;
-    RecordSelfIntersections(dense->self_intersections, "dense", dense->self_intersection_seconds,
-                            counts, timings, &warnings);
-  }
+  if (absl::Status s = ReportMergeProgress(progress, "dense_mesh", 0, 1); !s.ok()) return s;
+  dense_thread.join();
+  dense_joined = true;
+  if (!dense.status.ok()) return InStage("dense_mesh", dense.status);
+  const uint64_t dense_triangles = dense.result.triangles;
+  counts["dense_vertices"] = dense.result.vertices;
+  counts["dense_triangles"] = dense_triangles;
+  RecordSelfIntersections(dense.result.self_intersections, "dense",
+                          dense.result.self_intersection_seconds, counts, timings, &warnings);
   outputs.push_back("mesh/dense.ply");
-  timings["merge.dense_mesh"] = SecondsSince(t0);
+  timings["merge.dense_mesh"] = dense.seconds;
+  timings["merge.dense_mesh_wait"] = SecondsSince(t0);
 
   // §5.5–§5.6 segmentation against the floor plans, then the building's planar mesh and the
   // objects' dense meshes ➜ mesh/building.ply, mesh/objects.ply, mesh/objects/<id>.ply,
