@@ -1,7 +1,7 @@
 #include "services/rpc/worker_service.h"
 
 #include <grpcpp/grpcpp.h>
-#include <malloc.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -13,8 +13,6 @@
 #include <set>
 #include <thread>
 #include <vector>
-
-#include <spdlog/spdlog.h>
 
 #include "absl/base/thread_annotations.h"
 #include "absl/strings/str_cat.h"
@@ -30,6 +28,7 @@
 #include "services/rpc/process_metrics.h"
 #include "services/rpc/server_log.h"
 #include "services/rpc/worker_metrics.h"
+#include "services/system/process_memory.h"
 #include "storage/confined_path.h"
 #include "storage/file_hash.h"
 #include "storage/hdf5_lock.h"
@@ -555,13 +554,11 @@ void WorkerServer::Impl::CarveLoop() {
     metrics_.TaskStarted();
     const auto t0 = std::chrono::steady_clock::now();
     absl::Status carved = Carve(lease, tile, stats);
-#ifdef __GLIBC__
     // glibc keeps a finished task's freed sums and batches in its arenas, fragmented, and a
     // later task's resident peak counts them again: with the same heap peak, a worker's
     // resident memory grew with the slices' length (docs/BENCHMARKS.md "--laps 4"). Returned
     // to the system between tasks (milliseconds against a task's seconds).
-    malloc_trim(0);
-#endif
+    ReturnFreedMemory();
     metrics_.TaskFinished(
         lease.has_slice() ? "slice" : "combine", carved.ok(),
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
