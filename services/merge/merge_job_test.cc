@@ -83,6 +83,9 @@ TEST(RunMerge, MemoryBudgetTooSmallFailsBeforeThePlanarRegions) {
   EXPECT_NE(m.find("over its memory budget of 1 MiB"), std::string::npos) << m;
   EXPECT_EQ(stages, (std::vector<std::string>{"pocket_fill", "boundary_faces"}));
   EXPECT_FALSE(fs::exists(options.output_dir + "/job.json"));
+  // The dense mesh had started beside the planar regions: stopped, and no file of it left
+  // (not even the first merge's).
+  EXPECT_FALSE(fs::exists(options.output_dir + "/mesh/dense.ply"));
 }
 
 TEST(RunMerge, BoxRoomGivesEveryOutput) {
