@@ -1,7 +1,6 @@
 #include "services/rpc/worker_service.h"
 
 #include <grpcpp/grpcpp.h>
-#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -13,6 +12,8 @@
 #include <set>
 #include <thread>
 #include <vector>
+
+#include <spdlog/spdlog.h>
 
 #include "absl/base/thread_annotations.h"
 #include "absl/strings/str_cat.h"
