@@ -792,6 +792,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   counts["objects_dropped_cavities"] = layout.report.dropped_cavities;
   counts["objects_dropped_ceiling"] = layout.report.dropped_ceiling;
   counts["objects_grouped"] = layout.report.grouped;
+  counts["object_specks_unmeshed"] = layout.report.specks_unmeshed;
   timings["merge.object_mesh"] = SecondsSince(t0);
   result.objects = layout.objects.size();
   return result;

@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "geometry/union_find.h"
 #include "services/merge/merge_job.h"
 #include "services/merge/merge_test_util.h"
 #include "services/mesh/mesh_checks.h"
@@ -218,14 +219,29 @@ TEST_P(ObjectSegmentation, FindsTheFurnitureAndKeepsTheWalls) {
   ASSERT_TRUE(building.ok()) << building.status();
   const MeshCheck bcheck = CheckMesh(building->mesh);
   EXPECT_TRUE(bcheck.watertight()) << bcheck.ToString();
-  size_t object_triangles = 0, leaky = 0;
+  size_t object_triangles = 0, leaky = 0, shells = 0;
   for (const auto& obj : job["objects"]) {
     absl::StatusOr<PlyMesh> mesh = ReadPly(out + "/" + obj["mesh"].get<std::string>());
     ASSERT_TRUE(mesh.ok()) << mesh.status();
     leaky += !CheckMesh(mesh->mesh).watertight();
     object_triangles += mesh->mesh.triangles.size();
+    // Closed components: triangles joined through shared vertices.
+    UnionFind<int> parts(mesh->mesh.vertices.size());
+    for (const Eigen::Vector3i& t : mesh->mesh.triangles)
+      parts.Union(t[0], t[1]), parts.Union(t[0], t[2]);
+    std::vector<int> roots;
+    for (const Eigen::Vector3i& t : mesh->mesh.triangles) roots.push_back(parts.Find(t[0]));
+    std::sort(roots.begin(), roots.end());
+    shells += std::unique(roots.begin(), roots.end()) - roots.begin();
   }
   EXPECT_EQ(leaky, 0u);
+  // An object is one closed surface, or a few where it has separate parts (stacked boards), not
+  // a cloud of specks: at most 3 per object on average; and the objects, meshed finer than the
+  // building, still take fewer triangles than the dense mesh of the whole building.
+  std::printf("[%s] objects' closed surfaces %zu, %.2f per object\n", pc.name, shells,
+              double(shells) / std::max<size_t>(1, job["objects"].size()));
+  EXPECT_LE(double(shells), 3.0 * double(job["objects"].size()));
+  EXPECT_LT(object_triangles, merged->dense_triangles);
   // The planar building mesh uses ≤ 10 % of the dense mesh's triangles (measured
   // 2.6 %; 25 % while the carve was a speckle between rays).
   EXPECT_LE(double(building->mesh.triangles.size()), 0.10 * double(merged->dense_triangles));

@@ -294,7 +294,10 @@ absl::Status ObjectSplitter::FinishPiece(OpenPiece piece) {
     }
   }
   absl::Status sunk;
-  if (keep) {
+  // A speck's mesh is never written (ObjectSplitOptions::speck_volume_m3): its summary is all
+  // the grouping needs.
+  if (keep) summaries_.emplace_back(tris.front().first, obj);
+  if (keep && !Speck(obj, options_)) {
     // The piece's mesh: vertices in the order its triangles first use them.
     TriangleMesh mesh;
     mesh.triangles.reserve(tris.size());
@@ -308,7 +311,6 @@ absl::Status ObjectSplitter::FinishPiece(OpenPiece piece) {
       }
       mesh.triangles.push_back(Flipped(u));
     }
-    summaries_.emplace_back(tris.front().first, std::move(obj));
     if (sink_) sunk = sink_(tris.front().first, mesh);
   }
   for (const auto& [index, t] : tris) {
@@ -328,15 +330,19 @@ absl::StatusOr<ObjectLayout> ObjectSplitter::Finish() {
             [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<SegmentedObject> pieces;
   std::vector<uint64_t> keys;
+  std::vector<bool> speck;  // per piece: a speck, in its object's box but not its mesh
   pieces.reserve(summaries_.size());
   keys.reserve(summaries_.size());
   for (auto& [key, piece] : summaries_) {
     keys.push_back(key);
+    speck.push_back(Speck(piece, options_));
     pieces.push_back(std::move(piece));
   }
   summaries_.clear();
   ObjectLayout layout;
   layout.report = report_;
+  std::vector<double> volume(pieces.size());
+  for (size_t p = 0; p < pieces.size(); ++p) volume[p] = pieces[p].volume_m3;
   Groups groups = GroupStacked(std::move(pieces), plan_, options_, layout.report);
   std::vector<int> kept;
   for (int g = 0; g < static_cast<int>(groups.objects.size()); ++g) {
@@ -351,8 +357,17 @@ absl::StatusOr<ObjectLayout> ObjectSplitter::Finish() {
   for (int g : kept) {
     SegmentedObject& obj = layout.objects.emplace_back(std::move(groups.objects[g]));
     obj.id = static_cast<int>(layout.objects.size()) - 1;
+    // The grouping decided on the volume with the specks; the object's volume is its mesh's.
     std::vector<uint64_t>& of = layout.pieces.emplace_back();
-    for (int p : groups.pieces[g]) of.push_back(keys[p]);
+    obj.volume_m3 = 0;
+    for (int p : groups.pieces[g]) {
+      if (speck[p]) {
+        ++layout.report.specks_unmeshed;
+      } else {
+        obj.volume_m3 += volume[p];
+        of.push_back(keys[p]);
+      }
+    }
   }
   return layout;
 }

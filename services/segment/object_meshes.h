@@ -29,7 +29,10 @@ namespace carvemap {
 struct ObjectSplitOptions {
   // Pieces smaller than this are specks (noise on floors and walls), m³: while stacked pieces
   // are grouped (below) a speck joins the one object it overlaps most and never links two;
-  // left alone it is dropped.
+  // left alone it is dropped. A speck that joins an object widens its box (it is the evidence
+  // of a leg or a rod the wedges carved away) but is left out of its mesh: most are single
+  // cells made solid by one scan point, and meshed they made an object a cloud of hundreds of
+  // separate shells around its surfaces.
   double speck_volume_m3 = 0.001;
   // Objects smaller than this after grouping are dropped, m³. 5 litres (a 17 cm cube):
   // slivers of walls that a drifting path or sparse frames put inside the plan are 1–4
@@ -65,7 +68,7 @@ struct SegmentedObject {
   int level = -1;             // the plan level holding the centre of its box (−1 none)
   int room = -1;              // the room under that centre (−1 none)
   Eigen::AlignedBox3d box;    // m
-  double volume_m3 = 0;       // enclosed volume (divergence theorem)
+  double volume_m3 = 0;       // enclosed volume of its mesh (divergence theorem)
   TriangleMesh mesh;          // watertight, counter-clockwise seen from outside (normals out)
 };
 
@@ -75,6 +78,7 @@ struct ObjectSplitReport {
   uint64_t dropped_ceiling = 0;  // ceiling films and door headers
   uint64_t dropped_cavities = 0;  // inner surfaces of hollow objects (negative volume)
   uint64_t grouped = 0;  // pieces joined to a piece stacked over or under them
+  uint64_t specks_unmeshed = 0;  // specks in a kept object's box, not in its mesh
 };
 
 // The objects of a building, found as its object mesh streams past (StreamDenseMesh's order:
@@ -82,9 +86,9 @@ struct ObjectSplitReport {
 // (one closed surface) is finished once the stream is two columns past the last column that
 // gave it a triangle: a dense mesh's triangles reach at most a few cells past their chunk, so
 // no later triangle can share its vertices (checked: one that does is an Internal error).
-// A finished piece that is kept (not a cavity, not a ceiling film) goes to `sink` with its mesh,
-// facing out of the object, its vertices in the order its triangles first use them, and its
-// key: the index of its first triangle in the stream. Finish() groups the pieces' summaries as
+// A finished piece that is kept (not a cavity, not a ceiling film, not a speck) goes to `sink` with
+// its mesh, facing out of the object, its vertices in the order its triangles first use them, and
+// its key: the index of its first triangle in the stream. Finish() groups the pieces' summaries as
 // SplitObjects does; an object's mesh is its pieces' meshes appended in the order of its keys.
 //
 // Memory: the open pieces' triangles (~16 B each) and vertices (~32 B), one summary per kept
@@ -147,7 +151,8 @@ class ObjectSplitter {
 // level, then by the min corner of their box (x, y, z), so ids are deterministic. An inner
 // surface (a free cavity enclosed in an object) is dropped: its object stays watertight, filled.
 // Stacked pieces (options.stack_gap_m) are then joined: such an object's mesh is several closed
-// surfaces, each watertight. ObjectSplitter over the whole mesh at once, held in memory.
+// surfaces, each watertight; specks joined to it are in its box, not its mesh. ObjectSplitter over
+// the whole mesh at once, held in memory.
 [[nodiscard]] std::vector<SegmentedObject> SplitObjects(const TriangleMesh& object_mesh,
                                                         const PlanVolume& plan,
                                                         const ObjectSplitOptions& options,

@@ -122,7 +122,7 @@ TEST_F(ObjectMeshesTest, StackedPiecesAreOneObject) {
 
 // Pieces are matched wherever their footprints meet, not only near their corners: a cabinet
 // and a speck under and over the far end of a 3.6 m table join it; a speck as far from
-// everything stays alone and is dropped.
+// everything stays alone and is dropped. The speck widens the table's box, not its mesh.
 TEST_F(ObjectMeshesTest, PiecesStackWhereverTheirFootprintsMeet) {
   TriangleMesh all;
   all.Append(InwardBox({0.2f, 0.2f, 0.7f}, {3.8f, 3.8f, 0.75f}));     // a table top
@@ -137,7 +137,13 @@ TEST_F(ObjectMeshesTest, PiecesStackWhereverTheirFootprintsMeet) {
   ASSERT_EQ(objects.size(), 1u);
   EXPECT_TRUE(objects[0].box.isApprox(
       Eigen::AlignedBox3d(Eigen::Vector3d(0.2, 0.2, 0), Eigen::Vector3d(3.8, 3.8, 0.83)), 1e-6));
-  EXPECT_EQ(objects[0].mesh.triangles.size(), 3u * 12u);
+  EXPECT_EQ(report.specks_unmeshed, 1u);
+  EXPECT_EQ(objects[0].mesh.triangles.size(), 2u * 12u);  // the top and the cabinet
+  Eigen::AlignedBox3d meshed;
+  for (const Eigen::Vector3f& v : objects[0].mesh.vertices) meshed.extend(v.cast<double>());
+  EXPECT_NEAR(meshed.max().z(), 0.75, 1e-6);
+  EXPECT_NEAR(objects[0].volume_m3, 3.6 * 3.6 * 0.05 + 0.4 * 0.4 * 0.6, 1e-5);
+  EXPECT_TRUE(CheckMesh(objects[0].mesh).watertight());
 }
 
 // The mesh as StreamDenseMesh gives it, a chunk column at a time (columns 1 m wide here, by
@@ -151,6 +157,7 @@ TEST_F(ObjectMeshesTest, StreamedByColumnsGivesTheWholeMeshsObjects) {
   for (float z : {0.05f, 0.45f, 0.85f})
     boxes.Append(InwardBox({3, 1, z}, {3.9f, 1.35f, z + 0.05f}));
   boxes.Append(InwardBox({6.5f, 3, 1}, {6.64f, 3.14f, 1.1f}));
+  boxes.Append(InwardBox({5.5f, 1.5f, 0.6f}, {5.53f, 1.53f, 0.63f}));  // a speck over the table
   const auto column_of = [&](const Eigen::Vector3i& t) {
     float x = boxes.vertices[t[0]].x();
     for (int k = 1; k < 3; ++k) x = std::min(x, boxes.vertices[t[k]].x());
@@ -184,14 +191,18 @@ TEST_F(ObjectMeshesTest, StreamedByColumnsGivesTheWholeMeshsObjects) {
     i = j;
   }
   // By column 5 the cabinet (columns 1–2) and the boards (column 3) are finished: only the
-  // table's triangles are open, all but the two of its side at x = 6 (column 6).
-  EXPECT_EQ(open_at_table, 10u);
+  // table's triangles are open, all but the two of its side at x = 6 (column 6), and the speck's.
+  EXPECT_EQ(open_at_table, 10u + 12u);
   absl::StatusOr<ObjectLayout> layout = splitter.Finish();
   ASSERT_TRUE(layout.ok()) << layout.status();
   EXPECT_EQ(splitter.open_triangles(), 0u);
   EXPECT_EQ(layout->report.components, whole_report.components);
   EXPECT_EQ(layout->report.grouped, whole_report.grouped);
   EXPECT_EQ(layout->report.dropped_cavities, 1u);
+  EXPECT_EQ(layout->report.specks_unmeshed, 1u);
+  // The sink saw every kept piece but the speck: the cabinet, three boards, the table and the
+  // 2-litre sliver (dropped later, as too small an object).
+  EXPECT_EQ(pieces.size(), 6u);
   ASSERT_EQ(layout->objects.size(), whole.size());
   for (size_t i = 0; i < whole.size(); ++i) {
     const SegmentedObject& o = layout->objects[i];
