@@ -6,11 +6,24 @@ The same matching as services/merge/object_segmentation_test.cc: true objects wi
 one to one, greedy by IoU; a reported object is false when it overlaps no true object (any
 size) by >= 10 % of its own box. Prints found and false, and found per kind.
 
+It also prints issue 27's other object goals:
+  - against a wall: for each true object whose footprint comes within 10 cm of a wall (an edge
+    of a room's polygon), the reported object that overlaps it most, and how much taller its
+    box is than the truth (goal: none more than 0.3 m);
+  - mesh/objects.ply: its closed components (triangles joined through shared vertices) per
+    reported object (goal: at most 3 on average), and its triangles against mesh/dense.ply's.
+
 Usage: match_objects.py OUT_DIR GT_DIR
 """
 import json
 import os
 import sys
+
+import numpy as np
+
+from check_outputs import read_ply
+
+WALL_GAP = 0.10
 
 
 def volume(b):
@@ -26,6 +39,60 @@ def intersection(a, b):
 def iou(a, b):
     i = intersection(a, b)
     return i / (volume(a) + volume(b) - i) if i > 0 else 0.0
+
+
+def segment_distance(p, a, b):
+    """Distance from point p to segment ab (2D)."""
+    ab = (b[0] - a[0], b[1] - a[1])
+    n = ab[0] * ab[0] + ab[1] * ab[1]
+    t = 0.0 if n == 0 else max(0.0, min(1.0, ((p[0] - a[0]) * ab[0] + (p[1] - a[1]) * ab[1]) / n))
+    return ((p[0] - a[0] - t * ab[0]) ** 2 + (p[1] - a[1] - t * ab[1]) ** 2) ** 0.5
+
+
+def near_wall(box, rooms):
+    """Is the box's footprint within WALL_GAP of an edge of a room polygon on its level? The
+    footprint's corners against each edge, and each edge's ends against the footprint."""
+    (x0, y0, _), (x1, y1, _) = box
+    corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    for room in rooms:
+        ring = room["polygon"]
+        for i in range(len(ring)):
+            a, b = ring[i], ring[(i + 1) % len(ring)]
+            if min(segment_distance(c, a, b) for c in corners) <= WALL_GAP:
+                return True
+    return False
+
+
+def components(path):
+    """Closed components of a triangle mesh: triangles joined through shared vertices (label
+    propagation with pointer jumping; no graph library in the test tools' dependencies)."""
+    _, tri = read_ply(path)
+    if len(tri) == 0:
+        return 0
+    label = np.arange(tri.max() + 1)
+    while True:
+        m = label[tri].min(axis=1)
+        before = label.copy()
+        for k in range(3):
+            np.minimum.at(label, tri[:, k], m)
+        while True:  # pointer jumping: a label points at a smaller one
+            jumped = label[label]
+            if (jumped == label).all():
+                break
+            label = jumped
+        if (label == before).all():
+            break
+    return len(np.unique(label[tri[:, 0]]))
+
+
+def ply_faces(path):
+    with open(path, "rb") as f:
+        for line in f:
+            if line.startswith(b"element face"):
+                return int(line.split()[2])
+            if line.startswith(b"end_header"):
+                return 0
+    return 0
 
 
 def main():
@@ -60,6 +127,29 @@ def main():
         k[1] += ti in t_used
     for kind, (n, f) in sorted(kinds.items()):
         print(f"  {kind}: {f} of {n}")
+
+    against, taller = 0, []
+    for t in true_all:
+        rooms = [r for r in truth.get("rooms", []) if r.get("level", 0) == t.get("level", 0)]
+        if not near_wall(t["aabb"], rooms):
+            continue
+        against += 1
+        best = max(found, key=lambda f: intersection(t["aabb"], f), default=None)
+        if best is None or intersection(t["aabb"], best) == 0:
+            continue
+        excess = (best[1][2] - best[0][2]) - (t["aabb"][1][2] - t["aabb"][0][2])
+        if excess > 0.3:
+            taller.append((t.get("kind", "?"), round(excess, 2)))
+    print(f"against a wall: {against} true objects; reported more than 0.3 m taller: "
+          f"{len(taller)} {sorted(taller)}")
+
+    mesh = os.path.join(out, "mesh")
+    if os.path.exists(os.path.join(mesh, "objects.ply")):
+        c = components(os.path.join(mesh, "objects.ply"))
+        n = len(found)
+        print(f"objects.ply: {ply_faces(os.path.join(mesh, 'objects.ply'))} triangles (dense.ply "
+              f"{ply_faces(os.path.join(mesh, 'dense.ply'))}), {c} closed components, "
+              f"{c / max(1, n):.2f} per object")
 
 
 if __name__ == "__main__":
