@@ -296,7 +296,6 @@ absl::Status ObjectSplitter::FinishPiece(OpenPiece piece) {
   absl::Status sunk;
   // A speck's mesh is never written (ObjectSplitOptions::speck_volume_m3): its summary is all
   // the grouping needs.
-  if (keep) summaries_.emplace_back(tris.front().first, obj);
   if (keep && !Speck(obj, options_)) {
     // The piece's mesh: vertices in the order its triangles first use them.
     TriangleMesh mesh;
@@ -313,6 +312,7 @@ absl::Status ObjectSplitter::FinishPiece(OpenPiece piece) {
     }
     if (sink_) sunk = sink_(tris.front().first, mesh);
   }
+  if (keep) summaries_.emplace_back(tris.front().first, std::move(obj));
   for (const auto& [index, t] : tris) {
     for (int k = 0; k < 3; ++k) {
       finished_vertex_[t[k]] = true;
@@ -330,19 +330,19 @@ absl::StatusOr<ObjectLayout> ObjectSplitter::Finish() {
             [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<SegmentedObject> pieces;
   std::vector<uint64_t> keys;
-  std::vector<bool> speck;  // per piece: a speck, in its object's box but not its mesh
+  std::vector<bool> speck;     // per piece: a speck, in its object's box but not its mesh
+  std::vector<double> volume;  // per piece
   pieces.reserve(summaries_.size());
   keys.reserve(summaries_.size());
   for (auto& [key, piece] : summaries_) {
     keys.push_back(key);
     speck.push_back(Speck(piece, options_));
+    volume.push_back(piece.volume_m3);
     pieces.push_back(std::move(piece));
   }
   summaries_.clear();
   ObjectLayout layout;
   layout.report = report_;
-  std::vector<double> volume(pieces.size());
-  for (size_t p = 0; p < pieces.size(); ++p) volume[p] = pieces[p].volume_m3;
   Groups groups = GroupStacked(std::move(pieces), plan_, options_, layout.report);
   std::vector<int> kept;
   for (int g = 0; g < static_cast<int>(groups.objects.size()); ++g) {
