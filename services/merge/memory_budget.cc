@@ -33,4 +33,14 @@ absl::Status CheckPlanarMemory(std::string_view what, uint64_t num_faces, uint64
                    "process's cgroup memory limit) or carve at a coarser --resolution"));
 }
 
+absl::Status CheckPlanarMemory(std::string_view what, uint64_t num_faces,
+                               const std::function<uint64_t()>& held, uint64_t budget_bytes,
+                               const std::function<void()>& settle) {
+  if (budget_bytes == 0) return absl::OkStatus();
+  absl::Status fits = CheckPlanarMemory(what, num_faces, held(), budget_bytes);
+  if (fits.ok() || !settle) return fits;
+  settle();
+  return CheckPlanarMemory(what, num_faces, held(), budget_bytes);
+}
+
 }  // namespace carvemap

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string_view>
 
 #include "absl/status/status.h"
@@ -18,5 +19,15 @@ namespace carvemap {
 // faces, the estimate, held_bytes and the budget.
 [[nodiscard]] absl::Status CheckPlanarMemory(std::string_view what, uint64_t num_faces,
                                              uint64_t held_bytes, uint64_t budget_bytes);
+
+// The same with what the process holds read by `held` (its resident memory) when the check is
+// made. When it does not fit and `settle` is given, settle() is called once (it waits for work
+// running beside the stage to end and give its memory back: the dense mesh) and the check is
+// made again on a new reading. Why: such work ends on its own, so waiting for it costs only the
+// overlap, where failing would cost the job.
+[[nodiscard]] absl::Status CheckPlanarMemory(std::string_view what, uint64_t num_faces,
+                                             const std::function<uint64_t()>& held,
+                                             uint64_t budget_bytes,
+                                             const std::function<void()>& settle);
 
 }  // namespace carvemap

@@ -32,5 +32,31 @@ TEST(CheckPlanarMemory, NamesTheStageTheEstimateAndTheBudget) {
             std::string::npos);
 }
 
+// Work beside the stage (the dense mesh) that holds memory is waited for once before the check
+// gives up; a stage that still does not fit fails as before; without a budget nothing is read.
+TEST(CheckPlanarMemory, WaitsOnceForWorkBesideItBeforeFailing) {
+  const uint64_t need = 1000 * kPlanarBytesPerFace, budget = (uint64_t{1} << 20) + need;
+  uint64_t held = uint64_t{3} << 20;  // the stage's 1 MiB and 2 MiB of the dense mesh
+  int settled = 0, read = 0;
+  const auto reading = [&] { return ++read, held; };
+  const auto settle = [&] { ++settled, held = uint64_t{1} << 20; };
+  EXPECT_TRUE(CheckPlanarMemory("x", 1000, reading, budget, settle).ok());
+  EXPECT_EQ(settled, 1);
+  EXPECT_EQ(read, 2);
+  EXPECT_TRUE(CheckPlanarMemory("x", 1000, reading, budget, settle).ok());  // fits at once
+  EXPECT_EQ(settled, 1);
+  held = uint64_t{3} << 20;
+  EXPECT_EQ(CheckPlanarMemory("x", 1000, reading, budget, nullptr).code(),
+            absl::StatusCode::kResourceExhausted);
+  const auto settle_frees_nothing = [&] { ++settled; };
+  EXPECT_EQ(CheckPlanarMemory("x", 1000, reading, budget, settle_frees_nothing).code(),
+            absl::StatusCode::kResourceExhausted);
+  EXPECT_EQ(settled, 2);
+  read = 0;
+  EXPECT_TRUE(CheckPlanarMemory("x", 1000, reading, 0, settle).ok());
+  EXPECT_EQ(read, 0);
+  EXPECT_EQ(settled, 2);
+}
+
 }  // namespace
 }  // namespace carvemap

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <optional>
@@ -95,11 +96,12 @@ absl::Status InStage(const char* stage, const absl::Status& s) {
 }
 
 // CheckPlanarMemory against what this process holds now.
-absl::Status CheckPlanarMemory(const MergeOptions& options, std::string_view what,
-                               size_t num_faces) {
-  if (options.memory_budget_bytes == 0) return absl::OkStatus();
-  return carvemap::CheckPlanarMemory(what, num_faces, ReadProcessStatus().resident_bytes,
-                                     options.memory_budget_bytes);
+// `settle`, when given, waits for the dense mesh made beside the stage (RunMerge).
+absl::Status CheckPlanarMemory(const MergeOptions& options, std::string_view what, size_t num_faces,
+                               const std::function<void()>& settle = nullptr) {
+  return carvemap::CheckPlanarMemory(
+      what, num_faces, [] { return ReadProcessStatus().resident_bytes; },
+      options.memory_budget_bytes, settle);
 }
 
 int MergeThreads(const MergeOptions& options) {
@@ -162,6 +164,7 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles, const F
                             nlohmann::json& job, nlohmann::json& counts, nlohmann::json& timings,
                             std::vector<std::string>& outputs, std::vector<std::string>& warnings,
                             const MergeProgressCallback& progress,
+                            const std::function<void()>& settle_memory,
                             std::vector<std::pair<Level, FloorPlan>>& plans) {
   if (options.scan_path.empty()) {
     warnings.push_back("floorplan: no scan given, so no scanner path for the lines of sight; "
@@ -200,7 +203,7 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles, const F
             absl::StrCat("level ", k, "'s planar regions (its faces from ",
                          absl::SixDigits(levels[k].split_z_low - kLevelBandMarginM), " to ",
                          absl::SixDigits(levels[k].split_z_high + kLevelBandMarginM), " m)"),
-            band_end - band_begin);
+            band_end - band_begin, settle_memory);
         !s.ok()) {
       return s;
     }
@@ -953,11 +956,18 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
                                [&stop_dense](uint64_t, uint64_t) { return !stop_dense.load(); });
       });
   absl::Cleanup stop_dense_mesh = [&stop_dense] { stop_dense = true; };
+  // The dense mesh's tile cache and buffers count in what the process holds: a planar fit whose
+  // memory check fails beside it waits for it to end, then checks again.
+  const std::function<void()> settle_dense = [&dense_thread] {
+    if (dense_thread.joinable()) dense_thread.join();
+    ReturnFreedMemory();
+  };
 
   // planar regions (stage 2, §4.2.4) for the levels, fitted a slab of heights at a time
   // (level_regions.h); each level's own are fitted with its floor plan.
-  if (absl::Status s = CheckPlanarMemory(options, "the levels' planar regions (a slab of heights)",
-                                         std::min<uint64_t>((*faces)->size(), kLevelSlabFaces));
+  if (absl::Status s =
+          CheckPlanarMemory(options, "the levels' planar regions (a slab of heights)",
+                            std::min<uint64_t>((*faces)->size(), kLevelSlabFaces), settle_dense);
       !s.ok()) {
     return InStage("planar_regions", s);
   }
@@ -1000,7 +1010,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   // floorplan.dxf, extruded.ply; job.json "rooms"
   std::vector<std::pair<Level, FloorPlan>> plans;
   if (absl::Status s = FloorPlanStage(options, tiles, **faces, levels->levels, out, job, counts,
-                                      timings, outputs, warnings, progress, plans);
+                                      timings, outputs, warnings, progress, settle_dense, plans);
       !s.ok()) {
     return InStage("floorplan", s);
   }
@@ -1018,7 +1028,7 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   // dense mesh (§4.3.3) ➜ mesh/dense.ply, made beside the stages above
   t0 = Clock::now();
   if (absl::Status s = ReportMergeProgress(progress, "dense_mesh", 0, 1); !s.ok()) return s;
-  dense_thread.join();
+  if (dense_thread.joinable()) dense_thread.join();
   dense_joined = true;
   if (!dense.status.ok()) return InStage("dense_mesh", dense.status);
   const uint64_t dense_triangles = dense.result.triangles;
