@@ -44,33 +44,37 @@ def poses_at(path, t):
     return pos[i] * (1 - a) + pos[i + 1] * a, rotations(qq)
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("drifted")
-    ap.add_argument("exact")
-    ap.add_argument("--voxel", type=float, default=0.0625, help="leaf size to report against, m")
-    args = ap.parse_args()
-    drifted, exact = h5py.File(args.drifted, "r"), h5py.File(args.exact, "r")
+def placed_returns(drifted, exact):
+    """Every return of the open scan `drifted` placed with `exact`'s /path and with its own
+    recorded one: two (n, 3) arrays."""
     est, true = drifted["/path"][:], exact["/path"][:]
     if len(est) != len(true) or np.abs(est["t"] - true["t"]).max() > 1e-9:
-        sys.exit(f"{args.drifted} and {args.exact}: the paths' times differ; not one walk")
-    dist = []
+        sys.exit(f"{drifted.filename} and {exact.filename}: the paths' times differ; not one walk")
+    xs, xr = [], []
     for name, sensor in drifted["/sensors"].items():
         r_s2c = np.asarray(sensor.attrs["R_s2c"], float).reshape(3, 3)
         t_s2c = np.asarray(sensor.attrs["T_s2c"], float)
         frames, points = sensor["frames"][:], sensor["points"][:]
         t = np.repeat(frames["t"], frames["count"].astype(np.int64))
         if len(t) != len(points):
-            sys.exit(f"{args.drifted}: /sensors/{name}: frames count {len(t)} rays, points has "
+            sys.exit(f"{drifted.filename}: /sensors/{name}: frames count {len(t)} rays, points has "
                      f"{len(points)}")
         ok = np.isfinite(points).all(1)
         q = points[ok].astype(float) @ r_s2c.T + t_s2c  # in the system frame
-        c1, r1 = poses_at(est, t[ok])
-        c2, r2 = poses_at(true, t[ok])
-        x1 = np.einsum("nij,nj->ni", r1, q) + c1
-        x2 = np.einsum("nij,nj->ni", r2, q) + c2
-        dist.append(np.linalg.norm(x1 - x2, axis=1))
-    d = np.concatenate(dist)
+        for path, out in ((true, xs), (est, xr)):
+            c, r = poses_at(path, t[ok])
+            out.append(np.einsum("nij,nj->ni", r, q) + c)
+    return np.concatenate(xs), np.concatenate(xr)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("drifted")
+    ap.add_argument("exact")
+    ap.add_argument("--voxel", type=float, default=0.0625, help="leaf size to report against, m")
+    args = ap.parse_args()
+    x_exact, x_recorded = placed_returns(h5py.File(args.drifted, "r"), h5py.File(args.exact, "r"))
+    d = np.linalg.norm(x_recorded - x_exact, axis=1)
     v = args.voxel
     print(f"{len(d)} returns: displacement median {100 * np.median(d):.1f} cm, p90 "
           f"{100 * np.percentile(d, 90):.1f} cm, max {100 * d.max():.1f} cm; within {100 * v / 2:.2f} cm "

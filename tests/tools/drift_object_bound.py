@@ -26,12 +26,11 @@ Usage: drift_object_bound.py DRIFTED_SCAN.h5 EXACT_SCAN.h5 GT_DIR [--moved-gt DI
 import argparse
 import json
 import os
-import sys
 
 import h5py
 import numpy as np
 
-from drift_displacement import poses_at
+from drift_displacement import placed_returns
 
 MARGIN = 0.02
 FLOOR_CUT = 0.094  # segmentation's cut above the floor and under the ceiling (one coarse cell + 3 cm)
@@ -55,28 +54,6 @@ def inside(poly, x, y):
     return c
 
 
-def returns(drifted, exact):
-    """Every return's place with the exact and with the recorded path, (n, 3) each."""
-    est, true = drifted["/path"][:], exact["/path"][:]
-    if len(est) != len(true) or np.abs(est["t"] - true["t"]).max() > 1e-9:
-        sys.exit(f"{drifted.filename} and {exact.filename}: the paths' times differ; not one walk")
-    xs, xr = [], []
-    for name, sensor in drifted["/sensors"].items():
-        r_s2c = np.asarray(sensor.attrs["R_s2c"], float).reshape(3, 3)
-        t_s2c = np.asarray(sensor.attrs["T_s2c"], float)
-        frames, points = sensor["frames"][:], sensor["points"][:]
-        t = np.repeat(frames["t"], frames["count"].astype(np.int64))
-        if len(t) != len(points):
-            sys.exit(f"{drifted.filename}: /sensors/{name}: frames count {len(t)} rays, points has "
-                     f"{len(points)}")
-        ok = np.isfinite(points).all(1)
-        q = points[ok].astype(float) @ r_s2c.T + t_s2c
-        for path, out in ((true, xs), (est, xr)):
-            c, r = poses_at(path, t[ok])
-            out.append(np.einsum("nij,nj->ni", r, q) + c)
-    return np.concatenate(xs), np.concatenate(xr)
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("drifted")
@@ -85,7 +62,7 @@ def main():
     ap.add_argument("--moved-gt", help="write the truth with the objects moved here")
     args = ap.parse_args()
     truth = json.load(open(os.path.join(args.gt, "building.json")))
-    xs, xr = returns(h5py.File(args.drifted, "r"), h5py.File(args.exact, "r"))
+    xs, xr = placed_returns(h5py.File(args.drifted, "r"), h5py.File(args.exact, "r"))
     levels = {lv["index"]: lv for lv in truth["levels"]}
     rows, moved_objects = [], []
     for obj in truth["objects"]:
