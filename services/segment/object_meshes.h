@@ -31,8 +31,8 @@ struct ObjectSplitOptions {
   // are grouped (below) a speck joins the one object it overlaps most and never links two;
   // left alone it is dropped. A speck that joins an object widens its box (it is the evidence
   // of a leg or a rod the wedges carved away) but is left out of its mesh: most are single
-  // cells made solid by one scan point, and meshed they made an object a cloud of hundreds of
-  // separate shells around its surfaces.
+  // cells made solid by one scan point, and meshed they made an object a cloud of tens to hundreds
+  // of separate shells around its surfaces.
   double speck_volume_m3 = 0.001;
   // Objects smaller than this after grouping are dropped, m³. 5 litres (a 17 cm cube):
   // slivers of walls that a drifting path or sparse frames put inside the plan are 1–4
@@ -67,7 +67,7 @@ struct SegmentedObject {
   int id = 0;                 // 0.. in output order
   int level = -1;             // the plan level holding the centre of its box (−1 none)
   int room = -1;              // the room under that centre (−1 none)
-  Eigen::AlignedBox3d box;    // m
+  Eigen::AlignedBox3d box;    // m: of its mesh and the specks grouped into it
   double volume_m3 = 0;       // enclosed volume of its mesh (divergence theorem)
   TriangleMesh mesh;          // watertight, counter-clockwise seen from outside (normals out)
 };
