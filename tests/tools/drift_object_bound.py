@@ -31,16 +31,10 @@ import h5py
 import numpy as np
 
 from drift_displacement import placed_returns
+from match_objects import iou
 
 MARGIN = 0.02
 FLOOR_CUT = 0.094  # segmentation's cut above the floor and under the ceiling (one coarse cell + 3 cm)
-
-
-def iou(a, b):
-    lo, hi = np.maximum(a[0], b[0]), np.minimum(a[1], b[1])
-    inter = np.prod(np.clip(hi - lo, 0, None))
-    va, vb = np.prod(a[1] - a[0]), np.prod(b[1] - b[0])
-    return inter / (va + vb - inter) if inter > 0 else 0.0
 
 
 def inside(poly, x, y):

@@ -51,7 +51,8 @@ def segment_distance(p, a, b):
 
 def near_wall(box, rooms):
     """Is the box's footprint within WALL_GAP of an edge of a room polygon on its level? The
-    footprint's corners against each edge, and each edge's ends against the footprint."""
+    footprint's corners against each edge (walls end in corners, so a box near one is near
+    a corner's edge too)."""
     (x0, y0, _), (x1, y1, _) = box
     corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
     for room in rooms:
@@ -64,11 +65,12 @@ def near_wall(box, rooms):
 
 
 def components(path):
-    """Closed components of a triangle mesh: triangles joined through shared vertices (label
-    propagation with pointer jumping; no graph library in the test tools' dependencies)."""
+    """Closed components and triangles of a triangle mesh: triangles joined through shared
+    vertices (label propagation with pointer jumping; no graph library in the test tools'
+    dependencies)."""
     _, tri = read_ply(path)
     if len(tri) == 0:
-        return 0
+        return 0, 0
     label = np.arange(tri.max() + 1)
     while True:
         m = label[tri].min(axis=1)
@@ -82,7 +84,7 @@ def components(path):
             label = jumped
         if (label == before).all():
             break
-    return len(np.unique(label[tri[:, 0]]))
+    return len(np.unique(label[tri[:, 0]])), len(tri)
 
 
 def ply_faces(path):
@@ -145,9 +147,9 @@ def main():
 
     mesh = os.path.join(out, "mesh")
     if os.path.exists(os.path.join(mesh, "objects.ply")):
-        c = components(os.path.join(mesh, "objects.ply"))
+        c, triangles = components(os.path.join(mesh, "objects.ply"))
         n = len(found)
-        print(f"objects.ply: {ply_faces(os.path.join(mesh, 'objects.ply'))} triangles (dense.ply "
+        print(f"objects.ply: {triangles} triangles (dense.ply "
               f"{ply_faces(os.path.join(mesh, 'dense.ply'))}), {c} closed components, "
               f"{c / max(1, n):.2f} per object")
 
