@@ -282,17 +282,17 @@ TEST(SegmentThenMesh, BoxOnTheFloorComesOutAsOneObject) {
   const SegmentedObject& o = objects[0];
   EXPECT_TRUE(CheckMesh(o.mesh).watertight()) << CheckMesh(o.mesh).ToString();
   EXPECT_EQ(o.room, 0);
-  // The box is 0.5 × 0.75 × 0.5 m; the segmented object is cut one cell above the floor
-  // (§5.6: the floor's boundary layer is building), so 0.5 × 0.75 × 0.4375 m, its surface
-  // within a cell of the box's faces.
+  // The box is 0.5 × 0.75 × 0.5 m, standing on the floor: the floor's boundary layer under it
+  // is object too (§5.6 keeps that layer building elsewhere), so its surface is within a cell of
+  // the box's faces, the bottom too.
   const double r = grid.resolution_m();
   EXPECT_NEAR(o.box.min().x(), 0.75, r);
   EXPECT_NEAR(o.box.max().x(), 1.25, r);
   EXPECT_NEAR(o.box.min().y(), 0.5, r);
   EXPECT_NEAR(o.box.max().y(), 1.25, r);
-  EXPECT_NEAR(o.box.min().z(), 0.3125, r);
+  EXPECT_NEAR(o.box.min().z(), 0.25, 0.5 * r);
   EXPECT_NEAR(o.box.max().z(), 0.75, r);
-  EXPECT_NEAR(o.volume_m3, 0.5 * 0.75 * 0.4375, 0.15 * 0.5 * 0.75 * 0.4375);
+  EXPECT_NEAR(o.volume_m3, 0.5 * 0.75 * 0.5, 0.15 * 0.5 * 0.75 * 0.5);
 }
 
 }  // namespace

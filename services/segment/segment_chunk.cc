@@ -71,7 +71,10 @@ class ChunkSegmenter {
  public:
   ChunkSegmenter(const NeighbourhoodIndex& index, const PlanVolume& plan,
                  const SegmentOptions& options, const ChunkRegion* only_in)
-      : tile_(index.hood().tiles[ChunkNeighbourhood::Index(0, 0, 0)]),
+      : index_(index),
+        plan_(plan),
+        options_(options),
+        tile_(index.hood().tiles[ChunkNeighbourhood::Index(0, 0, 0)]),
         k_(index.hood().grid.chunk_depth),
         n_(index.hood().grid.leaves_per_side()) {
     const OctreeGrid& grid = index.hood().grid;
@@ -80,7 +83,7 @@ class ChunkSegmenter {
     const double res = grid.resolution_m();
     cells_.assign(static_cast<size_t>(n_) * n_ * n_, CellKey{});
     // §4.2.3 point evidence: points per cube of 2^shift cells a side.
-    int shift = 0;
+    int& shift = shift_;
     while (shift < k_ && (res * (2 << shift)) <= options.point_cell_m * (1 + 1e-9)) ++shift;
     const int nc = n_ >> shift;
     auto cube = [&](int x, int y, int z) {
@@ -148,6 +151,32 @@ class ChunkSegmenter {
         }
       }
     }
+    // The floor band under standing objects (ClassifyCell's above_is_object), top down so that
+    // the cell above is final; the chunk's top layer asks the chunk above. Only cells that
+    // ClassifyCell rejects without the object above: the band, not unswept air that failed the
+    // hidden-space test under an object.
+    for (int y = 0; y < n_; ++y) {
+      for (int x = 0; x < n_; ++x) {
+        for (int z = n_ - 1; z >= 0; --z) {
+          CellKey& c = cells_[Index(x, y, z)];
+          if (c.segment == CellSegment::kObject || c.segment == CellSegment::kTrimmed) continue;
+          if (z + 1 < n_ && cells_[Index(x, y, z + 1)].segment != CellSegment::kObject) continue;
+          if (only_in != nullptr && !only_in->Intersects(ChunkNode{Eigen::Vector3i(x, y, z), k_})) {
+            continue;
+          }
+          const LeafStats* s = c.leaf >= 0 ? &tile->leaves[c.leaf].stats : nullptr;
+          const bool observed = s != nullptr && s->observed();
+          const LeafKey key = base + Eigen::Vector3i(x, y, z);
+          if (!StandsOnTheFloor(key, s != nullptr && s->interior(), observed, points_at(x, y, z))) {
+            continue;
+          }
+          if (z + 1 == n_ && !ObjectOutside(key + LeafKey(0, 0, 1), BandCells())) continue;
+          c.segment = CellSegment::kObject;
+          ++object_cells_;
+          unobserved_object_cells_ += !observed;
+        }
+      }
+    }
   }
 
   void Emit(SegmentedChunk& out) {
@@ -161,6 +190,64 @@ class ChunkSegmenter {
   }
 
  private:
+  // Whether the cell `key` is object only because the cell above it is (the floor band).
+  [[nodiscard]] bool StandsOnTheFloor(const LeafKey& key, bool interior, bool observed,
+                                      bool points) const {
+    const Eigen::Vector3d centre = LeafCenter(index_.hood().grid, key);
+    const double res = index_.hood().grid.resolution_m();
+    return ClassifyCell(plan_, centre, interior, observed, points, res, options_) !=
+               CellSegment::kObject &&
+           ClassifyCell(plan_, centre, interior, observed, points, res, options_, true) ==
+               CellSegment::kObject;
+  }
+
+  // Cells of the band that ClassifyCell's above_is_object can reach: a cell's centre above
+  // the floor and below floor + tolerance + half a cell.
+  [[nodiscard]] int BandCells() const {
+    const double res = index_.hood().grid.resolution_m();
+    const double tol = options_.plan_tolerance_m < 0 ? res : options_.plan_tolerance_m;
+    return static_cast<int>(std::ceil(tol / res + 0.5)) + 1;
+  }
+
+  // Whether `key`, a cell of a neighbouring chunk, is an object as that chunk's segmentation
+  // classifies it (without its second pass's region, which this chunk does not know), looking
+  // up at most `hops` cells of floor band.
+  [[nodiscard]] bool ObjectOutside(const LeafKey& key, int hops) const {
+    if (index_.SlotOf(key) < 0) return false;
+    const TileLeaf* leaf = index_.StoredAt(key);
+    const bool observed = leaf != nullptr && leaf->stats.observed();
+    const bool interior = leaf != nullptr && leaf->stats.interior();
+    const bool points = PointsOutside(key);
+    const OctreeGrid& grid = index_.hood().grid;
+    const Eigen::Vector3d centre = LeafCenter(grid, key);
+    if (ClassifyCell(plan_, centre, interior, observed, points, grid.resolution_m(), options_) ==
+        CellSegment::kObject) {
+      return observed || HiddenBehindSolid(index_, plan_, centre, options_);
+    }
+    return hops > 0 && StandsOnTheFloor(key, interior, observed, points) &&
+           ObjectOutside(key + LeafKey(0, 0, 1), hops - 1);
+  }
+
+  // The point evidence of a neighbouring chunk's cell: its cube's points, each leaf once (a
+  // leaf coarser than the cube counts in full, as in this chunk's own count).
+  [[nodiscard]] bool PointsOutside(const LeafKey& key) const {
+    if (options_.min_points <= 0) return false;
+    const int c0 = 1 << shift_;
+    const LeafKey lo((key.x() >> shift_) << shift_, (key.y() >> shift_) << shift_,
+                     (key.z() >> shift_) << shift_);
+    std::vector<const TileLeaf*> seen;
+    uint64_t points = 0;
+    for (int z = 0; z < c0; ++z)
+      for (int y = 0; y < c0; ++y)
+        for (int x = 0; x < c0; ++x) {
+          const TileLeaf* leaf = index_.StoredAt(lo + LeafKey(x, y, z));
+          if (leaf == nullptr || std::find(seen.begin(), seen.end(), leaf) != seen.end()) continue;
+          seen.push_back(leaf);
+          points += leaf->stats.points;
+        }
+    return points >= static_cast<uint64_t>(options_.min_points);
+  }
+
   [[nodiscard]] size_t Index(int x, int y, int z) const {
     return static_cast<size_t>(x) +
            static_cast<size_t>(n_) * (static_cast<size_t>(y) + static_cast<size_t>(n_) * z);
@@ -206,8 +293,12 @@ class ChunkSegmenter {
     }
   }
 
+  const NeighbourhoodIndex& index_;
+  const PlanVolume& plan_;
+  const SegmentOptions& options_;
   const TileData* tile_;
   int k_, n_;
+  int shift_ = 0;
   std::vector<CellKey> cells_;
   uint64_t object_cells_ = 0, unobserved_object_cells_ = 0, trimmed_cells_ = 0;
 };
@@ -235,8 +326,8 @@ absl::Status SegmentOptions::Validate() const {
 }
 
 CellSegment ClassifyCell(const PlanVolume& plan, const Eigen::Vector3d& centre, bool interior,
-                         bool observed, bool points, double res_m,
-                         const SegmentOptions& options) {
+                         bool observed, bool points, double res_m, const SegmentOptions& options,
+                         bool above_is_object) {
   const PlanColumn col = LookupPlan(plan, centre);
   double wall_margin = 0;
   if (interior) {
@@ -256,7 +347,9 @@ CellSegment ClassifyCell(const PlanVolume& plan, const Eigen::Vector3d& centre, 
   // and ceiling, plus the tolerance.
   const double half = 0.5 * res_m;
   if (col.signed_distance_m < half * std::sqrt(2.0) + tol + wall_margin) return not_object;
-  if (centre.z() - half < col.floor_z + tol || centre.z() + half > col.ceiling_z - tol) {
+  const bool standing = above_is_object && centre.z() > col.floor_z;
+  if ((centre.z() - half < col.floor_z + tol && !standing) ||
+      centre.z() + half > col.ceiling_z - tol) {
     return not_object;
   }
   return CellSegment::kObject;

@@ -110,9 +110,10 @@ TEST_F(SegmentChunkTest, BoxOnTheFloorBecomesObjectAndFreeSpaceForTheBuilding) {
   absl::StatusOr<SegmentedChunk> seg =
       SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, SegmentOptions{});
   ASSERT_TRUE(seg.ok()) << seg.status();
-  // The box's cells are 8 × 8 × 8; its bottom layer touches the plan's floor (§5.6: volume on
-  // the plan's boundary is building), so 8 × 8 × 7 are objects.
-  EXPECT_EQ(seg->object_cells, 8u * 8u * 7u);
+  // The box's cells are 8 × 8 × 8. Its bottom layer lies in the plan's floor band (§5.6:
+  // volume on the plan's boundary is building), but under the box and above the floor: it
+  // stands on the floor, and so is object too.
+  EXPECT_EQ(seg->object_cells, 8u * 8u * 8u);
   EXPECT_EQ(seg->trimmed_cells, 0u);
 
   int twice = 0;
@@ -129,7 +130,7 @@ TEST_F(SegmentChunkTest, BoxOnTheFloorBecomesObjectAndFreeSpaceForTheBuilding) {
         const size_t i = x + static_cast<size_t>(n) * (y + static_cast<size_t>(n) * z);
         const Eigen::Vector3d c = LeafCenter(grid_, Eigen::Vector3i(x, y, z));
         const bool object = c.x() > 0.75 && c.x() < 1.25 && c.y() > 0.75 && c.y() < 1.25 &&
-                            c.z() > 0.3125 && c.z() < 0.75;
+                            c.z() > 0.25 && c.z() < 0.75;
         // Objects tile: interior exactly on the object cells, their p mirrored (0.2 ➜ 0.8);
         // free space mirrored to exterior (0.9 ➜ 0.1); walls unstored.
         EXPECT_EQ(objects[i].interior(), object) << c.transpose();
@@ -150,8 +151,8 @@ TEST_F(SegmentChunkTest, BoxOnTheFloorBecomesObjectAndFreeSpaceForTheBuilding) {
           ++building_changed;
         }
       }
-  EXPECT_EQ(object_interior, 8 * 8 * 7);
-  EXPECT_EQ(building_changed, 8 * 8 * 7);
+  EXPECT_EQ(object_interior, 8 * 8 * 8);
+  EXPECT_EQ(building_changed, 8 * 8 * 8);
 }
 
 // §4.2.3's point voxels: a table whose leg the wedges carved free (p = 0.9) but whose scan
@@ -196,16 +197,15 @@ TEST_F(SegmentChunkTest, ScanPointsKeepALegTheWedgesCarvedAway) {
   absl::StatusOr<SegmentedChunk> seg =
       SegmentAlone(&points, ChunkKey::Zero(), grid_, volume_, two);
   ASSERT_TRUE(seg.ok()) << seg.status();
-  // The leg's 8 cells less the one on the plan's floor (its box within a cell of the floor,
-  // as for solid cells).
-  EXPECT_EQ(seg->object_cells, 8u * 8u + 7u);
+  // The leg's 8 cells, the one in the floor band too: it stands under the leg.
+  EXPECT_EQ(seg->object_cells, 8u * 8u + 8u);
   const std::vector<LeafStats> objects = Cells(seg->objects);
   const int n = grid_.leaves_per_side();
   for (int z = 0; z < n; ++z)
     for (int y = 0; y < n; ++y)
       for (int x = 0; x < n; ++x) {
         const Eigen::Vector3d c = LeafCenter(grid_, Eigen::Vector3i(x, y, z));
-        const bool object = in_top(c) || (in_leg(c) && c.z() > 0.3125);
+        const bool object = in_top(c) || in_leg(c);
         EXPECT_EQ(objects[x + size_t(n) * (y + size_t(n) * z)].interior(), object)
             << c.transpose();
       }
@@ -215,6 +215,80 @@ TEST_F(SegmentChunkTest, ScanPointsKeepALegTheWedgesCarvedAway) {
       SegmentAlone(&points, ChunkKey::Zero(), grid_, volume_, off);
   ASSERT_TRUE(ignored.ok()) << ignored.status();
   EXPECT_EQ(ignored->object_cells, 8u * 8u);
+}
+
+// The floor band under a standing object is object only where the object is above it: carved
+// space under a table top stays free, and unswept air under an object above the band is not
+// filled down to the floor.
+TEST_F(SegmentChunkTest, TheFloorBandIsObjectOnlyUnderAnObject) {
+  // A table top [0.75, 1.25]² × [0.75, 0.8125] over carved space, and beside it a box seen
+  // only from above: x ∈ [1.375, 1.625], y ∈ [0.75, 1.25], solid over z ∈ [0.5, 0.75),
+  // unobserved below it down to the floor.
+  const TileData tile = FinestTile(grid_, [](const Eigen::Vector3d& c) {
+    const bool in_room =
+        Inside(c, Eigen::Vector3d::Constant(0.25), Eigen::Vector3d::Constant(1.75));
+    const bool in_top = Inside(c, {0.75, 0.75, 0.75}, {1.25, 1.25, 0.8125});
+    const bool in_box = Inside(c, {1.375, 0.75, 0.5}, {1.625, 1.25, 0.75});
+    const bool under_box = Inside(c, {1.375, 0.75, 0.25}, {1.625, 1.25, 0.5});
+    if (in_room && under_box) return -1.0;
+    return in_room && !in_top && !in_box ? 0.9 : 0.2;
+  });
+  absl::StatusOr<SegmentedChunk> seg =
+      SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, SegmentOptions{});
+  ASSERT_TRUE(seg.ok()) << seg.status();
+  // The top, and the box's 4 × 8 × 4 solid cells: the unswept air under the box has free space
+  // on both sides along the walls' normal, so the hidden-space test leaves it building, and the
+  // floor band under it has no object above.
+  EXPECT_EQ(seg->object_cells, 8u * 8u + 4u * 8u * 4u);
+  EXPECT_EQ(seg->unobserved_object_cells, 0u);
+}
+
+// A floor a cell below a chunk's top: the band's lower cell is in this chunk, its upper one and
+// the object over both in the chunk above, whose tile the segmentation reads across the border.
+TEST_F(SegmentChunkTest, TheFloorBandReachesAcrossTheChunkAbove) {
+  // One room [0.25, 1.75]² with floor 1.95 and ceiling 3.5, and a solid box
+  // [0.75, 1.25]² × [1.95, 2.5] standing on it: the band holds the cells centred at 1.96875
+  // (chunk 0's top layer) and 2.03125 (chunk 1's bottom layer).
+  const FloorPlan plan = RectanglePlan({{{0.25, 0.25}, {1.75, 1.75}, 1.95, 3.5}});
+  const PlanLevelInput in{&plan, 0, 1.0, 4.0};
+  const PlanVolume volume = *RasterizePlanVolume({&in, 1}, grid_.resolution_m(), 1.5);
+  auto p_at = [&](const LeafKey& cell) {
+    const Eigen::Vector3d c = LeafCenter(grid_, cell);
+    const bool in_room = Inside(c, {0.25, 0.25, 1.95}, {1.75, 1.75, 3.5});
+    const bool in_box = Inside(c, {0.75, 0.75, 1.9}, {1.25, 1.25, 2.5});
+    return in_room && !in_box ? 0.9 : 0.2;
+  };
+  const TileData lower = testing::FinestTileOfChunk(grid_, ChunkKey::Zero(), p_at);
+  const TileData upper = testing::FinestTileOfChunk(grid_, ChunkKey(0, 0, 1), p_at);
+  absl::StatusOr<SegmentedChunk> alone =
+      SegmentAlone(&lower, ChunkKey::Zero(), grid_, volume, SegmentOptions{});
+  ASSERT_TRUE(alone.ok()) << alone.status();
+  EXPECT_EQ(alone->object_cells, 0u);  // nothing above: the chunk above is unknown
+  ChunkNeighbourhood hood;
+  hood.grid = grid_;
+  hood.tiles[ChunkNeighbourhood::Index(0, 0, 0)] = &lower;
+  hood.tiles[ChunkNeighbourhood::Index(0, 0, 1)] = &upper;
+  absl::StatusOr<SegmentedChunk> seg = SegmentChunk(hood, volume, SegmentOptions{});
+  ASSERT_TRUE(seg.ok()) << seg.status();
+  EXPECT_EQ(seg->object_cells, 8u * 8u);  // the band's lower cell under the box
+  const std::vector<LeafStats> objects = Cells(seg->objects);
+  const int n = grid_.leaves_per_side();
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      const Eigen::Vector3d c = LeafCenter(grid_, Eigen::Vector3i(x, y, n - 1));
+      EXPECT_EQ(objects[x + size_t(n) * (y + size_t(n) * (n - 1))].interior(),
+                Inside(c, {0.75, 0.75, 1.9}, {1.25, 1.25, 2.5}))
+          << c.transpose();
+    }
+  // And the chunk above, with this one below it: its band cell and the box.
+  ChunkNeighbourhood above;
+  above.grid = grid_;
+  above.chunk = ChunkKey(0, 0, 1);
+  above.tiles[ChunkNeighbourhood::Index(0, 0, 0)] = &upper;
+  above.tiles[ChunkNeighbourhood::Index(0, 0, -1)] = &lower;
+  absl::StatusOr<SegmentedChunk> top = SegmentChunk(above, volume, SegmentOptions{});
+  ASSERT_TRUE(top.ok()) << top.status();
+  EXPECT_EQ(top->object_cells, 8u * 8u * 8u);  // z from 2.0 to 2.5
 }
 
 // A wall's points lie in the free layer in front of it: point cells keep point_wall_margin_m
@@ -331,7 +405,7 @@ TEST_F(SegmentChunkTest, RecarveRegionCoversTheObjectDownToTheFloor) {
   absl::StatusOr<SegmentedChunk> limited =
       SegmentAlone(&box, ChunkKey::Zero(), grid_, volume_, SegmentOptions{}, &half);
   ASSERT_TRUE(limited.ok()) << limited.status();
-  EXPECT_EQ(limited->object_cells, 8u * 8u * 3u);  // z cells 5, 6, 7 of the box's 5..11
+  EXPECT_EQ(limited->object_cells, 8u * 8u * 4u);  // z cells 4..7 of the box's 4..11
   const ChunkRegion nothing;
   limited = SegmentAlone(&box, ChunkKey::Zero(), grid_, volume_, SegmentOptions{}, &nothing);
   ASSERT_TRUE(limited.ok()) << limited.status();
@@ -376,15 +450,18 @@ TEST_F(SegmentChunkTest, LeavesSplitOnlyWhereTheClassChanges) {
   absl::StatusOr<SegmentedChunk> seg =
       SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, SegmentOptions{});
   ASSERT_TRUE(seg.ok()) << seg.status();
-  uint64_t expected = 0;  // counted with the rule itself
+  uint64_t expected = 0;  // counted with the rule itself, top down for the floor band
   const int n = grid_.leaves_per_side();
-  for (int z = 0; z < n; ++z)
-    for (int y = 0; y < n; ++y)
-      for (int x = 0; x < n; ++x) {
-        expected += ClassifyCell(volume_, LeafCenter(grid_, Eigen::Vector3i(x, y, z)), false,
-                                 true, false, grid_.resolution_m(),
-                                 SegmentOptions{}) == CellSegment::kObject;
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      bool above = false;
+      for (int z = n - 1; z >= 0; --z) {
+        above =
+            ClassifyCell(volume_, LeafCenter(grid_, Eigen::Vector3i(x, y, z)), false, true, false,
+                         grid_.resolution_m(), SegmentOptions{}, above) == CellSegment::kObject;
+        expected += above;
       }
+    }
   EXPECT_GT(expected, 1000u);
   EXPECT_EQ(seg->object_cells, expected);
   EXPECT_EQ(seg->unobserved_object_cells, 0u);
@@ -430,14 +507,14 @@ TEST_F(SegmentChunkTest, UnobservedSpaceIsObjectOnlyWhenHiddenBehindSolid) {
         else ++hidden;
       }
   EXPECT_EQ(air, 0);
-  // The front: x cells 8..23 (16), z cells above the floor band, 5..19 (15).
-  EXPECT_EQ(front, 16 * 2 * 15);
+  // The front: x cells 8..23 (16), z cells 4..19 (16; the floor band's cell under it too).
+  EXPECT_EQ(front, 16 * 2 * 16);
   // Behind it, down to the wall band (y cells 6..11 of 4..11: the two nearest the wall are
-  // building): 16 × 6 × 15, less those near the shelf's west end that are nearer the west wall
+  // building): 16 × 6 × 16, less those near the shelf's west end that are nearer the west wall
   // than the south one: their line of sight runs along x, through the hidden space to free
   // space past the shelf's east end (the rule's known blind spot in corners).
-  EXPECT_LE(hidden, 16 * 6 * 15);
-  EXPECT_GT(hidden, 0.75 * 16 * 6 * 15);
+  EXPECT_LE(hidden, 16 * 6 * 16);
+  EXPECT_GT(hidden, 0.75 * 16 * 6 * 16);
   EXPECT_EQ(seg->unobserved_object_cells, static_cast<uint64_t>(hidden));
   // Without the fill, unobserved space is never object.
   SegmentOptions no_fill;
@@ -445,7 +522,7 @@ TEST_F(SegmentChunkTest, UnobservedSpaceIsObjectOnlyWhenHiddenBehindSolid) {
   seg = SegmentAlone(&tile, ChunkKey::Zero(), grid_, volume_, no_fill);
   ASSERT_TRUE(seg.ok());
   EXPECT_EQ(seg->unobserved_object_cells, 0u);
-  EXPECT_EQ(seg->object_cells, 16u * 2u * 15u);
+  EXPECT_EQ(seg->object_cells, 16u * 2u * 16u);
 }
 
 TEST_F(SegmentChunkTest, InteriorFarOutsideThePlanIsTrimmed) {
