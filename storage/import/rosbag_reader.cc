@@ -276,6 +276,13 @@ absl::StatusOr<RosLaserScan> DecodeLaserScan(std::span<const uint8_t> data, RosE
                    &s.range_min, &s.range_max}) {
     if (!c.Read(*f)) return Short(kWhat, "angles and ranges limits");
   }
+  // Each return's bearing is angle_min + i · angle_increment: without both finite no return
+  // has a direction.
+  if (!std::isfinite(s.angle_min) || !std::isfinite(s.angle_increment)) {
+    return absl::InvalidArgumentError(absl::StrCat(kWhat, ": angle_min ", s.angle_min,
+                                                   " or angle_increment ", s.angle_increment,
+                                                   " is not finite"));
+  }
   uint32_t n = 0;
   std::span<const uint8_t> bytes;
   if (!c.Read(n) || !c.Bytes(uint64_t{n} * 4, bytes)) return Short(kWhat, "ranges");

@@ -144,6 +144,13 @@ TEST(RosbagReaderTest, LaserScansMustBeWhole) {
   longer.push_back(0);
   EXPECT_NE(DecodeLaserScan(longer).status().message().find("1 bytes left over"),
             std::string::npos);
+  // Without a finite first bearing and step no return has a direction.
+  for (float RosLaserScan::*field : {&RosLaserScan::angle_min, &RosLaserScan::angle_increment}) {
+    RosLaserScan bad = Scan(5.0, {1, 2});
+    bad.*field = std::nanf("");
+    absl::StatusOr<RosLaserScan> s = DecodeLaserScan(testing::SerializeLaserScan(bad));
+    EXPECT_NE(s.status().message().find("is not finite"), std::string::npos) << s.status();
+  }
 }
 
 TEST(RosbagReaderTest, CloudsReadXyzWhereverTheFieldsSit) {
