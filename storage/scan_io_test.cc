@@ -390,6 +390,21 @@ TEST(ScanReaderTest, PathAroundFramesGivesTheSamePoses) {
     const PathRecord& r = (*whole)->path()[i];
     EXPECT_EQ((*positions)[i], Eigen::Vector3d(r.x, r.y, r.z)) << i;
   }
+  // So is the horizontal position error: the RMS of √((xx + yy) / 2) over every pose.
+  double sum = 0;
+  for (const PathCovariance& c : *(*whole)->path_covariance()) sum += 0.5 * (double(c[0]) + c[3]);
+  absl::StatusOr<std::optional<double>> sigma = (*none)->HorizontalPositionSigma();
+  ASSERT_TRUE(sigma.ok()) << sigma.status();
+  ASSERT_TRUE(sigma->has_value());
+  EXPECT_GT(**sigma, 0);
+  EXPECT_NEAR(**sigma, std::sqrt(sum / (*whole)->path_covariance()->size()), 1e-9);
+  const std::string bare = TempPath("bare.h5");
+  WriteScan(bare, false, false);
+  auto without = ScanReader::Open(bare);
+  ASSERT_TRUE(without.ok()) << without.status();
+  sigma = (*without)->HorizontalPositionSigma();
+  ASSERT_TRUE(sigma.ok()) << sigma.status();
+  EXPECT_FALSE(sigma->has_value());
 }
 
 TEST(ScanWriterTest, NoFileWhenNotClosed) {

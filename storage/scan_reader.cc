@@ -155,6 +155,9 @@ struct ScanReader::Impl {
   absl::Status ForEachPathBlock(
       const std::function<absl::Status(uint64_t, std::span<const PathRecord>)>& fn) const;
   absl::Status ValidatePath() const;
+  // The same on /path_cov (when the scan has one), in the file's frame.
+  absl::Status ForEachPathCovBlock(
+      const std::function<absl::Status(uint64_t, std::span<const PathCovariance>)>& fn) const;
   absl::Status ValidatePathCov() const;
   absl::Status ValidateMagnetometer() const;
   absl::Status ValidateFrames(const SensorData& s, size_t block_rows) const;
@@ -816,11 +819,10 @@ absl::Status ScanReader::Impl::ValidatePath() const {
   });
 }
 
-absl::Status ScanReader::Impl::ValidatePathCov() const {
-  if (!has_path_cov) return absl::OkStatus();
+absl::Status ScanReader::Impl::ForEachPathCovBlock(
+    const std::function<absl::Status(uint64_t, std::span<const PathCovariance>)>& fn) const {
   auto dataset = OpenDataset("/path_cov");
   if (!dataset.ok()) return dataset.status();
-  constexpr std::array<int, 6> kDiagonal = {0, 3, 5, 6, 9, 11};  // xx yy zz of both blocks
   std::vector<PathCovariance> block;
   for (uint64_t first = 0; first < path_rows; first += block.size()) {
     block.resize(std::min(kPathBlockRows, path_rows - first));
@@ -829,6 +831,26 @@ absl::Status ScanReader::Impl::ValidatePathCov() const {
         !s.ok()) {
       return h5::Prefixed(absl::StrCat(file, ": /path_cov"), s);
     }
+    if (absl::Status s = fn(first, block); !s.ok()) return s;
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::optional<double>> ScanReader::HorizontalPositionSigma() {
+  if (!impl_->has_path_cov || impl_->path_rows == 0) return std::nullopt;
+  double sum = 0;  // of (xx + yy) / 2, which a turn about the vertical keeps
+  absl::Status s = impl_->ForEachPathCovBlock([&](uint64_t, std::span<const PathCovariance> block) {
+    for (const PathCovariance& c : block) sum += 0.5 * (double(c[0]) + double(c[3]));
+    return absl::OkStatus();
+  });
+  if (!s.ok()) return s;
+  return std::sqrt(std::max(0.0, sum / static_cast<double>(impl_->path_rows)));
+}
+
+absl::Status ScanReader::Impl::ValidatePathCov() const {
+  if (!has_path_cov) return absl::OkStatus();
+  constexpr std::array<int, 6> kDiagonal = {0, 3, 5, 6, 9, 11};  // xx yy zz of both blocks
+  return ForEachPathCovBlock([&](uint64_t first, std::span<const PathCovariance> block) {
     for (size_t k = 0; k < block.size(); ++k) {
       const uint64_t i = first + k;
       const PathCovariance& c = block[k];
@@ -842,8 +864,8 @@ absl::Status ScanReader::Impl::ValidatePathCov() const {
         }
       }
     }
-  }
-  return absl::OkStatus();
+    return absl::OkStatus();
+  });
 }
 
 absl::Status ScanReader::Impl::ValidateMagnetometer() const {

@@ -96,6 +96,10 @@ class ScanReader {
   // Every pose's position (/path x, y, z), read in blocks whatever Open kept of the path: 24
   // bytes per pose where the whole path is ~190.
   absl::StatusOr<std::vector<Eigen::Vector3d>> PathPositions();
+  // How far the path's positions may be off horizontally, m: the root mean square over the
+  // poses of √((xx + yy) / 2) of /path_cov, read in blocks whatever Open kept; nullopt when the
+  // scan has no /path_cov.
+  absl::StatusOr<std::optional<double>> HorizontalPositionSigma();
   // The magnetometer readings taken into the world frame through the pose at their times
   // (§2.3: R(t)·m, readings in the system frame), world_yaw_rad applied; the path read in
   // blocks whatever Open kept. Readings outside the path's time span are left out. Empty

@@ -131,6 +131,17 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string
   return (*reader)->PathPositions();
 }
 
+// How far the scan's path may be off horizontally (ScanReader::HorizontalPositionSigma), m;
+// nullopt without /path_cov. Under the process's HDF5 lock, as ReadPathPositions.
+absl::StatusOr<std::optional<double>> ReadPathSigma(const std::string& scan_path) {
+  std::lock_guard<std::mutex> lock(Hdf5Lock());
+  ScanReader::OpenOptions open;
+  open.path_rows = ScanReader::PathRows::kNone;
+  absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan_path, open);
+  if (!reader.ok()) return reader.status();
+  return (*reader)->HorizontalPositionSigma();
+}
+
 // Before a planar fit, which reads no tile: the cached tiles, and the small blocks the last fit
 // freed (millions of them, resident until given back), go back to the system.
 void ClearForFit(TileSet& tiles) {
@@ -715,8 +726,18 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
     absl::StatusOr<std::unique_ptr<TileSet>> otiles =
         TileSet::Open(source.dir, source.resolution_m, options.cache_budget_bytes);
     if (!otiles.ok()) return otiles.status();
+    // Specks within 3 σ of the path's horizontal error of a wall are the wall's smear
+    // (ObjectSplitOptions::wall_smear_m): 3 σ holds 99.7 % of a normal error along the wall's
+    // normal.
+    ObjectSplitOptions split = SplitOptionsFor(options, grid);
+    if (!options.scan_path.empty()) {
+      absl::StatusOr<std::optional<double>> sigma = ReadPathSigma(options.scan_path);
+      if (!sigma.ok()) return sigma.status();
+      if (sigma->has_value()) split.wall_smear_m = 3 * **sigma;
+    }
+    counts["object_wall_smear_m"] = split.wall_smear_m;
     ObjectSplitter splitter(
-        source.finer_volume ? *source.finer_volume : *volume, SplitOptionsFor(options, grid),
+        source.finer_volume ? *source.finer_volume : *volume, split,
         [&pieces](uint64_t key, const TriangleMesh& mesh) { return (*pieces)->Add(key, mesh); });
     DenseMeshSink sink;
     sink.vertices = [&splitter](std::span<const Eigen::Vector3f> v) {
@@ -796,6 +817,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   counts["objects_dropped_ceiling"] = layout.report.dropped_ceiling;
   counts["objects_grouped"] = layout.report.grouped;
   counts["object_specks_unmeshed"] = layout.report.specks_unmeshed;
+  counts["object_specks_off_walls"] = layout.report.specks_off_walls;
   timings["merge.object_mesh"] = SecondsSince(t0);
   result.objects = layout.objects.size();
   return result;

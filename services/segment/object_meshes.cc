@@ -24,6 +24,20 @@ bool TooSmall(const SegmentedObject& o, const ObjectSplitOptions& options) {
   return Speck(o, options) || o.volume_m3 < options.min_volume_m3;
 }
 
+// Whether every corner of the footprint (xy box) of `box` lies within `band` of the plan's
+// walls (ObjectSplitOptions::wall_smear_m), or outside the plan.
+bool AlongAWall(const Eigen::AlignedBox3d& box, const PlanVolume& plan, double band) {
+  if (!(band > 0)) return false;
+  for (double x : {box.min().x(), box.max().x()}) {
+    for (double y : {box.min().y(), box.max().y()}) {
+      if (LookupPlan(plan, Eigen::Vector3d(x, y, box.center().z())).signed_distance_m > band) {
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
 // The share of the smaller footprint (xy box) that the two footprints share.
 double FootprintOverlap(const Eigen::AlignedBox3d& a, const Eigen::AlignedBox3d& b) {
   const Eigen::AlignedBox2d fa(a.min().head<2>(), a.max().head<2>());
@@ -110,15 +124,24 @@ Groups GroupStacked(std::vector<SegmentedObject> pieces, const PlanVolume& plan,
   }
   // A speck joins the one object it overlaps most, so specks never link two objects (a desk
   // and the chair beside it share specks in the gap between them). Ties go to the first piece.
+  // A speck along a wall (wall_smear_m) does not join one below it.
   for (int i = 0; i < n; ++i) {
     if (!small[i]) continue;
     int best = -1;
     double best_overlap = 0;
+    bool held_off = false;
+    const bool along_a_wall = AlongAWall(pieces[i].box, plan, options.wall_smear_m);
     footprints.Candidates(pieces[i].box, pieces[i].level, near);
     for (int j : near) {
-      if (const double o = stacked(i, j); o > best_overlap) best = j, best_overlap = o;
+      const double o = stacked(i, j);
+      if (o > 0 && along_a_wall && pieces[i].box.min().z() > pieces[j].box.max().z()) {
+        held_off = true;
+        continue;
+      }
+      if (o > best_overlap) best = j, best_overlap = o;
     }
     if (best >= 0) groups.Union(i, best);
+    rep.specks_off_walls += held_off;
   }
   Groups grouped;
   std::vector<int> group_of(n, -1);

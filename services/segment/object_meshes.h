@@ -61,6 +61,13 @@ struct ObjectSplitOptions {
   // component).
   double stack_gap_m = 0.5;
   double stack_overlap = 0.5;
+  // Under localization drift a wall's scan points land up to a few σ of the path's position
+  // error inside the room, and §5.6 makes the cells they fill objects: mostly specks, which
+  // stacked over the desks and cabinets standing against the wall and took their boxes up to
+  // 1.8 m too tall (docs/BENCHMARKS.md). A speck whose footprint lies within this of the plan's
+  // walls (every corner) does not join an object below it, m; the merge sets 3 σ of the scan's
+  // /path_cov. 0 = off.
+  double wall_smear_m = 0;
 };
 
 struct SegmentedObject {
@@ -79,6 +86,7 @@ struct ObjectSplitReport {
   uint64_t dropped_cavities = 0;  // inner surfaces of hollow objects (negative volume)
   uint64_t grouped = 0;  // pieces joined to a piece stacked over or under them
   uint64_t specks_unmeshed = 0;  // specks in a kept object's box, not in its mesh
+  uint64_t specks_off_walls = 0;  // specks held off an object below them (wall_smear_m)
 };
 
 // The objects of a building, found as its object mesh streams past (StreamDenseMesh's order:

@@ -146,6 +146,32 @@ TEST_F(ObjectMeshesTest, PiecesStackWhereverTheirFootprintsMeet) {
   EXPECT_TRUE(CheckMesh(objects[0].mesh).watertight());
 }
 
+// Under drift a wall's points fill specks along it inside the room: with wall_smear_m they
+// no longer join the desk standing against the wall below them, and are dropped; a speck
+// farther from the wall, and one under the desk, still join it.
+TEST_F(ObjectMeshesTest, SpecksAlongAWallDoNotStackOnTheObjectBelow) {
+  TriangleMesh all;
+  all.Append(InwardBox({1.0f, 0.05f, 0.0f}, {2.4f, 0.75f, 0.75f}));  // a desk against y = 0
+  all.Append(InwardBox({1.5f, 0.1f, 1.2f}, {1.53f, 0.13f, 1.23f}));  // wall smear over it
+  all.Append(InwardBox({2.0f, 0.5f, 1.1f}, {2.03f, 0.53f, 1.13f}));  // 0.53 m from the wall
+  all.Append(InwardBox({1.2f, 0.1f, 0.0f}, {1.23f, 0.13f, 0.03f}));  // under its top's edge
+  ObjectSplitOptions options;
+  ObjectSplitReport plain;
+  std::vector<SegmentedObject> objects = SplitObjects(all, volume_, options, &plain);
+  ASSERT_EQ(objects.size(), 1u);
+  EXPECT_NEAR(objects[0].box.max().z(), 1.23, 1e-6);  // the smear took the desk up
+  EXPECT_EQ(plain.specks_off_walls, 0u);
+  options.wall_smear_m = 0.3;
+  ObjectSplitReport report;
+  objects = SplitObjects(all, volume_, options, &report);
+  ASSERT_EQ(objects.size(), 1u);
+  EXPECT_TRUE(objects[0].box.isApprox(
+      Eigen::AlignedBox3d(Eigen::Vector3d(1.0, 0.05, 0), Eigen::Vector3d(2.4, 0.75, 1.13)), 1e-6));
+  EXPECT_EQ(report.specks_off_walls, 1u);
+  EXPECT_EQ(report.grouped, 2u);
+  EXPECT_EQ(report.dropped_small, 1u);  // the smear, left alone
+}
+
 // The mesh as StreamDenseMesh gives it, a chunk column at a time (columns 1 m wide here, by
 // each triangle's lowest x): pieces are finished as the stream passes them, and the objects
 // are those of the whole mesh, meshes and all.
