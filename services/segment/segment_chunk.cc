@@ -83,8 +83,8 @@ class ChunkSegmenter {
     const double res = grid.resolution_m();
     cells_.assign(static_cast<size_t>(n_) * n_ * n_, CellKey{});
     // §4.2.3 point evidence: points per cube of 2^shift cells a side.
-    int& shift = shift_;
-    while (shift < k_ && (res * (2 << shift)) <= options.point_cell_m * (1 + 1e-9)) ++shift;
+    const int& shift = shift_;
+    while (shift_ < k_ && (res * (2 << shift_)) <= options.point_cell_m * (1 + 1e-9)) ++shift_;
     const int nc = n_ >> shift;
     auto cube = [&](int x, int y, int z) {
       return size_t(x >> shift) +
@@ -136,13 +136,8 @@ class ChunkSegmenter {
           }
           const LeafStats* s = c.leaf >= 0 ? &tile->leaves[c.leaf].stats : nullptr;
           const bool observed = s != nullptr && s->observed();
-          const Eigen::Vector3d centre = LeafCenter(grid, base + Eigen::Vector3i(x, y, z));
-          c.segment = ClassifyCell(plan, centre, s != nullptr && s->interior(), observed,
-                                   points_at(x, y, z), res, options);
-          if (c.segment == CellSegment::kObject && !observed &&
-              !HiddenBehindSolid(index, plan, centre, options)) {
-            c.segment = CellSegment::kBuilding;
-          }
+          c.segment = Segment(base + Eigen::Vector3i(x, y, z), s != nullptr && s->interior(),
+                              observed, points_at(x, y, z));
           if (c.segment == CellSegment::kObject) {
             ++object_cells_;
             unobserved_object_cells_ += !observed;
@@ -190,6 +185,20 @@ class ChunkSegmenter {
   }
 
  private:
+  // The class of the cell `key` (this chunk's or a neighbour's) from the plan, with the
+  // hidden-space test for unobserved object cells; the floor band aside.
+  [[nodiscard]] CellSegment Segment(const LeafKey& key, bool interior, bool observed,
+                                    bool points) const {
+    const Eigen::Vector3d centre = LeafCenter(index_.hood().grid, key);
+    const CellSegment segment = ClassifyCell(plan_, centre, interior, observed, points,
+                                             index_.hood().grid.resolution_m(), options_);
+    if (segment == CellSegment::kObject && !observed &&
+        !HiddenBehindSolid(index_, plan_, centre, options_)) {
+      return CellSegment::kBuilding;
+    }
+    return segment;
+  }
+
   // Whether the cell `key` is object only because the cell above it is (the floor band).
   [[nodiscard]] bool StandsOnTheFloor(const LeafKey& key, bool interior, bool observed,
                                       bool points) const {
@@ -218,12 +227,8 @@ class ChunkSegmenter {
     const bool observed = leaf != nullptr && leaf->stats.observed();
     const bool interior = leaf != nullptr && leaf->stats.interior();
     const bool points = PointsOutside(key);
-    const OctreeGrid& grid = index_.hood().grid;
-    const Eigen::Vector3d centre = LeafCenter(grid, key);
-    if (ClassifyCell(plan_, centre, interior, observed, points, grid.resolution_m(), options_) ==
-        CellSegment::kObject) {
-      return observed || HiddenBehindSolid(index_, plan_, centre, options_);
-    }
+    const CellSegment segment = Segment(key, interior, observed, points);
+    if (segment == CellSegment::kObject) return true;
     return hops > 0 && StandsOnTheFloor(key, interior, observed, points) &&
            ObjectOutside(key + LeafKey(0, 0, 1), hops - 1);
   }
