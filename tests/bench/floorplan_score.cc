@@ -1,12 +1,12 @@
 // Scores a floor plan the 3D route wrote (OUT/level_<k>/floorplan.geojson, docs/DESIGN.md §7)
 // against a real map's ground-truth rooms (tests/data/floormaps/*_gt_segmentation.png,
 // SOURCES.md), with the same metrics as the 2D route's evaluation
-// (services/floorplan/eval/room_scoring.h: room F1 at IoU > 0.5, one-to-one; Bormann et al.'s overlap
-// recall / precision). Used by tests/bench/floorplan_3d_eval.sh.
+// (services/floorplan/eval/room_scoring.h: room F1 at IoU > 0.5, one-to-one; Bormann et al.'s
+// overlap recall / precision). Used by tests/bench/floorplan_3d_eval.sh.
 //
 //   floorplan_score --geojson OUT/level_0/floorplan.geojson --gt MAP_gt_segmentation.png
 //                   [--resolution 0.05] [--origin-x 0] [--origin-y 0]
-//                   [--affine a11,a12,b1,a21,a22,b2] [--entered-scan SCAN.h5]
+//                   [--affine a11,a12,b1,a21,a22,b2] [--entered-scan SCAN.h5] [--rooms]
 //
 // Frames: `carvemap simulate --floormap` extrudes pixel (row, col) of an H-row map to
 // x = col·res, y = (H−1−row)·res (docs/DESIGN.md §4, lower-left origin), the frame
@@ -14,18 +14,21 @@
 // scan, so a map simulated with defaults needs no offset.
 //
 // --affine maps the plan (and the scan's path) into the map's frame first: [x_map, y_map] =
-// A·[x, y] + b, the 2×3 matrix [A | b] row by row (a real log's frame is not the map's;
-// /work/shared/data/carmen/registration.json). --entered-scan scores against the truth rooms
-// its /path enters only (room_scoring.h KeepEnteredRooms): a survey that skipped rooms is judged
-// on the rooms it could know.
+// A·[x, y] + b, the 2×3 matrix [A | b] row by row (a real log's frame is not the map's: the
+// registration the CARMEN logs come with, tests/data/SOURCES.md). --entered-scan scores against the
+// truth rooms its /path enters only (room_scoring.h KeepEnteredRooms): a survey that skipped rooms
+// is judged on the rooms it could know.
 //
 // Prints one line of key=value pairs (truth_rooms, predicted_rooms, matched, precision, recall,
 // f1, bormann_recall, bormann_precision, plan_rooms = room features in the file,
-// all_truth_rooms = the map's rooms before --entered-scan).
+// all_truth_rooms = the map's rooms before --entered-scan); with --rooms, then one line per scored
+// truth room (room_scoring.h TruthRoomScore), to see which rooms a plan misses and by how much.
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -178,6 +181,10 @@ int Main(int argc, char** argv) {
   app.add_option("--entered-scan", entered_scan,
                  "Score only the truth rooms this scan.h5's /path enters")
       ->check(CLI::ExistingFile);
+  bool per_room = false;
+  app.add_flag("--rooms", per_room,
+               "Also list each scored truth room: its centre and area in the map's frame, and "
+               "the predicted room of highest IoU with it");
   CLI11_PARSE(app, argc, argv);
 
   absl::StatusOr<Image<uint8_t>> gt = ReadPngGray8(gt_path);
@@ -234,6 +241,28 @@ int Main(int argc, char** argv) {
       "bormann_recall=%.3f bormann_precision=%.3f plan_rooms=%zu all_truth_rooms=%d\n",
       s->truth_rooms, s->predicted_rooms, s->matched, s->precision, s->recall, s->f1,
       s->bormann_recall, s->bormann_precision, rooms->size(), all_truth_rooms);
+  if (per_room) {
+    // Centres in the map's frame (pixel centres as in RasterizeFloorPlan).
+    std::map<int32_t, Eigen::Vector3d> sums;  // x, y, pixels
+    for (int row = 0; row < truth.height; ++row) {
+      for (int col = 0; col < truth.width; ++col) {
+        const int32_t t = truth.labels[size_t(row) * truth.width + col];
+        if (t >= 0) {
+          sums[t] +=
+              Eigen::Vector3d(ox + (col + 0.5) * res, oy + (truth.height - 1 - row + 0.5) * res, 1);
+        }
+      }
+    }
+    const double px_m2 = res * res;
+    for (const TruthRoomScore& r : s->per_truth) {
+      const Eigen::Vector3d& c = sums[r.label];
+      std::printf(
+          "truth_room=%d centre=%.2f,%.2f area_m2=%.1f best_predicted=%d iou=%.3f "
+          "predicted_area_m2=%.1f%s\n",
+          r.label, c.x() / c.z(), c.y() / c.z(), double(r.pixels) * px_m2, r.best_predicted,
+          r.best_iou, double(r.best_predicted_pixels) * px_m2, r.best_iou > 0.5 ? " matched" : "");
+    }
+  }
   return 0;
 }
 

@@ -166,6 +166,8 @@ absl::StatusOr<RoomScores> ScoreRooms(const LabelImage& truth, const LabelImage&
   for (const auto& [t, a] : truth_area) best_t[t] = 0;
   for (const auto& [p, a] : pred_area) best_p[p] = 0;
   std::map<int32_t, bool> matched_t;
+  std::map<int32_t, TruthRoomScore> per_truth;
+  for (const auto& [t, a] : truth_area) per_truth[t] = TruthRoomScore{.label = t, .pixels = a};
   for (const auto& [key, o] : overlap) {
     const int32_t t = static_cast<int32_t>(key >> 32);
     const int32_t p = static_cast<int32_t>(key & 0xffffffffu);
@@ -176,6 +178,14 @@ absl::StatusOr<RoomScores> ScoreRooms(const LabelImage& truth, const LabelImage&
     // one without any assignment step.
     const int64_t uni = truth_area[t] + pred_area[p] - o;
     if (2 * o > uni) matched_t[t] = true;
+    TruthRoomScore& r = per_truth[t];
+    const double iou = double(o) / double(uni);
+    // Ties go to the lower predicted label, so the listing does not follow the hash order.
+    if (iou > r.best_iou || (iou == r.best_iou && r.best_predicted >= 0 && p < r.best_predicted)) {
+      r.best_iou = iou;
+      r.best_predicted = p;
+      r.best_predicted_pixels = pred_area[p];
+    }
   }
   RoomScores s;
   s.truth_rooms = static_cast<int>(truth_area.size());
@@ -192,6 +202,7 @@ absl::StatusOr<RoomScores> ScoreRooms(const LabelImage& truth, const LabelImage&
   sum = 0;
   for (const auto& [p, o] : best_p) sum += double(o) / pred_area[p];
   if (!best_p.empty()) s.bormann_precision = sum / best_p.size();
+  for (auto& [t, r] : per_truth) s.per_truth.push_back(r);
   return s;
 }
 

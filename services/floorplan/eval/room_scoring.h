@@ -52,10 +52,21 @@ struct LabelImage {
                                             double resolution_m, double origin_x_m,
                                             double origin_y_m);
 
+// One truth room's best match: what a failed match was short of (a room cut in two, merged
+// with its neighbour, or partly unseen all show here before they show in the F1).
+struct TruthRoomScore {
+  int32_t label = 0;
+  int64_t pixels = 0;                 // its area in the scoring domain
+  int32_t best_predicted = -1;        // the predicted room of highest IoU with it; −1 none
+  double best_iou = 0;                // IoU with that room, in the scoring domain
+  int64_t best_predicted_pixels = 0;  // that room's area in the domain
+};
+
 struct RoomScores {
   int truth_rooms = 0, predicted_rooms = 0, matched = 0;
   double precision = 0, recall = 0, f1 = 0;
   double bormann_recall = 0, bormann_precision = 0;
+  std::vector<TruthRoomScore> per_truth;  // in label order
 };
 
 // Scoring domain: the pixels inside some truth room (truth label ≥ 0). Predicted pixels outside

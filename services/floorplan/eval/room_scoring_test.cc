@@ -66,6 +66,15 @@ TEST(RoomScoringTest, SplitRoomIsUnmatched) {
   EXPECT_DOUBLE_EQ(s->f1, 0.4);
   EXPECT_DOUBLE_EQ(s->bormann_recall, (25.0 / 50 + 1.0) / 2);
   EXPECT_DOUBLE_EQ(s->bormann_precision, 1.0);
+  // Per truth room: A's best is one of its halves (the lower label of the tie), B's is exact.
+  ASSERT_EQ(s->per_truth.size(), 2u);
+  EXPECT_EQ(s->per_truth[0].label, 0);
+  EXPECT_EQ(s->per_truth[0].pixels, 50);
+  EXPECT_EQ(s->per_truth[0].best_predicted, 10);
+  EXPECT_DOUBLE_EQ(s->per_truth[0].best_iou, 0.5);
+  EXPECT_EQ(s->per_truth[0].best_predicted_pixels, 25);
+  EXPECT_EQ(s->per_truth[1].best_predicted, 12);
+  EXPECT_DOUBLE_EQ(s->per_truth[1].best_iou, 1.0);
 
   // One more pixel of A in room 10 (26 of 50, IoU 0.52 > 0.5): matched.
   p.labels[5 * 10 + 0] = 10;
@@ -96,6 +105,10 @@ TEST(RoomScoringTest, MergedRoomsAndTheScoringDomain) {
   EXPECT_DOUBLE_EQ(s->recall, 0.5);
   EXPECT_DOUBLE_EQ(s->bormann_recall, 1.0);
   EXPECT_DOUBLE_EQ(s->bormann_precision, 50.0 / 90);
+  ASSERT_EQ(s->per_truth.size(), 2u);
+  EXPECT_DOUBLE_EQ(s->per_truth[0].best_iou, 40.0 / 90);  // merged: each truth room's best is 5
+  EXPECT_DOUBLE_EQ(s->per_truth[1].best_iou, 50.0 / 90);
+  EXPECT_EQ(s->per_truth[0].best_predicted, 5);
 
   // Nothing predicted: all zero, no division by zero.
   s = ScoreRooms(t, Labels(10, 10));
@@ -104,6 +117,9 @@ TEST(RoomScoringTest, MergedRoomsAndTheScoringDomain) {
   EXPECT_EQ(s->f1, 0);
   EXPECT_EQ(s->bormann_precision, 0);
   EXPECT_EQ(s->bormann_recall, 0);
+  ASSERT_EQ(s->per_truth.size(), 2u);
+  EXPECT_EQ(s->per_truth[1].best_predicted, -1);
+  EXPECT_EQ(s->per_truth[1].best_iou, 0);
 }
 
 // A walk through rooms 0 and 7 (lower-left origin at (1, 2), 0.5 m pixels) keeps those two and
