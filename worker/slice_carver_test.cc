@@ -349,9 +349,11 @@ TEST_F(SliceCarverTest, OnlyTheSlicesPosesSameBytes) {
 }
 
 // §5.6.1: with regions, only the chunks listed, only inside their regions: the whole carve's
-// leaves there (the combine's sums within rounding).
+// leaves there (the combine's sums within rounding). Two shapes: each chunk's lower half, and
+// one cell of an eighth of its side, which most wedges through the chunk pass by (they are
+// left out of its carve before their leaves are listed).
 TEST_F(SliceCarverTest, RegionsCarveOnlyThere) {
-  // Two busy chunks, in each its lower half at depth 1 (octants z = 0).
+  // Two busy chunks.
   std::vector<ChunkKey> busiest;
   for (const auto& [chunk, tile] : *reference_) busiest.push_back(chunk);
   std::sort(busiest.begin(), busiest.end(), [](const ChunkKey& x, const ChunkKey& y) {
@@ -360,32 +362,35 @@ TEST_F(SliceCarverTest, RegionsCarveOnlyThere) {
             ChunkKeyLess()(x, y));
   });
   busiest.resize(2);
-  RecarveRegionMap regions;
-  for (const ChunkKey& c : busiest) {
-    regions.emplace(
-        c, RecarveChunk::Of(c, ChunkRegion(1, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}})));
-  }
-  SliceCarveOptions o = Options(CarveEvaluation::kExact);
-  o.regions = &regions;
-  const Carved c = CarveBySlices("regions", 6.0, o);
-  ASSERT_EQ(c.tiles.size(), 2u);
-  for (const ChunkKey& chunk : busiest) {
-    ASSERT_TRUE(c.tiles.count(chunk));
-    // The reference tile's leaves in the region, against the region's tile: the finest leaves
-    // agree (simplification may merge differently at the region's border).
-    testing::TileAgreement agreement;
-    TileData inside = reference_->at(chunk);
-    std::erase_if(inside.leaves, [](const TileLeaf& l) {  // keep those within octants z = 0
-      return l.node.depth < 1 || (l.node.local.z() >> (l.node.depth - 1)) != 0;
-    });
-    testing::AddTilePair(&inside, &c.tiles.at(chunk), agreement);
-    EXPECT_EQ(agreement.LabelShare(), 1.0) << chunk.transpose();
-    EXPECT_LT(agreement.max_dp, 1e-9) << chunk.transpose();
-    absl::StatusOr<ChunkRegion> region = regions.at(chunk).Decode();
-    ASSERT_TRUE(region.ok()) << region.status();
-    for (const TileLeaf& l : c.tiles.at(chunk).leaves) {
-      EXPECT_TRUE(region->Intersects(l.node)) << l.node.local.transpose();
+  const ChunkRegion lower_half(1, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}});
+  const ChunkRegion one_cell(3, {{3, 4, 1}});
+  for (const ChunkRegion* shape : {&lower_half, &one_cell}) {
+    SCOPED_TRACE(shape == &lower_half ? "lower half" : "one cell");
+    RecarveRegionMap regions;
+    for (const ChunkKey& c : busiest) regions.emplace(c, RecarveChunk::Of(c, *shape));
+    SliceCarveOptions o = Options(CarveEvaluation::kExact);
+    o.regions = &regions;
+    const Carved c = CarveBySlices(shape == &lower_half ? "regions" : "regions_cell", 6.0, o);
+    int compared = 0;
+    for (const ChunkKey& chunk : busiest) {
+      // The reference tile's leaves in the region, against the region's tile: the finest
+      // leaves agree (simplification may merge differently at the region's border).
+      TileData inside = reference_->at(chunk);
+      std::erase_if(inside.leaves, [&](const TileLeaf& l) {
+        return l.node.depth < shape->depth() || !shape->Intersects(l.node);
+      });
+      if (inside.leaves.empty()) continue;  // merged into coarser leaves by the reference
+      ++compared;
+      ASSERT_TRUE(c.tiles.count(chunk)) << chunk.transpose();
+      testing::TileAgreement agreement;
+      testing::AddTilePair(&inside, &c.tiles.at(chunk), agreement);
+      EXPECT_EQ(agreement.LabelShare(), 1.0) << chunk.transpose();
+      EXPECT_LT(agreement.max_dp, 1e-9) << chunk.transpose();
+      for (const TileLeaf& l : c.tiles.at(chunk).leaves) {
+        EXPECT_TRUE(shape->Intersects(l.node)) << l.node.local.transpose();
+      }
     }
+    EXPECT_GT(compared, 0);
   }
 }
 
