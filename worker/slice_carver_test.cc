@@ -371,6 +371,10 @@ TEST_F(SliceCarverTest, RegionsCarveOnlyThere) {
     SliceCarveOptions o = Options(CarveEvaluation::kExact);
     o.regions = &regions;
     const Carved c = CarveBySlices(shape == &lower_half ? "regions" : "regions_cell", 6.0, o);
+    for (const auto& [chunk, tile] : c.tiles) {  // no tile of a chunk not listed
+      EXPECT_NE(std::find(busiest.begin(), busiest.end(), chunk), busiest.end())
+          << chunk.transpose();
+    }
     int compared = 0;
     for (const ChunkKey& chunk : busiest) {
       // The reference tile's leaves in the region, against the region's tile: the finest
