@@ -818,6 +818,7 @@ absl::StatusOr<SegmentStageResult> SegmentStage(
   counts["objects_grouped"] = layout.report.grouped;
   counts["object_specks_unmeshed"] = layout.report.specks_unmeshed;
   counts["object_specks_off_walls"] = layout.report.specks_off_walls;
+  counts["objects_dropped_wall_smear"] = layout.report.dropped_wall_smear;
   timings["merge.object_mesh"] = SecondsSince(t0);
   result.objects = layout.objects.size();
   return result;

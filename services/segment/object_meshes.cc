@@ -313,6 +313,9 @@ absl::Status ObjectSplitter::FinishPiece(OpenPiece piece) {
           (thin <= options_.door_header_depth_m && wide >= options_.door_header_min_width_m)) {
         ++report_.dropped_ceiling;
         keep = false;
+      } else if (AlongAWall(obj.box, plan_, options_.wall_smear_m)) {
+        ++report_.dropped_wall_smear;
+        keep = false;
       }
     }
   }

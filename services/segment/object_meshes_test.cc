@@ -172,6 +172,27 @@ TEST_F(ObjectMeshesTest, SpecksAlongAWallDoNotStackOnTheObjectBelow) {
   EXPECT_EQ(report.dropped_small, 1u);  // the smear, left alone
 }
 
+// Under drift the wall itself lands inside the room as a slab up to the ceiling, deeper than a
+// door header, the plan's wall line through it: with wall_smear_m it is dropped. A piece up to
+// the ceiling away from the walls, and one along the wall that stops below the ceiling, stay.
+TEST_F(ObjectMeshesTest, AWallSlabUpToTheCeilingIsNoObject) {
+  TriangleMesh all;
+  all.Append(InwardBox({1.0f, -0.2f, 1.6f}, {2.2f, 0.25f, 2.5f}));  // the wall's slab, 0.45 m deep
+  all.Append(InwardBox({2.5f, 1.5f, 0.0f}, {3.0f, 2.0f, 2.45f}));   // a tall cabinet in the room
+  all.Append(InwardBox({1.0f, -0.2f, 0.3f}, {2.2f, 0.25f, 1.0f}));  // along the wall, low
+  ObjectSplitOptions options;
+  ObjectSplitReport plain;
+  EXPECT_EQ(SplitObjects(all, volume_, options, &plain).size(), 3u);
+  EXPECT_EQ(plain.dropped_wall_smear, 0u);
+  EXPECT_EQ(plain.dropped_ceiling, 0u);  // deeper than a door header
+  options.wall_smear_m = 0.3;
+  ObjectSplitReport report;
+  const std::vector<SegmentedObject> objects = SplitObjects(all, volume_, options, &report);
+  ASSERT_EQ(objects.size(), 2u);
+  EXPECT_EQ(report.dropped_wall_smear, 1u);
+  for (const SegmentedObject& o : objects) EXPECT_LT(o.box.min().z(), 1.0) << o.box.min().z();
+}
+
 // The mesh as StreamDenseMesh gives it, a chunk column at a time (columns 1 m wide here, by
 // each triangle's lowest x): pieces are finished as the stream passes them, and the objects
 // are those of the whole mesh, meshes and all.
