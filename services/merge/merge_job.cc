@@ -117,29 +117,31 @@ ChunkProgressFn StageProgress(const MergeProgressCallback& progress, const char*
   };
 }
 
-// The recorded system path of the job's scan (docs/DESIGN.md §3 /path): the scanner positions of
-// the floor plans (§3.3.1), 24 bytes per pose; the poses' other fields are not read. Under the
-// process's HDF5 lock: the dense mesh reads tiles on another thread meanwhile (RunMerge).
-absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string& scan_path,
-                                                               double world_yaw_rad) {
+// `read` on the job's scan opened without its path held (the readers read it in blocks), under
+// the process's HDF5 lock: the dense mesh reads tiles on another thread meanwhile (RunMerge).
+template <typename Read>
+auto WithScanPath(const std::string& scan_path, double world_yaw_rad, Read read)
+    -> decltype(read(std::declval<ScanReader&>())) {
   std::lock_guard<std::mutex> lock(Hdf5Lock());
   ScanReader::OpenOptions open;
   open.path_rows = ScanReader::PathRows::kNone;
   open.world_yaw_rad = world_yaw_rad;
   absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan_path, open);
   if (!reader.ok()) return reader.status();
-  return (*reader)->PathPositions();
+  return read(**reader);
+}
+
+// The recorded system path of the job's scan (docs/DESIGN.md §3 /path): the scanner positions of
+// the floor plans (§3.3.1), 24 bytes per pose; the poses' other fields are not read.
+absl::StatusOr<std::vector<Eigen::Vector3d>> ReadPathPositions(const std::string& scan_path,
+                                                               double world_yaw_rad) {
+  return WithScanPath(scan_path, world_yaw_rad, [](ScanReader& r) { return r.PathPositions(); });
 }
 
 // How far the scan's path may be off horizontally (ScanReader::HorizontalPositionSigma), m;
-// nullopt without /path_cov. Under the process's HDF5 lock, as ReadPathPositions.
+// nullopt without /path_cov. A turn about the vertical keeps it.
 absl::StatusOr<std::optional<double>> ReadPathSigma(const std::string& scan_path) {
-  std::lock_guard<std::mutex> lock(Hdf5Lock());
-  ScanReader::OpenOptions open;
-  open.path_rows = ScanReader::PathRows::kNone;
-  absl::StatusOr<std::unique_ptr<ScanReader>> reader = ScanReader::Open(scan_path, open);
-  if (!reader.ok()) return reader.status();
-  return (*reader)->HorizontalPositionSigma();
+  return WithScanPath(scan_path, 0.0, [](ScanReader& r) { return r.HorizontalPositionSigma(); });
 }
 
 // Before a planar fit, which reads no tile: the cached tiles, and the small blocks the last fit
