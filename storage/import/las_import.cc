@@ -126,7 +126,9 @@ absl::StatusOr<double> Walk(const LasImport::State& st, LasReport& rep, const Fr
                          " s lies outside the trajectory ", st.options.trajectory, " (", t0, " to ",
                          t1, " s; --skip-outside-trajectory drops such points)"));
       }
-      if (!open || p.t >= frame_t + st.options.frame_seconds) {
+      // p.t > frame_t too: at times so large that frame_seconds is below their resolution,
+      // t + frame_seconds == t, and every point would open a frame at the same time.
+      if (!open || (p.t >= frame_t + st.options.frame_seconds && p.t > frame_t)) {
         if (absl::Status s = flush(); !s.ok()) return s;
         open = true;
         frame_t = p.t;
