@@ -1,7 +1,7 @@
 #include "services/merge/pocket_tiles.h"
 
+#include <algorithm>
 #include <filesystem>
-#include <map>
 #include <optional>
 #include <utility>
 
@@ -24,28 +24,39 @@ absl::StatusOr<PocketTilesResult> FillPocketTiles(TileSet& tiles, const std::str
   threads = std::max(1, threads);
   PocketTilesResult result;
 
-  // 1. Every chunk's candidates (its neighbours decoded with it), then the whole pockets.
-  std::vector<PocketCell> candidates;
-  absl::Status s = ForEachChunk<std::vector<PocketCell>>(
+  // 1. Every chunk's candidates (its neighbours decoded with it), each chunk's list at its
+  //    size, then the whole pockets, kept in those lists.
+  std::vector<std::pair<ChunkKey, std::vector<PocketCell>>> by_chunk;
+  absl::Status s = ForEachChunk<std::pair<ChunkKey, std::vector<PocketCell>>>(
       tiles, tiles.chunks(), /*low_only=*/false, threads,
-      [&](const ChunkNeighbourhood& hood) { return PocketCandidates(hood, options); },
-      [&](std::vector<PocketCell>&& cells) {
-        candidates.insert(candidates.end(), cells.begin(), cells.end());
+      [&](const ChunkNeighbourhood& hood)
+          -> absl::StatusOr<std::pair<ChunkKey, std::vector<PocketCell>>> {
+        absl::StatusOr<std::vector<PocketCell>> cells = PocketCandidates(hood, options);
+        if (!cells.ok()) return cells.status();
+        DropInnerTaintedPockets(*cells, hood.chunk, hood.grid.chunk_depth);
+        cells->shrink_to_fit();
+        return std::make_pair(hood.chunk, *std::move(cells));
+      },
+      [&](std::pair<ChunkKey, std::vector<PocketCell>>&& cells) {
+        if (!cells.second.empty()) by_chunk.push_back(std::move(cells));
       },
       progress, "pocket_fill");
   if (!s.ok()) return s;
-  const std::vector<PocketCell> fillable = FillablePocketCells(std::move(candidates));
-  const int k = tiles.grid().chunk_depth;
-  std::map<ChunkKey, std::vector<PocketCell>, ChunkKeyLess> by_chunk;
-  for (const PocketCell& c : fillable) {
-    by_chunk[ChunkKey(c.cell.x() >> k, c.cell.y() >> k, c.cell.z() >> k)].push_back(c);
-  }
+  by_chunk.shrink_to_fit();
+  if (s = KeepFillablePocketCells(by_chunk, tiles.grid().chunk_depth); !s.ok()) return s;
+  std::erase_if(by_chunk, [](const auto& c) { return c.second.empty(); });
+  const auto cells_of = [&by_chunk](const ChunkKey& chunk) -> const std::vector<PocketCell>* {
+    auto it = std::lower_bound(
+        by_chunk.begin(), by_chunk.end(), chunk,
+        [](const auto& e, const ChunkKey& k) { return ChunkKeyLess{}(e.first, k); });
+    return it != by_chunk.end() && it->first == chunk ? &it->second : nullptr;
+  };
 
   // 2. Each chunk with filled cells as a new tile (built and compressed on `threads` threads,
   //    written in order), any other as a link to its tile.
   std::vector<ChunkKey> filled;
   for (const ChunkKey& chunk : tiles.chunks()) {
-    if (by_chunk.count(chunk)) {
+    if (cells_of(chunk) != nullptr) {
       filled.push_back(chunk);
       continue;
     }
@@ -74,7 +85,7 @@ absl::StatusOr<PocketTilesResult> FillPocketTiles(TileSet& tiles, const std::str
     }
     std::vector<std::optional<absl::StatusOr<EncodedTile>>> encoded(n);
     ParallelFor(n, threads, [&](size_t i) {
-      absl::StatusOr<TileData> tile = WithFilledCells(*in[i], by_chunk.at(filled[first + i]));
+      absl::StatusOr<TileData> tile = WithFilledCells(*in[i], *cells_of(filled[first + i]));
       encoded[i].emplace(tile.ok() ? EncodeTile(out_dir, *tile)
                                    : absl::StatusOr<EncodedTile>(tile.status()));
     });
@@ -83,7 +94,7 @@ absl::StatusOr<PocketTilesResult> FillPocketTiles(TileSet& tiles, const std::str
       if (absl::StatusOr<std::string> w = WriteEncodedTile(**encoded[i]); !w.ok()) {
         return w.status();
       }
-      result.filled_cells += by_chunk.at(filled[first + i]).size();
+      result.filled_cells += cells_of(filled[first + i])->size();
     }
   }
   result.chunks = tiles.chunks().size();

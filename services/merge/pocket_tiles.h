@@ -22,8 +22,9 @@ struct PocketTilesResult {
 
 // Writes every chunk of `tiles` (read from `tiles_dir`) into `out_dir` (created): a chunk with
 // pockets as a new tile, any other as a hard link to its tile in `tiles_dir` (a copy where the
-// file system has no hard links). Holds every chunk's candidate cells at once (32 bytes each:
-// a pocket may span chunks), then reads the chunks with filled cells a second time. Errors:
+// file system has no hard links). Holds every chunk's candidate cells at once (29 bytes each
+// with their sets: a pocket may span chunks), then reads the chunks with filled cells a second
+// time. Errors:
 // TileSet::Get's, PocketCandidates', WriteTile's (naming the file), Unavailable naming a directory
 // or file that cannot be created, Cancelled. The chunks are filled on `threads` threads and written
 // in order on the calling thread: the tiles do not depend on the thread count.

@@ -162,7 +162,7 @@ absl::StatusOr<std::vector<PocketCell>> PocketCandidates(const ChunkNeighbourhoo
             tainted |= cells.state(at(q)) == kUnobserved && !std::isfinite(best[zone(q)]);
           }
         }
-        out.push_back(PocketCell{origin + c, p, tainted});
+        out.push_back(PocketCell{origin + c, tainted, p});
       }
     }
   }
@@ -202,6 +202,123 @@ std::vector<PocketCell> FillablePocketCells(std::vector<PocketCell> candidates) 
     if (!tainted[size_t(sets.Find(int64_t(i)))]) out.push_back(candidates[i]);
   }
   return out;
+}
+
+namespace {
+
+template <typename Index>
+void KeepFillable(std::vector<std::pair<ChunkKey, std::vector<PocketCell>>>& chunks,
+                  const std::vector<uint64_t>& offset, int chunk_depth) {
+  const auto chunk_of = [chunk_depth](const LeafKey& c) {
+    return ChunkKey(c.x() >> chunk_depth, c.y() >> chunk_depth, c.z() >> chunk_depth);
+  };
+  // The global index of a candidate cell, or −1; `hint` is the chunk of the cell asked from.
+  const auto find = [&](size_t hint, const LeafKey& key) -> int64_t {
+    const ChunkKey ck = chunk_of(key);
+    size_t ci = hint;
+    if (ck != chunks[hint].first) {
+      auto it = std::lower_bound(
+          chunks.begin(), chunks.end(), ck,
+          [](const auto& e, const ChunkKey& k) { return ChunkKeyLess{}(e.first, k); });
+      if (it == chunks.end() || it->first != ck) return -1;
+      ci = size_t(it - chunks.begin());
+    }
+    const std::vector<PocketCell>& v = chunks[ci].second;
+    auto it = std::lower_bound(v.begin(), v.end(), key, [](const PocketCell& a, const LeafKey& b) {
+      return CellLess(a.cell, b);
+    });
+    return it != v.end() && it->cell == key ? int64_t(offset[ci] + uint64_t(it - v.begin())) : -1;
+  };
+  UnionFind<Index> sets(offset.back());
+  for (size_t ci = 0; ci < chunks.size(); ++ci) {
+    const std::vector<PocketCell>& v = chunks[ci].second;
+    for (size_t i = 0; i < v.size(); ++i) {
+      for (int d = 0; d < 3; ++d) {
+        const int64_t j = find(ci, v[i].cell + LeafKey::Unit(d));
+        if (j >= 0) sets.Union(Index(offset[ci] + i), Index(j));
+      }
+    }
+  }
+  std::vector<uint8_t> tainted(offset.back(), 0);
+  for (size_t ci = 0; ci < chunks.size(); ++ci) {
+    const std::vector<PocketCell>& v = chunks[ci].second;
+    for (size_t i = 0; i < v.size(); ++i) {
+      if (v[i].tainted) tainted[size_t(sets.Find(Index(offset[ci] + i)))] = 1;
+    }
+  }
+  for (size_t ci = 0; ci < chunks.size(); ++ci) {
+    std::vector<PocketCell>& v = chunks[ci].second;
+    size_t kept = 0;
+    for (size_t i = 0; i < v.size(); ++i) {
+      if (!tainted[size_t(sets.Find(Index(offset[ci] + i)))]) v[kept++] = v[i];
+    }
+    v.resize(kept);
+    v.shrink_to_fit();
+  }
+}
+
+}  // namespace
+
+void DropInnerTaintedPockets(std::vector<PocketCell>& cells, const ChunkKey& chunk,
+                             int chunk_depth) {
+  const int n = 1 << chunk_depth;
+  const LeafKey origin = chunk * n;
+  const auto find = [&cells](const LeafKey& key) -> int {
+    auto it =
+        std::lower_bound(cells.begin(), cells.end(), key,
+                         [](const PocketCell& a, const LeafKey& b) { return CellLess(a.cell, b); });
+    return it != cells.end() && it->cell == key ? int(it - cells.begin()) : -1;
+  };
+  UnionFind<int> sets(cells.size());
+  for (size_t i = 0; i < cells.size(); ++i) {
+    for (int d = 0; d < 3; ++d) {
+      const int j = find(cells[i].cell + LeafKey::Unit(d));
+      if (j >= 0) sets.Union(int(i), j);
+    }
+  }
+  // Per set (at its root): 1 tainted, 2 on a face of the chunk.
+  std::vector<uint8_t> flags(cells.size(), 0);
+  for (size_t i = 0; i < cells.size(); ++i) {
+    const LeafKey local = cells[i].cell - origin;
+    const bool on_face = (local.array() == 0).any() || (local.array() == n - 1).any();
+    flags[size_t(sets.Find(int(i)))] |= (cells[i].tainted ? 1 : 0) | (on_face ? 2 : 0);
+  }
+  size_t kept = 0;
+  for (size_t i = 0; i < cells.size(); ++i) {
+    if (flags[size_t(sets.Find(int(i)))] != 1) cells[kept++] = cells[i];
+  }
+  cells.resize(kept);
+}
+
+absl::Status KeepFillablePocketCells(
+    std::vector<std::pair<ChunkKey, std::vector<PocketCell>>>& chunks, int chunk_depth) {
+  std::sort(chunks.begin(), chunks.end(),
+            [](const auto& a, const auto& b) { return ChunkKeyLess{}(a.first, b.first); });
+  std::vector<uint64_t> offset(chunks.size() + 1, 0);
+  for (size_t ci = 0; ci < chunks.size(); ++ci) {
+    if (ci > 0 && chunks[ci].first == chunks[ci - 1].first) {
+      return absl::InvalidArgumentError(absl::StrCat("pocket fill: chunk ", chunks[ci].first.x(),
+                                                     ",", chunks[ci].first.y(), ",",
+                                                     chunks[ci].first.z(), " is given twice"));
+    }
+    for (const PocketCell& c : chunks[ci].second) {
+      const ChunkKey ck(c.cell.x() >> chunk_depth, c.cell.y() >> chunk_depth,
+                        c.cell.z() >> chunk_depth);
+      if (ck != chunks[ci].first) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "pocket fill: cell ", c.cell.x(), ",", c.cell.y(), ",", c.cell.z(), " is not in chunk ",
+            chunks[ci].first.x(), ",", chunks[ci].first.y(), ",", chunks[ci].first.z()));
+      }
+    }
+    offset[ci + 1] = offset[ci] + chunks[ci].second.size();
+  }
+  // 4-byte set indices while they fit: the sets are as many as the candidates.
+  if (offset.back() <= uint64_t(std::numeric_limits<int32_t>::max())) {
+    KeepFillable<int32_t>(chunks, offset, chunk_depth);
+  } else {
+    KeepFillable<int64_t>(chunks, offset, chunk_depth);
+  }
+  return absl::OkStatus();
 }
 
 absl::StatusOr<TileData> WithFilledCells(const TileData& tile, std::span<const PocketCell> cells) {

@@ -18,11 +18,14 @@ namespace {
 using testing::FinestTileOfChunk;
 
 // The cells filled when `chunks` are the whole job: every chunk's candidates, then whole
-// pockets, by global cell (x, y, z) with their p.
+// pockets, by global cell (x, y, z) with their p. The candidates kept per chunk, less the
+// tainted pockets inside one chunk (DropInnerTaintedPockets, KeepFillablePocketCells: as the
+// merge does), must give the same cells as all at once.
 std::map<std::array<int, 3>, double> Filled(const OctreeGrid& grid, std::span<const TileData> tiles,
                                             std::span<const ChunkKey> chunks,
                                             const PocketFillOptions& options = {}) {
   std::vector<PocketCell> candidates;
+  std::vector<std::pair<ChunkKey, std::vector<PocketCell>>> per_chunk;
   for (const ChunkKey& chunk : chunks) {
     ChunkNeighbourhood hood;
     hood.grid = grid;
@@ -35,12 +38,29 @@ std::map<std::array<int, 3>, double> Filled(const OctreeGrid& grid, std::span<co
     }
     absl::StatusOr<std::vector<PocketCell>> c = PocketCandidates(hood, options);
     EXPECT_TRUE(c.ok()) << c.status();
-    if (c.ok()) candidates.insert(candidates.end(), c->begin(), c->end());
+    if (c.ok()) {
+      candidates.insert(candidates.end(), c->begin(), c->end());
+      per_chunk.emplace_back(chunk, *c);
+      DropInnerTaintedPockets(per_chunk.back().second, chunk, grid.chunk_depth);
+    }
   }
   std::map<std::array<int, 3>, double> out;
   for (const PocketCell& c : FillablePocketCells(candidates)) {
     out[{c.cell.x(), c.cell.y(), c.cell.z()}] = c.p;
   }
+  std::reverse(per_chunk.begin(), per_chunk.end());  // any order of chunks
+  const absl::Status kept = KeepFillablePocketCells(per_chunk, grid.chunk_depth);
+  EXPECT_TRUE(kept.ok()) << kept;
+  std::map<std::array<int, 3>, double> by_chunk;
+  for (size_t i = 0; i < per_chunk.size(); ++i) {
+    if (i > 0) {
+      EXPECT_TRUE(ChunkKeyLess{}(per_chunk[i - 1].first, per_chunk[i].first));
+    }
+    for (const PocketCell& c : per_chunk[i].second) {
+      by_chunk[{c.cell.x(), c.cell.y(), c.cell.z()}] = c.p;
+    }
+  }
+  EXPECT_EQ(by_chunk, out);
   return out;
 }
 
@@ -70,7 +90,9 @@ TEST_F(FillPocketsTest, FillsAThinUnobservedSlabInsideFreeSpace) {
   }
   // The tile with them is a valid tile: no overlaps, sums consistent.
   std::vector<PocketCell> cells;
-  for (const auto& [cell, p] : filled) cells.push_back({LeafKey(cell[0], cell[1], cell[2]), p});
+  for (const auto& [cell, p] : filled) {
+    cells.push_back({LeafKey(cell[0], cell[1], cell[2]), false, p});
+  }
   absl::StatusOr<TileData> with = WithFilledCells(in, cells);
   ASSERT_TRUE(with.ok()) << with.status();
   EXPECT_EQ(with->leaves.size(), in.leaves.size() + cells.size());
@@ -93,6 +115,16 @@ TEST_F(FillPocketsTest, FillsOnlyWholePockets) {
     return InSlab(c, 2, 7, 6, 7) || InSlab(c, 8, 13, 6, 11) ? -1.0 : 0.9;
   });
   EXPECT_TRUE(Filled(grid_, {&in, 1}, {&origin_, 1}).empty());
+  // Its candidates, inside the chunk and tainted, are dropped before the chunks are joined.
+  ChunkNeighbourhood hood;
+  hood.grid = grid_;
+  hood.chunk = origin_;
+  hood.tiles[ChunkNeighbourhood::Index(0, 0, 0)] = &in;
+  absl::StatusOr<std::vector<PocketCell>> candidates = PocketCandidates(hood);
+  ASSERT_TRUE(candidates.ok()) << candidates.status();
+  EXPECT_FALSE(candidates->empty());
+  DropInnerTaintedPockets(*candidates, origin_, grid_.chunk_depth);
+  EXPECT_TRUE(candidates->empty());
   // The thin part with a free column between it and the thick part: a pocket of its own.
   const TileData apart = FinestTileOfChunk(grid_, origin_, [](const LeafKey& c) {
     return InSlab(c, 2, 6, 6, 7) || InSlab(c, 8, 13, 6, 11) ? -1.0 : 0.9;
@@ -192,11 +224,21 @@ TEST_F(FillPocketsTest, BadInputIsAnError) {
   ASSERT_FALSE(out.ok());
   EXPECT_NE(out.status().message().find("slot (1, 0, 0)"), std::string::npos) << out.status();
   // A cell outside the tile's chunk.
-  const PocketCell outside{LeafKey(16, 0, 0), 0.9, false};
+  const PocketCell outside{LeafKey(16, 0, 0), false, 0.9};
   absl::StatusOr<TileData> with = WithFilledCells(in, {&outside, 1});
   ASSERT_FALSE(with.ok());
   EXPECT_NE(with.status().message().find("cell 16,0,0 is not in chunk 0,0,0"), std::string::npos)
       << with.status();
+  // Candidates kept per chunk: a cell in another chunk than its list's, a chunk listed twice.
+  std::vector<std::pair<ChunkKey, std::vector<PocketCell>>> lists = {{origin_, {outside}}};
+  absl::Status kept = KeepFillablePocketCells(lists, grid_.chunk_depth);
+  EXPECT_EQ(kept.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(kept.message().find("cell 16,0,0 is not in chunk 0,0,0"), std::string::npos) << kept;
+  const PocketCell inside{LeafKey(3, 0, 0), false, 0.9};
+  lists = {{origin_, {inside}}, {origin_, {inside}}};
+  kept = KeepFillablePocketCells(lists, grid_.chunk_depth);
+  EXPECT_EQ(kept.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(kept.message().find("given twice"), std::string::npos) << kept;
 }
 
 }  // namespace
