@@ -993,7 +993,10 @@ absl::StatusOr<MergeSummary> RunMerge(const MergeOptions& options,
   };
 
   // planar regions (stage 2, §4.2.4) for the levels, fitted a slab of heights at a time
-  // (level_regions.h); each level's own are fitted with its floor plan.
+  // (level_regions.h); each level's own are fitted with its floor plan. Beyond two slabs' faces
+  // the building is a large one, whose slab fits (a core and its margins above and below) and
+  // dense mesh together would pass 0.9 GiB (a four-level office at 10 Hz): the fits wait.
+  if ((*faces)->size() > 2 * kLevelSlabFaces) settle_dense();
   if (absl::Status s =
           CheckPlanarMemory(options, "the levels' planar regions (a slab of heights)",
                             std::min<uint64_t>((*faces)->size(), kLevelSlabFaces), settle_dense);
