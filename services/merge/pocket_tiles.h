@@ -22,11 +22,11 @@ struct PocketTilesResult {
 
 // Writes every chunk of `tiles` (read from `tiles_dir`) into `out_dir` (created): a chunk with
 // pockets as a new tile, any other as a hard link to its tile in `tiles_dir` (a copy where the
-// file system has no hard links). Holds every chunk's candidate cells at once (29 bytes each
-// with their sets: a pocket may span chunks), then reads the chunks with filled cells a second
-// time. Errors:
-// TileSet::Get's, PocketCandidates', WriteTile's (naming the file), Unavailable naming a directory
-// or file that cannot be created, Cancelled. The chunks are filled on `threads` threads and written
+// file system has no hard links). Holds every chunk's candidate cells at once but for the
+// tainted pockets inside one chunk (29 bytes each with their sets: a pocket may span chunks),
+// then reads the chunks with filled cells a second time. Errors: TileSet::Get's,
+// PocketCandidates', KeepFillablePocketCells', WriteTile's (naming the file), Unavailable naming
+// a directory or file that cannot be created, Cancelled. The chunks are filled on `threads` threads and written
 // in order on the calling thread: the tiles do not depend on the thread count.
 [[nodiscard]] absl::StatusOr<PocketTilesResult> FillPocketTiles(
     TileSet& tiles, const std::string& tiles_dir, const std::string& out_dir,

