@@ -175,24 +175,31 @@ bool CellLess(const LeafKey& a, const LeafKey& b) {
   return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
 }
 
+// The pockets of `cells` (sorted by CellLess): sets over their indices, 6-neighbours joined.
+template <typename Index>
+UnionFind<Index> JoinNeighbours(const std::vector<PocketCell>& cells) {
+  const auto find = [&cells](const LeafKey& key) -> Index {
+    auto it =
+        std::lower_bound(cells.begin(), cells.end(), key,
+                         [](const PocketCell& a, const LeafKey& b) { return CellLess(a.cell, b); });
+    return it != cells.end() && it->cell == key ? Index(it - cells.begin()) : Index(-1);
+  };
+  UnionFind<Index> sets(cells.size());
+  for (size_t i = 0; i < cells.size(); ++i) {
+    for (int d = 0; d < 3; ++d) {
+      const Index j = find(cells[i].cell + LeafKey::Unit(d));
+      if (j >= 0) sets.Union(Index(i), j);
+    }
+  }
+  return sets;
+}
+
 }  // namespace
 
 std::vector<PocketCell> FillablePocketCells(std::vector<PocketCell> candidates) {
   std::sort(candidates.begin(), candidates.end(),
             [](const PocketCell& a, const PocketCell& b) { return CellLess(a.cell, b.cell); });
-  const auto find = [&](const LeafKey& key) -> int64_t {
-    auto it =
-        std::lower_bound(candidates.begin(), candidates.end(), key,
-                         [](const PocketCell& a, const LeafKey& b) { return CellLess(a.cell, b); });
-    return it != candidates.end() && it->cell == key ? it - candidates.begin() : -1;
-  };
-  UnionFind<int64_t> sets(candidates.size());
-  for (size_t i = 0; i < candidates.size(); ++i) {
-    for (int d = 0; d < 3; ++d) {
-      const int64_t j = find(candidates[i].cell + LeafKey::Unit(d));
-      if (j >= 0) sets.Union(int64_t(i), j);
-    }
-  }
+  UnionFind<int64_t> sets = JoinNeighbours<int64_t>(candidates);
   std::vector<uint8_t> tainted(candidates.size(), 0);
   for (size_t i = 0; i < candidates.size(); ++i) {
     if (candidates[i].tainted) tainted[size_t(sets.Find(int64_t(i)))] = 1;
@@ -263,19 +270,7 @@ void DropInnerTaintedPockets(std::vector<PocketCell>& cells, const ChunkKey& chu
                              int chunk_depth) {
   const int n = 1 << chunk_depth;
   const LeafKey origin = chunk * n;
-  const auto find = [&cells](const LeafKey& key) -> int {
-    auto it =
-        std::lower_bound(cells.begin(), cells.end(), key,
-                         [](const PocketCell& a, const LeafKey& b) { return CellLess(a.cell, b); });
-    return it != cells.end() && it->cell == key ? int(it - cells.begin()) : -1;
-  };
-  UnionFind<int> sets(cells.size());
-  for (size_t i = 0; i < cells.size(); ++i) {
-    for (int d = 0; d < 3; ++d) {
-      const int j = find(cells[i].cell + LeafKey::Unit(d));
-      if (j >= 0) sets.Union(int(i), j);
-    }
-  }
+  UnionFind<int> sets = JoinNeighbours<int>(cells);
   // Per set (at its root): 1 tainted, 2 on a face of the chunk.
   std::vector<uint8_t> flags(cells.size(), 0);
   for (size_t i = 0; i < cells.size(); ++i) {
