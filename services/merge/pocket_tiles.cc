@@ -33,7 +33,7 @@ absl::StatusOr<PocketTilesResult> FillPocketTiles(TileSet& tiles, const std::str
           -> absl::StatusOr<std::pair<ChunkKey, std::vector<PocketCell>>> {
         absl::StatusOr<std::vector<PocketCell>> cells = PocketCandidates(hood, options);
         if (!cells.ok()) return cells.status();
-        DropInnerTaintedPockets(*cells, hood.chunk, hood.grid.chunk_depth);
+        DropInnerTaintedPockets(*cells, hood.chunk, hood.grid);
         cells->shrink_to_fit();
         return std::make_pair(hood.chunk, *std::move(cells));
       },
@@ -43,7 +43,7 @@ absl::StatusOr<PocketTilesResult> FillPocketTiles(TileSet& tiles, const std::str
       progress, "pocket_fill");
   if (!s.ok()) return s;
   by_chunk.shrink_to_fit();
-  if (s = KeepFillablePocketCells(by_chunk, tiles.grid().chunk_depth); !s.ok()) return s;
+  if (s = KeepFillablePocketCells(by_chunk, tiles.grid()); !s.ok()) return s;
   std::erase_if(by_chunk, [](const auto& c) { return c.second.empty(); });
   const auto cells_of = [&by_chunk](const ChunkKey& chunk) -> const std::vector<PocketCell>* {
     auto it = std::lower_bound(

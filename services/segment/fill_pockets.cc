@@ -215,13 +215,10 @@ namespace {
 
 template <typename Index>
 void KeepFillable(std::vector<std::pair<ChunkKey, std::vector<PocketCell>>>& chunks,
-                  const std::vector<uint64_t>& offset, int chunk_depth) {
-  const auto chunk_of = [chunk_depth](const LeafKey& c) {
-    return ChunkKey(c.x() >> chunk_depth, c.y() >> chunk_depth, c.z() >> chunk_depth);
-  };
+                  const std::vector<uint64_t>& offset, const OctreeGrid& grid) {
   // The global index of a candidate cell, or −1; `hint` is the chunk of the cell asked from.
   const auto find = [&](size_t hint, const LeafKey& key) -> int64_t {
-    const ChunkKey ck = chunk_of(key);
+    const ChunkKey ck = ChunkOfLeaf(grid, key);
     size_t ci = hint;
     if (ck != chunks[hint].first) {
       auto it = std::lower_bound(
@@ -267,8 +264,8 @@ void KeepFillable(std::vector<std::pair<ChunkKey, std::vector<PocketCell>>>& chu
 }  // namespace
 
 void DropInnerTaintedPockets(std::vector<PocketCell>& cells, const ChunkKey& chunk,
-                             int chunk_depth) {
-  const int n = 1 << chunk_depth;
+                             const OctreeGrid& grid) {
+  const int n = grid.leaves_per_side();
   const LeafKey origin = chunk * n;
   UnionFind<int> sets = JoinNeighbours<int>(cells);
   // Per set (at its root): 1 tainted, 2 on a face of the chunk.
@@ -286,7 +283,7 @@ void DropInnerTaintedPockets(std::vector<PocketCell>& cells, const ChunkKey& chu
 }
 
 absl::Status KeepFillablePocketCells(
-    std::vector<std::pair<ChunkKey, std::vector<PocketCell>>>& chunks, int chunk_depth) {
+    std::vector<std::pair<ChunkKey, std::vector<PocketCell>>>& chunks, const OctreeGrid& grid) {
   std::sort(chunks.begin(), chunks.end(),
             [](const auto& a, const auto& b) { return ChunkKeyLess{}(a.first, b.first); });
   std::vector<uint64_t> offset(chunks.size() + 1, 0);
@@ -297,9 +294,7 @@ absl::Status KeepFillablePocketCells(
                                                      chunks[ci].first.z(), " is given twice"));
     }
     for (const PocketCell& c : chunks[ci].second) {
-      const ChunkKey ck(c.cell.x() >> chunk_depth, c.cell.y() >> chunk_depth,
-                        c.cell.z() >> chunk_depth);
-      if (ck != chunks[ci].first) {
+      if (ChunkOfLeaf(grid, c.cell) != chunks[ci].first) {
         return absl::InvalidArgumentError(absl::StrCat(
             "pocket fill: cell ", c.cell.x(), ",", c.cell.y(), ",", c.cell.z(), " is not in chunk ",
             chunks[ci].first.x(), ",", chunks[ci].first.y(), ",", chunks[ci].first.z()));
@@ -309,9 +304,9 @@ absl::Status KeepFillablePocketCells(
   }
   // 4-byte set indices while they fit: the sets are as many as the candidates.
   if (offset.back() <= uint64_t(std::numeric_limits<int32_t>::max())) {
-    KeepFillable<int32_t>(chunks, offset, chunk_depth);
+    KeepFillable<int32_t>(chunks, offset, grid);
   } else {
-    KeepFillable<int64_t>(chunks, offset, chunk_depth);
+    KeepFillable<int64_t>(chunks, offset, grid);
   }
   return absl::OkStatus();
 }

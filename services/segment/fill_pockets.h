@@ -32,6 +32,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "geometry/octree_keys.h"
 #include "services/mesh/boundary_faces.h"
 #include "storage/tile_store.h"
 
@@ -73,16 +74,16 @@ struct PocketCell {
 // candidates took the merge from 0.34 to 1.0 GiB), and the merge holds every chunk's
 // candidates at once. Keeps the order.
 void DropInnerTaintedPockets(std::vector<PocketCell>& cells, const ChunkKey& chunk,
-                             int chunk_depth);
+                             const OctreeGrid& grid);
 
 // FillablePocketCells over the candidates kept per chunk, in place, without a copy of them
 // all: each entry of `chunks` is a chunk and its candidates (sorted by cell as
-// PocketCandidates gives them, each in that chunk: cell >> chunk_depth on every axis, a chunk
-// at most once); on return each keeps only its fillable cells, in the same order, and the
-// entries are sorted by ChunkKeyLess. The cells kept are FillablePocketCells' of all entries'.
+// PocketCandidates gives them, each in that chunk by ChunkOfLeaf, a chunk at most once); on
+// return each keeps only its fillable cells, in the same order, and the entries are sorted by
+// ChunkKeyLess. The cells kept are FillablePocketCells' of all entries'.
 // InvalidArgument for a cell outside its entry's chunk or a chunk given twice.
 [[nodiscard]] absl::Status KeepFillablePocketCells(
-    std::vector<std::pair<ChunkKey, std::vector<PocketCell>>>& chunks, int chunk_depth);
+    std::vector<std::pair<ChunkKey, std::vector<PocketCell>>>& chunks, const OctreeGrid& grid);
 
 // `tile` with one finest leaf per cell of `cells` (each in its chunk, unobserved in it):
 // sum_w 1, Σ w p = p, count 1. InvalidArgument for a cell outside the chunk.

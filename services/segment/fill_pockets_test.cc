@@ -41,7 +41,7 @@ std::map<std::array<int, 3>, double> Filled(const OctreeGrid& grid, std::span<co
     if (c.ok()) {
       candidates.insert(candidates.end(), c->begin(), c->end());
       per_chunk.emplace_back(chunk, *c);
-      DropInnerTaintedPockets(per_chunk.back().second, chunk, grid.chunk_depth);
+      DropInnerTaintedPockets(per_chunk.back().second, chunk, grid);
     }
   }
   std::map<std::array<int, 3>, double> out;
@@ -49,7 +49,7 @@ std::map<std::array<int, 3>, double> Filled(const OctreeGrid& grid, std::span<co
     out[{c.cell.x(), c.cell.y(), c.cell.z()}] = c.p;
   }
   std::reverse(per_chunk.begin(), per_chunk.end());  // any order of chunks
-  const absl::Status kept = KeepFillablePocketCells(per_chunk, grid.chunk_depth);
+  const absl::Status kept = KeepFillablePocketCells(per_chunk, grid);
   EXPECT_TRUE(kept.ok()) << kept;
   std::map<std::array<int, 3>, double> by_chunk;
   for (size_t i = 0; i < per_chunk.size(); ++i) {
@@ -123,7 +123,7 @@ TEST_F(FillPocketsTest, FillsOnlyWholePockets) {
   absl::StatusOr<std::vector<PocketCell>> candidates = PocketCandidates(hood);
   ASSERT_TRUE(candidates.ok()) << candidates.status();
   EXPECT_FALSE(candidates->empty());
-  DropInnerTaintedPockets(*candidates, origin_, grid_.chunk_depth);
+  DropInnerTaintedPockets(*candidates, origin_, grid_);
   EXPECT_TRUE(candidates->empty());
   // The thin part with a free column between it and the thick part: a pocket of its own.
   const TileData apart = FinestTileOfChunk(grid_, origin_, [](const LeafKey& c) {
@@ -231,12 +231,12 @@ TEST_F(FillPocketsTest, BadInputIsAnError) {
       << with.status();
   // Candidates kept per chunk: a cell in another chunk than its list's, a chunk listed twice.
   std::vector<std::pair<ChunkKey, std::vector<PocketCell>>> lists = {{origin_, {outside}}};
-  absl::Status kept = KeepFillablePocketCells(lists, grid_.chunk_depth);
+  absl::Status kept = KeepFillablePocketCells(lists, grid_);
   EXPECT_EQ(kept.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(kept.message().find("cell 16,0,0 is not in chunk 0,0,0"), std::string::npos) << kept;
   const PocketCell inside{LeafKey(3, 0, 0), false, 0.9};
   lists = {{origin_, {inside}}, {origin_, {inside}}};
-  kept = KeepFillablePocketCells(lists, grid_.chunk_depth);
+  kept = KeepFillablePocketCells(lists, grid_);
   EXPECT_EQ(kept.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(kept.message().find("given twice"), std::string::npos) << kept;
 }
