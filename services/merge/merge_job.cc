@@ -211,10 +211,6 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles, const F
     Clock::time_point t0 = Clock::now();
     PlanarRegionSet regions;
     const auto [band_begin, band_end] = LevelBand(faces.heights(), levels[k]);
-    // A level with more faces than a slab of the levels' fit is a large building's: the dense
-    // mesh beside its fit would add its own memory (~0.3–0.4 GiB on a four-level office) to
-    // the fit's, for a few seconds saved.
-    if (band_end - band_begin > kLevelSlabFaces && settle_memory) settle_memory();
     if (absl::Status s = CheckPlanarMemory(
             options,
             absl::StrCat("level ", k, "'s planar regions (its faces from ",
