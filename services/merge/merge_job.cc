@@ -325,6 +325,8 @@ absl::StatusOr<TriangleMesh> WriteBuildingMesh(PlanarMesh planar, const fs::path
   counts["building_vertices"] = planar.mesh.vertices.size();
   counts["building_triangles"] = planar.mesh.triangles.size();
   counts["building_watertight"] = check.watertight();
+  counts["building_regions_not_retriangulated"] = planar.regions_not_retriangulated;
+  counts["building_triangles_not_retriangulated"] = planar.triangles_not_retriangulated;
   CountSelfIntersectionsInto(planar.mesh, "building", counts, timings, &warnings);
   return std::move(planar.mesh);
 }
@@ -393,6 +395,8 @@ absl::StatusOr<std::optional<PlanarMesh>> PlanarMeshByLevel(
     joined.mesh.Append(planar->mesh);
     joined.triangle_region.insert(joined.triangle_region.end(), planar->triangle_region.begin(),
                                   planar->triangle_region.end());
+    joined.regions_not_retriangulated += planar->regions_not_retriangulated;
+    joined.triangles_not_retriangulated += planar->triangles_not_retriangulated;
   }
   counts["building_planar_regions"] = regions_before;
   counts["building_level_caps"] = caps;

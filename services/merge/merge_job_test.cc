@@ -157,6 +157,9 @@ TEST(RunMerge, BoxRoomGivesEveryOutput) {
   EXPECT_EQ(job["counts"]["planar_regions"], 6);
   EXPECT_EQ(job["counts"]["level_planar_regions"], 6);
   EXPECT_EQ(job["counts"]["building_watertight"], true);
+  // A box's six walls are each re-triangulated in their plane.
+  EXPECT_EQ(job["counts"]["building_regions_not_retriangulated"], 0);
+  EXPECT_EQ(job["counts"]["building_triangles_not_retriangulated"], 0);
   EXPECT_EQ(job["levels_source"], "regions");
   const nlohmann::json topdown = ReadJson(options.output_dir + "/level_0/topdown.json");
   EXPECT_TRUE(topdown.contains("z_range"));

@@ -517,10 +517,10 @@ class EdgeUsers {
 
 // The output mesh: each region re-triangulated in its plane (RetriangulateRegion) where its
 // outline allows and no edge would be shared with another region, else its simplified
-// triangles as they are.
+// triangles as they are (not_retriangulated[r] set, for a region with an outline).
 PlanarMesh Retriangulate(const WorkMesh& m, const std::vector<PlaneFrame>& frames,
                          const RegionOutlines& outlines, const PlanarMeshOptions& options,
-                         double res) {
+                         double res, std::vector<char>& not_retriangulated) {
   PlanarMesh out;
   std::vector<int> out_vertex(m.pos.size(), -1);
   const auto vertex_id = [&](int v) {
@@ -562,6 +562,7 @@ PlanarMesh Retriangulate(const WorkMesh& m, const std::vector<PlaneFrame>& frame
     if (!remeshed) {
       tris = std::move(old_tris);
       steiner.clear();
+      not_retriangulated[r] = !outlines.segs[r].empty();
     }
     std::vector<int> steiner_id(steiner.size(), -1);
     for (const auto& t : tris) {
@@ -602,8 +603,11 @@ absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
   absl::StatusOr<RegionOutlines> outlines =
       OutlinesOf(*work, static_cast<int>(regions.regions.size()));
   if (!outlines.ok()) return outlines.status();
-  PlanarMesh out = Retriangulate(*work, frames, *outlines, options, res);
+  std::vector<char> not_retriangulated(regions.regions.size(), 0);
+  PlanarMesh out = Retriangulate(*work, frames, *outlines, options, res, not_retriangulated);
   RepairPlanarMesh(out, res);
+  for (char n : not_retriangulated) out.regions_not_retriangulated += n;
+  for (int r : out.triangle_region) out.triangles_not_retriangulated += not_retriangulated[r];
   const MeshCheck check = CheckMesh(out.mesh);
   if (!check.watertight()) {
     return absl::InternalError(absl::StrCat("planar_mesh: not watertight: ", check.ToString()));

@@ -60,6 +60,11 @@ struct PlanarMeshOptions {
 struct PlanarMesh {
   TriangleMesh mesh;              // counter-clockwise seen from free space (the faces' normals)
   std::vector<int> triangle_region;  // per triangle: its PlanarRegion id
+  // Regions whose outline does not make a valid polygon in their 2D coordinates, and the
+  // triangles they hold: they keep their simplified triangles, which may be folded through
+  // each other or a neighbour (where the mesh's self-intersections are; job.json counts).
+  int regions_not_retriangulated = 0;
+  size_t triangles_not_retriangulated = 0;
 };
 
 // The planar mesh of `faces` partitioned by `regions` (regions.face_region.size() ==

@@ -751,6 +751,7 @@ TEST_P(SteppedRoomTest, NoSelfIntersections) {
   EXPECT_EQ(si.pairs, 0u);
   EXPECT_EQ(si.unchecked, 0u);
   RecordProperty("regions", static_cast<int>(regions->regions.size()));
+  RecordProperty("not_retriangulated", pm->regions_not_retriangulated);
   RecordProperty("triangles", static_cast<int>(pm->mesh.triangles.size()));
   RecordProperty("pairs", static_cast<int>(si.pairs));
 }
@@ -774,6 +775,40 @@ TEST(PlanarMeshTest, Deterministic) {
   for (size_t i = 0; i < a->mesh.vertices.size(); ++i) EXPECT_EQ(a->mesh.vertices[i], b->mesh.vertices[i]);
   for (size_t i = 0; i < a->mesh.triangles.size(); ++i) EXPECT_EQ(a->mesh.triangles[i], b->mesh.triangles[i]);
   EXPECT_EQ(a->triangle_region, b->triangle_region);
+}
+
+// A region that laps over itself along its axis (the floors of two rooms, one above the other
+// and shifted, given one horizontal region) has an outline that crosses itself in its 2D
+// coordinates: it keeps its simplified triangles, which cross each other, and the mesh counts
+// it. Every other region is re-triangulated.
+TEST(PlanarMeshTest, CountsARegionItCannotRetriangulate) {
+  const OctreeGrid grid = Grid();
+  const double res = grid.resolution_m();
+  VoxelWorld world({28, 28, 16});
+  world.Fill({4, 4, 2}, {18, 18, 6}, true);
+  world.Fill({10, 10, 8}, {24, 24, 14}, true);
+  const std::vector<BoundaryFace> faces = FacesOf(world, grid);
+  const PlanarRegionSet by_axis = AxisRegions(faces, res);
+  ASSERT_EQ(by_axis.regions.size(), 12u);
+  auto is_floor = [](const BoundaryFace& f) { return f.axis == 2 && f.normal().z() > 0; };
+  std::vector<int64_t> label;
+  for (size_t f = 0; f < faces.size(); ++f) {
+    label.push_back(is_floor(faces[f]) ? -1 : by_axis.face_region[f]);
+  }
+  PlanarRegionSet regions = RegionsFromLabels(faces, label);
+  ASSERT_EQ(regions.regions.size(), 11u);
+  const int both =
+      regions.face_region[std::find_if(faces.begin(), faces.end(), is_floor) - faces.begin()];
+  regions.regions[both].normal = Eigen::Vector3d::UnitZ();  // PCA would tilt it
+  absl::StatusOr<PlanarMesh> pm = BuildPlanarMesh(faces, regions, grid, NoQuadtree());
+  ASSERT_TRUE(pm.ok()) << pm.status();
+  EXPECT_TRUE(CheckMesh(pm->mesh).watertight()) << CheckMesh(pm->mesh).ToString();
+  EXPECT_EQ(pm->regions_not_retriangulated, 1);
+  size_t kept = 0;
+  for (int r : pm->triangle_region) kept += r == both;
+  EXPECT_EQ(pm->triangles_not_retriangulated, kept);
+  EXPECT_GT(kept, 0u);
+  EXPECT_GT(CountSelfIntersections(pm->mesh).pairs, 0u);
 }
 
 // Two interior cells touching only along an edge: the faces around it are paired per

@@ -184,6 +184,9 @@ int main(int argc, char** argv) {
         "planar mesh self-intersections: %llu pairs (%llu triangles not tested) in %.2f s cpu\n",
         static_cast<unsigned long long>(crossings.pairs),
         static_cast<unsigned long long>(crossings.unchecked), CpuSeconds() - t);
+    std::printf(
+        "regions not re-triangulated (their simplified triangles kept): %d, %zu triangles\n",
+        planar->regions_not_retriangulated, planar->triangles_not_retriangulated);
     // Triangles by the size of their region.
     size_t by_size[4] = {};
     for (int r : planar->triangle_region) {
