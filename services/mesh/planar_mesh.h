@@ -46,7 +46,11 @@ struct PlanarMeshOptions {
   double max_displacement_cells = 3.0;
   // A vertex of a chain between two regions is removed only when it lies within this distance
   // (grid cells) of the segment joining its chain neighbours. 0 removes collinear ones only.
-  double chain_tolerance_cells = 0.5;
+  // One cell (the resolution the walls were sampled at, as §3.3.3 simplifies the plan's walls):
+  // the staircase a chain keeps at half a cell folds the outlines of many regions in their
+  // plane, so they keep their simplified triangles, where the mesh crosses itself
+  // (docs/BENCHMARKS.md "Where building.ply still crosses itself").
+  double chain_tolerance_cells = 1.0;
   // §4.2.5: add quadtree points inside regions (bounded angles, bigger triangles on bigger
   // regions). false: the regions' boundary vertices only (fewest triangles).
   bool quadtree_points = true;

@@ -4,9 +4,11 @@
 // for tuning on kept carves without re-running the whole merge.
 //
 //   planar_mesh_bench TILES_DIR [--mesh-growth] [--no-dense] [--regions-only] [--out DIR]
-//                     [--gt GT_DIR] [--max-displacement CELLS]
+//                     [--gt GT_DIR] [--max-displacement CELLS] [--chain-tolerance CELLS]
 //
-// --max-displacement sets PlanarMeshOptions::max_displacement_cells (eq 4.9's clamp).
+// --max-displacement sets PlanarMeshOptions::max_displacement_cells (eq 4.9's clamp),
+// --chain-tolerance its chain_tolerance_cells (how far a chain vertex may lie off the segment
+// that replaces it).
 // --regions-only stops after the regions, so that a heap profiler's peak is theirs.
 // --mesh-growth fits the regions as the merge does for mesh/building.ply
 // (PlanarRegionOptions::mesh_growth); without it, as for the levels and floor plans.
@@ -57,7 +59,7 @@ int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr,
                  "usage: %s TILES_DIR [--mesh-growth] [--no-dense] [--regions-only] [--out DIR] "
-                 "[--gt GT_DIR] [--max-displacement CELLS]\n",
+                 "[--gt GT_DIR] [--max-displacement CELLS] [--chain-tolerance CELLS]\n",
                  argv[0]);
     return 2;
   }
@@ -82,6 +84,8 @@ int main(int argc, char** argv) {
       gt = argv[++i];
     } else if (a == "--max-displacement" && i + 1 < argc) {
       mesh_options.max_displacement_cells = std::atof(argv[++i]);
+    } else if (a == "--chain-tolerance" && i + 1 < argc) {
+      mesh_options.chain_tolerance_cells = std::atof(argv[++i]);
     } else {
       std::fprintf(stderr, "%s: unknown argument %s\n", argv[0], a.c_str());
       return 2;
