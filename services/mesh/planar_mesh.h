@@ -46,10 +46,10 @@ struct PlanarMeshOptions {
   double max_displacement_cells = 3.0;
   // A vertex of a chain between two regions is removed only when it lies within this distance
   // (grid cells) of the segment joining its chain neighbours. 0 removes collinear ones only.
-  // One cell (the resolution the walls were sampled at, as §3.3.3 simplifies the plan's walls):
-  // the staircase a chain keeps at half a cell folds the outlines of many regions in their
-  // plane, so they keep their simplified triangles, where the mesh crosses itself
-  // (docs/BENCHMARKS.md "Where building.ply still crosses itself").
+  // One cell, the resolution the walls were sampled at (as §3.3.3 simplifies a plan's walls):
+  // at half a cell the chains keep more of their octree staircase, whose steps make many more
+  // regions' outlines cross in their plane, and those regions keep their simplified triangles,
+  // where the mesh crosses itself (docs/BENCHMARKS.md "Where building.ply still crosses itself").
   double chain_tolerance_cells = 1.0;
   // §4.2.5: add quadtree points inside regions (bounded angles, bigger triangles on bigger
   // regions). false: the regions' boundary vertices only (fewest triangles).
@@ -64,9 +64,10 @@ struct PlanarMeshOptions {
 struct PlanarMesh {
   TriangleMesh mesh;              // counter-clockwise seen from free space (the faces' normals)
   std::vector<int> triangle_region;  // per triangle: its PlanarRegion id
-  // Regions whose outline does not make a valid polygon in their 2D coordinates, and the
-  // triangles they hold: they keep their simplified triangles, which may be folded through
-  // each other or a neighbour (where the mesh's self-intersections are; job.json counts).
+  // Regions that could not be re-triangulated in their plane (mostly: their outline crosses
+  // itself in their 2D coordinates), and the triangles they hold: they keep their simplified
+  // triangles, which may fold through each other or a neighbour's; most of the mesh's
+  // self-intersections are there (docs/BENCHMARKS.md). job.json counts both.
   int regions_not_retriangulated = 0;
   size_t triangles_not_retriangulated = 0;
 };
