@@ -36,6 +36,11 @@ absl::Status PlanarMeshOptions::Validate() const {
     return absl::InvalidArgumentError(absl::StrCat(
         "planar_mesh: chain_tolerance_cells must be >= 0, got ", chain_tolerance_cells));
   }
+  if (!(untangle_edge_cells >= 0) || !(untangle_move_cells >= 0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("planar_mesh: untangle_edge_cells and untangle_move_cells must be >= 0, got ",
+                     untangle_edge_cells, " and ", untangle_move_cells));
+  }
   if (min_quadtree_cells < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("planar_mesh: min_quadtree_cells must be >= 1, got ", min_quadtree_cells));
@@ -45,10 +50,13 @@ absl::Status PlanarMeshOptions::Validate() const {
 
 namespace {
 
+using planar_mesh_internal::BoxGrid;
 using planar_mesh_internal::BuildWorkMesh;
 using planar_mesh_internal::FrameOf;
 using planar_mesh_internal::PlaneFrame;
 using planar_mesh_internal::Simplify;
+using planar_mesh_internal::TrianglesMeet;
+using planar_mesh_internal::Untangle;
 using planar_mesh_internal::WorkMesh;
 
 using K = CGAL::Exact_predicates_inexact_constructions_kernel;
@@ -515,31 +523,93 @@ class EdgeUsers {
   absl::flat_hash_map<uint64_t, int> count_;
 };
 
+// A region's triangles in the output: ids of the work mesh's vertices, or −2 − i for its
+// Steiner point i.
+struct RegionTriangles {
+  std::vector<std::array<int, 3>> tris;
+  std::vector<Eigen::Vector3d> steiner;
+};
+
+// Whether each region's new triangles meet more triangles of the other regions (as the output
+// would have them: `chosen`) than its simplified ones do. Lifted onto its plane, a region can
+// pass through a neighbour that its simplified triangles, off the plane where eq 4.9's moves
+// were clamped, stayed clear of (the two faces of a thin part).
+std::vector<char> MeetMoreOnPlane(const WorkMesh& m, const std::vector<RegionTriangles>& chosen,
+                                  const std::vector<std::vector<std::array<int, 3>>>& old_tris,
+                                  const std::vector<char>& remeshed, double res) {
+  struct Placed {
+    int region;
+    std::array<int, 3> id;  // Steiner points: ids below any other region's
+    std::array<Eigen::Vector3d, 3> p;
+    Eigen::Vector3d lo, hi;
+  };
+  std::vector<Placed> placed;
+  int next_steiner = -2;
+  auto place = [&](int r, const std::array<int, 3>& t, std::span<const Eigen::Vector3d> steiner,
+                   int steiner_base) {
+    Placed x{r, t, {}, {}, {}};
+    for (int i = 0; i < 3; ++i) {
+      x.p[i] = t[i] >= 0 ? m.pos[t[i]] : steiner[-t[i] - 2];
+      if (t[i] < 0) x.id[i] = steiner_base + t[i] + 2;
+    }
+    x.lo = x.p[0].cwiseMin(x.p[1]).cwiseMin(x.p[2]);
+    x.hi = x.p[0].cwiseMax(x.p[1]).cwiseMax(x.p[2]);
+    return x;
+  };
+  for (int r = 0; r < static_cast<int>(chosen.size()); ++r) {
+    for (const auto& t : chosen[r].tris)
+      placed.push_back(place(r, t, chosen[r].steiner, next_steiner));
+    next_steiner -= static_cast<int>(chosen[r].steiner.size());
+  }
+  BoxGrid grid(8 * res);
+  for (int i = 0; i < static_cast<int>(placed.size()); ++i) grid.Add(i, placed[i].lo, placed[i].hi);
+  auto meets = [&](int r, std::span<const Placed> tris) {
+    int n = 0;
+    for (const Placed& x : tris) {
+      for (int i : grid.Candidates(x.lo, x.hi)) {
+        const Placed& y = placed[i];
+        if (y.region == r || (y.hi.array() < x.lo.array()).any() ||
+            (y.lo.array() > x.hi.array()).any()) {
+          continue;
+        }
+        n += TrianglesMeet(x.id, x.p, y.id, y.p);
+      }
+    }
+    return n;
+  };
+  std::vector<char> more(chosen.size(), 0);
+  next_steiner = -2;
+  for (int r = 0; r < static_cast<int>(chosen.size()); ++r) {
+    const int base = next_steiner;
+    next_steiner -= static_cast<int>(chosen[r].steiner.size());
+    if (!remeshed[r]) continue;
+    std::vector<Placed> now, before;
+    for (const auto& t : chosen[r].tris) now.push_back(place(r, t, chosen[r].steiner, base));
+    for (const auto& t : old_tris[r]) before.push_back(place(r, t, {}, 0));
+    more[r] = meets(r, now) > meets(r, before);
+  }
+  return more;
+}
+
 // The output mesh: each region re-triangulated in its plane (RetriangulateRegion) where its
-// outline allows and no edge would be shared with another region, else its simplified
+// outline allows, no edge would be shared with another region, and its new triangles meet no
+// more of the others' than its simplified ones (MeetMoreOnPlane), else its simplified
 // triangles as they are (not_retriangulated[r] set, for a region with an outline).
 PlanarMesh Retriangulate(const WorkMesh& m, const std::vector<PlaneFrame>& frames,
                          const RegionOutlines& outlines, const PlanarMeshOptions& options,
                          double res, std::vector<char>& not_retriangulated) {
-  PlanarMesh out;
-  std::vector<int> out_vertex(m.pos.size(), -1);
-  const auto vertex_id = [&](int v) {
-    if (out_vertex[v] < 0) {
-      out_vertex[v] = static_cast<int>(out.mesh.vertices.size());
-      out.mesh.vertices.push_back(m.pos[v].cast<float>());
-    }
-    return out_vertex[v];
-  };
+  const int num_regions = static_cast<int>(outlines.tris.size());
+  std::vector<RegionTriangles> chosen(num_regions);
+  std::vector<std::vector<std::array<int, 3>>> old_tris(num_regions);
+  std::vector<char> remeshed(num_regions, 0);
   EdgeUsers users(m);
-  for (int r = 0; r < static_cast<int>(outlines.tris.size()); ++r) {
-    std::vector<std::array<int, 3>> old_tris;
-    for (int t : outlines.tris[r]) old_tris.push_back(m.tri[t]);
-    std::vector<std::array<int, 3>> tris;
-    std::vector<Eigen::Vector3d> steiner;
+  for (int r = 0; r < num_regions; ++r) {
+    for (int t : outlines.tris[r]) old_tris[r].push_back(m.tri[t]);
+    std::vector<std::array<int, 3>>& tris = chosen[r].tris;
+    std::vector<Eigen::Vector3d>& steiner = chosen[r].steiner;
     // A new inner edge that another region already has (the two regions meet along two
     // chains, and both would join the same two corners across): split it by a point at its
     // middle, which lies inside this region, and triangulate again.
-    bool remeshed = false;
     std::vector<Eigen::Vector2d> splits;
     for (int attempt = 0; attempt < 4 && !outlines.segs[r].empty(); ++attempt) {
       tris.clear();
@@ -549,35 +619,48 @@ PlanarMesh Retriangulate(const WorkMesh& m, const std::vector<PlaneFrame>& frame
         break;
       }
       // Steiner points (negative ids) never sit on the outline, so the fans' ends compare.
-      if (PinchedFans(outlines.segs[r], old_tris) != PinchedFans(outlines.segs[r], tris)) break;
+      if (PinchedFans(outlines.segs[r], old_tris[r]) != PinchedFans(outlines.segs[r], tris)) {
+        break;
+      }
       std::vector<std::pair<int, int>> conflicts;
-      if (users.TryReplace(outlines.segs[r], old_tris, tris, &conflicts)) {
-        remeshed = true;
+      if (users.TryReplace(outlines.segs[r], old_tris[r], tris, &conflicts)) {
+        remeshed[r] = 1;
         break;
       }
       for (auto [a, b] : conflicts) {
         splits.push_back(0.5 * (frames[r].To2(m.pos[a]) + frames[r].To2(m.pos[b])));
       }
     }
-    if (!remeshed) {
-      tris = std::move(old_tris);
+    if (!remeshed[r]) {
+      tris = old_tris[r];
       steiner.clear();
-      not_retriangulated[r] = !outlines.segs[r].empty();
     }
+  }
+  PlanarMesh out;
+  const std::vector<char> more = MeetMoreOnPlane(m, chosen, old_tris, remeshed, res);
+  for (int r = 0; r < num_regions; ++r) {
+    // Back to the simplified triangles, unless another region took one of their inner edges.
+    if (more[r] && users.TryReplace(outlines.segs[r], chosen[r].tris, old_tris[r])) {
+      remeshed[r] = 0;
+      chosen[r].tris = old_tris[r];
+      chosen[r].steiner.clear();
+      ++out.regions_kept_off_plane;
+    }
+    not_retriangulated[r] = !remeshed[r] && !outlines.segs[r].empty();
+  }
+  std::vector<int> out_vertex(m.pos.size(), -1);
+  for (int r = 0; r < num_regions; ++r) {
+    const std::vector<Eigen::Vector3d>& steiner = chosen[r].steiner;
     std::vector<int> steiner_id(steiner.size(), -1);
-    for (const auto& t : tris) {
+    for (const auto& t : chosen[r].tris) {
       Eigen::Vector3i o;
       for (int i = 0; i < 3; ++i) {
-        if (t[i] >= 0) {
-          o[i] = vertex_id(t[i]);
-          continue;
+        int& id = t[i] >= 0 ? out_vertex[t[i]] : steiner_id[-t[i] - 2];
+        if (id < 0) {
+          id = static_cast<int>(out.mesh.vertices.size());
+          out.mesh.vertices.push_back((t[i] >= 0 ? m.pos[t[i]] : steiner[-t[i] - 2]).cast<float>());
         }
-        const int s = -t[i] - 2;
-        if (steiner_id[s] < 0) {
-          steiner_id[s] = static_cast<int>(out.mesh.vertices.size());
-          out.mesh.vertices.push_back(steiner[s].cast<float>());
-        }
-        o[i] = steiner_id[s];
+        o[i] = id;
       }
       out.mesh.triangles.push_back(o);
       out.triangle_region.push_back(r);
@@ -600,12 +683,18 @@ absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
   absl::StatusOr<WorkMesh> work = BuildWorkMesh(faces, regions, frames, options, res);
   if (!work.ok()) return work.status();
   Simplify(*work, frames, options.chain_tolerance_cells * res, res);
+  const planar_mesh_internal::UntangleCounts untangled = Untangle(
+      *work, frames, options.untangle_edge_cells * res, options.untangle_move_cells * res, res);
   absl::StatusOr<RegionOutlines> outlines =
       OutlinesOf(*work, static_cast<int>(regions.regions.size()));
   if (!outlines.ok()) return outlines.status();
   std::vector<char> not_retriangulated(regions.regions.size(), 0);
   PlanarMesh out = Retriangulate(*work, frames, *outlines, options, res, not_retriangulated);
-  RepairPlanarMesh(out, res);
+  const int kept_off_plane = out.regions_kept_off_plane;
+  RepairPlanarMesh(out, res);  // a new PlanarMesh: the counts go in after it
+  out.regions_kept_off_plane = kept_off_plane;
+  out.untangle_collapses = untangled.collapses;
+  out.untangle_moves = untangled.moves;
   for (char n : not_retriangulated) out.regions_not_retriangulated += n;
   for (int r : out.triangle_region) out.triangles_not_retriangulated += not_retriangulated[r];
   const MeshCheck check = CheckMesh(out.mesh);

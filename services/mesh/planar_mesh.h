@@ -11,10 +11,14 @@
 // turns over and no region wraps around a vertex in its 2D coordinates. Edge collapses that
 // keep the mesh a closed manifold, under the same two conditions, then remove region
 // interiors and straight runs of the chains between two regions, so neighbouring regions keep
-// exactly the same boundary vertices; last, each region is re-triangulated in its 2D
-// coordinates and lifted onto its plane (constrained Delaunay of its boundary plus quadtree
-// points, §4.2.5), or keeps its collapsed triangles when its boundary does not make a valid
-// polygon there. Those are where self-intersections remain.
+// exactly the same boundary vertices. Where the simplified surface then passes through itself
+// (the two faces of a part one or two cells thick, a fan folded at a vertex), the meeting
+// triangles' vertices are collapsed or moved a little where that leaves fewer meeting pairs
+// (untangling; §4.2.5 does not look for self-intersections). Last, each region is
+// re-triangulated in its 2D coordinates and lifted onto its plane (constrained Delaunay of its
+// boundary plus quadtree points, §4.2.5), or keeps its collapsed triangles when its boundary
+// does not make a valid polygon there or the lifted triangles would meet more of the other
+// regions' triangles. The few self-intersections left are there.
 #pragma once
 
 #include <span>
@@ -51,6 +55,13 @@ struct PlanarMeshOptions {
   // regions' outlines cross in their plane, and those regions keep their simplified triangles,
   // where the mesh crosses itself (docs/BENCHMARKS.md "Where building.ply still crosses itself").
   double chain_tolerance_cells = 1.0;
+  // Where the simplified mesh passes through itself (the two faces of a part one or two cells
+  // thick moved or collapsed into each other, a fan folded at a vertex), a vertex of the
+  // meeting triangles is collapsed into a neighbour at most this many grid cells away, or else
+  // moved up to `untangle_move_cells`, when that leaves fewer meeting pairs around it. Both 0:
+  // not done. §4.2.5 does not check for self-intersection; CountSelfIntersections finds them.
+  double untangle_edge_cells = 8.0;
+  double untangle_move_cells = 1.0;
   // §4.2.5: add quadtree points inside regions (bounded angles, bigger triangles on bigger
   // regions). false: the regions' boundary vertices only (fewest triangles).
   bool quadtree_points = true;
@@ -70,6 +81,12 @@ struct PlanarMesh {
   // self-intersections are there (docs/BENCHMARKS.md). job.json counts both.
   int regions_not_retriangulated = 0;
   size_t triangles_not_retriangulated = 0;
+  // Of those, the regions whose outline did make a polygon, but whose triangles lifted onto
+  // their plane would have met more of their neighbours' triangles than the simplified ones.
+  int regions_kept_off_plane = 0;
+  // Untangle's work (PlanarMeshOptions::untangle_*): vertices collapsed, vertices moved.
+  int untangle_collapses = 0;
+  int untangle_moves = 0;
 };
 
 // The planar mesh of `faces` partitioned by `regions` (regions.face_region.size() ==

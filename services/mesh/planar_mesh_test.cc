@@ -17,6 +17,7 @@
 
 #include "services/mesh/mesh_checks.h"
 #include "services/mesh/planar_regions.h"
+#include "services/mesh/planar_work_mesh.h"
 #include "services/mesh/self_intersections.h"
 #ifdef CARVEMAP_PLANAR_CARVED_ONLY
 #include "services/building/building.h"
@@ -695,6 +696,58 @@ TEST_P(NoisyFittedRoomTest, AlwaysWatertight) {
 INSTANTIATE_TEST_SUITE_P(Seeds, NoisyFittedRoomTest,
                          ::testing::Combine(::testing::Range(1, 31), ::testing::Values(1, 4)));
 
+// The noisy rooms above cross themselves where the simplification brought the two faces of a
+// one-cell bump or wall into each other, or folded a fan at a vertex. Untangling (collapses and
+// short moves of the meeting triangles' vertices, and regions kept off their plane where
+// lifting them would cross a neighbour) removes most of it: 1,812 → 580 pairs over these 12
+// rooms, fewer in every one.
+TEST(PlanarMeshUntangleTest, NoisyRoomsCrossThemselvesLess) {
+  const OctreeGrid grid = Grid();
+  const double res = grid.resolution_m();
+  uint64_t total[2] = {0, 0};
+  for (int seed = 1; seed <= 6; ++seed) {
+    for (int leaf : {1, 4}) {
+      SCOPED_TRACE(::testing::Message() << "seed " << seed << " leaf " << leaf);
+      VoxelWorld world({40, 36, 24});
+      world.Fill({4, 4, 4}, {36, 32, 20}, true);
+      std::mt19937 rng(seed);
+      std::uniform_real_distribution<double> u(0, 1);
+      for (int z = 3; z < 21; ++z)
+        for (int y = 3; y < 33; ++y)
+          for (int x = 3; x < 37; ++x) {
+            const Eigen::Vector3i c(x, y, z);
+            const bool wall = x < 5 || x > 34 || y < 5 || y > 30 || z < 5 || z > 18;
+            if (wall && u(rng) < 0.2) world.interior[world.Index(c)] = !world.At(c);
+          }
+      std::vector<BoundaryFace> faces = FacesOf(world, grid, leaf);
+      for (BoundaryFace& f : faces) {
+        f.isosurface_m += (u(rng) - 0.5) * 0.9 * std::min(f.size_m, res);
+      }
+      absl::StatusOr<PlanarRegionSet> regions = FitRegions(faces, grid, /*mesh_growth=*/true);
+      ASSERT_TRUE(regions.ok()) << regions.status();
+      uint64_t pairs[2];
+      for (const bool untangle : {false, true}) {
+        PlanarMeshOptions options;
+        if (!untangle) options.untangle_edge_cells = options.untangle_move_cells = 0;
+        absl::StatusOr<PlanarMesh> pm = BuildPlanarMesh(faces, *regions, grid, options);
+        ASSERT_TRUE(pm.ok()) << pm.status();
+        EXPECT_TRUE(CheckMesh(pm->mesh).watertight()) << CheckMesh(pm->mesh).ToString();
+        pairs[untangle] = CountSelfIntersections(pm->mesh).pairs;
+        total[untangle] += pairs[untangle];
+        if (untangle) {
+          EXPECT_GT(pm->untangle_collapses + pm->untangle_moves, 0);
+        } else {
+          EXPECT_EQ(pm->untangle_collapses + pm->untangle_moves, 0);
+        }
+      }
+      EXPECT_LT(pairs[1], pairs[0]);
+    }
+  }
+  RecordProperty("pairs_without", static_cast<int>(total[0]));
+  RecordProperty("pairs_with", static_cast<int>(total[1]));
+  EXPECT_LT(total[1], total[0] / 2);
+}
+
 // Carved walls that are a little off the lattice are staircases: mesh_growth gives each wall
 // one region with its one-cell steps and risers (planar_regions.h), some risers facing a
 // little away from the wall's normal. Projected orthogonally onto the plane those risers were
@@ -859,6 +912,42 @@ TEST(PlanarMeshTest, CellsTouchingAtACornerDoNotTouchInTheMesh) {
     EXPECT_NEAR(d.norm(), 0.02 * grid.resolution_m(), 1e-5);
   }
   EXPECT_EQ(near, 2);
+}
+
+// What counts as meeting for the untangling, as CountSelfIntersections counts it.
+TEST(PlanarMeshTest, TrianglesMeetOtherThanAtWhatTheyShare) {
+  using planar_mesh_internal::TrianglesMeet;
+  using P = std::array<Eigen::Vector3d, 3>;
+  const P flat = {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(2, 0, 0), Eigen::Vector3d(0, 2, 0)};
+  // Apart, and crossing without a shared vertex.
+  EXPECT_FALSE(TrianglesMeet(
+      {0, 1, 2}, flat, {3, 4, 5},
+      {Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(2, 0, 1), Eigen::Vector3d(0, 2, 1)}));
+  EXPECT_TRUE(TrianglesMeet(
+      {0, 1, 2}, flat, {3, 4, 5},
+      {Eigen::Vector3d(0.5, 0.5, -1), Eigen::Vector3d(0.5, 0.5, 1), Eigen::Vector3d(0.5, -1, 0)}));
+  // One shared vertex: meeting there only, or passing through the other beyond it.
+  EXPECT_FALSE(TrianglesMeet({0, 1, 2}, flat, {0, 4, 5},
+                             {flat[0], Eigen::Vector3d(0, 0, 2), Eigen::Vector3d(-1, -1, 1)}));
+  EXPECT_TRUE(TrianglesMeet({0, 1, 2}, flat, {0, 4, 5},
+                            {flat[0], Eigen::Vector3d(1, 0.5, 1), Eigen::Vector3d(1, 0.5, -1)}));
+  // A shared edge: a crease is not meeting, a fold in one plane onto the same side is.
+  EXPECT_FALSE(
+      TrianglesMeet({0, 1, 2}, flat, {1, 0, 5}, {flat[1], flat[0], Eigen::Vector3d(1, -1, 0)}));
+  EXPECT_FALSE(
+      TrianglesMeet({0, 1, 2}, flat, {1, 0, 5}, {flat[1], flat[0], Eigen::Vector3d(1, 1, 1)}));
+  EXPECT_TRUE(
+      TrianglesMeet({0, 1, 2}, flat, {1, 0, 5}, {flat[1], flat[0], Eigen::Vector3d(1, 0.5, 0)}));
+  // Vertices on one point count as shared (sheets touching at a corner are the repair's).
+  EXPECT_FALSE(TrianglesMeet({0, 1, 2}, flat, {6, 4, 5},
+                             {flat[0], Eigen::Vector3d(0, 0, 2), Eigen::Vector3d(-1, -1, 1)}));
+  // A triangle without area is its longest edge.
+  const P needle = {Eigen::Vector3d(0.5, 0.5, -1), Eigen::Vector3d(0.5, 0.5, 0.5),
+                    Eigen::Vector3d(0.5, 0.5, 1)};
+  EXPECT_TRUE(TrianglesMeet({0, 1, 2}, flat, {3, 4, 5}, needle));
+  EXPECT_FALSE(TrianglesMeet(
+      {0, 1, 2}, flat, {3, 4, 5},
+      {Eigen::Vector3d(3, 3, -1), Eigen::Vector3d(3, 3, 0), Eigen::Vector3d(3, 3, 1)}));
 }
 
 TEST(PlanarMeshTest, RejectsBadInput) {

@@ -1,12 +1,15 @@
 #include "services/mesh/planar_work_mesh.h"
 
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/intersections.h>
+
+#include <Eigen/SVD>
 #include <cmath>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <limits>
 #include <utility>
-
-#include <Eigen/SVD>
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/container/flat_hash_set.h"
@@ -554,7 +557,306 @@ int ResumeMoves(WorkMesh& m, const std::vector<PlaneFrame>& frames, double res) 
   return moved;
 }
 
+// ---------------------------------------------------------------------------------------------
+// Untangle: triangles of the work mesh that meet other than at what they share, decided with
+// CGAL's exact predicates (the same test CountSelfIntersections makes on the written mesh).
+
+using UK = CGAL::Exact_predicates_inexact_constructions_kernel;
+
+UK::Point_3 P3(const Eigen::Vector3d& x) { return {x.x(), x.y(), x.z()}; }
+
+bool WorkTrianglesMeet(const WorkMesh& m, const std::array<int, 3>& a,
+                       const std::array<int, 3>& b) {
+  return TrianglesMeet(a, {m.pos[a[0]], m.pos[a[1]], m.pos[a[2]]}, b,
+                       {m.pos[b[0]], m.pos[b[1]], m.pos[b[2]]});
+}
+
+void TriangleBox(const WorkMesh& m, const std::array<int, 3>& x, Eigen::Vector3d& lo,
+                 Eigen::Vector3d& hi) {
+  lo = m.pos[x[0]].cwiseMin(m.pos[x[1]]).cwiseMin(m.pos[x[2]]);
+  hi = m.pos[x[0]].cwiseMax(m.pos[x[1]]).cwiseMax(m.pos[x[2]]);
+}
+
+// The alive triangles in `grid` whose box meets [lo, hi] now.
+std::vector<int> AliveNear(const WorkMesh& m, const BoxGrid& grid, const Eigen::Vector3d& lo,
+                           const Eigen::Vector3d& hi) {
+  std::vector<int> out = grid.Candidates(lo, hi);
+  std::erase_if(out, [&](int t) {
+    if (!m.alive[t]) return true;
+    Eigen::Vector3d a, b;
+    TriangleBox(m, m.tri[t], a, b);
+    return (b.array() < lo.array()).any() || (a.array() > hi.array()).any();
+  });
+  return out;
+}
+
+// Triangles near a vertex, with their boxes as they are now, for Untangle's counts.
+struct Nearby {
+  int t;
+  Eigen::Vector3d lo, hi;
+};
+
+// Pairs that meet among `changed` (triangle ids with the vertices they would have, at the
+// positions m holds now) and between them and the `near` triangles that are neither changed
+// nor in `gone`.
+int MeetingPairs(const WorkMesh& m, std::span<const Nearby> near,
+                 std::span<const std::pair<int, std::array<int, 3>>> changed,
+                 std::span<const int> gone, int limit = std::numeric_limits<int>::max()) {
+  auto skip = [&](int t) {
+    if (std::find(gone.begin(), gone.end(), t) != gone.end()) return true;
+    for (const auto& c : changed)
+      if (c.first == t) return true;
+    return false;
+  };
+  int n = 0;
+  for (size_t i = 0; i < changed.size() && n < limit; ++i) {
+    const std::array<int, 3>& x = changed[i].second;
+    for (size_t j = i + 1; j < changed.size(); ++j) n += WorkTrianglesMeet(m, x, changed[j].second);
+    const Eigen::Vector3d lo = m.pos[x[0]].cwiseMin(m.pos[x[1]]).cwiseMin(m.pos[x[2]]);
+    const Eigen::Vector3d hi = m.pos[x[0]].cwiseMax(m.pos[x[1]]).cwiseMax(m.pos[x[2]]);
+    for (const Nearby& o : near) {
+      if ((o.hi.array() < lo.array()).any() || (o.lo.array() > hi.array()).any()) continue;
+      if (!skip(o.t)) n += WorkTrianglesMeet(m, x, m.tri[o.t]);
+      if (n >= limit) break;
+    }
+  }
+  return n;
+}
+
 }  // namespace
+
+// Sharing a vertex s, two triangles meet elsewhere iff the edge of one opposite s meets the
+// other; sharing an edge, iff they lie in one plane on the same side of it (folded onto each
+// other).
+bool TrianglesMeet(const std::array<int, 3>& a, const std::array<Eigen::Vector3d, 3>& pa,
+                   const std::array<int, 3>& b, const std::array<Eigen::Vector3d, 3>& pb) {
+  const UK::Triangle_3 ta(P3(pa[0]), P3(pa[1]), P3(pa[2]));
+  const UK::Triangle_3 tb(P3(pb[0]), P3(pb[1]), P3(pb[2]));
+  // Vertices on one point count as shared, as CountSelfIntersections welds them: sheets that
+  // touch there are RepairPlanarMesh's to separate.
+  int ia[3], ib[3], shared = 0;  // positions of the shared vertices in a and in b
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      if (shared < 3 && (a[i] == b[j] || pa[i] == pb[j])) {
+        ia[shared] = i;
+        ib[shared] = j;
+        ++shared;
+      }
+  if (shared == 3) return true;
+  // CGAL's exact test only where doubles cannot tell: an area well above rounding has area.
+  auto flat = [](const std::array<Eigen::Vector3d, 3>& p, const UK::Triangle_3& t) {
+    const Eigen::Vector3d e1 = p[1] - p[0], e2 = p[2] - p[0];
+    const double scale = std::max(e1.squaredNorm(), e2.squaredNorm());
+    return e1.cross(e2).squaredNorm() <= 1e-20 * scale * scale && t.is_degenerate();
+  };
+  const bool da = flat(pa, ta), db = flat(pb, tb);
+  if (da || db) {
+    // CGAL's triangle tests need area: a flat triangle is tested as its longest edge, and only
+    // against a triangle it shares nothing with.
+    if (shared > 0 || (da && db)) return false;
+    const UK::Triangle_3& d = da ? ta : tb;
+    int k = 0;
+    for (int i = 1; i < 3; ++i) {
+      if (CGAL::squared_distance(d[i], d[(i + 1) % 3]) >
+          CGAL::squared_distance(d[k], d[(k + 1) % 3]))
+        k = i;
+    }
+    if (d[k] == d[(k + 1) % 3]) return false;
+    return CGAL::do_intersect(UK::Segment_3(d[k], d[(k + 1) % 3]), da ? tb : ta);
+  }
+  if (shared == 0) return CGAL::do_intersect(ta, tb);
+  if (shared == 1) {
+    const UK::Segment_3 ea(ta[(ia[0] + 1) % 3], ta[(ia[0] + 2) % 3]);
+    const UK::Segment_3 eb(tb[(ib[0] + 1) % 3], tb[(ib[0] + 2) % 3]);
+    return CGAL::do_intersect(ea, tb) || CGAL::do_intersect(eb, ta);
+  }
+  const UK::Point_3& s = ta[ia[0]];
+  const UK::Point_3& t = ta[ia[1]];
+  const UK::Point_3& x = ta[3 - ia[0] - ia[1]];
+  const UK::Point_3& y = tb[3 - ib[0] - ib[1]];
+  return CGAL::coplanar(s, t, x, y) && CGAL::coplanar_orientation(s, t, x, y) == CGAL::POSITIVE;
+}
+
+void BoxGrid::Add(int id, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+  ForCells(lo, hi, [&](uint64_t c) { cells_[c].push_back(id); });
+}
+
+std::vector<int> BoxGrid::Candidates(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const {
+  std::vector<int> out;
+  ForCells(lo, hi, [&](uint64_t c) {
+    if (auto it = cells_.find(c); it != cells_.end())
+      out.insert(out.end(), it->second.begin(), it->second.end());
+  });
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+void BoxGrid::ForCells(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
+                       const std::function<void(uint64_t)>& f) const {
+  int64_t l[3], h[3];
+  for (int i = 0; i < 3; ++i) {
+    l[i] = static_cast<int64_t>(std::floor(lo[i] * inv_cell_));
+    h[i] = static_cast<int64_t>(std::floor(hi[i] * inv_cell_));
+  }
+  for (int64_t x = l[0]; x <= h[0]; ++x)
+    for (int64_t y = l[1]; y <= h[1]; ++y)
+      for (int64_t z = l[2]; z <= h[2]; ++z)
+        f((static_cast<uint64_t>(x & 0x1fffff) << 42) |
+          (static_cast<uint64_t>(y & 0x1fffff) << 21) | static_cast<uint64_t>(z & 0x1fffff));
+}
+
+// Untangle's moves: towards the centroid and the nearest few neighbours.
+constexpr size_t kMoveTowardsNearest = 3;
+
+UntangleCounts Untangle(WorkMesh& m, const std::vector<PlaneFrame>& frames, double max_edge_m,
+                        double max_move_m, double res) {
+  const double min_area = 1e-6 * res * res;
+  const double min_area2 = 2e-6 * res * res;  // as TryCollapse's winding test
+  UntangleCounts counts;
+  if (max_edge_m <= 0 && max_move_m <= 0) return counts;
+  for (int round = 0; round < 8; ++round) {
+    BoxGrid grid(8 * res);
+    auto add = [&](int t) {
+      Eigen::Vector3d lo, hi;
+      TriangleBox(m, m.tri[t], lo, hi);
+      grid.Add(t, lo, hi);
+    };
+    for (int t = 0; t < static_cast<int>(m.tri.size()); ++t) {
+      if (m.alive[t]) add(t);
+    }
+    // The vertices of every triangle that meets another.
+    std::vector<int> tangled;
+    for (int t = 0; t < static_cast<int>(m.tri.size()); ++t) {
+      if (!m.alive[t]) continue;
+      Eigen::Vector3d lo, hi;
+      TriangleBox(m, m.tri[t], lo, hi);
+      for (int o : AliveNear(m, grid, lo, hi)) {
+        if (o <= t || !WorkTrianglesMeet(m, m.tri[t], m.tri[o])) continue;
+        tangled.insert(tangled.end(), m.tri[t].begin(), m.tri[t].end());
+        tangled.insert(tangled.end(), m.tri[o].begin(), m.tri[o].end());
+      }
+    }
+    std::sort(tangled.begin(), tangled.end());
+    tangled.erase(std::unique(tangled.begin(), tangled.end()), tangled.end());
+    int changed = 0;
+    for (int u : tangled) {
+      if (!m.vertex_alive[u]) continue;
+      std::vector<int> nbrs;
+      for (int t : m.Tris(u))
+        for (int w : m.tri[t])
+          if (w != u) nbrs.push_back(w);
+      std::sort(nbrs.begin(), nbrs.end());
+      nbrs.erase(std::unique(nbrs.begin(), nbrs.end()), nbrs.end());
+      std::stable_sort(nbrs.begin(), nbrs.end(), [&](int a, int b) {
+        return (m.pos[a] - m.pos[u]).squaredNorm() < (m.pos[b] - m.pos[u]).squaredNorm();
+      });
+      // Every triangle a collapse or move of u can reach: within the box of u's two rings,
+      // grown by the longest move.
+      Eigen::Vector3d lo = m.pos[u], hi = m.pos[u];
+      for (int w : nbrs) {
+        for (int t : m.Tris(w))
+          for (int x : m.tri[t]) {
+            lo = lo.cwiseMin(m.pos[x]);
+            hi = hi.cwiseMax(m.pos[x]);
+          }
+      }
+      lo.array() -= max_move_m;
+      hi.array() += max_move_m;
+      std::vector<Nearby> near;
+      for (int t : AliveNear(m, grid, lo, hi)) {
+        Nearby o{t, {}, {}};
+        TriangleBox(m, m.tri[t], o.lo, o.hi);
+        near.push_back(o);
+      }
+      std::vector<std::pair<int, std::array<int, 3>>> star;
+      for (int t : m.Tris(u)) star.push_back({t, m.tri[t]});
+      bool done = false;
+      for (int v : nbrs) {
+        if ((m.pos[v] - m.pos[u]).norm() > max_edge_m) break;
+        std::vector<std::pair<int, std::array<int, 3>>> before = star, after;
+        std::vector<int> shared;
+        for (int t : m.Tris(v)) {
+          const auto& x = m.tri[t];
+          if (x[0] == u || x[1] == u || x[2] == u) {
+            shared.push_back(t);
+          } else {
+            before.push_back({t, x});
+            after.push_back({t, x});
+          }
+        }
+        for (const auto& [t, x0] : star) {
+          if (std::find(shared.begin(), shared.end(), t) != shared.end()) continue;
+          std::array<int, 3> x = x0;
+          for (int& w : x)
+            if (w == u) w = v;
+          after.push_back({t, x});
+        }
+        const int n_before = MeetingPairs(m, near, before, {});
+        if (n_before == 0 || MeetingPairs(m, near, after, shared, n_before) >= n_before) continue;
+        if (!TryCollapse(m, frames, u, v, min_area, res)) continue;
+        for (int t : m.Tris(v)) add(t);
+        ++counts.collapses;
+        done = true;
+        break;
+      }
+      if (done) {
+        ++changed;
+        continue;
+      }
+      if (max_move_m <= 0) continue;
+      // No collapse helps: move u part of the way towards its neighbours' centroid or one of
+      // the nearest of them, as far as no triangle around it gets worse below min_area in its
+      // region's plane and its regions do not wrap around it (TryCollapse's conditions).
+      const int n_before = MeetingPairs(m, near, star, {});
+      if (n_before == 0) continue;
+      const Eigen::Vector3d from = m.pos[u];
+      Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+      for (int w : nbrs) centroid += m.pos[w];
+      std::vector<Eigen::Vector3d> targets = {centroid / std::max<size_t>(nbrs.size(), 1)};
+      for (size_t i = 0; i < nbrs.size() && i < kMoveTowardsNearest; ++i) {
+        targets.push_back(m.pos[nbrs[i]]);
+      }
+      std::vector<double> area_before;
+      for (const auto& [t, x] : star) {
+        area_before.push_back(SignedArea(m, frames, m.tri_region[t], x[0], x[1], x[2]));
+      }
+      for (size_t k = 0; k < targets.size() && !done; ++k) {
+        for (double f : {0.1, 0.25, 0.5}) {
+          const Eigen::Vector3d to = from + f * (targets[k] - from);
+          if ((to - from).norm() > max_move_m) break;
+          m.pos[u] = to;
+          bool ok = true;
+          for (size_t i = 0; i < star.size() && ok; ++i) {
+            const auto& x = star[i].second;
+            const double a = SignedArea(m, frames, m.tri_region[star[i].first], x[0], x[1], x[2]);
+            ok = a >= min_area || a >= area_before[i];
+          }
+          ok = ok && MeetingPairs(m, near, star, {}, n_before) < n_before;
+          // No region may wrap around u or a neighbour that it did not wrap around before.
+          for (size_t i = 0; i <= nbrs.size() && ok; ++i) {
+            const int w = i < nbrs.size() ? nbrs[i] : u;
+            if (!Overwound(m, frames, w, min_area2)) continue;
+            m.pos[u] = from;
+            ok = Overwound(m, frames, w, min_area2);
+            m.pos[u] = to;
+          }
+          if (ok) {
+            for (const auto& [t, x] : star) add(t);
+            ++counts.moves;
+            done = true;
+            break;
+          }
+          m.pos[u] = from;
+        }
+      }
+      changed += done;
+    }
+    // Later rounds find less and less to do, at the cost of a whole round each.
+    if (changed * 50 < static_cast<int>(tangled.size())) break;
+  }
+  return counts;
+}
 
 PlaneFrame FrameOf(const PlanarRegion& region) {
   PlaneFrame f;

@@ -4,13 +4,15 @@
 // then re-triangulates each region in its plane; planar_mesh_test.cc tests them together.
 #pragma once
 
+#include <Eigen/Core>
 #include <algorithm>
 #include <array>
+#include <cstdint>
+#include <functional>
 #include <span>
 #include <vector>
 
-#include <Eigen/Core>
-
+#include "absl/container/flat_hash_map.h"
 #include "absl/container/inlined_vector.h"
 #include "absl/status/statusor.h"
 #include "services/mesh/boundary_faces.h"
@@ -127,5 +129,43 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces,
 // leave triangles spanning three vertices of one straight chain, which block its collapse),
 // then interiors, until nothing changes.
 void Simplify(WorkMesh& m, const std::vector<PlaneFrame>& frames, double tolerance_m, double res);
+
+// Whether triangles a and b (vertex ids and positions) meet other than at the vertices they
+// share, with CGAL's exact predicates (as CountSelfIntersections tests the written mesh).
+bool TrianglesMeet(const std::array<int, 3>& a, const std::array<Eigen::Vector3d, 3>& pa,
+                   const std::array<int, 3>& b, const std::array<Eigen::Vector3d, 3>& pb);
+
+// Ids by cell of a coarse grid over their boxes: the candidates for an exact test near a box
+// (Untangle's work triangles, Retriangulate's output). An id added again after its box changed
+// stays in its old cells too; callers check the boxes they get. Written here because the
+// triangles change one collapse at a time, and CGAL's box_intersection_d finds all pairs of a
+// fixed set at once.
+class BoxGrid {
+ public:
+  explicit BoxGrid(double cell) : inv_cell_(1.0 / cell) {}
+  void Add(int id, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi);
+  // The ids listed in the cells that [lo, hi] meets, each once.
+  [[nodiscard]] std::vector<int> Candidates(const Eigen::Vector3d& lo,
+                                            const Eigen::Vector3d& hi) const;
+
+ private:
+  void ForCells(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
+                const std::function<void(uint64_t)>& f) const;
+  double inv_cell_;
+  absl::flat_hash_map<uint64_t, std::vector<int>> cells_;
+};
+
+// Where the simplified surface passes through itself (the two faces of a part one or two cells
+// thick, moved and collapsed into each other; a fan folded at a vertex), for each vertex of the
+// meeting triangles: collapse it into a neighbour at most `max_edge_m` away, or else move it up
+// to `max_move_m` towards its neighbours, when that leaves fewer meeting pairs around it and
+// TryCollapse's conditions hold (no triangle turned over in its region's plane, no region
+// wrapped around a vertex). Rounds until one changes nothing.
+struct UntangleCounts {
+  int collapses = 0;
+  int moves = 0;
+};
+UntangleCounts Untangle(WorkMesh& m, const std::vector<PlaneFrame>& frames, double max_edge_m,
+                        double max_move_m, double res);
 
 }  // namespace carvemap::planar_mesh_internal

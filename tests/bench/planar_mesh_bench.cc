@@ -5,10 +5,12 @@
 //
 //   planar_mesh_bench TILES_DIR [--mesh-growth] [--no-dense] [--regions-only] [--out DIR]
 //                     [--gt GT_DIR] [--max-displacement CELLS] [--chain-tolerance CELLS]
+//                     [--untangle-edge CELLS] [--untangle-move CELLS]
 //
 // --max-displacement sets PlanarMeshOptions::max_displacement_cells (eq 4.9's clamp),
 // --chain-tolerance its chain_tolerance_cells (how far a chain vertex may lie off the segment
-// that replaces it).
+// that replaces it), --untangle-edge and --untangle-move its untangle_edge_cells and
+// untangle_move_cells (0 and 0: the self-intersections are not untangled).
 // --regions-only stops after the regions, so that a heap profiler's peak is theirs.
 // --mesh-growth fits the regions as the merge does for mesh/building.ply
 // (PlanarRegionOptions::mesh_growth); without it, as for the levels and floor plans.
@@ -86,6 +88,10 @@ int main(int argc, char** argv) {
       mesh_options.max_displacement_cells = std::atof(argv[++i]);
     } else if (a == "--chain-tolerance" && i + 1 < argc) {
       mesh_options.chain_tolerance_cells = std::atof(argv[++i]);
+    } else if (a == "--untangle-edge" && i + 1 < argc) {
+      mesh_options.untangle_edge_cells = std::atof(argv[++i]);
+    } else if (a == "--untangle-move" && i + 1 < argc) {
+      mesh_options.untangle_move_cells = std::atof(argv[++i]);
     } else {
       std::fprintf(stderr, "%s: unknown argument %s\n", argv[0], a.c_str());
       return 2;
@@ -189,8 +195,12 @@ int main(int argc, char** argv) {
         static_cast<unsigned long long>(crossings.pairs),
         static_cast<unsigned long long>(crossings.unchecked), CpuSeconds() - t);
     std::printf(
-        "regions not re-triangulated (their simplified triangles kept): %d, %zu triangles\n",
-        planar->regions_not_retriangulated, planar->triangles_not_retriangulated);
+        "regions not re-triangulated (their simplified triangles kept): %d, %zu triangles; "
+        "%d of them would have met more lifted onto their plane\n",
+        planar->regions_not_retriangulated, planar->triangles_not_retriangulated,
+        planar->regions_kept_off_plane);
+    std::printf("untangled: %d vertices collapsed, %d moved\n", planar->untangle_collapses,
+                planar->untangle_moves);
     // Triangles by the size of their region.
     size_t by_size[4] = {};
     for (int r : planar->triangle_region) {
