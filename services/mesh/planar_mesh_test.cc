@@ -652,9 +652,7 @@ INSTANTIATE_TEST_SUITE_P(Worlds, FittedRegionsTest,
 // a slanted wall, and isosurface points jittered by up to 0.45 cell (Fig 4.9's clamp).
 class NoisyFittedRoomTest : public ::testing::TestWithParam<std::tuple<int, int>> {};
 
-TEST_P(NoisyFittedRoomTest, AlwaysWatertight) {
-  const auto [seed, leaf] = GetParam();
-  const OctreeGrid grid = Grid();
+std::vector<BoundaryFace> NoisyFittedRoomFaces(int seed, int leaf, const OctreeGrid& grid) {
   const double res = grid.resolution_m();
   VoxelWorld world({40, 36, 24});
   world.Fill({4, 4, 4}, {36, 32, 20}, true);
@@ -677,6 +675,13 @@ TEST_P(NoisyFittedRoomTest, AlwaysWatertight) {
   for (BoundaryFace& f : faces) {
     f.isosurface_m += (u(rng) - 0.5) * 0.9 * std::min(f.size_m, res);
   }
+  return faces;
+}
+
+TEST_P(NoisyFittedRoomTest, AlwaysWatertight) {
+  const auto [seed, leaf] = GetParam();
+  const OctreeGrid grid = Grid();
+  const std::vector<BoundaryFace> faces = NoisyFittedRoomFaces(seed, leaf, grid);
   RecordProperty("faces", static_cast<int>(faces.size()));
   for (const bool mesh_growth : {false, true}) {
     SCOPED_TRACE(mesh_growth ? "mesh_growth" : "default growth");
@@ -699,30 +704,15 @@ INSTANTIATE_TEST_SUITE_P(Seeds, NoisyFittedRoomTest,
 // The noisy rooms above cross themselves where the simplification brought the two faces of a
 // one-cell bump or wall into each other, or folded a fan at a vertex. Untangling (collapses and
 // short moves of the meeting triangles' vertices, and regions kept off their plane where
-// lifting them would cross a neighbour) removes most of it: 1,812 → 580 pairs over these 12
+// lifting them would cross a neighbour) removes most of it: 1,992 → 739 pairs over these 12
 // rooms, fewer in every one.
 TEST(PlanarMeshUntangleTest, NoisyRoomsCrossThemselvesLess) {
   const OctreeGrid grid = Grid();
-  const double res = grid.resolution_m();
   uint64_t total[2] = {0, 0};
   for (int seed = 1; seed <= 6; ++seed) {
     for (int leaf : {1, 4}) {
       SCOPED_TRACE(::testing::Message() << "seed " << seed << " leaf " << leaf);
-      VoxelWorld world({40, 36, 24});
-      world.Fill({4, 4, 4}, {36, 32, 20}, true);
-      std::mt19937 rng(seed);
-      std::uniform_real_distribution<double> u(0, 1);
-      for (int z = 3; z < 21; ++z)
-        for (int y = 3; y < 33; ++y)
-          for (int x = 3; x < 37; ++x) {
-            const Eigen::Vector3i c(x, y, z);
-            const bool wall = x < 5 || x > 34 || y < 5 || y > 30 || z < 5 || z > 18;
-            if (wall && u(rng) < 0.2) world.interior[world.Index(c)] = !world.At(c);
-          }
-      std::vector<BoundaryFace> faces = FacesOf(world, grid, leaf);
-      for (BoundaryFace& f : faces) {
-        f.isosurface_m += (u(rng) - 0.5) * 0.9 * std::min(f.size_m, res);
-      }
+      const std::vector<BoundaryFace> faces = NoisyFittedRoomFaces(seed, leaf, grid);
       absl::StatusOr<PlanarRegionSet> regions = FitRegions(faces, grid, /*mesh_growth=*/true);
       ASSERT_TRUE(regions.ok()) << regions.status();
       uint64_t pairs[2];

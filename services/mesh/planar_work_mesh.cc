@@ -148,6 +148,14 @@ std::vector<int> Around(WorkMesh& m, std::span<const int> vs) {
   return out;
 }
 
+// The vertices that share a triangle with u, sorted.
+std::vector<int> Neighbours(WorkMesh& m, int u) {
+  const int one[1] = {u};
+  std::vector<int> out = Around(m, one);
+  out.erase(std::remove(out.begin(), out.end(), u), out.end());
+  return out;
+}
+
 // Collapses u into v when that keeps the surface a manifold, no triangle gets worse than
 // `min_area` in its region's plane (§4.2.5: the chains stay where the regions meet) and no
 // region wraps around a vertex (Overwound).
@@ -742,12 +750,7 @@ UntangleCounts Untangle(WorkMesh& m, const std::vector<PlaneFrame>& frames, doub
     int changed = 0;
     for (int u : tangled) {
       if (!m.vertex_alive[u]) continue;
-      std::vector<int> nbrs;
-      for (int t : m.Tris(u))
-        for (int w : m.tri[t])
-          if (w != u) nbrs.push_back(w);
-      std::sort(nbrs.begin(), nbrs.end());
-      nbrs.erase(std::unique(nbrs.begin(), nbrs.end()), nbrs.end());
+      std::vector<int> nbrs = Neighbours(m, u);
       std::stable_sort(nbrs.begin(), nbrs.end(), [&](int a, int b) {
         return (m.pos[a] - m.pos[u]).squaredNorm() < (m.pos[b] - m.pos[u]).squaredNorm();
       });
@@ -990,12 +993,7 @@ void Simplify(WorkMesh& m, const std::vector<PlaneFrame>& frames, double toleran
     int collapsed = 0;
     for (int u = 0; u < static_cast<int>(m.pos.size()); ++u) {
       if (!m.vertex_alive[u] || m.kind[u] != kind) continue;
-      std::vector<int> nbrs;
-      for (int t : m.Tris(u))
-        for (int w : m.tri[t])
-          if (w != u) nbrs.push_back(w);
-      std::sort(nbrs.begin(), nbrs.end());
-      nbrs.erase(std::unique(nbrs.begin(), nbrs.end()), nbrs.end());
+      std::vector<int> nbrs = Neighbours(m, u);
       if (kind == WorkMesh::kAnchor) {
         // Several octree corners placed on one point (noisy corners where three planes meet):
         // merge them, which changes no geometry.
