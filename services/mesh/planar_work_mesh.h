@@ -4,13 +4,14 @@
 // then re-triangulates each region in its plane; planar_mesh_test.cc tests them together.
 #pragma once
 
-#include <Eigen/Core>
 #include <algorithm>
 #include <array>
 #include <cstdint>
 #include <functional>
 #include <span>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/container/inlined_vector.h"
@@ -158,9 +159,10 @@ class BoxGrid {
 // Where the simplified surface passes through itself (the two faces of a part one or two cells
 // thick, moved and collapsed into each other; a fan folded at a vertex), for each vertex of the
 // meeting triangles: collapse it into a neighbour at most `max_edge_m` away, or else move it up
-// to `max_move_m` towards its neighbours, when that leaves fewer meeting pairs around it and
-// TryCollapse's conditions hold (no triangle turned over in its region's plane, no region
-// wrapped around a vertex). Rounds until one changes nothing.
+// to `max_move_m` towards its neighbours' centroid or one of the nearest, when that leaves
+// fewer meeting pairs around it and TryCollapse's conditions hold (no triangle turned over in
+// its region's plane, no region wrapped around a vertex). In rounds, until one changes fewer
+// than 2 % of the vertices it tried.
 struct UntangleCounts {
   int collapses = 0;
   int moves = 0;
