@@ -543,8 +543,6 @@ std::vector<char> MeetMoreOnPlane(const WorkMesh& m, const std::vector<RegionTri
     std::array<Eigen::Vector3d, 3> p;
     Eigen::Vector3d lo, hi;
   };
-  std::vector<Placed> placed;
-  int next_steiner = -2;
   auto place = [&](int r, const std::array<int, 3>& t, std::span<const Eigen::Vector3d> steiner,
                    int steiner_base) {
     Placed x{r, t, {}, {}, {}};
@@ -556,11 +554,17 @@ std::vector<char> MeetMoreOnPlane(const WorkMesh& m, const std::vector<RegionTri
     x.hi = x.p[0].cwiseMax(x.p[1]).cwiseMax(x.p[2]);
     return x;
   };
+  std::vector<Placed> placed;
+  // Region r's triangles: placed[first[r]] up to placed[first[r + 1]].
+  std::vector<size_t> first(chosen.size() + 1, 0);
+  int next_steiner = -2;
   for (int r = 0; r < static_cast<int>(chosen.size()); ++r) {
+    first[r] = placed.size();
     for (const auto& t : chosen[r].tris)
       placed.push_back(place(r, t, chosen[r].steiner, next_steiner));
     next_steiner -= static_cast<int>(chosen[r].steiner.size());
   }
+  first[chosen.size()] = placed.size();
   BoxGrid grid(8 * res);
   for (int i = 0; i < static_cast<int>(placed.size()); ++i) grid.Add(i, placed[i].lo, placed[i].hi);
   auto meets = [&](int r, std::span<const Placed> tris) {
@@ -578,14 +582,11 @@ std::vector<char> MeetMoreOnPlane(const WorkMesh& m, const std::vector<RegionTri
     return n;
   };
   std::vector<char> more(chosen.size(), 0);
-  next_steiner = -2;
   for (int r = 0; r < static_cast<int>(chosen.size()); ++r) {
-    const int base = next_steiner;
-    next_steiner -= static_cast<int>(chosen[r].steiner.size());
     if (!remeshed[r]) continue;
-    std::vector<Placed> now, before;
-    for (const auto& t : chosen[r].tris) now.push_back(place(r, t, chosen[r].steiner, base));
+    std::vector<Placed> before;
     for (const auto& t : old_tris[r]) before.push_back(place(r, t, {}, 0));
+    const std::span<const Placed> now(placed.data() + first[r], first[r + 1] - first[r]);
     more[r] = meets(r, now) > meets(r, before);
   }
   return more;
@@ -594,10 +595,11 @@ std::vector<char> MeetMoreOnPlane(const WorkMesh& m, const std::vector<RegionTri
 // The output mesh: each region re-triangulated in its plane (RetriangulateRegion) where its
 // outline allows, no edge would be shared with another region, and its new triangles meet no
 // more of the others' than its simplified ones (MeetMoreOnPlane), else its simplified
-// triangles as they are (not_retriangulated[r] set, for a region with an outline).
+// triangles as they are (not_retriangulated[r] set, for a region with an outline; those of
+// them kept for meeting more counted in kept_off_plane).
 PlanarMesh Retriangulate(const WorkMesh& m, const std::vector<PlaneFrame>& frames,
                          const RegionOutlines& outlines, const PlanarMeshOptions& options,
-                         double res, std::vector<char>& not_retriangulated) {
+                         double res, std::vector<char>& not_retriangulated, int& kept_off_plane) {
   const int num_regions = static_cast<int>(outlines.tris.size());
   std::vector<RegionTriangles> chosen(num_regions);
   std::vector<std::vector<std::array<int, 3>>> old_tris(num_regions);
@@ -644,7 +646,7 @@ PlanarMesh Retriangulate(const WorkMesh& m, const std::vector<PlaneFrame>& frame
       remeshed[r] = 0;
       chosen[r].tris = old_tris[r];
       chosen[r].steiner.clear();
-      ++out.regions_kept_off_plane;
+      ++kept_off_plane;
     }
     not_retriangulated[r] = !remeshed[r] && !outlines.segs[r].empty();
   }
@@ -689,8 +691,9 @@ absl::StatusOr<PlanarMesh> BuildPlanarMesh(std::span<const BoundaryFace> faces,
       OutlinesOf(*work, static_cast<int>(regions.regions.size()));
   if (!outlines.ok()) return outlines.status();
   std::vector<char> not_retriangulated(regions.regions.size(), 0);
-  PlanarMesh out = Retriangulate(*work, frames, *outlines, options, res, not_retriangulated);
-  const int kept_off_plane = out.regions_kept_off_plane;
+  int kept_off_plane = 0;
+  PlanarMesh out =
+      Retriangulate(*work, frames, *outlines, options, res, not_retriangulated, kept_off_plane);
   RepairPlanarMesh(out, res);  // a new PlanarMesh: the counts go in after it
   out.regions_kept_off_plane = kept_off_plane;
   out.untangle_collapses = untangled.collapses;

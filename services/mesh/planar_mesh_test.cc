@@ -703,9 +703,8 @@ INSTANTIATE_TEST_SUITE_P(Seeds, NoisyFittedRoomTest,
 
 // The noisy rooms above cross themselves where the simplification brought the two faces of a
 // one-cell bump or wall into each other, or folded a fan at a vertex. Untangling (collapses and
-// short moves of the meeting triangles' vertices, and regions kept off their plane where
-// lifting them would cross a neighbour) removes most of it: 1,992 → 739 pairs over these 12
-// rooms, fewer in every one.
+// short moves of the meeting triangles' vertices; the test at the re-triangulation runs in
+// both) removes most of it: 1,992 → 739 pairs over these 12 rooms, fewer in every one.
 TEST(PlanarMeshUntangleTest, NoisyRoomsCrossThemselvesLess) {
   const OctreeGrid grid = Grid();
   uint64_t total[2] = {0, 0};

@@ -620,8 +620,8 @@ int MeetingPairs(const WorkMesh& m, std::span<const Nearby> near,
   for (size_t i = 0; i < changed.size() && n < limit; ++i) {
     const std::array<int, 3>& x = changed[i].second;
     for (size_t j = i + 1; j < changed.size(); ++j) n += WorkTrianglesMeet(m, x, changed[j].second);
-    const Eigen::Vector3d lo = m.pos[x[0]].cwiseMin(m.pos[x[1]]).cwiseMin(m.pos[x[2]]);
-    const Eigen::Vector3d hi = m.pos[x[0]].cwiseMax(m.pos[x[1]]).cwiseMax(m.pos[x[2]]);
+    Eigen::Vector3d lo, hi;
+    TriangleBox(m, x, lo, hi);
     for (const Nearby& o : near) {
       if ((o.hi.array() < lo.array()).any() || (o.lo.array() > hi.array()).any()) continue;
       if (!skip(o.t)) n += WorkTrianglesMeet(m, x, m.tri[o.t]);
