@@ -558,8 +558,11 @@ void WorkerServer::Impl::CarveLoop() {
     // glibc keeps a finished task's freed sums and batches in its arenas, fragmented, and a
     // later task's resident peak counts them again: with the same heap peak, a worker's
     // resident memory grew with the slices' length (docs/BENCHMARKS.md "--laps 4"). Returned
-    // to the system between tasks (milliseconds against a task's seconds).
-    ReturnFreedMemory();
+    // to the system after each slice (milliseconds against its seconds), not after a combine:
+    // its buffers (one chunk's leaves) are what the next combine needs again, and giving them
+    // back took ~250 system calls per combine, then faulting them in again (docs/BENCHMARKS.md
+    // "The combines' system calls").
+    if (lease.has_slice()) ReturnFreedMemory();
     metrics_.TaskFinished(
         lease.has_slice() ? "slice" : "combine", carved.ok(),
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
