@@ -510,6 +510,7 @@ void WorkerServer::Impl::Report(const std::string& worker_id, const pb::Lease& l
 }
 
 void WorkerServer::Impl::CarveLoop() {
+  bool kept_freed = false;  // a combine's freed buffers are kept for the next task
   while (!stop_.HasBeenNotified()) {
     absl::StatusOr<std::string> id = EnsureRegistered();
     if (!id.ok()) return;
@@ -545,6 +546,9 @@ void WorkerServer::Impl::CarveLoop() {
     }
     Reachable();
     if (!resp.has_lease()) {
+      // Idle: what the last combines kept goes back to the system.
+      if (kept_freed) ReturnFreedMemory();
+      kept_freed = false;
       Sleep(resp.retry_after_s() > 0 ? resp.retry_after_s() : 1.0);
       continue;
     }
@@ -563,6 +567,7 @@ void WorkerServer::Impl::CarveLoop() {
     // back took ~250 system calls per combine, then faulting them in again (docs/BENCHMARKS.md
     // "The combines' system calls").
     if (lease.has_slice()) ReturnFreedMemory();
+    kept_freed = !lease.has_slice();
     metrics_.TaskFinished(
         lease.has_slice() ? "slice" : "combine", carved.ok(),
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
