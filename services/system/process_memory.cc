@@ -30,8 +30,14 @@ ProcessStatus ReadProcessStatus() {
 }
 
 bool MapLargeBuffersAlone(size_t min_bytes) {
-  // Setting the threshold also turns glibc's raising of it off.
-  return mallopt(M_MMAP_THRESHOLD, static_cast<int>(min_bytes)) == 1;
+  // Setting the threshold also turns glibc's raising of it off, and with it the raising of the
+  // trim threshold, which then stays at 128 KiB: each free that left more than that at the top
+  // of a heap gave those pages back, and the next chunk's buffer of the same size faulted them
+  // in again (half the merge's page faults; docs/BENCHMARKS.md "The merge's page faults"). What
+  // a stage frees below the heaps' tops goes back at ReturnFreedMemory between stages.
+  constexpr int kKeptAtHeapTop = 8 << 20;
+  return mallopt(M_MMAP_THRESHOLD, static_cast<int>(min_bytes)) == 1 &&
+         mallopt(M_TRIM_THRESHOLD, kKeptAtHeapTop) == 1;
 }
 
 bool ReturnFreedMemory() { return malloc_trim(0) == 1; }

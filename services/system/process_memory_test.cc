@@ -1,11 +1,12 @@
 #include "services/system/process_memory.h"
 
+#include <gtest/gtest.h>
+#include <sys/resource.h>
+
 #include <array>
 #include <cstring>
 #include <memory>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 namespace carvemap {
 namespace {
@@ -37,6 +38,21 @@ TEST(ProcessStatus, FreedLargeBuffersLeaveTheResidentSet) {
   }
   const uint64_t without = ReadProcessStatus().resident_bytes;
   EXPECT_GE(with, without + (size_t{7} << 20));
+}
+
+TEST(ProcessStatus, ABufferFreedAtTheHeapTopStaysForTheNextOne) {
+  ASSERT_TRUE(MapLargeBuffersAlone());
+  const auto faults = [] {
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    return usage.ru_minflt;
+  };
+  // Below the 1 MiB threshold: from the heap. glibc's default 128 KiB trim threshold would give
+  // its 128 pages back when freed, and the same buffer again would fault them all in.
+  { std::vector<char> first(size_t{512} << 10, 1); }
+  const long before = faults();
+  { std::vector<char> again(size_t{512} << 10, 1); }
+  EXPECT_LT(faults() - before, 16);
 }
 
 TEST(ProcessStatus, FreedSmallBlocksGoBackWhenAsked) {
