@@ -28,6 +28,7 @@
 #include "services/rpc/grpc_status.h"
 #include "services/rpc/process_metrics.h"
 #include "services/rpc/server_log.h"
+#include "services/rpc/worker_memory_policy.h"
 #include "services/rpc/worker_metrics.h"
 #include "services/system/process_memory.h"
 #include "storage/confined_path.h"
@@ -510,7 +511,7 @@ void WorkerServer::Impl::Report(const std::string& worker_id, const pb::Lease& l
 }
 
 void WorkerServer::Impl::CarveLoop() {
-  bool kept_freed = false;  // a combine's freed buffers are kept for the next task
+  FreedMemoryPolicy freed_memory;
   while (!stop_.HasBeenNotified()) {
     absl::StatusOr<std::string> id = EnsureRegistered();
     if (!id.ok()) return;
@@ -546,9 +547,7 @@ void WorkerServer::Impl::CarveLoop() {
     }
     Reachable();
     if (!resp.has_lease()) {
-      // Idle: what the last combines kept goes back to the system.
-      if (kept_freed) ReturnFreedMemory();
-      kept_freed = false;
+      if (freed_memory.WhenIdle()) ReturnFreedMemory();
       Sleep(resp.retry_after_s() > 0 ? resp.retry_after_s() : 1.0);
       continue;
     }
@@ -559,15 +558,7 @@ void WorkerServer::Impl::CarveLoop() {
     metrics_.TaskStarted();
     const auto t0 = std::chrono::steady_clock::now();
     absl::Status carved = Carve(lease, tile, stats);
-    // glibc keeps a finished task's freed sums and batches in its arenas, fragmented, and a
-    // later task's resident peak counts them again: with the same heap peak, a worker's
-    // resident memory grew with the slices' length (docs/BENCHMARKS.md "--laps 4"). Returned
-    // to the system after each slice (milliseconds against its seconds), not after a combine:
-    // its buffers (one chunk's leaves) are what the next combine needs again, and giving them
-    // back took ~250 system calls per combine, then faulting them in again (docs/BENCHMARKS.md
-    // "The combines' system calls").
-    if (lease.has_slice()) ReturnFreedMemory();
-    kept_freed = !lease.has_slice();
+    if (freed_memory.AfterTask(lease.has_slice())) ReturnFreedMemory();
     metrics_.TaskFinished(
         lease.has_slice() ? "slice" : "combine", carved.ok(),
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
