@@ -27,8 +27,9 @@ ProcessStatus ReadProcessStatus();
 // so that a stage's large buffers go back to the system when it frees them. By default glibc
 // raises that threshold to the largest buffer freed so far (up to 32 MiB); after that, buffers
 // below it come from the heap, and what one stage freed stays resident under the next one's
-// peak. For a process that runs stages one after another (the merge). Returns false when the
-// allocator refuses.
+// peak. Smaller buffers freed at a heap's top stay there up to 8 MiB (M_TRIM_THRESHOLD) for the
+// next one, as they do with glibc's defaults. For a process that runs stages one after another
+// (the merge). Returns false when the allocator refuses.
 bool MapLargeBuffersAlone(size_t min_bytes = size_t{1} << 20);
 
 // Gives the system back the whole free pages inside the allocator's heaps (glibc's
