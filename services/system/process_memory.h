@@ -28,8 +28,8 @@ ProcessStatus ReadProcessStatus();
 // raises that threshold to the largest buffer freed so far (up to 32 MiB); after that, buffers
 // below it come from the heap, and what one stage freed stays resident under the next one's
 // peak. Smaller buffers freed at a heap's top stay there up to 8 MiB (M_TRIM_THRESHOLD) for the
-// next one, as they do with glibc's defaults. For a process that runs stages one after another
-// (the merge). Returns false when the allocator refuses.
+// next one, as glibc's own raising of the thresholds would have kept them. For a process that
+// runs stages one after another (the merge). Returns false when the allocator refuses.
 bool MapLargeBuffersAlone(size_t min_bytes = size_t{1} << 20);
 
 // Gives the system back the whole free pages inside the allocator's heaps (glibc's
