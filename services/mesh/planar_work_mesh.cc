@@ -980,6 +980,11 @@ absl::StatusOr<WorkMesh> BuildWorkMesh(std::span<const BoundaryFace> faces,
       for (int i = 0; i < n; ++i) m.AddTriangle(center, poly[i], poly[(i + 1) % n], r);
     }
   }
+  // The surface's corners and the edges' midpoints are not read by the moves, whose own
+  // buffers come on top of the work mesh: freed first, as the moves are this stage's peak.
+  *surface = FaceSurface{};
+  absl::flat_hash_map<int, int>().swap(midpoint);
+  std::vector<uint64_t>().swap(shared_edges);
   MoveWithoutFolds(m, frames, shared, regions, options, res);
   return m;
 }
