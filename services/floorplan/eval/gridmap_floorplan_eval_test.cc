@@ -166,6 +166,10 @@ TEST(GridmapFloorplanEval, RoomsAgainstGroundTruthOnEveryRealMap) {
                       e.labeling.seconds_poles, e.labeling.seconds_nonpoles, e.seconds_rooms,
                       e.seconds_curves);
         }
+        // Every map: issue's goal 0.85 furnished; the lowest measured is lab_intel, 0.844
+        // plain, 0.870 furnished.
+        EXPECT_GE(s.f1, 0.82) << name << " " << (furnished ? "furnished" : "plain") << " "
+                              << (m == 0 ? "rooms" : "eigencrust");
         sum_f1[m] += s.f1;
         sum_br[m] += s.bormann_recall;
         sum_bp[m] += s.bormann_precision;
@@ -181,17 +185,17 @@ TEST(GridmapFloorplanEval, RoomsAgainstGroundTruthOnEveryRealMap) {
                    std::to_string(sum_f1[0] / n));
     RecordProperty(furnished ? "mean_f1_furnished_eigencrust" : "mean_f1_plain_eigencrust",
                    std::to_string(sum_f1[1] / n));
-    // Floors a little below the measured means (F1 plain 0.935, furnished 0.927; Bormann
-    // recall 0.986 / 0.944, precision 0.977 / 0.985; docs/BENCHMARKS.md; the goal: F1 ≥ 0.9
-    // furnished).
-    EXPECT_GE(sum_f1[0] / n, furnished ? 0.91 : 0.92) << kind;
+    // Floors a little below the measured means (F1 plain 0.968, furnished 0.958; Bormann
+    // recall 0.986 / 0.944, precision 0.987 / 0.988; docs/BENCHMARKS.md; the goals: F1 ≥ 0.9
+    // furnished, then a mean ≥ 0.93).
+    EXPECT_GE(sum_f1[0] / n, furnished ? 0.94 : 0.95) << kind;
     EXPECT_GE(sum_br[0] / n, furnished ? 0.92 : 0.96) << kind;
     EXPECT_GE(sum_bp[0] / n, furnished ? 0.96 : 0.95) << kind;
     // Eigencrust (§3.2, rooms by §3.3.2 on its interior): floors a little below its means
-    // (measured: the same as §3.3's to three decimals, F1 0.935 / 0.927, Bormann recall
-    // 0.986 / 0.944, precision 0.977 / 0.985: the rooms come from the same partition, and
+    // (measured: the same as §3.3's to three decimals, F1 0.968 / 0.958, Bormann recall
+    // 0.986 / 0.944, precision 0.987 / 0.988: the rooms come from the same partition, and
     // the interiors differ only along the walls; docs/BENCHMARKS.md "Eigencrust floor plans").
-    EXPECT_GE(sum_f1[1] / n, furnished ? 0.91 : 0.92) << kind << " eigencrust";
+    EXPECT_GE(sum_f1[1] / n, furnished ? 0.94 : 0.95) << kind << " eigencrust";
     EXPECT_GE(sum_br[1] / n, furnished ? 0.92 : 0.96) << kind << " eigencrust";
     EXPECT_GE(sum_bp[1] / n, furnished ? 0.96 : 0.95) << kind << " eigencrust";
   }

@@ -523,6 +523,61 @@ std::vector<int> Partition(const Mesh& m, const std::vector<Circle>& circles,
   return label;
 }
 
+// The sample positions bucketed by cell, to look at the walls around a point.
+class SampleGrid {
+ public:
+  SampleGrid(const std::vector<Vector2d>& pts, double cell) : cell_(cell) {
+    for (const Vector2d& p : pts) cells_[Key(p)].push_back(p);
+  }
+  // Calls fn(sample) for the samples within r of q.
+  template <typename Fn>
+  void ForEachWithin(const Vector2d& q, double r, Fn&& fn) const {
+    const int64_t x0 = Floor(q.x() - r), x1 = Floor(q.x() + r);
+    const int64_t y0 = Floor(q.y() - r), y1 = Floor(q.y() + r);
+    for (int64_t x = x0; x <= x1; ++x) {
+      for (int64_t y = y0; y <= y1; ++y) {
+        const auto it = cells_.find(Pack(x, y));
+        if (it == cells_.end()) continue;
+        for (const Vector2d& p : it->second) {
+          if ((p - q).squaredNorm() <= r * r) fn(p);
+        }
+      }
+    }
+  }
+
+ private:
+  [[nodiscard]] int64_t Floor(double x) const {
+    return static_cast<int64_t>(std::floor(x / cell_));
+  }
+  [[nodiscard]] static uint64_t Pack(int64_t x, int64_t y) {
+    return (static_cast<uint64_t>(x) << 32) ^ static_cast<uint32_t>(y);
+  }
+  [[nodiscard]] uint64_t Key(const Vector2d& p) const { return Pack(Floor(p.x()), Floor(p.y())); }
+  double cell_;
+  absl::flat_hash_map<uint64_t, std::vector<Vector2d>> cells_;
+};
+
+// How much of the view from p the walls around it take: the angle, seen from p, spanned by the
+// samples between `inner` and wall_end_radius_m from it (SplitOpenSides). A wall's or a
+// partition's end, its faces running away from p, spans ~0–60°; a corner the free space goes
+// around 90°; a point on a wall's face, away from its end, ~180°. 360° with fewer than three
+// such samples (a lone sample is no wall).
+double WallEndSpanDeg(const SampleGrid& grid, const Vector2d& p, const RoomLabelingOptions& options,
+                      double inner) {
+  std::vector<double> angles;
+  grid.ForEachWithin(p, options.wall_end_radius_m, [&](const Vector2d& q) {
+    const Vector2d d = q - p;
+    if (d.squaredNorm() >= inner * inner) angles.push_back(std::atan2(d.y(), d.x()));
+  });
+  if (angles.size() < 3) return 360;
+  std::sort(angles.begin(), angles.end());
+  double largest_gap = angles.front() + 2 * M_PI - angles.back();
+  for (size_t i = 1; i < angles.size(); ++i) {
+    largest_gap = std::max(largest_gap, angles[i] - angles[i - 1]);
+  }
+  return (2 * M_PI - largest_gap) * 180 / M_PI;
+}
+
 // What the §3.3.2 merge test looks at for a pair of adjacent rooms. Their shared edges (thin
 // walls left out) form pieces: chains of edges joined at vertices; each piece is one opening.
 //  - length: the longest piece. The dissertation speaks of "a border" between two rooms; summing
@@ -921,6 +976,162 @@ absl::Status RefineRooms(const Mesh& m, const std::vector<Circle>& circles,
   return absl::OkStatus();
 }
 
+// Extension of §3.3.2, open sides (RoomLabelingOptions::open_side_max_m): the seeds miss a bay
+// or a room open onto a corridor over its width, as the largest circle sits in the opening.
+// Once the rooms have converged, a room is cut between two of its wall ends (WallEndSpanDeg),
+// one a tip, through its own triangles only, when the smaller side is a room of its own: big
+// and deep enough, entered, and a dead end. Shortest cuts first; each gives the smaller side a
+// new label, seeded at its largest circle.
+void SplitOpenSides(const Mesh& m, const std::vector<Circle>& circles,
+                    const std::vector<char>& entered, double spacing_m, double wall_edge_m,
+                    const RoomLabelingOptions& options, std::vector<int>& seeds,
+                    std::vector<int>& label, RoomLabelingReport& rep) {
+  if (options.open_side_max_m <= 0 || options.open_side_min_area_m2 <= 0) return;
+  const int nf = static_cast<int>(m.fv.size());
+  const int nv = static_cast<int>(m.pts.size());
+  const SampleGrid walls(m.pts, std::max(0.1, options.wall_end_radius_m / 4));
+  const double inner = 4 * spacing_m;
+  // Per room, its wall ends: vertices of its faces that touch a face outside every room and
+  // span at most wall_end_span_deg.
+  std::vector<std::vector<int>> ends_of(seeds.size());
+  std::vector<double> span(nv, -1);  // −1: not asked yet
+  for (int f = 0; f < nf; ++f) {
+    const int l = label[f];
+    if (l < 0) continue;
+    for (int i = 0; i < 3; ++i) {
+      const int v = m.fv[f][i];
+      bool on_wall = false;
+      m.AnyFaceAround(v, [&](int g) { return on_wall = label[g] < 0; });
+      if (!on_wall) continue;
+      if (span[v] < 0) span[v] = WallEndSpanDeg(walls, m.pts[v], options, inner);
+      if (span[v] <= options.wall_end_span_deg) ends_of[l].push_back(v);
+    }
+  }
+  struct Cut {
+    double length;
+    int room, a, b;
+  };
+  std::vector<Cut> cuts;
+  for (size_t l = 0; l < ends_of.size(); ++l) {
+    std::vector<int>& e = ends_of[l];
+    std::sort(e.begin(), e.end());
+    e.erase(std::unique(e.begin(), e.end()), e.end());
+    for (size_t i = 0; i < e.size(); ++i) {
+      for (size_t j = i + 1; j < e.size(); ++j) {
+        const double d = (m.pts[e[i]] - m.pts[e[j]]).norm();
+        // One end at least is a wall's tip, not a corner: two corners are as likely a
+        // corridor's end, or furniture standing in a room.
+        const double tip = std::min(span[e[i]], span[e[j]]);
+        if (d > wall_edge_m && d <= options.open_side_max_m && tip <= options.wall_tip_span_deg) {
+          cuts.push_back({d, static_cast<int>(l), e[i], e[j]});
+        }
+      }
+    }
+  }
+  std::sort(cuts.begin(), cuts.end(), [](const Cut& x, const Cut& y) {
+    return std::tie(x.length, x.room, x.a, x.b) < std::tie(y.length, y.room, y.a, y.b);
+  });
+  absl::flat_hash_map<uint64_t, char> blocked;  // face pairs the cut separates
+  auto pair_key = [](int f, int g) {
+    return static_cast<uint64_t>(std::min(f, g)) << 32 | static_cast<uint32_t>(std::max(f, g));
+  };
+  std::vector<int> crossed, side(nf, -1), stack;
+  for (const Cut& c : cuts) {
+    // The segment through the room's own faces, from face to adjacent face.
+    crossed.clear();
+    bool inside = true;
+    Walk(m, m.pts[c.a], m.pts[c.b], Start{Start::kVertex, c.a, -1}, [&](int f) {
+      if (label[f] != c.room) inside = false;
+      crossed.push_back(f);
+    });
+    if (!inside || crossed.empty()) continue;
+    blocked.clear();
+    for (size_t i = 0; i + 1 < crossed.size(); ++i) {
+      const int f = crossed[i], g = crossed[i + 1];
+      if (m.fn[f][0] != g && m.fn[f][1] != g && m.fn[f][2] != g) {
+        inside = false;  // through a vertex: the faces around it would join the sides
+        break;
+      }
+      blocked[pair_key(f, g)] = 1;
+    }
+    if (!inside) continue;
+    // The room's faces on either side: flood fill from the first crossed face, not across the
+    // segment; what it does not reach is the other side.
+    const int room = c.room;
+    auto fill = [&](int start, int mark, std::vector<int>& out) {
+      stack.assign(1, start);
+      side[start] = mark;
+      while (!stack.empty()) {
+        const int f = stack.back();
+        stack.pop_back();
+        out.push_back(f);
+        for (int i = 0; i < 3; ++i) {
+          const int n = m.fn[f][i];
+          if (n < 0 || label[n] != room || side[n] == mark) continue;
+          if (blocked.contains(pair_key(f, n))) continue;
+          side[n] = mark;
+          stack.push_back(n);
+        }
+      }
+    };
+    std::vector<int> one, all;
+    fill(crossed.front(), 1, one);
+    for (int f = 0; f < nf; ++f) {
+      if (label[f] == room) all.push_back(f);
+    }
+    std::vector<int> other;
+    for (int f : all) {
+      if (side[f] != 1) other.push_back(f);
+    }
+    for (int f : one) side[f] = -1;
+    if (other.empty()) continue;  // the segment does not separate the room
+    // The other side must be one piece too, or the cut split off more than one part.
+    std::vector<int> two;
+    fill(other.front(), 2, two);
+    for (int f : two) side[f] = -1;
+    if (two.size() != other.size()) continue;
+    double area_one = 0, area_two = 0;
+    for (int f : one) area_one += FaceArea(m, f);
+    for (int f : two) area_two += FaceArea(m, f);
+    std::vector<int>& small = area_one <= area_two ? one : two;
+    const double small_area = std::min(area_one, area_two);
+    if (small_area < options.open_side_min_area_m2 ||
+        small_area < options.open_side_min_depth * c.length * c.length) {
+      continue;
+    }
+    bool dead_end = true, was_entered = false;
+    for (int f : small) {
+      was_entered |= entered[f] != 0;
+      for (int i = 0; i < 3; ++i) {
+        const int n = m.fn[f][i];
+        if (n < 0 || label[n] < 0 || label[n] == room) continue;
+        const double len = (m.pts[m.fv[f][(i + 1) % 3]] - m.pts[m.fv[f][(i + 2) % 3]]).norm();
+        if (!IsThinWall(len, wall_edge_m)) dead_end = false;
+      }
+    }
+    if (!dead_end || !was_entered) continue;
+    std::vector<int>& big = &small == &one ? two : one;
+    const int fresh = static_cast<int>(seeds.size());
+    int seed = small.front();
+    for (int f : small) {
+      if (Larger(circles[f], circles[seed])) seed = f;
+    }
+    // The room keeps its seed when it lies on the small side: the small side takes it, the
+    // rest gets its largest circle.
+    const bool seed_moves = std::find(small.begin(), small.end(), seeds[room]) != small.end();
+    for (int f : small) label[f] = fresh;
+    seeds.push_back(seed);
+    if (seed_moves) {
+      int rest = -1;
+      for (int f : big) {
+        if (rest < 0 || Larger(circles[f], circles[rest])) rest = f;
+      }
+      seeds[room] = rest;
+    }
+    ++rep.open_sides_split;
+  }
+}
+
 // Extension: a room under min_room_area_m2 is no room (a sliver between a wall and furniture
 // that the path happens to cross, a pocket cut off by thin walls): once the rooms have
 // converged, it joins the room it shares the most edge length with (thin walls included),
@@ -1048,6 +1259,32 @@ absl::Status RoomLabelingOptions::Validate() const {
     return absl::InvalidArgumentError(
         absl::StrCat("room labeling: door_context must be finite and > 0, got ", door_context));
   }
+  if (!std::isfinite(open_side_max_m) || open_side_max_m < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: open_side_max_m must be finite and ≥ 0, got ", open_side_max_m));
+  }
+  if (!std::isfinite(open_side_min_depth) || open_side_min_depth < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: open_side_min_depth must be finite and ≥ 0, got ", open_side_min_depth));
+  }
+  if (!std::isfinite(open_side_min_area_m2) || open_side_min_area_m2 < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("room labeling: open_side_min_area_m2 must be finite and ≥ 0, got ",
+                     open_side_min_area_m2));
+  }
+  if (!std::isfinite(wall_end_radius_m) || wall_end_radius_m <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: wall_end_radius_m must be finite and > 0, got ", wall_end_radius_m));
+  }
+  if (!(wall_end_span_deg > 0 && wall_end_span_deg < 360)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "room labeling: wall_end_span_deg must be in (0, 360), got ", wall_end_span_deg));
+  }
+  if (!(wall_tip_span_deg > 0 && wall_tip_span_deg <= wall_end_span_deg)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("room labeling: wall_tip_span_deg must be in (0, wall_end_span_deg], got ",
+                     wall_tip_span_deg));
+  }
   if (!std::isfinite(thin_wall_spacings) || thin_wall_spacings < 0) {
     return absl::InvalidArgumentError(absl::StrCat(
         "room labeling: thin_wall_spacings must be finite and ≥ 0, got ", thin_wall_spacings));
@@ -1117,6 +1354,7 @@ absl::StatusOr<FloorPlan> LabelRoomsOfInterior(const WallSampleSet& samples,
       !s.ok()) {
     return s;
   }
+  SplitOpenSides(m, circles, entered, samples.spacing_m, wall_edge_m, options, seeds, label, rep);
   MergeSmallRooms(m, options, seeds, label, rep);
   FloorPlan plan =
       PlanOf(m, std::move(vertices.floor_z), std::move(vertices.ceiling_z), circles, seeds, label);

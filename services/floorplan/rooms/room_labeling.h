@@ -16,13 +16,15 @@
 //     door when it is longer than max_door_width_m (§3.3.2) or when the free space does not
 //     narrow there (door_narrowing, an extension: a 2 m corridor's pieces share borders of its
 //     width, under a double door's 2.44 m, and would stay split).
-//  6. Rooms under min_room_area_m2 join a neighbour (extension).
+//  6. Open sides: a converged room is cut where a dead-end part of it opens between two wall
+//     ends wider than a door (extension).
+//  7. Rooms under min_room_area_m2 join a neighbour (extension).
 //
 // The extensions, where the dissertation is silent or its rule fails on real maps (measured on the
 // 9 real floor maps, docs/BENCHMARKS.md "Floor plans with rooms"), each with its own option so it
-// can be switched off (0): door narrowing, thin walls, seed overlap, small rooms. Borders are
-// counted as contiguous pieces, the dissertation's "a border": the sum of all shared edges would
-// merge two rooms joined by two ordinary doors.
+// can be switched off (0): door narrowing, thin walls, seed overlap, open sides, small rooms.
+// Borders are counted as contiguous pieces, the dissertation's "a border": the sum of all shared
+// edges would merge two rooms joined by two ordinary doors.
 //
 // Plain function over plain data: no files, no logging. Thread-compatible.
 #pragma once
@@ -53,6 +55,24 @@ struct RoomLabelingOptions {
   // 0 disables the extension (the dissertation's rule alone).
   double door_narrowing = 0.7;
   double door_context = 2.0;
+  // Extension of §3.3.2, open sides: where a bay or a room opens onto a corridor over its
+  // whole width (3–4 m on the lab maps, whose labels call them rooms), the largest circle sits
+  // in the opening and no seed is left inside the room. Once the rooms have converged, a room
+  // is cut along a segment between two wall ends (a partition's tip, a wall's end at an
+  // opening, a corner: the samples between a few spacings and wall_end_radius_m from it span at
+  // most wall_end_span_deg seen from it), one of them a tip (at most wall_tip_span_deg: two
+  // corners bound a corridor's end as well, or furniture), up to open_side_max_m long, through
+  // its own triangles,
+  // when the smaller side is a dead end (it borders no other room: a corridor's branch leads on
+  // through its doors), was entered, has at least open_side_min_area_m2 and is at least
+  // open_side_min_depth times as deep as the cut is long (area ≥ depth × length²: no sliver
+  // between furniture and a wall). 0 for open_side_max_m disables it.
+  double open_side_max_m = 5.0;
+  double open_side_min_area_m2 = 4.0;
+  double open_side_min_depth = 0.75;
+  double wall_end_radius_m = 0.6;
+  double wall_end_span_deg = 135;
+  double wall_tip_span_deg = 60;
   // Extension of §3.3.1–§3.3.2: an edge between two interior triangles no longer than
   // thin_wall_spacings × d_s (the samples' spacing) is a wall one sample thick, scanned from
   // both sides; the partition does not cross it and borders leave it out. 2.1: neighbours on a
@@ -87,6 +107,7 @@ struct RoomLabelingReport {
   size_t initial_seeds = 0;      // seeds of the first round
   size_t merged_seeds = 0;       // seeds dropped because a border is no door
   size_t narrow_merged_seeds = 0;  // of those, for door_narrowing alone (not max_door_width_m)
+  size_t open_sides_split = 0;     // rooms cut off a converged room along an open side
   size_t small_merged_rooms = 0;   // rooms under min_room_area_m2 joined to a neighbour
   size_t removed_rooms = 0;      // rooms removed as never entered (thin-wall pockets included)
   double removed_area_m2 = 0;    // their area

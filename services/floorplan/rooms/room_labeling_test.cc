@@ -408,9 +408,78 @@ TEST(RoomLabelingTest, EqualRoomsJoinedByACentredDoorKeepTheirSeeds) {
 
   RoomLabelingOptions literal;  // any overlap suppresses
   literal.seed_min_overlap = 0;
+  literal.open_side_max_m = 0;  // which would cut the merged room at the door again
   absl::StatusOr<FloorPlan> shared = LabelRooms(set, literal);
   ASSERT_TRUE(shared.ok()) << shared.status();
   EXPECT_EQ(shared->rooms.size(), 1u);
+}
+
+// A 3 m corridor [0, 16]×[3, 6] with three bays below it, 3 m wide and 3 m deep (x ∈ [2, 5],
+// [5.1, 8.1], [8.2, 11.2], y ∈ [0, 3]), open to the corridor over their whole width, between
+// 10 cm partitions (as on lab_c's map). The largest circles sit in the bays' openings, across
+// bay and corridor, so §3.3.2 leaves no seed inside a bay and the corridor takes them; the open
+// sides cut each bay off at the line between its partitions' tips.
+TEST(RoomLabelingTest, BaysOpenToACorridorAreRooms) {
+  Scene scene;
+  scene.walls = {{{0, 6}, {16, 6}}, {{0, 3}, {0, 6}},      {{16, 3}, {16, 6}},
+                 {{0, 3}, {2, 3}},  {{11.2, 3}, {16, 3}},  {{2, 0}, {11.2, 0}},
+                 {{2, 0}, {2, 3}},  {{11.2, 0}, {11.2, 3}}};
+  std::vector<Vector2d> path = {{0.5, 4.5}};
+  for (double x : {5.0, 8.1}) {  // the partitions' faces and tips
+    scene.walls.push_back({{x, 0}, {x, 3}});
+    scene.walls.push_back({{x + 0.1, 0}, {x + 0.1, 3}});
+    scene.walls.push_back({{x, 3}, {x + 0.1, 3}});
+  }
+  for (double x : {3.5, 6.6, 9.7}) {
+    for (const Vector2d& p : std::vector<Vector2d>{{x, 4.5}, {x, 1}, {x, 4.5}}) path.push_back(p);
+  }
+  path.push_back({15.5, 4.5});
+  scene.paths = {path};
+  const WallSampleSet set = MakeSamples(scene);
+  RoomLabelingReport report;
+  absl::StatusOr<FloorPlan> plan = LabelRooms(set, {}, &report);
+  ASSERT_TRUE(plan.ok()) << plan.status();
+  CheckPlan(*plan);
+  ASSERT_EQ(plan->rooms.size(), 4u);
+  EXPECT_NEAR(plan->rooms[0].area_m2, 48.0, 0.03 * 48.0);  // the corridor, largest
+  for (size_t r = 1; r < 4; ++r) EXPECT_NEAR(plan->rooms[r].area_m2, 9.0, 0.05 * 9.0);
+  EXPECT_EQ(report.open_sides_split, 3u);
+
+  RoomLabelingOptions off;
+  off.open_side_max_m = 0;
+  absl::StatusOr<FloorPlan> merged = LabelRooms(set, off);
+  ASSERT_TRUE(merged.ok()) << merged.status();
+  EXPECT_LT(merged->rooms.size(), 4u);
+}
+
+// A corridor [0, 16]×[4, 6] with a 2.5 m branch [7, 9.5]×[0, 4] off it, both walked, and a
+// 4 m × 3.9 m room [9.6, 13.6]×[0, 3.9] behind a 10 cm wall with a 0.9 m door off the branch.
+// The branch's mouth runs between two corners (wall ends) and is wider than a double door, but
+// the branch leads on to the room: it is no dead end and stays part of the corridor.
+TEST(RoomLabelingTest, CorridorBranchWithADoorIsNoOpenSide) {
+  Scene scene;
+  scene.walls = {{{0, 6}, {16, 6}},        {{0, 4}, {0, 6}},          {{16, 4}, {16, 6}},
+                 {{0, 4}, {7, 4}},         {{9.5, 4}, {16, 4}},       {{7, 0}, {7, 4}},
+                 {{7, 0}, {13.6, 0}},      {{9.5, 1.9}, {9.5, 4}},    {{9.6, 1.9}, {9.6, 3.9}},
+                 {{9.5, 0}, {9.5, 1}},     {{9.6, 0}, {9.6, 1}},      {{9.5, 1}, {9.6, 1}},
+                 {{9.5, 1.9}, {9.6, 1.9}}, {{9.6, 3.9}, {13.6, 3.9}}, {{13.6, 0}, {13.6, 3.9}}};
+  scene.paths = {{{0.5, 5},
+                  {8.25, 5},
+                  {8.25, 1.45},
+                  {11.6, 1.45},
+                  {11.6, 3},
+                  {8.25, 1.45},
+                  {8.25, 5},
+                  {15.5, 5}}};
+  const WallSampleSet set = MakeSamples(scene);
+  RoomLabelingReport report;
+  absl::StatusOr<FloorPlan> plan = LabelRooms(set, {}, &report);
+  ASSERT_TRUE(plan.ok()) << plan.status();
+  CheckPlan(*plan);
+  ASSERT_EQ(plan->rooms.size(), 2u);
+  EXPECT_NEAR(plan->rooms[0].area_m2, 32.0 + 10.0, 0.03 * 42.0);  // corridor and branch
+  EXPECT_NEAR(plan->rooms[1].area_m2, 15.6, 0.03 * 15.6);
+  EXPECT_EQ(report.open_sides_split, 0u);
 }
 
 // A 0.9 m × 0.9 m closet behind a 0.6 m opening in the right wall of a 6 m × 4 m room, and the
@@ -590,6 +659,12 @@ TEST(RoomLabelingTest, BadInput) {
   EXPECT_EQ(LabelRooms(set, bad).status().code(), absl::StatusCode::kInvalidArgument);
   bad = {};
   bad.seed_min_overlap = 3;
+  EXPECT_EQ(LabelRooms(set, bad).status().code(), absl::StatusCode::kInvalidArgument);
+  bad = {};
+  bad.open_side_max_m = -1;
+  EXPECT_EQ(LabelRooms(set, bad).status().code(), absl::StatusCode::kInvalidArgument);
+  bad = {};
+  bad.wall_end_span_deg = 360;
   EXPECT_EQ(LabelRooms(set, bad).status().code(), absl::StatusCode::kInvalidArgument);
   bad = {};
   bad.min_room_area_m2 = -1;
