@@ -68,6 +68,7 @@ nlohmann::json PlanCounts(const LevelFloorPlan& r) {
                       {"truncated_segments", lr.truncated_segments},
                       {"initial_seeds", lr.initial_seeds},
                       {"removed_rooms", lr.removed_rooms},
+                      {"open_sides_split", lr.open_sides_split},
                       {"rooms", r.plan.rooms.size()},
                       {"extruded_triangles", r.extruded.triangles.size()}};
   if (r.method == FloorPlanMethod::kEigencrust) {

@@ -282,6 +282,7 @@ absl::Status FloorPlanStage(const MergeOptions& options, TileSet& tiles, const F
           {"interior_triangles", plan->labeling.interior_triangles},
           {"initial_seeds", plan->labeling.initial_seeds},
           {"removed_rooms", plan->labeling.removed_rooms},
+          {"open_sides_split", plan->labeling.open_sides_split},
           {"rooms", plan->plan.rooms.size()},
           {"extruded_triangles", plan->extruded.triangles.size()}};
   }

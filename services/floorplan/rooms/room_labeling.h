@@ -16,8 +16,8 @@
 //     door when it is longer than max_door_width_m (§3.3.2) or when the free space does not
 //     narrow there (door_narrowing, an extension: a 2 m corridor's pieces share borders of its
 //     width, under a double door's 2.44 m, and would stay split).
-//  6. Open sides: a converged room is cut where a dead-end part of it opens between two wall
-//     ends wider than a door (extension).
+//  6. Open sides: a converged room is cut where a dead-end part of it, which holds no seed,
+//     opens between two wall ends (extension).
 //  7. Rooms under min_room_area_m2 join a neighbour (extension).
 //
 // The extensions, where the dissertation is silent or its rule fails on real maps (measured on the
@@ -62,11 +62,11 @@ struct RoomLabelingOptions {
   // opening, a corner: the samples between a few spacings and wall_end_radius_m from it span at
   // most wall_end_span_deg seen from it), one of them a tip (at most wall_tip_span_deg: two
   // corners bound a corridor's end as well, or furniture), up to open_side_max_m long, through
-  // its own triangles,
-  // when the smaller side is a dead end (it borders no other room: a corridor's branch leads on
-  // through its doors), was entered, has at least open_side_min_area_m2 and is at least
-  // open_side_min_depth times as deep as the cut is long (area ≥ depth × length²: no sliver
-  // between furniture and a wall). 0 for open_side_max_m disables it.
+  // its own triangles, when the smaller side is a dead end (it borders no other room: a
+  // corridor's branch leads on through its doors), was entered, has at least
+  // open_side_min_area_m2 and is at least open_side_min_depth times as deep as the cut is long
+  // (area ≥ depth × length²: no sliver between furniture and a wall). 0 for open_side_max_m
+  // disables it.
   double open_side_max_m = 5.0;
   double open_side_min_area_m2 = 4.0;
   double open_side_min_depth = 0.75;
