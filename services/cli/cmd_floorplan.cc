@@ -378,6 +378,7 @@ absl::Status RunFloorplan(FloorplanFlags& f) {
   }
   params["floorplan"] = FloorPlanMethodName(f.plan.method);
   params["max_door_width_m"] = f.plan.rooms.max_door_width_m;
+  params["open_side_max_m"] = f.plan.rooms.open_side_max_m;
   params["remove_unentered_rooms"] = f.plan.rooms.remove_unentered_rooms;
   params["simplify"] = f.plan.simplify;
   const double seconds =
@@ -475,6 +476,12 @@ void RegisterFloorplan(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--door-width", f->plan.rooms.max_door_width_m,
                   "Rooms sharing a border longer than this are one room, m (§3.3.2: 2.44)")
+      ->capture_default_str();
+  cmd->add_option("--open-side-width", f->plan.rooms.open_side_max_m,
+                  "Once the rooms are found, a dead-end part of a room (a bay, a room open to a "
+                  "corridor over its width) that opens between two wall ends at most this far "
+                  "apart becomes a room of its own, m (0: off, §3.3.2's rooms alone)")
+      ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   cmd->add_flag("--keep-unentered", f->keep_unentered,
                 "Keep rooms the walk never entered (§3.3.2 removes them)");
