@@ -454,8 +454,8 @@ TEST(RoomLabelingTest, BaysOpenToACorridorAreRooms) {
 
 // A corridor [0, 16]×[4, 6] with a 2.5 m branch [7, 9.5]×[0, 4] off it, both walked, and a
 // 4 m × 3.9 m room [9.6, 13.6]×[0, 3.9] behind a 10 cm wall with a 0.9 m door off the branch.
-// The branch's mouth runs between two corners (wall ends) and is wider than a double door, but
-// the branch leads on to the room: it is no dead end and stays part of the corridor.
+// The branch's mouth is wider than a double door, but it runs between two corners, no wall's
+// tip, and the branch leads on to the room: it stays part of the corridor.
 TEST(RoomLabelingTest, CorridorBranchWithADoorIsNoOpenSide) {
   Scene scene;
   scene.walls = {{{0, 6}, {16, 6}},        {{0, 4}, {0, 6}},          {{16, 4}, {16, 6}},
@@ -480,6 +480,61 @@ TEST(RoomLabelingTest, CorridorBranchWithADoorIsNoOpenSide) {
   EXPECT_NEAR(plan->rooms[0].area_m2, 32.0 + 10.0, 0.03 * 42.0);  // corridor and branch
   EXPECT_NEAR(plan->rooms[1].area_m2, 15.6, 0.03 * 15.6);
   EXPECT_EQ(report.open_sides_split, 0u);
+}
+
+// BaysOpenToACorridorAreRooms' middle bay with a 0.9 m door in its back wall (10 cm thick) to a
+// 3 m × 3 m room behind it, walked through: that bay leads on, so it is no dead end and stays
+// with the corridor; the bays either side are cut off as before.
+TEST(RoomLabelingTest, BayThatLeadsOnIsNoOpenSide) {
+  Scene scene;
+  scene.walls = {{{0, 6}, {16, 6}},
+                 {{0, 3}, {0, 6}},
+                 {{16, 3}, {16, 6}},
+                 {{0, 3}, {2, 3}},
+                 {{11.2, 3}, {16, 3}},
+                 {{2, 0}, {5.1, 0}},
+                 {{8.1, 0}, {11.2, 0}},
+                 {{2, 0}, {2, 3}},
+                 {{11.2, 0}, {11.2, 3}},
+                 // the middle bay's back wall, its door at x ∈ [6.15, 7.05], the room behind
+                 {{5.1, 0}, {6.15, 0}},
+                 {{7.05, 0}, {8.1, 0}},
+                 {{5.1, -0.1}, {6.15, -0.1}},
+                 {{7.05, -0.1}, {8.1, -0.1}},
+                 {{6.15, -0.1}, {6.15, 0}},
+                 {{7.05, -0.1}, {7.05, 0}},
+                 {{5.1, -3.1}, {8.1, -3.1}},
+                 {{5.1, -3.1}, {5.1, -0.1}},
+                 {{8.1, -3.1}, {8.1, -0.1}}};
+  std::vector<Vector2d> path = {{0.5, 4.5}};
+  for (double x : {5.0, 8.1}) {
+    scene.walls.push_back({{x, 0}, {x, 3}});
+    scene.walls.push_back({{x + 0.1, 0}, {x + 0.1, 3}});
+    scene.walls.push_back({{x, 3}, {x + 0.1, 3}});
+  }
+  for (const Vector2d& p : std::vector<Vector2d>{{3.5, 4.5},
+                                                 {3.5, 1},
+                                                 {3.5, 4.5},
+                                                 {6.6, 4.5},
+                                                 {6.6, -1.6},
+                                                 {6.6, 4.5},
+                                                 {9.7, 4.5},
+                                                 {9.7, 1},
+                                                 {9.7, 4.5},
+                                                 {15.5, 4.5}}) {
+    path.push_back(p);
+  }
+  scene.paths = {path};
+  const WallSampleSet set = MakeSamples(scene);
+  RoomLabelingReport report;
+  absl::StatusOr<FloorPlan> plan = LabelRooms(set, {}, &report);
+  ASSERT_TRUE(plan.ok()) << plan.status();
+  CheckPlan(*plan);
+  ASSERT_EQ(plan->rooms.size(), 4u);
+  EXPECT_NEAR(plan->rooms[0].area_m2, 48.0 + 9.0, 0.03 * 57.0);  // corridor and middle bay
+  // The two bays cut off and the room behind the door, 9 m² each.
+  for (size_t r = 1; r < 4; ++r) EXPECT_NEAR(plan->rooms[r].area_m2, 9.0, 0.08 * 9.0);
+  EXPECT_EQ(report.open_sides_split, 2u);
 }
 
 // A 0.9 m × 0.9 m closet behind a 0.6 m opening in the right wall of a 6 m × 4 m room, and the
